@@ -1,0 +1,249 @@
+//! Messages exchanged between a robot (simulated or real) and the futago robot stack.
+//!
+//! This crate is the only thing the simulator (`futago-sim`) and the autonomy stack
+//! (`futago-robot`) have in common: the stack sees sensor messages and emits commands,
+//! so the same stack runs on the simulator and on logs of real robots.
+//!
+//! Conventions (ROS REP 103): SI units, right-handed frames, x forward, y left, z up,
+//! angles in radians. Time is simulation (or log) time in integer nanoseconds.
+
+pub mod carmen;
+pub mod grid;
+pub mod tum;
+
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+
+/// A point in time, in integer nanoseconds since the start of a run (or the log's epoch).
+///
+/// Integer time keeps sensor schedules exact over long runs (no drift from summing
+/// floating-point periods), which the determinism guarantee relies on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct Time(pub i64);
+
+impl Time {
+    /// Time zero.
+    pub const ZERO: Time = Time(0);
+
+    /// Time from seconds, rounded to the nearest nanosecond.
+    pub fn from_secs(s: f64) -> Time {
+        Time((s * 1e9).round() as i64)
+    }
+
+    /// Seconds as a float.
+    pub fn secs(self) -> f64 {
+        self.0 as f64 * 1e-9
+    }
+
+    /// Nanoseconds.
+    pub fn nanos(self) -> i64 {
+        self.0
+    }
+}
+
+impl std::ops::Add<Duration> for Time {
+    type Output = Time;
+    fn add(self, d: Duration) -> Time {
+        Time(self.0 + d.0)
+    }
+}
+
+impl std::ops::Sub for Time {
+    type Output = Duration;
+    fn sub(self, o: Time) -> Duration {
+        Duration(self.0 - o.0)
+    }
+}
+
+/// A span of time in integer nanoseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct Duration(pub i64);
+
+impl Duration {
+    /// Duration from seconds, rounded to the nearest nanosecond.
+    pub fn from_secs(s: f64) -> Duration {
+        Duration((s * 1e9).round() as i64)
+    }
+
+    /// Seconds as a float.
+    pub fn secs(self) -> f64 {
+        self.0 as f64 * 1e-9
+    }
+}
+
+/// Wraps an angle to (-π, π].
+pub fn wrap_angle(a: f64) -> f64 {
+    let mut a = a % (2.0 * PI);
+    if a > PI {
+        a -= 2.0 * PI;
+    } else if a <= -PI {
+        a += 2.0 * PI;
+    }
+    a
+}
+
+/// A planar pose: position (m) and heading (rad, counter-clockwise from +x).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pose2 {
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+}
+
+impl Pose2 {
+    /// The identity pose.
+    pub const IDENTITY: Pose2 = Pose2 { x: 0.0, y: 0.0, theta: 0.0 };
+
+    pub fn new(x: f64, y: f64, theta: f64) -> Pose2 {
+        Pose2 { x, y, theta }
+    }
+
+    /// `self ⊕ other`: `other` expressed in the frame of `self`, brought to the parent frame.
+    pub fn compose(&self, other: &Pose2) -> Pose2 {
+        let (s, c) = self.theta.sin_cos();
+        Pose2 {
+            x: self.x + c * other.x - s * other.y,
+            y: self.y + s * other.x + c * other.y,
+            theta: wrap_angle(self.theta + other.theta),
+        }
+    }
+
+    /// The inverse transform.
+    pub fn inverse(&self) -> Pose2 {
+        let (s, c) = self.theta.sin_cos();
+        Pose2 {
+            x: -c * self.x - s * self.y,
+            y: s * self.x - c * self.y,
+            theta: wrap_angle(-self.theta),
+        }
+    }
+
+    /// `self⁻¹ ⊕ other`: the pose of `other` relative to `self`.
+    pub fn between(&self, other: &Pose2) -> Pose2 {
+        self.inverse().compose(other)
+    }
+
+    /// Transforms a point from this pose's frame to the parent frame.
+    pub fn transform_point(&self, p: [f64; 2]) -> [f64; 2] {
+        let (s, c) = self.theta.sin_cos();
+        [self.x + c * p[0] - s * p[1], self.y + s * p[0] + c * p[1]]
+    }
+
+    /// Euclidean distance between the positions of two poses.
+    pub fn distance(&self, other: &Pose2) -> f64 {
+        (self.x - other.x).hypot(self.y - other.y)
+    }
+}
+
+/// A 3D pose: translation (m) and unit quaternion `[x, y, z, w]`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Pose3 {
+    pub translation: [f64; 3],
+    pub rotation: [f64; 4],
+}
+
+impl Pose3 {
+    /// Lifts a planar pose to 3D at height `z`.
+    pub fn from_pose2(p: &Pose2, z: f64) -> Pose3 {
+        let (s, c) = (p.theta * 0.5).sin_cos();
+        Pose3 { translation: [p.x, p.y, z], rotation: [0.0, 0.0, s, c] }
+    }
+}
+
+/// One laser scan, in the conventions of ROS `sensor_msgs/LaserScan`.
+///
+/// Beam `i` points at `angle_min + i·angle_increment` in the laser frame and was measured at
+/// `stamp + i·time_increment`. A range of `+∞` is a beam with no return (beyond
+/// `range_max`, or a dropout); `-∞` is a return closer than `range_min` (REP 117).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LaserScan {
+    /// Name of the laser (its frame), e.g. `front`.
+    pub frame: String,
+    /// Time of the first beam.
+    pub stamp: Time,
+    pub angle_min: f64,
+    pub angle_increment: f64,
+    /// Time between two beams, s (0 for a scan taken at one instant).
+    pub time_increment: f64,
+    pub range_min: f64,
+    pub range_max: f64,
+    pub ranges: Vec<f32>,
+}
+
+impl LaserScan {
+    /// Bearing of beam `i` in the laser frame.
+    pub fn angle(&self, i: usize) -> f64 {
+        self.angle_min + i as f64 * self.angle_increment
+    }
+
+    /// Angle of the last beam.
+    pub fn angle_max(&self) -> f64 {
+        self.angle(self.ranges.len().saturating_sub(1))
+    }
+}
+
+/// Odometry as the iRobot Create reports it: distance and angle travelled since the last
+/// request (Open Interface packets 19 and 20), computed inside the robot from its wheel
+/// encoders.
+///
+/// The Create reports integer millimetres and degrees; `distance` and `angle` carry those
+/// quantised values converted to metres and radians.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Odometry {
+    pub stamp: Time,
+    /// Distance travelled by the centre of the wheel axle since the last report, m.
+    pub distance: f64,
+    /// Heading change since the last report, rad, counter-clockwise positive.
+    pub angle: f64,
+}
+
+/// The Create's bumper and wheel-drop bits (Open Interface packet 7).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BumpsAndDrops {
+    pub bump_left: bool,
+    pub bump_right: bool,
+    pub drop_left: bool,
+    pub drop_right: bool,
+    pub drop_caster: bool,
+}
+
+impl BumpsAndDrops {
+    /// Any bumper pressed.
+    pub fn bumped(&self) -> bool {
+        self.bump_left || self.bump_right
+    }
+
+    /// Any wheel off the ground.
+    pub fn dropped(&self) -> bool {
+        self.drop_left || self.drop_right || self.drop_caster
+    }
+}
+
+/// A turning radius for the Create's Drive command (Open Interface opcode 137).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Radius {
+    /// Drive straight (the OI's special radius 32767/32768).
+    Straight,
+    /// Turn in place counter-clockwise (radius 1).
+    InPlaceCcw,
+    /// Turn in place clockwise (radius −1).
+    InPlaceCw,
+    /// Arc of this radius, m; positive turns left (counter-clockwise). The OI accepts
+    /// −2 … 2 m.
+    Arc(f64),
+}
+
+/// A command to the Create's drive.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum DriveCommand {
+    /// OI Drive (opcode 137): mean wheel velocity (m/s, ±0.5) and turning radius. For turns
+    /// in place the velocity is the speed of each wheel.
+    Drive { velocity: f64, radius: Radius },
+    /// OI Drive Direct (opcode 145): right and left wheel velocities, m/s (±0.5).
+    DriveDirect { left: f64, right: f64 },
+}
+
+impl DriveCommand {
+    /// Stop both wheels.
+    pub const STOP: DriveCommand = DriveCommand::DriveDirect { left: 0.0, right: 0.0 };
+}

@@ -1,0 +1,111 @@
+//! TUM trajectory format: one pose per line, `timestamp tx ty tz qx qy qz qw`, `#` comments.
+//!
+//! This is the format of the TUM RGB-D benchmark's `groundtruth.txt`, read by `evo` and most
+//! SLAM evaluation tools.
+
+use crate::{Pose3, Time};
+use std::fmt::Write as _;
+
+/// One trajectory sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stamped {
+    pub stamp: Time,
+    pub pose: Pose3,
+}
+
+/// Formats one TUM line (with trailing newline): time with 6 decimals (µs), translation
+/// with 6 (µm), quaternion with 9.
+pub fn format_line(out: &mut String, s: &Stamped) {
+    let t = s.pose.translation;
+    let q = s.pose.rotation;
+    // The sign of a quaternion is arbitrary; keep w ≥ 0 so that equal poses print equally.
+    let sign = if q[3] < 0.0 { -1.0 } else { 1.0 };
+    let _ = writeln!(
+        out,
+        "{:.6} {:.6} {:.6} {:.6} {:.9} {:.9} {:.9} {:.9}",
+        s.stamp.secs(),
+        t[0],
+        t[1],
+        t[2],
+        sign * q[0],
+        sign * q[1],
+        sign * q[2],
+        sign * q[3]
+    );
+}
+
+/// An error reading a TUM file: the line number (1-based) and what was wrong.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParseError {
+    pub line: usize,
+    pub message: String,
+}
+
+impl std::fmt::Display for ParseError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "line {}: {}", self.line, self.message)
+    }
+}
+
+impl std::error::Error for ParseError {}
+
+/// Parses a TUM trajectory. Blank lines and `#` comments are skipped; anything else must be
+/// eight finite numbers with a unit-norm (±1e-3) quaternion.
+pub fn parse(text: &str) -> Result<Vec<Stamped>, ParseError> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let err = |message: String| ParseError { line: i + 1, message };
+        let v: Vec<f64> = line
+            .split_whitespace()
+            .map(|w| w.parse::<f64>().map_err(|_| err(format!("`{w}` is not a number"))))
+            .collect::<Result<_, _>>()?;
+        if v.len() != 8 {
+            return Err(err(format!("expected 8 numbers (t tx ty tz qx qy qz qw), found {}", v.len())));
+        }
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(err("non-finite value".into()));
+        }
+        let n = (v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]).sqrt();
+        if (n - 1.0).abs() > 1e-3 {
+            return Err(err(format!("quaternion norm is {n:.6}, expected 1")));
+        }
+        out.push(Stamped {
+            stamp: Time::from_secs(v[0]),
+            pose: Pose3 { translation: [v[1], v[2], v[3]], rotation: [v[4], v[5], v[6], v[7]] },
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Pose2;
+
+    #[test]
+    fn round_trip_keeps_pose_to_format_precision() {
+        let p = Pose2::new(1.25, -3.5, 2.0);
+        let s = Stamped { stamp: Time::from_secs(12.5), pose: Pose3::from_pose2(&p, 0.0) };
+        let mut text = String::from("# t x y z qx qy qz qw\n");
+        format_line(&mut text, &s);
+        let back = parse(&text).unwrap();
+        assert_eq!(back.len(), 1);
+        assert_eq!(back[0].stamp, Time::from_secs(12.5));
+        let q = back[0].pose.rotation;
+        let yaw = 2.0 * q[2].atan2(q[3]);
+        assert!((yaw - 2.0).abs() < 1e-8);
+        assert!((back[0].pose.translation[0] - 1.25).abs() < 1e-9);
+    }
+
+    #[test]
+    fn rejects_short_lines_and_bad_quaternions() {
+        assert_eq!(parse("1 2 3\n").unwrap_err().line, 1);
+        let e = parse("# c\n0 0 0 0 0 0 0 2\n").unwrap_err();
+        assert_eq!(e.line, 2);
+        assert!(e.message.contains("norm"));
+    }
+}

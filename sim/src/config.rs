@@ -1,0 +1,130 @@
+//! Loading typed configuration from TOML files with errors that name the file, the key and
+//! what was expected.
+//!
+//! Every world and scenario file goes through [`load_toml`]: unknown keys are rejected by the
+//! `deny_unknown_fields` of the target types, and [`SpecError`] carries the dotted key path
+//! (`robot.odometry.noise`) found by `serde_path_to_error`.
+
+use serde::de::DeserializeOwned;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A problem with an input file: which file, which key, what was expected.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpecError {
+    pub file: PathBuf,
+    /// Dotted key path, e.g. `lidar[0].range_max`; empty for the whole file.
+    pub key: String,
+    /// Line (1-based) when known.
+    pub line: Option<usize>,
+    pub message: String,
+}
+
+impl SpecError {
+    /// An error about `key` in `file`.
+    pub fn new(file: impl Into<PathBuf>, key: impl Into<String>, message: impl Into<String>) -> SpecError {
+        SpecError { file: file.into(), key: key.into(), line: None, message: message.into() }
+    }
+}
+
+impl fmt::Display for SpecError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file.display())?;
+        if let Some(l) = self.line {
+            write!(f, ":{l}")?;
+        }
+        if !self.key.is_empty() {
+            write!(f, ": key `{}`", self.key)?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for SpecError {}
+
+/// Reads `path` as UTF-8 text, naming the file in the error.
+pub fn read_text(path: &Path) -> Result<String, SpecError> {
+    std::fs::read_to_string(path).map_err(|e| SpecError::new(path, "", format!("cannot read file: {e}")))
+}
+
+/// Parses TOML text into `T`, naming `path`, the key path and the line in errors.
+pub fn parse_toml<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T, SpecError> {
+    let line_of = |offset: usize| text[..offset.min(text.len())].matches('\n').count() + 1;
+    let de = toml::de::Deserializer::parse(text).map_err(|e| SpecError {
+        file: path.to_path_buf(),
+        key: String::new(),
+        line: e.span().map(|s| line_of(s.start)),
+        message: format!("TOML syntax error: {}", e.message()),
+    })?;
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let key = e.path().to_string();
+        let inner = e.into_inner();
+        SpecError {
+            file: path.to_path_buf(),
+            key: if key == "." { String::new() } else { key },
+            line: inner.span().map(|s| line_of(s.start)),
+            message: inner.message().to_string(),
+        }
+    })
+}
+
+/// Reads and parses a TOML file into `T`.
+pub fn load_toml<T: DeserializeOwned>(path: &Path) -> Result<T, SpecError> {
+    let text = read_text(path)?;
+    parse_toml(path, &text)
+}
+
+/// Checks that `value` is finite and within `[lo, hi]`; otherwise an error naming `key`.
+pub fn check_range(file: &Path, key: &str, value: f64, lo: f64, hi: f64, unit: &str) -> Result<(), SpecError> {
+    if value.is_finite() && value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(SpecError::new(file, key, format!("expected a value in [{lo}, {hi}] {unit}, found {value}")))
+    }
+}
+
+/// Checks that `value` is finite and strictly positive.
+pub fn check_positive(file: &Path, key: &str, value: f64, unit: &str) -> Result<(), SpecError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(SpecError::new(file, key, format!("expected a positive number of {unit}, found {value}")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde::Deserialize;
+
+    #[derive(Deserialize, Debug)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Inner {
+        range_max: f64,
+    }
+
+    #[derive(Deserialize, Debug)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Outer {
+        name: String,
+        lidar: Vec<Inner>,
+    }
+
+    #[test]
+    fn errors_name_key_path_and_line() {
+        let p = Path::new("x.toml");
+        let e = parse_toml::<Outer>(p, "name = \"a\"\n[[lidar]]\nrange_max = \"far\"\n").unwrap_err();
+        assert_eq!(e.key, "lidar[0].range_max");
+        assert_eq!(e.line, Some(3));
+        assert!(e.to_string().starts_with("x.toml:3: key `lidar[0].range_max`"), "{e}");
+
+        let e = parse_toml::<Outer>(p, "name = \"a\"\nlidar = []\nrange = 3\n").unwrap_err();
+        assert!(e.message.contains("unknown field `range`"), "{e}");
+
+        let e = parse_toml::<Outer>(p, "name = \n").unwrap_err();
+        assert!(e.message.contains("syntax"), "{e}");
+        assert_eq!(e.line, Some(1));
+    }
+}

@@ -1,0 +1,23 @@
+//! futago-sim: the simulated world of the futago digital twin.
+//!
+//! - [`world`]: the TOML world format compiled into an immutable [`World`], its meshes,
+//!   textures, glTF import/export and ground-truth exports;
+//! - [`sim`]: the running [`Simulation`] (rapier state, clock, sensors);
+//! - [`create`]: the iRobot Create's drive, wheel traction and odometry;
+//! - [`lidar`]: ray-cast laser range finders;
+//! - [`noise`]: seeded random streams per noise source;
+//! - [`config`]: TOML loading with errors that name file, key and expectation.
+//!
+//! The simulator knows nothing of the robot stack: it takes [`futago_msgs::DriveCommand`]s and
+//! produces sensor messages.
+
+pub mod config;
+pub mod create;
+pub mod lidar;
+pub mod noise;
+pub mod sim;
+pub mod world;
+
+pub use config::SpecError;
+pub use sim::{PhysicsConfig, Simulation, StepOutput};
+pub use world::World;

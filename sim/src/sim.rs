@@ -1,0 +1,310 @@
+//! The running simulation: rapier state, the robot, its sensors and the clock.
+//!
+//! [`Simulation`] is the mutable counterpart of the immutable [`World`] (MuJoCo's `mjData` to
+//! its `mjModel`). [`Simulation::step`] advances one fixed physics step and returns whatever
+//! sensor messages fell due in it; sensors run at their own rates on the simulation clock, so
+//! a run depends only on the world, the configuration, the seed and the commands given.
+
+use crate::config::{SpecError, check_range};
+use crate::create::{CreateConfig, CreateDrive, GRAVITY, PlanarVelocity, wheel_traction};
+use crate::lidar::{Lidar, LidarConfig};
+use crate::noise::stream;
+use crate::world::mesh::TriMesh;
+use crate::world::{Motion, World};
+use futago_msgs::{BumpsAndDrops, DriveCommand, LaserScan, Odometry, Pose2, Time};
+use glam::{Quat, Vec3};
+use rapier3d::math::Pose;
+use rapier3d::prelude::*;
+use serde::Deserialize;
+use std::path::Path;
+
+/// Physics settings.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct PhysicsConfig {
+    /// Fixed physics rate, Hz (at least 200).
+    pub rate: f64,
+}
+
+impl Default for PhysicsConfig {
+    fn default() -> Self {
+        PhysicsConfig { rate: 200.0 }
+    }
+}
+
+impl PhysicsConfig {
+    pub fn validate(&self, file: &Path, key: &str) -> Result<(), SpecError> {
+        check_range(file, &format!("{key}.rate"), self.rate, 200.0, 100_000.0, "Hz")?;
+        let period = 1e9 / self.rate;
+        if (period - period.round()).abs() > 1e-6 {
+            return Err(SpecError::new(file, format!("{key}.rate"), format!("expected a rate whose period is a whole number of nanoseconds, found {} Hz", self.rate)));
+        }
+        Ok(())
+    }
+}
+
+/// What one step produced.
+#[derive(Debug, Clone, Default)]
+pub struct StepOutput {
+    /// Completed laser scans, with the index of their laser.
+    pub scans: Vec<(usize, LaserScan)>,
+    /// The Create's sensor stream, when a packet fell due.
+    pub odometry: Option<Odometry>,
+    pub bumps: Option<BumpsAndDrops>,
+}
+
+/// Counts of physical events over a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counters {
+    pub steps: u64,
+    /// Steps that began a bumper press (either side).
+    pub bump_events: u64,
+    /// Steps with some wheel off the ground.
+    pub wheel_drop_steps: u64,
+    pub laser_rays: u64,
+}
+
+/// The state of a simulation of one Create in a world.
+pub struct Simulation {
+    physics: PhysicsWorld,
+    dt: Duration,
+    time: Time,
+    robot: RigidBodyHandle,
+    robot_collider: ColliderHandle,
+    drive: CreateDrive,
+    yaw_inertia: f64,
+    lidars: Vec<Lidar>,
+    /// Rigid body of each world object (fixed bodies for static ones).
+    object_bodies: Vec<RigidBodyHandle>,
+    stream_period: Duration,
+    next_stream: i64,
+    bumps: BumpsAndDrops,
+    counters: Counters,
+}
+
+use futago_msgs::Duration;
+
+/// Robot body shape: a prism of this many sides (the render mesh uses the same vertices).
+const ROBOT_SEGMENTS: u32 = 32;
+
+impl Simulation {
+    /// Builds the rapier state from `world`, places the robot at `start` and seeds every noise
+    /// stream from `seed`.
+    pub fn new(world: &World, physics: &PhysicsConfig, robot: &CreateConfig, lidars: &[(LidarConfig, crate::lidar::LidarSpec)], start: Pose2, seed: u64) -> Simulation {
+        let mut p = PhysicsWorld::new();
+        p.gravity = Vec3::new(0.0, 0.0, -GRAVITY as f32);
+        p.integration_parameters.dt = (1.0 / physics.rate) as f32;
+        let mut object_bodies = Vec::with_capacity(world.objects.len());
+        for o in &world.objects {
+            let body = match o.motion {
+                Motion::Static => RigidBodyBuilder::fixed().pose(o.pose).build(),
+                Motion::Dynamic { .. } => RigidBodyBuilder::dynamic().pose(o.pose).build(),
+            };
+            let h = p.bodies.insert(body);
+            if let Some(shape) = &o.shape {
+                let mut cb = ColliderBuilder::new(shape.clone()).friction(o.friction as f32);
+                if let Motion::Dynamic { mass } = o.motion {
+                    cb = cb.mass(mass as f32);
+                }
+                p.colliders.insert_with_parent(cb.build(), h, &mut p.bodies);
+            }
+            object_bodies.push(h);
+        }
+        // The robot: planar (z, roll and pitch locked), moved by its wheels, not by gravity.
+        let m = robot.mass as f32;
+        let r = robot.radius as f32;
+        let yaw_inertia = 0.5 * robot.mass * robot.radius * robot.radius;
+        let body = RigidBodyBuilder::dynamic()
+            .pose(Pose::from_parts(Vec3::new(start.x as f32, start.y as f32, 0.0), Quat::from_rotation_z(start.theta as f32)))
+            .gravity_scale(0.0)
+            .locked_axes(LockedAxes::TRANSLATION_LOCKED_Z | LockedAxes::ROTATION_LOCKED_X | LockedAxes::ROTATION_LOCKED_Y)
+            .additional_mass_properties(MassProperties::new(Vec3::ZERO, m, Vec3::new(yaw_inertia as f32 / 2.0, yaw_inertia as f32 / 2.0, yaw_inertia as f32)))
+            .ccd_enabled(true)
+            .build();
+        let robot_body = p.bodies.insert(body);
+        let hh = (robot.height / 2.0) as f32;
+        let hull = SharedShape::convex_hull(&TriMesh::prism_vertices(r, hh, ROBOT_SEGMENTS)).expect("a prism has a hull");
+        let col = ColliderBuilder::new(hull)
+            .density(0.0)
+            .friction(0.3)
+            .translation(Vec3::new(0.0, 0.0, robot.clearance as f32 + hh))
+            .build();
+        let robot_collider = p.colliders.insert_with_parent(col, robot_body, &mut p.bodies);
+        let drive = CreateDrive::new(robot.clone(), [stream(seed, "robot.encoder.left"), stream(seed, "robot.encoder.right")]);
+        let lidars = lidars.iter().map(|(c, s)| Lidar::new(c, s.clone(), stream(seed, &format!("lidar.{}", c.name)))).collect();
+        Simulation {
+            physics: p,
+            dt: Duration((1e9 / physics.rate).round() as i64),
+            time: Time::ZERO,
+            robot: robot_body,
+            robot_collider,
+            drive,
+            yaw_inertia,
+            lidars,
+            object_bodies,
+            stream_period: Duration::from_secs(robot.stream_period),
+            next_stream: 1,
+            bumps: BumpsAndDrops::default(),
+            counters: Counters::default(),
+        }
+    }
+
+    /// Simulation time.
+    pub fn time(&self) -> Time {
+        self.time
+    }
+
+    /// The fixed step.
+    pub fn dt(&self) -> Duration {
+        self.dt
+    }
+
+    /// Event counts so far.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// The lasers, in configuration order.
+    pub fn lidars(&self) -> &[Lidar] {
+        &self.lidars
+    }
+
+    /// Ground-truth pose of the robot's base frame (on the floor, between the drive wheels).
+    pub fn robot_pose(&self) -> Pose2 {
+        let b = &self.physics.bodies[self.robot];
+        let t = b.translation();
+        let (axis, angle) = b.rotation().to_axis_angle();
+        let yaw = if axis.z >= 0.0 { angle } else { -angle };
+        Pose2::new(t.x as f64, t.y as f64, futago_msgs::wrap_angle(yaw as f64))
+    }
+
+    /// Ground-truth velocity of the robot in its own frame.
+    pub fn robot_velocity(&self) -> PlanarVelocity {
+        let b = &self.physics.bodies[self.robot];
+        let v = b.linvel();
+        let th = self.robot_pose().theta;
+        let (s, c) = th.sin_cos();
+        PlanarVelocity { forward: c * v.x as f64 + s * v.y as f64, lateral: -s * v.x as f64 + c * v.y as f64, yaw_rate: b.angvel().z as f64 }
+    }
+
+    /// Current nominal wheel speeds (left, right), m/s: what the firmware believes.
+    pub fn wheel_speeds(&self) -> (f64, f64) {
+        self.drive.wheel_speed
+    }
+
+    /// Current pose of every world object, in [`World::objects`] order.
+    pub fn object_poses(&self) -> Vec<Pose> {
+        self.object_bodies.iter().map(|&h| *self.physics.bodies[h].position()).collect()
+    }
+
+    /// Latest bumper and wheel-drop state.
+    pub fn bumps(&self) -> BumpsAndDrops {
+        self.bumps
+    }
+
+    /// Casts a ray against everything but the robot; distance to the first hit.
+    pub fn cast_ray(&self, origin: Vec3, dir: Vec3, max: f32) -> Option<f32> {
+        let qp = self.physics.query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
+        qp.cast_ray(&Ray::new(origin, dir), max, true).map(|(_, d)| d)
+    }
+
+    /// Which wheels (left, right, caster) have no floor within their drop travel.
+    fn wheel_drops(&self, pose: &Pose2) -> BumpsAndDrops {
+        let c = &self.drive.config;
+        let b = c.actual_wheel_base() / 2.0;
+        let qp = self.physics.query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
+        let top = 0.05f32;
+        let dropped = |x: f64, y: f64| {
+            let p = pose.transform_point([x, y]);
+            qp.cast_ray(&Ray::new(Vec3::new(p[0] as f32, p[1] as f32, top), -Vec3::Z), top + c.wheel_drop_travel as f32, true).is_none()
+        };
+        BumpsAndDrops { drop_left: dropped(0.0, b), drop_right: dropped(0.0, -b), drop_caster: dropped(0.13f64.min(c.radius * 0.8), 0.0), ..Default::default() }
+    }
+
+    /// Bumper state from the robot's contacts: a touching contact in the front half presses
+    /// the bumper on its side; one within ±15° of straight ahead presses both.
+    fn bumpers(&self) -> (bool, bool) {
+        let (mut left, mut right) = (false, false);
+        for pair in self.physics.narrow_phase.contact_pairs_with(self.robot_collider) {
+            let robot_first = pair.collider1 == self.robot_collider;
+            for m in pair.manifolds() {
+                for pt in &m.points {
+                    if pt.dist > 1e-3 {
+                        continue;
+                    }
+                    // Contact points are in each collider's frame; the robot's turns with its body.
+                    let local = if robot_first { pt.local_p1 } else { pt.local_p2 };
+                    let bearing = (local.y as f64).atan2(local.x as f64);
+                    if bearing.abs() > std::f64::consts::FRAC_PI_2 {
+                        continue;
+                    }
+                    let band = 15f64.to_radians();
+                    if bearing > -band {
+                        left = true;
+                    }
+                    if bearing < band {
+                        right = true;
+                    }
+                }
+            }
+        }
+        (left, right)
+    }
+
+    /// Advances one physics step. `command`, if given, replaces the drive command (it holds
+    /// until the next one, as on the Create).
+    pub fn step(&mut self, command: Option<&DriveCommand>) -> StepOutput {
+        let mut out = StepOutput::default();
+        if let Some(c) = command {
+            self.drive.command(c);
+        }
+        let dt = self.dt.secs();
+        let pose = self.robot_pose();
+        let drops = self.wheel_drops(&pose);
+        let rims = self.drive.advance(dt, drops.dropped());
+        // Wheel traction on the floor.
+        let cfg = &self.drive.config;
+        let w = cfg.mass * GRAVITY * cfg.drive_load_fraction / 2.0;
+        let loads = (if drops.drop_left { 0.0 } else { w }, if drops.drop_right { 0.0 } else { w });
+        let v = wheel_traction(self.robot_velocity(), cfg.mass, self.yaw_inertia, cfg.actual_wheel_base(), rims, loads, cfg.wheel_friction, dt);
+        let (s, c) = pose.theta.sin_cos();
+        let body = &mut self.physics.bodies[self.robot];
+        body.set_linvel(Vec3::new((c * v.forward - s * v.lateral) as f32, (s * v.forward + c * v.lateral) as f32, 0.0), true);
+        body.set_angvel(Vec3::new(0.0, 0.0, v.yaw_rate as f32), true);
+        self.physics.step();
+        self.time = self.time + self.dt;
+        self.counters.steps += 1;
+
+        let (bl, br) = self.bumpers();
+        if (bl || br) && !self.bumps.bumped() {
+            self.counters.bump_events += 1;
+        }
+        if drops.dropped() {
+            self.counters.wheel_drop_steps += 1;
+        }
+        self.bumps = BumpsAndDrops { bump_left: bl, bump_right: br, ..drops };
+
+        // Lasers.
+        let base = *self.physics.bodies[self.robot].position();
+        let qp = self.physics.query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
+        let mut rays = 0u64;
+        for (i, l) in self.lidars.iter_mut().enumerate() {
+            let laser_pose = base * l.mount;
+            if let Some(scan) = l.update(self.time, &laser_pose, |o, d, max| {
+                rays += 1;
+                qp.cast_ray(&Ray::new(o, d), max, true).map(|(_, t)| t)
+            }) {
+                out.scans.push((i, scan));
+            }
+        }
+        self.counters.laser_rays += rays;
+
+        // The Create's sensor stream.
+        if self.time.nanos() >= self.next_stream * self.stream_period.0 {
+            self.next_stream += 1;
+            out.odometry = Some(self.drive.report(self.time));
+            out.bumps = Some(self.bumps);
+        }
+        out
+    }
+}

@@ -1,0 +1,227 @@
+//! Triangle meshes for rendering and export, and the generators of the world's primitives.
+//!
+//! A primitive's render mesh and its collider describe the same surface: boxes are exact
+//! cuboids and cylinders are prisms with the same vertices as their convex-hull collider, so
+//! a rendered depth image and a ray cast of the colliders agree.
+
+use glam::{Vec2, Vec3};
+
+/// An indexed triangle mesh with per-vertex normals and texture coordinates.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TriMesh {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    /// Texture coordinates, already scaled to texture space (1.0 = one tile).
+    pub uvs: Vec<Vec2>,
+    pub indices: Vec<[u32; 3]>,
+}
+
+/// How a primitive maps its texture onto its faces.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum UvMap {
+    /// One tile per `size` metres (u, v), so patterns keep their physical size.
+    Tiled(Vec2),
+    /// The texture stretched once over each face.
+    Fit,
+}
+
+impl TriMesh {
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// Appends a planar quad `o, o+u, o+u+v, o+v` (counter-clockwise seen from `n`).
+    fn quad(&mut self, o: Vec3, u: Vec3, v: Vec3, uv: UvMap) {
+        let n = u.cross(v).normalize();
+        let base = self.positions.len() as u32;
+        let (su, sv) = match uv {
+            UvMap::Tiled(size) => (u.length() / size.x, v.length() / size.y),
+            UvMap::Fit => (1.0, 1.0),
+        };
+        for (p, t) in [
+            (o, Vec2::new(0.0, sv)),
+            (o + u, Vec2::new(su, sv)),
+            (o + u + v, Vec2::new(su, 0.0)),
+            (o + v, Vec2::new(0.0, 0.0)),
+        ] {
+            self.positions.push(p);
+            self.normals.push(n);
+            self.uvs.push(t);
+        }
+        self.indices.push([base, base + 1, base + 2]);
+        self.indices.push([base, base + 2, base + 3]);
+    }
+
+    /// An axis-aligned box centred on the origin with half extents `h`.
+    pub fn cuboid(h: Vec3, uv: UvMap) -> TriMesh {
+        let mut m = TriMesh::default();
+        let (x, y, z) = (Vec3::X * h.x, Vec3::Y * h.y, Vec3::Z * h.z);
+        // Each face: origin at its lower-left corner seen from outside, u to the right, v up.
+        m.quad(-x + y - z, -2.0 * y, 2.0 * z, uv); // -x face
+        m.quad(x - y - z, 2.0 * y, 2.0 * z, uv); // +x face
+        m.quad(-x - y - z, 2.0 * x, 2.0 * z, uv); // -y face
+        m.quad(x + y - z, -2.0 * x, 2.0 * z, uv); // +y face
+        m.quad(-x - y + z, 2.0 * x, 2.0 * y, uv); // top
+        m.quad(-x + y - z, 2.0 * x, -2.0 * y, uv); // bottom
+        m
+    }
+
+    /// The vertices of an upright prism of `segments` sides inscribed in a cylinder of
+    /// `radius`, centred on the origin, `2·half_height` tall. Shared with the collider.
+    pub fn prism_vertices(radius: f32, half_height: f32, segments: u32) -> Vec<Vec3> {
+        let mut v = Vec::with_capacity(2 * segments as usize);
+        for z in [-half_height, half_height] {
+            for i in 0..segments {
+                let a = i as f32 / segments as f32 * std::f32::consts::TAU;
+                v.push(Vec3::new(radius * a.cos(), radius * a.sin(), z));
+            }
+        }
+        v
+    }
+
+    /// An upright prism approximating a cylinder, with smooth side normals and flat caps.
+    pub fn prism(radius: f32, half_height: f32, segments: u32, uv: UvMap) -> TriMesh {
+        let mut m = TriMesh::default();
+        let s = segments as usize;
+        let verts = Self::prism_vertices(radius, half_height, segments);
+        let circumference = std::f32::consts::TAU * radius;
+        let (u_scale, v_side) = match uv {
+            UvMap::Tiled(size) => (circumference / size.x, 2.0 * half_height / size.y),
+            UvMap::Fit => (1.0, 1.0),
+        };
+        // Sides: duplicate the seam column so texture coordinates wrap cleanly.
+        for i in 0..=s {
+            let a = i as f32 / s as f32 * std::f32::consts::TAU;
+            let n = Vec3::new(a.cos(), a.sin(), 0.0);
+            let u = i as f32 / s as f32 * u_scale;
+            m.positions.push(verts[i % s]);
+            m.normals.push(n);
+            m.uvs.push(Vec2::new(u, v_side));
+            m.positions.push(verts[s + i % s]);
+            m.normals.push(n);
+            m.uvs.push(Vec2::new(u, 0.0));
+        }
+        for i in 0..s as u32 {
+            let (b0, t0, b1, t1) = (2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 3);
+            m.indices.push([b0, b1, t1]);
+            m.indices.push([b0, t1, t0]);
+        }
+        // Caps as fans.
+        for (z, n) in [(-half_height, -Vec3::Z), (half_height, Vec3::Z)] {
+            let centre = m.positions.len() as u32;
+            let cap_uv = |p: Vec3| match uv {
+                UvMap::Tiled(size) => Vec2::new(p.x / size.x, p.y / size.y),
+                UvMap::Fit => Vec2::new(0.5 + 0.5 * p.x / radius, 0.5 - 0.5 * p.y / radius),
+            };
+            m.positions.push(Vec3::new(0.0, 0.0, z));
+            m.normals.push(n);
+            m.uvs.push(cap_uv(Vec3::ZERO));
+            for i in 0..s {
+                let p = Vec3::new(verts[i].x, verts[i].y, z);
+                m.positions.push(p);
+                m.normals.push(n);
+                m.uvs.push(cap_uv(p));
+            }
+            for i in 0..s as u32 {
+                let a = centre + 1 + i;
+                let b = centre + 1 + (i + 1) % s as u32;
+                if n.z > 0.0 {
+                    m.indices.push([centre, a, b]);
+                } else {
+                    m.indices.push([centre, b, a]);
+                }
+            }
+        }
+        m
+    }
+
+    /// Applies a rigid transform (and uniform scale) to positions and normals.
+    pub fn transformed(&self, rotation: glam::Quat, translation: Vec3, scale: f32) -> TriMesh {
+        TriMesh {
+            positions: self.positions.iter().map(|&p| rotation * (p * scale) + translation).collect(),
+            normals: self.normals.iter().map(|&n| rotation * n).collect(),
+            uvs: self.uvs.clone(),
+            indices: self.indices.clone(),
+        }
+    }
+
+    /// Removes triangles with (near) zero area or out-of-range indices; returns how many.
+    pub fn remove_degenerate(&mut self) -> usize {
+        let before = self.indices.len();
+        let n = self.positions.len() as u32;
+        let pos = &self.positions;
+        self.indices.retain(|t| {
+            t.iter().all(|&i| i < n) && {
+                let (a, b, c) = (pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]);
+                (b - a).cross(c - a).length() > 1e-12
+            }
+        });
+        before - self.indices.len()
+    }
+
+    /// Fills missing normals with area-weighted vertex normals.
+    pub fn compute_normals(&mut self) {
+        let mut normals = vec![Vec3::ZERO; self.positions.len()];
+        for t in &self.indices {
+            let (a, b, c) = (self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]);
+            let n = (b - a).cross(c - a);
+            for &i in t {
+                normals[i as usize] += n;
+            }
+        }
+        self.normals = normals.into_iter().map(|n| n.normalize_or(Vec3::Z)).collect();
+    }
+
+    /// Total surface area, m².
+    pub fn area(&self) -> f32 {
+        self.indices
+            .iter()
+            .map(|t| {
+                let (a, b, c) = (self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]);
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cuboid_is_closed_with_outward_normals_and_right_area() {
+        let m = TriMesh::cuboid(Vec3::new(1.0, 0.5, 0.25), UvMap::Fit);
+        assert_eq!(m.triangle_count(), 12);
+        let area = 2.0 * (2.0 * 1.0 + 2.0 * 0.5 + 1.0 * 0.5) * 4.0 / 4.0;
+        assert!((m.area() - area).abs() < 1e-5, "{} vs {}", m.area(), area);
+        for t in &m.indices {
+            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            let n = (b - a).cross(c - a);
+            let centroid = (a + b + c) / 3.0;
+            assert!(n.dot(centroid) > 0.0, "triangle {t:?} winds inward");
+            assert!(n.normalize().dot(m.normals[t[0] as usize]) > 0.999);
+        }
+    }
+
+    #[test]
+    fn prism_winds_outward_and_tiles_by_size() {
+        let m = TriMesh::prism(0.5, 1.0, 16, UvMap::Tiled(Vec2::new(1.0, 1.0)));
+        for t in &m.indices {
+            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            let n = (b - a).cross(c - a);
+            assert!(n.dot((a + b + c) / 3.0) > 0.0);
+        }
+        let umax = m.uvs.iter().map(|u| u.x).fold(0.0, f32::max);
+        assert!((umax - std::f32::consts::TAU * 0.5).abs() < 1e-4);
+    }
+
+    #[test]
+    fn degenerate_triangles_are_removed() {
+        let mut m = TriMesh::cuboid(Vec3::ONE, UvMap::Fit);
+        m.indices.push([0, 0, 1]);
+        m.indices.push([0, 1, 999]);
+        assert_eq!(m.remove_degenerate(), 2);
+        assert_eq!(m.triangle_count(), 12);
+    }
+}
