@@ -1,1 +1,160 @@
-fn main(){}
+//! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
+
+mod bench;
+mod run;
+mod scenario;
+mod world_cmd;
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(name = "futago", version, about = "futago (双子, twin): a simulation-first digital twin of a small indoor robot", long_about = "futago simulates an iRobot Create with a laser range finder in a rapier physics world, runs a controller in closed loop on it, and writes the robot's sensor data beside the ground truth. Worlds and scenarios are TOML files (see worlds/ and scenarios/).")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scenario and write its results: groundtruth.txt and odometry.txt (TUM), scans.clf
+    /// (CARMEN log) and summary.json.
+    Run {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// Output folder, created or replaced whole [default: out/<scenario name>].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Seed of every noise source (overrides the scenario's).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Simulated seconds (overrides the scenario's duration).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// No progress bar.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Inspect worlds and export their ground truth.
+    World {
+        #[command(subcommand)]
+        command: WorldCommand,
+    },
+    /// Measure the simulator's speed: real-time factor of a scenario and laser rays per second.
+    Bench {
+        /// Scenario to measure.
+        #[arg(default_value = "scenarios/bench-office.toml")]
+        scenario: PathBuf,
+        /// Simulated seconds (overrides the scenario's duration).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Rays to cast in the ray-throughput measurement.
+        #[arg(long, default_value_t = 2_000_000)]
+        rays: usize,
+    },
+}
+
+#[derive(Subcommand)]
+enum WorldCommand {
+    /// Load a world and describe it (objects, triangles, bounds, spawns).
+    Info {
+        world: PathBuf,
+    },
+    /// Write the occupancy grid of a height band (PGM + YAML, ROS map_server) and the world
+    /// mesh (PLY and/or binary glTF) from the world's own colliders and meshes.
+    Export {
+        world: PathBuf,
+        /// Output folder [default: out/worlds/<world name>].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Grid cell size, m.
+        #[arg(long, default_value_t = 0.05)]
+        resolution: f64,
+        /// Height band `ZMIN:ZMAX`, m (default: around a laser at 0.2 m).
+        #[arg(long, default_value = "0.15:0.25")]
+        band: String,
+        /// Free margin around the world's bounds, m.
+        #[arg(long, default_value_t = 0.5)]
+        margin: f64,
+        /// Mesh formats to write.
+        #[arg(long, value_enum, default_value = "both")]
+        mesh: world_cmd::MeshFormat,
+        /// Skip the occupancy grid (write meshes only).
+        #[arg(long)]
+        no_grid: bool,
+    },
+}
+
+fn parse_band(s: &str) -> Result<(f64, f64)> {
+    let (a, b) = s.split_once(':').with_context(|| format!("--band: expected ZMIN:ZMAX in metres, found `{s}`"))?;
+    let (a, b): (f64, f64) = (a.trim().parse().with_context(|| format!("--band: `{a}` is not a number"))?, b.trim().parse().with_context(|| format!("--band: `{b}` is not a number"))?);
+    if !(a.is_finite() && b.is_finite() && b > a) {
+        bail!("--band: expected ZMIN < ZMAX, found {a}:{b}");
+    }
+    Ok((a, b))
+}
+
+fn main() -> std::process::ExitCode {
+    match real_main() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("futago: error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn real_main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Run { scenario, out, seed, duration, quiet } => {
+            if let Some(d) = duration
+                && !(d.is_finite() && d > 0.0)
+            {
+                bail!("--duration: expected a positive number of seconds, found {d}");
+            }
+            let s = scenario::Scenario::load(&scenario)?;
+            let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
+            let opts = run::RunOptions { seed, duration, progress: !quiet };
+            let (summary, o) = run::run(&s, &opts, &out)?;
+            let rtf = summary["performance"]["real_time_factor"].as_f64().unwrap_or(0.0);
+            println!(
+                "{}: {:.1} s simulated in {:.2} s ({rtf:.0}× real time), {:.2} m driven, odometry off by {:.3} m; results in {}",
+                s.spec.name,
+                o.sim_time,
+                o.wall_time,
+                o.distance_travelled,
+                o.final_truth.distance(&o.final_odometry),
+                out.display()
+            );
+        }
+        Command::World { command } => match command {
+            WorldCommand::Info { world } => {
+                let w = world_cmd::load(&world)?;
+                println!("{}", world_cmd::describe(&w));
+            }
+            WorldCommand::Export { world, out, resolution, band, margin, mesh, no_grid } => {
+                if !(resolution.is_finite() && resolution >= 0.001 && resolution <= 10.0) {
+                    bail!("--resolution: expected a cell size in [0.001, 10] m, found {resolution}");
+                }
+                if !(margin.is_finite() && margin >= 0.0) {
+                    bail!("--margin: expected a non-negative number of metres, found {margin}");
+                }
+                let band = parse_band(&band)?;
+                let w = world_cmd::load(&world)?;
+                let dir = out.unwrap_or_else(|| PathBuf::from("out/worlds").join(&w.name));
+                let written = world_cmd::export_world(&w, &dir, &world_cmd::ExportOptions { resolution, band, margin, mesh, grid: !no_grid })?;
+                for p in written {
+                    println!("wrote {}", p.display());
+                }
+            }
+        },
+        Command::Bench { scenario, duration, rays } => {
+            let s = scenario::Scenario::load(&scenario)?;
+            let r = bench::bench(&s, duration, rays.max(682))?;
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+    }
+    Ok(())
+}

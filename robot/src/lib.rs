@@ -1,1 +1,9 @@
-pub fn x(){}
+//! futago-robot: the robot's own software, which sees only sensor messages
+//! ([`futago_msgs`]) and emits drive commands. It never depends on the simulator, so the same
+//! code runs in simulation and on logs of real robots.
+//!
+//! So far: odometry integration ([`odometry`]) and scripted drive plans ([`script`]); the
+//! mapping, localisation and navigation stack plugs in beside them.
+
+pub mod odometry;
+pub mod script;

@@ -19,20 +19,23 @@ use std::path::Path;
 
 /// Known scanner models.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "kebab-case")]
 pub enum LidarPreset {
     /// Hokuyo URG-04LX: 682 beams of 360°/1024 (239.8°), 0.02–5.6 m, 10 Hz (SCIP 2.0 spec;
     /// reference §4.1). Noise: ±10 mm below 1 m, ±1 % beyond, taken as 1σ.
+    #[serde(rename = "urg-04lx")]
     Urg04lx,
     /// Hokuyo UTM-30LX: 1081 beams of 0.25° (270°), 0.1–30 m, 40 Hz (reference §4.2). Noise:
     /// ±30 mm taken as 1σ, growing to ±50 mm at 30 m.
+    #[serde(rename = "utm-30lx")]
     Utm30lx,
     /// SICK LMS200: 361 beams of 0.5° (180°), 8 m (its millimetre mode), 37.5 Hz (two
     /// interlaced 75 Hz sweeps). Noise: the datasheet's typical ±15 mm as 1σ.
+    #[serde(rename = "lms200")]
     Lms200,
     /// Seed 000's scanner: 240° and 30 m (seed-000 §2.2.2). Its model, resolution and rate are
     /// not stated; this preset takes the UTM-30LX's 0.25°, 40 Hz and noise, with which it
     /// shares the 30 m range: 961 beams.
+    #[serde(rename = "seed000")]
     Seed000,
 }
 

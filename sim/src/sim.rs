@@ -84,6 +84,11 @@ pub struct Simulation {
 
 use futago_msgs::Duration;
 
+/// Collision group of floor and ceiling slabs.
+const SLAB_GROUP: Group = Group::GROUP_2;
+/// Collision group of the robot body.
+const ROBOT_GROUP: Group = Group::GROUP_3;
+
 /// Robot body shape: a prism of this many sides (the render mesh uses the same vertices).
 const ROBOT_SEGMENTS: u32 = 32;
 
@@ -103,6 +108,9 @@ impl Simulation {
             let h = p.bodies.insert(body);
             if let Some(shape) = &o.shape {
                 let mut cb = ColliderBuilder::new(shape.clone()).friction(o.friction as f32);
+                if o.slab {
+                    cb = cb.collision_groups(InteractionGroups::new(SLAB_GROUP, Group::ALL, InteractionTestMode::And));
+                }
                 if let Motion::Dynamic { mass } = o.motion {
                     cb = cb.mass(mass as f32);
                 }
@@ -119,7 +127,6 @@ impl Simulation {
             .gravity_scale(0.0)
             .locked_axes(LockedAxes::TRANSLATION_LOCKED_Z | LockedAxes::ROTATION_LOCKED_X | LockedAxes::ROTATION_LOCKED_Y)
             .additional_mass_properties(MassProperties::new(Vec3::ZERO, m, Vec3::new(yaw_inertia as f32 / 2.0, yaw_inertia as f32 / 2.0, yaw_inertia as f32)))
-            .ccd_enabled(true)
             .build();
         let robot_body = p.bodies.insert(body);
         let hh = (robot.height / 2.0) as f32;
@@ -127,12 +134,15 @@ impl Simulation {
         let col = ColliderBuilder::new(hull)
             .density(0.0)
             .friction(0.3)
+            .collision_groups(InteractionGroups::new(ROBOT_GROUP, Group::ALL.difference(SLAB_GROUP), InteractionTestMode::And))
             .translation(Vec3::new(0.0, 0.0, robot.clearance as f32 + hh))
             .build();
         let robot_collider = p.colliders.insert_with_parent(col, robot_body, &mut p.bodies);
         let drive = CreateDrive::new(robot.clone(), [stream(seed, "robot.encoder.left"), stream(seed, "robot.encoder.right")]);
         let lidars = lidars.iter().map(|(c, s)| Lidar::new(c, s.clone(), stream(seed, &format!("lidar.{}", c.name)))).collect();
-        Simulation {
+        // Build the broad phase (and so the ray-cast structure) before the first step.
+        p.detect_collisions(&(), &());
+        let mut sim = Simulation {
             physics: p,
             dt: Duration((1e9 / physics.rate).round() as i64),
             time: Time::ZERO,
@@ -146,7 +156,10 @@ impl Simulation {
             next_stream: 1,
             bumps: BumpsAndDrops::default(),
             counters: Counters::default(),
-        }
+        };
+        let pose = sim.robot_pose();
+        sim.bumps = sim.wheel_drops(&pose);
+        sim
     }
 
     /// Simulation time.
@@ -260,7 +273,8 @@ impl Simulation {
         }
         let dt = self.dt.secs();
         let pose = self.robot_pose();
-        let drops = self.wheel_drops(&pose);
+        // Wheel drops as sensed at the end of the previous step.
+        let drops = self.bumps;
         let rims = self.drive.advance(dt, drops.dropped());
         // Wheel traction on the floor.
         let cfg = &self.drive.config;
@@ -279,6 +293,10 @@ impl Simulation {
         if (bl || br) && !self.bumps.bumped() {
             self.counters.bump_events += 1;
         }
+        // The wheel-drop switches are sampled with the sensor stream (every 15 ms on the
+        // Create); between samples the last state holds, for the firmware and the traction.
+        let stream_due = self.time.nanos() >= self.next_stream * self.stream_period.0;
+        let drops = if stream_due { self.wheel_drops(&self.robot_pose()) } else { self.bumps };
         if drops.dropped() {
             self.counters.wheel_drop_steps += 1;
         }
@@ -300,7 +318,7 @@ impl Simulation {
         self.counters.laser_rays += rays;
 
         // The Create's sensor stream.
-        if self.time.nanos() >= self.next_stream * self.stream_period.0 {
+        if stream_due {
             self.next_stream += 1;
             out.odometry = Some(self.drive.report(self.time));
             out.bumps = Some(self.bumps);

@@ -61,6 +61,9 @@ pub struct Object {
     pub parts: Vec<MeshPart>,
     pub motion: Motion,
     pub friction: f64,
+    /// The floor or ceiling slab. The planar robot body does not collide with slabs (its
+    /// height is fixed), which keeps the contact solver idle while it drives.
+    pub slab: bool,
 }
 
 /// A compiled world: immutable while a simulation runs.
@@ -215,6 +218,7 @@ pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
             parts: vec![MeshPart { material: mat, mesh: TriMesh::cuboid(half, uv) }],
             motion: Motion::Static,
             friction: 0.8,
+            slab: true,
         });
     }
     if c.world.objects.is_empty() {
@@ -391,6 +395,7 @@ impl Compiler<'_> {
                     parts: vec![MeshPart { material: mat, mesh: TriMesh::cuboid(half, uv) }],
                     motion: Motion::Static,
                     friction: 0.6,
+                    slab: false,
                 });
             }
         }
@@ -418,6 +423,7 @@ impl Compiler<'_> {
             parts: vec![MeshPart { material: mat, mesh: TriMesh::cuboid(half, self.uv(mat)) }],
             motion,
             friction,
+            slab: false,
         });
         Ok(())
     }
@@ -444,6 +450,7 @@ impl Compiler<'_> {
             parts: vec![MeshPart { material: mat, mesh: TriMesh::prism(r, hh, cy.segments, self.uv(mat)) }],
             motion,
             friction,
+            slab: false,
         });
         Ok(())
     }
@@ -511,6 +518,7 @@ impl Compiler<'_> {
             parts,
             motion,
             friction,
+            slab: false,
         });
         Ok(())
     }

@@ -1,0 +1,417 @@
+//! Scripted drive plans: timed velocity segments, and waypoints with a simple follower.
+//!
+//! These stand in for the autonomy stack in scenarios that only need the robot to move: a
+//! controller is updated with what the robot knows (its odometry, and the true pose only when
+//! a scenario asks for an oracle) and answers with Create drive commands.
+
+use crate::odometry::OdometryIntegrator;
+use futago_msgs::{BumpsAndDrops, DriveCommand, Odometry, Pose2, Radius, Time, wrap_angle};
+use serde::Deserialize;
+
+/// A turning radius as written in a scenario: metres, or `"straight"`, `"ccw"`, `"cw"`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum RadiusSpec {
+    Metres(f64),
+    Named(NamedRadius),
+}
+
+/// The special radii of the OI Drive command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NamedRadius {
+    Straight,
+    Ccw,
+    Cw,
+}
+
+impl RadiusSpec {
+    pub fn radius(self) -> Radius {
+        match self {
+            RadiusSpec::Metres(r) => Radius::Arc(r),
+            RadiusSpec::Named(NamedRadius::Straight) => Radius::Straight,
+            RadiusSpec::Named(NamedRadius::Ccw) => Radius::InPlaceCcw,
+            RadiusSpec::Named(NamedRadius::Cw) => Radius::InPlaceCw,
+        }
+    }
+}
+
+/// One timed drive command.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Segment {
+    /// How long to hold it, s.
+    pub duration: f64,
+    /// OI Drive velocity, m/s (with `radius`).
+    #[serde(default)]
+    pub velocity: f64,
+    #[serde(default = "straight")]
+    pub radius: RadiusSpec,
+    /// OI Drive Direct wheel velocities `[left, right]`, m/s, instead of velocity and radius.
+    pub wheels: Option<[f64; 2]>,
+}
+
+fn straight() -> RadiusSpec {
+    RadiusSpec::Named(NamedRadius::Straight)
+}
+
+impl Segment {
+    fn command(&self) -> DriveCommand {
+        match self.wheels {
+            Some([left, right]) => DriveCommand::DriveDirect { left, right },
+            None => DriveCommand::Drive { velocity: self.velocity, radius: self.radius.radius() },
+        }
+    }
+}
+
+/// Where the waypoint follower takes its pose from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseSource {
+    /// Dead reckoning from the robot's odometry reports, as a real robot without a localiser.
+    #[default]
+    Odometry,
+    /// The simulator's true pose (an oracle for tests and for driving exact routes).
+    GroundTruth,
+}
+
+/// Follower settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WaypointConfig {
+    /// `[[x, y], …]` in the world frame, m.
+    pub waypoints: Vec<[f64; 2]>,
+    /// Cruise speed, m/s.
+    #[serde(default = "default_speed")]
+    pub speed: f64,
+    /// Pure-pursuit look-ahead distance, m.
+    #[serde(default = "default_lookahead")]
+    pub lookahead: f64,
+    /// A waypoint counts as reached within this distance, m.
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f64,
+    /// Turn in place when the heading error exceeds this, degrees.
+    #[serde(default = "default_turn")]
+    pub turn_in_place_deg: f64,
+    /// In-place turns stop within this heading error, degrees.
+    #[serde(default = "default_turn_tolerance")]
+    pub turn_tolerance_deg: f64,
+    /// Speed of each wheel in in-place turns, m/s.
+    #[serde(default = "default_turn_speed")]
+    pub turn_speed: f64,
+    /// Drive the list this many times (the last point back to the first between laps).
+    #[serde(default = "one")]
+    pub laps: u32,
+    #[serde(default)]
+    pub pose_source: PoseSource,
+}
+
+fn default_speed() -> f64 {
+    0.3
+}
+fn default_lookahead() -> f64 {
+    0.4
+}
+fn default_tolerance() -> f64 {
+    0.05
+}
+fn default_turn() -> f64 {
+    45.0
+}
+fn default_turn_tolerance() -> f64 {
+    1.0
+}
+fn default_turn_speed() -> f64 {
+    0.1
+}
+fn one() -> u32 {
+    1
+}
+
+/// A scripted controller as a scenario's `[controller]` table declares it.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ControllerConfig {
+    /// Stand still.
+    Idle,
+    /// Timed commands, in order, `repeat` times.
+    Segments {
+        segments: Vec<Segment>,
+        #[serde(default = "one")]
+        repeat: u32,
+    },
+    /// Follow waypoints.
+    Waypoints(WaypointConfig),
+}
+
+impl ControllerConfig {
+    /// Checks values a controller cannot run with; returns `(key, expectation)` on error.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let bad = |k: &str, m: &str| Err((k.to_string(), m.to_string()));
+        match self {
+            ControllerConfig::Idle => Ok(()),
+            ControllerConfig::Segments { segments, repeat } => {
+                if segments.is_empty() || *repeat == 0 {
+                    return bad("segments", "expected at least one segment and repeat ≥ 1");
+                }
+                for (i, s) in segments.iter().enumerate() {
+                    if !(s.duration.is_finite() && s.duration > 0.0) {
+                        return Err((format!("segments[{i}].duration"), format!("expected a positive duration in s, found {}", s.duration)));
+                    }
+                    if !s.velocity.is_finite() || s.wheels.is_some_and(|w| w.iter().any(|v| !v.is_finite())) {
+                        return Err((format!("segments[{i}]"), "expected finite velocities in m/s".into()));
+                    }
+                    if let RadiusSpec::Metres(r) = s.radius
+                        && !(r.is_finite() && r != 0.0)
+                    {
+                        return Err((format!("segments[{i}].radius"), "expected a non-zero radius in m, or \"straight\", \"ccw\", \"cw\"".into()));
+                    }
+                }
+                Ok(())
+            }
+            ControllerConfig::Waypoints(w) => {
+                if w.waypoints.is_empty() || w.waypoints.iter().flatten().any(|v| !v.is_finite()) {
+                    return bad("waypoints", "expected at least one finite [x, y] point");
+                }
+                for (k, v, lo, hi) in [
+                    ("speed", w.speed, 0.01, 0.5),
+                    ("lookahead", w.lookahead, 0.01, 10.0),
+                    ("tolerance", w.tolerance, 0.001, 10.0),
+                    ("turn_in_place_deg", w.turn_in_place_deg, 1.0, 180.0),
+                    ("turn_tolerance_deg", w.turn_tolerance_deg, 0.01, 90.0),
+                    ("turn_speed", w.turn_speed, 0.01, 0.5),
+                ] {
+                    if !(v.is_finite() && v >= lo && v <= hi) {
+                        return Err((k.to_string(), format!("expected a value in [{lo}, {hi}], found {v}")));
+                    }
+                }
+                if w.laps == 0 {
+                    return bad("laps", "expected at least one lap");
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// What a controller is told at each control tick.
+#[derive(Debug, Clone, Copy)]
+pub struct ControlInput<'a> {
+    pub now: Time,
+    /// Odometry reports received since the last tick.
+    pub odometry: &'a [Odometry],
+    pub bumps: BumpsAndDrops,
+    /// The true pose, when the scenario grants an oracle.
+    pub ground_truth: Option<Pose2>,
+}
+
+/// A running scripted controller.
+#[derive(Debug, Clone)]
+pub struct ScriptedController {
+    config: ControllerConfig,
+    start: Time,
+    odometry: OdometryIntegrator,
+    /// Waypoint follower: index into the expanded route, and whether turning in place.
+    target: usize,
+    route: Vec<[f64; 2]>,
+    turning: bool,
+    last: Option<DriveCommand>,
+    done: bool,
+}
+
+impl ScriptedController {
+    /// A controller starting at time `start` from `initial` (the pose dead reckoning starts from).
+    pub fn new(config: ControllerConfig, start: Time, initial: Pose2) -> ScriptedController {
+        let route = match &config {
+            ControllerConfig::Waypoints(w) => {
+                let mut r = Vec::new();
+                for _ in 0..w.laps {
+                    r.extend_from_slice(&w.waypoints);
+                }
+                if w.laps > 1 {
+                    r.push(w.waypoints[0]);
+                }
+                r
+            }
+            _ => Vec::new(),
+        };
+        ScriptedController { config, start, odometry: OdometryIntegrator::new(initial), target: 0, route, turning: false, last: None, done: false }
+    }
+
+    /// True once the plan is complete (the robot has been told to stop).
+    pub fn finished(&self) -> bool {
+        self.done
+    }
+
+    /// The dead-reckoned pose.
+    pub fn odometry_pose(&self) -> Pose2 {
+        self.odometry.pose
+    }
+
+    /// Index of the waypoint being approached (waypoint follower).
+    pub fn progress(&self) -> usize {
+        self.target
+    }
+
+    /// One control tick: returns a command when it differs from the last one sent.
+    pub fn update(&mut self, input: &ControlInput) -> Option<DriveCommand> {
+        for o in input.odometry {
+            self.odometry.integrate(o);
+        }
+        let cmd = match &self.config {
+            ControllerConfig::Idle => {
+                self.done = true;
+                DriveCommand::STOP
+            }
+            ControllerConfig::Segments { segments, repeat } => {
+                let mut t = (input.now - self.start).secs();
+                let period: f64 = segments.iter().map(|s| s.duration).sum();
+                if t >= period * *repeat as f64 {
+                    self.done = true;
+                    DriveCommand::STOP
+                } else {
+                    t %= period;
+                    let mut cmd = DriveCommand::STOP;
+                    for s in segments {
+                        if t < s.duration {
+                            cmd = s.command();
+                            break;
+                        }
+                        t -= s.duration;
+                    }
+                    cmd
+                }
+            }
+            ControllerConfig::Waypoints(w) => {
+                let pose = match w.pose_source {
+                    PoseSource::Odometry => self.odometry.pose,
+                    PoseSource::GroundTruth => input.ground_truth.unwrap_or(self.odometry.pose),
+                };
+                self.follow(w.clone(), pose)
+            }
+        };
+        if self.last != Some(cmd) {
+            self.last = Some(cmd);
+            Some(cmd)
+        } else {
+            None
+        }
+    }
+
+    fn follow(&mut self, w: WaypointConfig, pose: Pose2) -> DriveCommand {
+        // Advance past reached waypoints.
+        while self.target < self.route.len() {
+            let t = self.route[self.target];
+            if (t[0] - pose.x).hypot(t[1] - pose.y) > w.tolerance {
+                break;
+            }
+            self.target += 1;
+            self.turning = true;
+        }
+        if self.target >= self.route.len() {
+            self.done = true;
+            return DriveCommand::STOP;
+        }
+        let goal = self.route[self.target];
+        let dist = (goal[0] - pose.x).hypot(goal[1] - pose.y);
+        // Aim point: the goal, or a point `lookahead` along the segment from the previous one.
+        let aim = if dist <= w.lookahead || self.target == 0 {
+            goal
+        } else {
+            let prev = self.route[self.target - 1];
+            let (dx, dy) = (goal[0] - prev[0], goal[1] - prev[1]);
+            let len = dx.hypot(dy).max(1e-9);
+            let s = (((pose.x - prev[0]) * dx + (pose.y - prev[1]) * dy) / len).clamp(0.0, len);
+            let s = (s + w.lookahead).min(len);
+            [prev[0] + dx / len * s, prev[1] + dy / len * s]
+        };
+        let local = pose.inverse().transform_point(aim);
+        let bearing = local[1].atan2(local[0]);
+        let err = wrap_angle(bearing);
+        if self.turning || err.abs() > w.turn_in_place_deg.to_radians() {
+            self.turning = err.abs() > w.turn_tolerance_deg.to_radians();
+            if self.turning {
+                // Slow down near the end of the turn so as not to overshoot.
+                let v = w.turn_speed.min(0.02 + err.abs() * 0.2);
+                let radius = if err > 0.0 { Radius::InPlaceCcw } else { Radius::InPlaceCw };
+                return DriveCommand::Drive { velocity: (v * 1000.0).round() / 1000.0, radius };
+            }
+        }
+        // Pure pursuit: the circle through the robot and the aim point, tangent to the heading.
+        let l2 = local[0] * local[0] + local[1] * local[1];
+        let speed = w.speed.min(0.05 + dist); // ease in to the last point
+        let speed = (speed * 1000.0).round() / 1000.0;
+        if local[1].abs() < 1e-4 {
+            return DriveCommand::Drive { velocity: speed, radius: Radius::Straight };
+        }
+        let r = l2 / (2.0 * local[1]);
+        // Commands are quantised to whole millimetres, as the OI's integer fields are.
+        let r = (r * 1000.0).round() / 1000.0;
+        if r.abs() > 2.0 {
+            DriveCommand::Drive { velocity: speed, radius: Radius::Straight }
+        } else {
+            DriveCommand::Drive { velocity: speed, radius: Radius::Arc(r) }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tick(c: &mut ScriptedController, t: f64, truth: Pose2) -> Option<DriveCommand> {
+        c.update(&ControlInput { now: Time::from_secs(t), odometry: &[], bumps: BumpsAndDrops::default(), ground_truth: Some(truth) })
+    }
+
+    #[test]
+    fn segments_play_in_order_then_stop() {
+        let cfg: ControllerConfig = ControllerConfig::Segments {
+            segments: vec![
+                Segment { duration: 1.0, velocity: 0.2, radius: straight(), wheels: None },
+                Segment { duration: 2.0, velocity: 0.1, radius: RadiusSpec::Named(NamedRadius::Ccw), wheels: None },
+            ],
+            repeat: 1,
+        };
+        let mut c = ScriptedController::new(cfg, Time::ZERO, Pose2::IDENTITY);
+        assert_eq!(tick(&mut c, 0.5, Pose2::IDENTITY), Some(DriveCommand::Drive { velocity: 0.2, radius: Radius::Straight }));
+        assert_eq!(tick(&mut c, 0.6, Pose2::IDENTITY), None, "unchanged commands are not resent");
+        assert_eq!(tick(&mut c, 1.5, Pose2::IDENTITY), Some(DriveCommand::Drive { velocity: 0.1, radius: Radius::InPlaceCcw }));
+        assert!(!c.finished());
+        assert_eq!(tick(&mut c, 3.0, Pose2::IDENTITY), Some(DriveCommand::STOP));
+        assert!(c.finished());
+    }
+
+    #[test]
+    fn follower_turns_in_place_toward_a_waypoint_behind_and_arcs_to_one_ahead() {
+        let w = WaypointConfig {
+            waypoints: vec![[-1.0, 0.0]],
+            speed: 0.3,
+            lookahead: 0.4,
+            tolerance: 0.05,
+            turn_in_place_deg: 45.0,
+            turn_tolerance_deg: 1.0,
+            turn_speed: 0.1,
+            laps: 1,
+            pose_source: PoseSource::GroundTruth,
+        };
+        let mut c = ScriptedController::new(ControllerConfig::Waypoints(w.clone()), Time::ZERO, Pose2::IDENTITY);
+        match tick(&mut c, 0.0, Pose2::new(0.0, 0.0, 0.1)) {
+            Some(DriveCommand::Drive { radius: Radius::InPlaceCcw, .. }) => {}
+            other => panic!("expected a left turn in place, got {other:?}"),
+        }
+        let mut w2 = w;
+        w2.waypoints = vec![[1.0, 0.5]];
+        let mut c = ScriptedController::new(ControllerConfig::Waypoints(w2), Time::ZERO, Pose2::IDENTITY);
+        match tick(&mut c, 0.0, Pose2::IDENTITY) {
+            // Circle through (0, 0) and (1, 0.5), tangent to +x: R = (1 + 0.25) / (2 · 0.5).
+            Some(DriveCommand::Drive { velocity, radius: Radius::Arc(r) }) => {
+                assert!(velocity > 0.0);
+                assert!((r - 1.25).abs() < 1e-9, "{r}");
+            }
+            other => panic!("expected an arc, got {other:?}"),
+        }
+        // Reached: stop and finish.
+        assert_eq!(tick(&mut c, 1.0, Pose2::new(1.0, 0.5, 0.0)), Some(DriveCommand::STOP));
+        assert!(c.finished());
+    }
+}

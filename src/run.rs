@@ -1,0 +1,310 @@
+//! `futago run`: the closed loop of simulator and controller, and the files it writes.
+//!
+//! The loop is single-threaded and steps on the simulation clock only, so a scenario and a seed
+//! always give the same bytes. Outputs go to a temporary folder beside the destination and are
+//! renamed into place at the end: a failed or interrupted run leaves no half-written results.
+
+use crate::scenario::Scenario;
+use anyhow::{Context, Result};
+use futago_msgs::{Duration, Pose2, Pose3, Time, carmen, tum};
+use futago_robot::odometry::OdometryIntegrator;
+use futago_robot::script::{ControlInput, ScriptedController};
+use futago_sim::Simulation;
+use serde_json::{Value, json};
+use sha2::{Digest, Sha256};
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// The files a run writes, in the order they are listed in the summary.
+pub const OUTPUT_FILES: [&str; 3] = ["groundtruth.txt", "odometry.txt", "scans.clf"];
+
+/// Options of one run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// Overrides the scenario's seed.
+    pub seed: Option<u64>,
+    /// Overrides the scenario's duration, s.
+    pub duration: Option<f64>,
+    /// Show a progress bar (on a terminal).
+    pub progress: bool,
+}
+
+/// Text sinks of a run; `None` when only timing matters (benchmarks).
+struct Sinks {
+    groundtruth: BufWriter<File>,
+    odometry: BufWriter<File>,
+    carmen: Option<BufWriter<File>>,
+}
+
+/// What a run measured, for the summary and for callers (tests, benchmarks).
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub seed: u64,
+    pub sim_time: f64,
+    pub wall_time: f64,
+    pub steps: u64,
+    pub scans: Vec<u64>,
+    pub laser_rays: u64,
+    pub bump_events: u64,
+    pub wheel_drop_steps: u64,
+    pub distance_travelled: f64,
+    pub final_truth: Pose2,
+    pub final_odometry: Pose2,
+    pub controller_finished: bool,
+}
+
+/// The odometry pose at `t`, interpolated in the recent history.
+fn pose_at(history: &VecDeque<(Time, Pose2)>, t: Time) -> Pose2 {
+    let Some(&(t_last, p_last)) = history.back() else { return Pose2::IDENTITY };
+    if t >= t_last {
+        return p_last;
+    }
+    for w in history.iter().collect::<Vec<_>>().windows(2) {
+        let ((t0, p0), (t1, p1)) = (*w[0], *w[1]);
+        if t >= t0 && t <= t1 {
+            let a = if t1 > t0 { (t - t0).secs() / (t1 - t0).secs() } else { 0.0 };
+            let dth = futago_msgs::wrap_angle(p1.theta - p0.theta);
+            return Pose2::new(p0.x + a * (p1.x - p0.x), p0.y + a * (p1.y - p0.y), futago_msgs::wrap_angle(p0.theta + a * dth));
+        }
+    }
+    history.front().map(|h| h.1).unwrap_or(p_last)
+}
+
+/// Runs the scenario's closed loop, writing into `sinks` when given.
+fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> Result<Outcome> {
+    let seed = opts.seed.unwrap_or(s.spec.seed);
+    let duration = opts.duration.unwrap_or(s.spec.duration);
+    let spec = &s.spec;
+    let mut sim = Simulation::new(&s.world, &spec.physics, &spec.robot, &s.lidars, s.start, seed);
+    let mut ctl = ScriptedController::new(spec.controller.clone(), Time::ZERO, s.start);
+    let mut odo = OdometryIntegrator::new(s.start);
+    let mut history: VecDeque<(Time, Pose2)> = VecDeque::from([(Time::ZERO, s.start)]);
+    let gt_period = Duration::from_secs(1.0 / spec.output.groundtruth_rate);
+    let end = Time::from_secs(duration);
+    let mut next_gt: i64 = 0;
+    let mut scans = vec![0u64; s.lidars.len()];
+    let mut distance = 0.0;
+    let mut prev_truth = s.start;
+    let mut line = String::new();
+    let started = std::time::Instant::now();
+    let bar = if opts.progress {
+        let b = indicatif::ProgressBar::new((duration * 1000.0) as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} {msg} [{bar:40}] {percent}% sim {pos}/{len} ms, eta {eta}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        b.set_message(spec.name.clone());
+        Some(b)
+    } else {
+        None
+    };
+
+    if let Some(k) = sinks.as_deref_mut() {
+        writeln!(k.groundtruth, "# futago ground truth of {}: robot base frame in the world frame\n# timestamp tx ty tz qx qy qz qw", spec.name)?;
+        writeln!(k.odometry, "# futago wheel odometry of {}, integrated from the start pose\n# timestamp tx ty tz qx qy qz qw", spec.name)?;
+        if let Some(c) = k.carmen.as_mut() {
+            line.clear();
+            carmen::param(&mut line, "robot_name", "create");
+            carmen::param(&mut line, "robot_wheel_base", &format!("{}", spec.robot.wheel_base));
+            for (i, (cfg, _)) in s.lidars.iter().enumerate() {
+                let prefix = if i == 0 { "robot_frontlaser" } else { "robot_rearlaser" };
+                carmen::param(&mut line, &format!("{prefix}_offset"), &format!("{}", cfg.xyz[0]));
+                carmen::param(&mut line, &format!("{prefix}_side_offset"), &format!("{}", cfg.xyz[1]));
+                carmen::param(&mut line, &format!("{prefix}_angular_offset"), &format!("{}", cfg.rpy_deg[2].to_radians()));
+            }
+            c.write_all(line.as_bytes())?;
+        }
+    }
+    let write_pose = |w: &mut BufWriter<File>, t: Time, p: &Pose2, line: &mut String| -> Result<()> {
+        line.clear();
+        tum::format_line(line, &tum::Stamped { stamp: t, pose: Pose3::from_pose2(p, 0.0) });
+        w.write_all(line.as_bytes())?;
+        Ok(())
+    };
+
+    if let Some(k) = sinks.as_deref_mut() {
+        write_pose(&mut k.odometry, Time::ZERO, &s.start, &mut line)?;
+    }
+    let mut pending = Vec::new();
+    let mut cmd = ctl.update(&ControlInput { now: Time::ZERO, odometry: &[], bumps: sim.bumps(), ground_truth: Some(s.start) });
+    loop {
+        let now = sim.time();
+        if now.nanos() >= next_gt * gt_period.0 {
+            next_gt += 1;
+            let truth = sim.robot_pose();
+            if let Some(k) = sinks.as_deref_mut() {
+                write_pose(&mut k.groundtruth, now, &truth, &mut line)?;
+                if let Some(c) = k.carmen.as_mut() {
+                    line.clear();
+                    carmen::truepos(&mut line, now.secs(), &truth, &odo.pose);
+                    c.write_all(line.as_bytes())?;
+                }
+            }
+        }
+        if now >= end || (ctl.finished() && sim.wheel_speeds() == (0.0, 0.0) && cmd.is_none()) {
+            break;
+        }
+        let out = sim.step(cmd.take().as_ref());
+        let now = sim.time();
+        let truth = sim.robot_pose();
+        distance += truth.distance(&prev_truth);
+        prev_truth = truth;
+        if let Some(o) = out.odometry {
+            odo.integrate(&o);
+            history.push_back((now, odo.pose));
+            while history.len() > 256 {
+                history.pop_front();
+            }
+            pending.push(o);
+            if let Some(k) = sinks.as_deref_mut() {
+                write_pose(&mut k.odometry, now, &odo.pose, &mut line)?;
+                if let Some(c) = k.carmen.as_mut() {
+                    let (l, r) = sim.wheel_speeds();
+                    line.clear();
+                    carmen::odom(&mut line, now.secs(), &odo.pose, (l + r) / 2.0, (r - l) / spec.robot.wheel_base);
+                    c.write_all(line.as_bytes())?;
+                }
+            }
+        }
+        for (i, scan) in out.scans {
+            scans[i] += 1;
+            if let Some(c) = sinks.as_deref_mut().and_then(|k| k.carmen.as_mut()) {
+                let robot = pose_at(&history, scan.stamp);
+                let cfg = &s.lidars[i].0;
+                let laser = robot.compose(&Pose2::new(cfg.xyz[0], cfg.xyz[1], cfg.rpy_deg[2].to_radians()));
+                let (l, r) = sim.wheel_speeds();
+                line.clear();
+                carmen::robotlaser(&mut line, i as u8 + 1, &scan, s.lidars[i].1.sigma, &laser, &robot, (l + r) / 2.0, (r - l) / spec.robot.wheel_base);
+                c.write_all(line.as_bytes())?;
+            }
+        }
+        // Control at the rate of the Create's sensor stream.
+        if out.odometry.is_some() {
+            cmd = ctl.update(&ControlInput { now, odometry: &pending, bumps: out.bumps.unwrap_or_default(), ground_truth: Some(truth) });
+            pending.clear();
+        }
+        if let Some(b) = &bar
+            && sim.counters().steps % 200 == 0
+        {
+            b.set_position((now.secs() * 1000.0) as u64);
+        }
+    }
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let c = sim.counters();
+    Ok(Outcome {
+        seed,
+        sim_time: sim.time().secs(),
+        wall_time: started.elapsed().as_secs_f64(),
+        steps: c.steps,
+        scans,
+        laser_rays: c.laser_rays,
+        bump_events: c.bump_events,
+        wheel_drop_steps: c.wheel_drop_steps,
+        distance_travelled: distance,
+        final_truth: sim.robot_pose(),
+        final_odometry: odo.pose,
+        controller_finished: ctl.finished(),
+    })
+}
+
+/// Runs without writing anything (for benchmarks).
+pub fn run_in_memory(s: &Scenario, opts: &RunOptions) -> Result<Outcome> {
+    simulate(s, opts, None)
+}
+
+fn sha256_file(p: &Path) -> Result<String> {
+    let bytes = std::fs::read(p).with_context(|| format!("reading back {}", p.display()))?;
+    Ok(Sha256::digest(&bytes).iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// The deterministic part of a run's summary (everything but `performance`).
+pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
+    let err = o.final_truth.distance(&o.final_odometry);
+    let herr = futago_msgs::wrap_angle(o.final_odometry.theta - o.final_truth.theta).to_degrees();
+    json!({
+        "scenario": s.spec.name,
+        "description": s.spec.description,
+        "world": s.world.name,
+        "seed": o.seed,
+        "sim_time_s": o.sim_time,
+        "physics_rate_hz": s.spec.physics.rate,
+        "steps": o.steps,
+        "controller_finished": o.controller_finished,
+        "robot": {
+            "start": [s.start.x, s.start.y, s.start.theta],
+            "final_pose": [o.final_truth.x, o.final_truth.y, o.final_truth.theta],
+            "distance_travelled_m": o.distance_travelled,
+            "bump_events": o.bump_events,
+            "wheel_drop_steps": o.wheel_drop_steps,
+        },
+        "odometry": {
+            "final_pose": [o.final_odometry.x, o.final_odometry.y, o.final_odometry.theta],
+            "final_position_error_m": err,
+            "final_heading_error_deg": herr,
+        },
+        "lidar": s.lidars.iter().zip(&o.scans).map(|((c, _), n)| json!({ "name": c.name, "preset": format!("{:?}", c.preset), "scans": n })).collect::<Vec<_>>(),
+        "laser_rays": o.laser_rays,
+        "files": files,
+    })
+}
+
+/// Runs a scenario and writes its results into `out` (created or replaced whole).
+pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcome)> {
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).with_context(|| format!("creating {}", parent.display()))?;
+    let name = out.file_name().with_context(|| format!("{} is not a folder name", out.display()))?.to_string_lossy().to_string();
+    let tmp = parent.join(format!(".{name}.partial-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    std::fs::create_dir(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+    let result = (|| -> Result<(Value, Outcome)> {
+        let open = |n: &str| -> Result<BufWriter<File>> { Ok(BufWriter::new(File::create(tmp.join(n)).with_context(|| format!("creating {n}"))?)) };
+        let mut sinks = Sinks {
+            groundtruth: open(OUTPUT_FILES[0])?,
+            odometry: open(OUTPUT_FILES[1])?,
+            carmen: if s.spec.output.carmen { Some(open(OUTPUT_FILES[2])?) } else { None },
+        };
+        let outcome = simulate(s, opts, Some(&mut sinks))?;
+        sinks.groundtruth.flush()?;
+        sinks.odometry.flush()?;
+        if let Some(c) = sinks.carmen.as_mut() {
+            c.flush()?;
+        }
+        drop(sinks);
+        let mut files = serde_json::Map::new();
+        for f in OUTPUT_FILES {
+            let p = tmp.join(f);
+            if p.exists() {
+                files.insert(f.to_string(), json!({ "sha256": sha256_file(&p)? }));
+            }
+        }
+        let mut sum = summary(s, &outcome, Value::Object(files));
+        sum["performance"] = json!({
+            "wall_time_s": outcome.wall_time,
+            "real_time_factor": if outcome.wall_time > 0.0 { outcome.sim_time / outcome.wall_time } else { 0.0 },
+        });
+        let text = serde_json::to_string_pretty(&sum)? + "\n";
+        std::fs::write(tmp.join("summary.json"), text).context("writing summary.json")?;
+        Ok((sum, outcome))
+    })();
+    match result {
+        Ok(r) => {
+            if out.exists() {
+                std::fs::remove_dir_all(out).with_context(|| format!("replacing {}", out.display()))?;
+            }
+            std::fs::rename(&tmp, out).with_context(|| format!("moving results into {}", out.display()))?;
+            Ok(r)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&tmp);
+            Err(e)
+        }
+    }
+}

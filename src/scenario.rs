@@ -1,0 +1,131 @@
+//! Scenario files: which world, which robot and sensors, how long, which seed, which
+//! controller, and what to write.
+//!
+//! Every table is a typed config of the module it configures (`[robot]` is the Create's
+//! [`CreateConfig`], `[[lidar]]` a [`LidarConfig`], `[controller]` a scripted
+//! [`ControllerConfig`]), so any parameter is reachable by its dotted path.
+
+use futago_msgs::Pose2;
+use futago_robot::script::ControllerConfig;
+use futago_sim::config::{SpecError, check_positive, check_range, load_toml};
+use futago_sim::create::CreateConfig;
+use futago_sim::lidar::{LidarConfig, LidarSpec};
+use futago_sim::{PhysicsConfig, World};
+use serde::Deserialize;
+use std::path::Path;
+
+/// A scenario file as written.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioSpec {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// World file, relative to the scenario file.
+    pub world: String,
+    /// Longest simulated time, s; the run ends earlier when the controller is done.
+    pub duration: f64,
+    #[serde(default)]
+    pub seed: u64,
+    /// Where the robot starts: a spawn name of the world or `{ x, y, yaw_deg }`.
+    pub start: StartSpec,
+    #[serde(default)]
+    pub physics: PhysicsConfig,
+    #[serde(default)]
+    pub robot: CreateConfig,
+    #[serde(default)]
+    pub lidar: Vec<LidarConfig>,
+    pub controller: ControllerConfig,
+    #[serde(default)]
+    pub output: OutputConfig,
+}
+
+/// A start pose.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+pub enum StartSpec {
+    Spawn(String),
+    Pose {
+        x: f64,
+        y: f64,
+        #[serde(default)]
+        yaw_deg: f64,
+    },
+}
+
+/// What `futago run` writes.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputConfig {
+    /// Rate of the ground-truth trajectory, Hz.
+    pub groundtruth_rate: f64,
+    /// Write the CARMEN log of laser scans and odometry.
+    pub carmen: bool,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        OutputConfig { groundtruth_rate: 50.0, carmen: true }
+    }
+}
+
+/// A loaded, checked scenario with its world compiled.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    pub spec: ScenarioSpec,
+    pub world: World,
+    pub start: Pose2,
+    /// Resolved laser parameters, in `spec.lidar` order.
+    pub lidars: Vec<(LidarConfig, LidarSpec)>,
+}
+
+/// The most lasers a CARMEN log has channels for (ROBOTLASER1, ROBOTLASER2).
+pub const MAX_LIDARS: usize = 2;
+
+impl Scenario {
+    /// Loads and checks a scenario and the world it names. Nothing runs before this succeeds.
+    pub fn load(path: &Path) -> Result<Scenario, SpecError> {
+        let spec: ScenarioSpec = load_toml(path)?;
+        Scenario::from_spec(path, spec)
+    }
+
+    /// Checks a parsed scenario and compiles its world.
+    pub fn from_spec(path: &Path, spec: ScenarioSpec) -> Result<Scenario, SpecError> {
+        if spec.name.is_empty() || !spec.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+            return Err(SpecError::new(path, "name", "expected a non-empty name of letters, digits, '-' and '_'"));
+        }
+        check_range(path, "duration", spec.duration, 1e-3, 1e7, "s")?;
+        spec.physics.validate(path, "physics")?;
+        spec.robot.validate(path, "robot")?;
+        check_positive(path, "output.groundtruth_rate", spec.output.groundtruth_rate, "Hz")?;
+        if spec.lidar.len() > MAX_LIDARS {
+            return Err(SpecError::new(path, "lidar", format!("expected at most {MAX_LIDARS} lasers (the CARMEN log's ROBOTLASER1 and ROBOTLASER2), found {}", spec.lidar.len())));
+        }
+        let mut lidars = Vec::new();
+        for (i, l) in spec.lidar.iter().enumerate() {
+            let s = l.resolve(path, &format!("lidar[{i}]"))?;
+            if spec.lidar[..i].iter().any(|o| o.name == l.name) {
+                return Err(SpecError::new(path, format!("lidar[{i}].name"), format!("laser name `{}` is used twice", l.name)));
+            }
+            lidars.push((l.clone(), s));
+        }
+        spec.controller.validate().map_err(|(k, m)| SpecError::new(path, format!("controller.{k}"), m))?;
+        let world_path = path.parent().unwrap_or(Path::new(".")).join(&spec.world);
+        if !world_path.is_file() {
+            return Err(SpecError::new(path, "world", format!("world file {} does not exist", world_path.display())));
+        }
+        let world = World::load(&world_path)?;
+        let start = match &spec.start {
+            StartSpec::Spawn(name) => world.spawn(name).ok_or_else(|| {
+                SpecError::new(path, "start", format!("world `{}` has no spawn `{name}`; it has {:?}", world.name, world.spawns.iter().map(|(n, _)| n).collect::<Vec<_>>()))
+            })?,
+            StartSpec::Pose { x, y, yaw_deg } => {
+                if ![x, y, yaw_deg].iter().all(|v| v.is_finite()) {
+                    return Err(SpecError::new(path, "start", "expected finite x, y and yaw_deg"));
+                }
+                Pose2::new(*x, *y, yaw_deg.to_radians())
+            }
+        };
+        Ok(Scenario { spec, world, start, lidars })
+    }
+}
