@@ -10,7 +10,12 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 
 #[derive(Parser)]
-#[command(name = "futago", version, about = "futago (双子, twin): a simulation-first digital twin of a small indoor robot", long_about = "futago simulates an iRobot Create with a laser range finder in a rapier physics world, runs a controller in closed loop on it, and writes the robot's sensor data beside the ground truth. Worlds and scenarios are TOML files (see worlds/ and scenarios/).")]
+#[command(
+    name = "futago",
+    version,
+    about = "futago (双子, twin): a simulation-first digital twin of a small indoor robot",
+    long_about = "futago simulates an iRobot Create with a laser range finder in a rapier physics world, runs a controller in closed loop on it, and writes the robot's sensor data beside the ground truth. Worlds and scenarios are TOML files (see worlds/ and scenarios/)."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -58,9 +63,7 @@ enum Command {
 #[derive(Subcommand)]
 enum WorldCommand {
     /// Load a world and describe it (objects, triangles, bounds, spawns).
-    Info {
-        world: PathBuf,
-    },
+    Info { world: PathBuf },
     /// Write the occupancy grid of a height band (PGM + YAML, ROS map_server) and the world
     /// mesh (PLY and/or binary glTF) from the world's own colliders and meshes.
     Export {
@@ -87,8 +90,17 @@ enum WorldCommand {
 }
 
 fn parse_band(s: &str) -> Result<(f64, f64)> {
-    let (a, b) = s.split_once(':').with_context(|| format!("--band: expected ZMIN:ZMAX in metres, found `{s}`"))?;
-    let (a, b): (f64, f64) = (a.trim().parse().with_context(|| format!("--band: `{a}` is not a number"))?, b.trim().parse().with_context(|| format!("--band: `{b}` is not a number"))?);
+    let (a, b) = s
+        .split_once(':')
+        .with_context(|| format!("--band: expected ZMIN:ZMAX in metres, found `{s}`"))?;
+    let (a, b): (f64, f64) = (
+        a.trim()
+            .parse()
+            .with_context(|| format!("--band: `{a}` is not a number"))?,
+        b.trim()
+            .parse()
+            .with_context(|| format!("--band: `{b}` is not a number"))?,
+    );
     if !(a.is_finite() && b.is_finite() && b > a) {
         bail!("--band: expected ZMIN < ZMAX, found {a}:{b}");
     }
@@ -108,7 +120,13 @@ fn main() -> std::process::ExitCode {
 fn real_main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Run { scenario, out, seed, duration, quiet } => {
+        Command::Run {
+            scenario,
+            out,
+            seed,
+            duration,
+            quiet,
+        } => {
             if let Some(d) = duration
                 && !(d.is_finite() && d > 0.0)
             {
@@ -116,9 +134,15 @@ fn real_main() -> Result<()> {
             }
             let s = scenario::Scenario::load(&scenario)?;
             let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
-            let opts = run::RunOptions { seed, duration, progress: !quiet };
+            let opts = run::RunOptions {
+                seed,
+                duration,
+                progress: !quiet,
+            };
             let (summary, o) = run::run(&s, &opts, &out)?;
-            let rtf = summary["performance"]["real_time_factor"].as_f64().unwrap_or(0.0);
+            let rtf = summary["performance"]["real_time_factor"]
+                .as_f64()
+                .unwrap_or(0.0);
             println!(
                 "{}: {:.1} s simulated in {:.2} s ({rtf:.0}× real time), {:.2} m driven, odometry off by {:.3} m; results in {}",
                 s.spec.name,
@@ -134,9 +158,19 @@ fn real_main() -> Result<()> {
                 let w = world_cmd::load(&world)?;
                 println!("{}", world_cmd::describe(&w));
             }
-            WorldCommand::Export { world, out, resolution, band, margin, mesh, no_grid } => {
+            WorldCommand::Export {
+                world,
+                out,
+                resolution,
+                band,
+                margin,
+                mesh,
+                no_grid,
+            } => {
                 if !(resolution.is_finite() && resolution >= 0.001 && resolution <= 10.0) {
-                    bail!("--resolution: expected a cell size in [0.001, 10] m, found {resolution}");
+                    bail!(
+                        "--resolution: expected a cell size in [0.001, 10] m, found {resolution}"
+                    );
                 }
                 if !(margin.is_finite() && margin >= 0.0) {
                     bail!("--margin: expected a non-negative number of metres, found {margin}");
@@ -144,13 +178,27 @@ fn real_main() -> Result<()> {
                 let band = parse_band(&band)?;
                 let w = world_cmd::load(&world)?;
                 let dir = out.unwrap_or_else(|| PathBuf::from("out/worlds").join(&w.name));
-                let written = world_cmd::export_world(&w, &dir, &world_cmd::ExportOptions { resolution, band, margin, mesh, grid: !no_grid })?;
+                let written = world_cmd::export_world(
+                    &w,
+                    &dir,
+                    &world_cmd::ExportOptions {
+                        resolution,
+                        band,
+                        margin,
+                        mesh,
+                        grid: !no_grid,
+                    },
+                )?;
                 for p in written {
                     println!("wrote {}", p.display());
                 }
             }
         },
-        Command::Bench { scenario, duration, rays } => {
+        Command::Bench {
+            scenario,
+            duration,
+            rays,
+        } => {
             let s = scenario::Scenario::load(&scenario)?;
             let r = bench::bench(&s, duration, rays.max(682))?;
             println!("{}", serde_json::to_string_pretty(&r)?);

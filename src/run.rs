@@ -57,16 +57,26 @@ pub struct Outcome {
 
 /// The odometry pose at `t`, interpolated in the recent history.
 fn pose_at(history: &VecDeque<(Time, Pose2)>, t: Time) -> Pose2 {
-    let Some(&(t_last, p_last)) = history.back() else { return Pose2::IDENTITY };
+    let Some(&(t_last, p_last)) = history.back() else {
+        return Pose2::IDENTITY;
+    };
     if t >= t_last {
         return p_last;
     }
     for w in history.iter().collect::<Vec<_>>().windows(2) {
         let ((t0, p0), (t1, p1)) = (*w[0], *w[1]);
         if t >= t0 && t <= t1 {
-            let a = if t1 > t0 { (t - t0).secs() / (t1 - t0).secs() } else { 0.0 };
+            let a = if t1 > t0 {
+                (t - t0).secs() / (t1 - t0).secs()
+            } else {
+                0.0
+            };
             let dth = futago_msgs::wrap_angle(p1.theta - p0.theta);
-            return Pose2::new(p0.x + a * (p1.x - p0.x), p0.y + a * (p1.y - p0.y), futago_msgs::wrap_angle(p0.theta + a * dth));
+            return Pose2::new(
+                p0.x + a * (p1.x - p0.x),
+                p0.y + a * (p1.y - p0.y),
+                futago_msgs::wrap_angle(p0.theta + a * dth),
+            );
         }
     }
     history.front().map(|h| h.1).unwrap_or(p_last)
@@ -77,7 +87,14 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
     let seed = opts.seed.unwrap_or(s.spec.seed);
     let duration = opts.duration.unwrap_or(s.spec.duration);
     let spec = &s.spec;
-    let mut sim = Simulation::new(&s.world, &spec.physics, &spec.robot, &s.lidars, s.start, seed);
+    let mut sim = Simulation::new(
+        &s.world,
+        &spec.physics,
+        &spec.robot,
+        &s.lidars,
+        s.start,
+        seed,
+    );
     let mut ctl = ScriptedController::new(spec.controller.clone(), Time::ZERO, s.start);
     let mut odo = OdometryIntegrator::new(s.start);
     let mut history: VecDeque<(Time, Pose2)> = VecDeque::from([(Time::ZERO, s.start)]);
@@ -92,9 +109,11 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
     let bar = if opts.progress {
         let b = indicatif::ProgressBar::new((duration * 1000.0) as u64);
         b.set_style(
-            indicatif::ProgressStyle::with_template("{spinner} {msg} [{bar:40}] {percent}% sim {pos}/{len} ms, eta {eta}")
-                .expect("valid template")
-                .progress_chars("=> "),
+            indicatif::ProgressStyle::with_template(
+                "{spinner} {msg} [{bar:40}] {percent}% sim {pos}/{len} ms, eta {eta}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
         );
         b.set_message(spec.name.clone());
         Some(b)
@@ -103,33 +122,73 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
     };
 
     if let Some(k) = sinks.as_deref_mut() {
-        writeln!(k.groundtruth, "# futago ground truth of {}: robot base frame in the world frame\n# timestamp tx ty tz qx qy qz qw", spec.name)?;
-        writeln!(k.odometry, "# futago wheel odometry of {}, integrated from the start pose\n# timestamp tx ty tz qx qy qz qw", spec.name)?;
+        writeln!(
+            k.groundtruth,
+            "# futago ground truth of {}: robot base frame in the world frame\n# timestamp tx ty tz qx qy qz qw",
+            spec.name
+        )?;
+        writeln!(
+            k.odometry,
+            "# futago wheel odometry of {}, integrated from the start pose\n# timestamp tx ty tz qx qy qz qw",
+            spec.name
+        )?;
         if let Some(c) = k.carmen.as_mut() {
             line.clear();
             carmen::param(&mut line, "robot_name", "create");
-            carmen::param(&mut line, "robot_wheel_base", &format!("{}", spec.robot.wheel_base));
+            carmen::param(
+                &mut line,
+                "robot_wheel_base",
+                &format!("{}", spec.robot.wheel_base),
+            );
             for (i, (cfg, _)) in s.lidars.iter().enumerate() {
-                let prefix = if i == 0 { "robot_frontlaser" } else { "robot_rearlaser" };
-                carmen::param(&mut line, &format!("{prefix}_offset"), &format!("{}", cfg.xyz[0]));
-                carmen::param(&mut line, &format!("{prefix}_side_offset"), &format!("{}", cfg.xyz[1]));
-                carmen::param(&mut line, &format!("{prefix}_angular_offset"), &format!("{}", cfg.rpy_deg[2].to_radians()));
+                let prefix = if i == 0 {
+                    "robot_frontlaser"
+                } else {
+                    "robot_rearlaser"
+                };
+                carmen::param(
+                    &mut line,
+                    &format!("{prefix}_offset"),
+                    &format!("{}", cfg.xyz[0]),
+                );
+                carmen::param(
+                    &mut line,
+                    &format!("{prefix}_side_offset"),
+                    &format!("{}", cfg.xyz[1]),
+                );
+                carmen::param(
+                    &mut line,
+                    &format!("{prefix}_angular_offset"),
+                    &format!("{}", cfg.rpy_deg[2].to_radians()),
+                );
             }
             c.write_all(line.as_bytes())?;
         }
     }
-    let write_pose = |w: &mut BufWriter<File>, t: Time, p: &Pose2, line: &mut String| -> Result<()> {
-        line.clear();
-        tum::format_line(line, &tum::Stamped { stamp: t, pose: Pose3::from_pose2(p, 0.0) });
-        w.write_all(line.as_bytes())?;
-        Ok(())
-    };
+    let write_pose =
+        |w: &mut BufWriter<File>, t: Time, p: &Pose2, line: &mut String| -> Result<()> {
+            line.clear();
+            tum::format_line(
+                line,
+                &tum::Stamped {
+                    stamp: t,
+                    pose: Pose3::from_pose2(p, 0.0),
+                },
+            );
+            w.write_all(line.as_bytes())?;
+            Ok(())
+        };
 
     if let Some(k) = sinks.as_deref_mut() {
         write_pose(&mut k.odometry, Time::ZERO, &s.start, &mut line)?;
     }
     let mut pending = Vec::new();
-    let mut cmd = ctl.update(&ControlInput { now: Time::ZERO, odometry: &[], bumps: sim.bumps(), ground_truth: Some(s.start) });
+    let mut cmd = ctl.update(&ControlInput {
+        now: Time::ZERO,
+        odometry: &[],
+        bumps: sim.bumps(),
+        ground_truth: Some(s.start),
+    });
     loop {
         let now = sim.time();
         if now.nanos() >= next_gt * gt_period.0 {
@@ -164,7 +223,13 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 if let Some(c) = k.carmen.as_mut() {
                     let (l, r) = sim.wheel_speeds();
                     line.clear();
-                    carmen::odom(&mut line, now.secs(), &odo.pose, (l + r) / 2.0, (r - l) / spec.robot.wheel_base);
+                    carmen::odom(
+                        &mut line,
+                        now.secs(),
+                        &odo.pose,
+                        (l + r) / 2.0,
+                        (r - l) / spec.robot.wheel_base,
+                    );
                     c.write_all(line.as_bytes())?;
                 }
             }
@@ -174,16 +239,34 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
             if let Some(c) = sinks.as_deref_mut().and_then(|k| k.carmen.as_mut()) {
                 let robot = pose_at(&history, scan.stamp);
                 let cfg = &s.lidars[i].0;
-                let laser = robot.compose(&Pose2::new(cfg.xyz[0], cfg.xyz[1], cfg.rpy_deg[2].to_radians()));
+                let laser = robot.compose(&Pose2::new(
+                    cfg.xyz[0],
+                    cfg.xyz[1],
+                    cfg.rpy_deg[2].to_radians(),
+                ));
                 let (l, r) = sim.wheel_speeds();
                 line.clear();
-                carmen::robotlaser(&mut line, i as u8 + 1, &scan, s.lidars[i].1.sigma, &laser, &robot, (l + r) / 2.0, (r - l) / spec.robot.wheel_base);
+                carmen::robotlaser(
+                    &mut line,
+                    i as u8 + 1,
+                    &scan,
+                    s.lidars[i].1.sigma,
+                    &laser,
+                    &robot,
+                    (l + r) / 2.0,
+                    (r - l) / spec.robot.wheel_base,
+                );
                 c.write_all(line.as_bytes())?;
             }
         }
         // Control at the rate of the Create's sensor stream.
         if out.odometry.is_some() {
-            cmd = ctl.update(&ControlInput { now, odometry: &pending, bumps: out.bumps.unwrap_or_default(), ground_truth: Some(truth) });
+            cmd = ctl.update(&ControlInput {
+                now,
+                odometry: &pending,
+                bumps: out.bumps.unwrap_or_default(),
+                ground_truth: Some(truth),
+            });
             pending.clear();
         }
         if let Some(b) = &bar
@@ -219,7 +302,10 @@ pub fn run_in_memory(s: &Scenario, opts: &RunOptions) -> Result<Outcome> {
 
 fn sha256_file(p: &Path) -> Result<String> {
     let bytes = std::fs::read(p).with_context(|| format!("reading back {}", p.display()))?;
-    Ok(Sha256::digest(&bytes).iter().map(|b| format!("{b:02x}")).collect())
+    Ok(Sha256::digest(&bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
 }
 
 /// The deterministic part of a run's summary (everything but `performance`).
@@ -260,16 +346,28 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
         _ => PathBuf::from("."),
     };
     std::fs::create_dir_all(&parent).with_context(|| format!("creating {}", parent.display()))?;
-    let name = out.file_name().with_context(|| format!("{} is not a folder name", out.display()))?.to_string_lossy().to_string();
+    let name = out
+        .file_name()
+        .with_context(|| format!("{} is not a folder name", out.display()))?
+        .to_string_lossy()
+        .to_string();
     let tmp = parent.join(format!(".{name}.partial-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
     std::fs::create_dir(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
     let result = (|| -> Result<(Value, Outcome)> {
-        let open = |n: &str| -> Result<BufWriter<File>> { Ok(BufWriter::new(File::create(tmp.join(n)).with_context(|| format!("creating {n}"))?)) };
+        let open = |n: &str| -> Result<BufWriter<File>> {
+            Ok(BufWriter::new(
+                File::create(tmp.join(n)).with_context(|| format!("creating {n}"))?,
+            ))
+        };
         let mut sinks = Sinks {
             groundtruth: open(OUTPUT_FILES[0])?,
             odometry: open(OUTPUT_FILES[1])?,
-            carmen: if s.spec.output.carmen { Some(open(OUTPUT_FILES[2])?) } else { None },
+            carmen: if s.spec.output.carmen {
+                Some(open(OUTPUT_FILES[2])?)
+            } else {
+                None
+            },
         };
         let outcome = simulate(s, opts, Some(&mut sinks))?;
         sinks.groundtruth.flush()?;
@@ -297,9 +395,11 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
     match result {
         Ok(r) => {
             if out.exists() {
-                std::fs::remove_dir_all(out).with_context(|| format!("replacing {}", out.display()))?;
+                std::fs::remove_dir_all(out)
+                    .with_context(|| format!("replacing {}", out.display()))?;
             }
-            std::fs::rename(&tmp, out).with_context(|| format!("moving results into {}", out.display()))?;
+            std::fs::rename(&tmp, out)
+                .with_context(|| format!("moving results into {}", out.display()))?;
             Ok(r)
         }
         Err(e) => {

@@ -65,7 +65,10 @@ pub struct OutputConfig {
 
 impl Default for OutputConfig {
     fn default() -> Self {
-        OutputConfig { groundtruth_rate: 50.0, carmen: true }
+        OutputConfig {
+            groundtruth_rate: 50.0,
+            carmen: true,
+        }
     }
 }
 
@@ -91,41 +94,89 @@ impl Scenario {
 
     /// Checks a parsed scenario and compiles its world.
     pub fn from_spec(path: &Path, spec: ScenarioSpec) -> Result<Scenario, SpecError> {
-        if spec.name.is_empty() || !spec.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
-            return Err(SpecError::new(path, "name", "expected a non-empty name of letters, digits, '-' and '_'"));
+        if spec.name.is_empty()
+            || !spec
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            return Err(SpecError::new(
+                path,
+                "name",
+                "expected a non-empty name of letters, digits, '-' and '_'",
+            ));
         }
         check_range(path, "duration", spec.duration, 1e-3, 1e7, "s")?;
         spec.physics.validate(path, "physics")?;
         spec.robot.validate(path, "robot")?;
-        check_positive(path, "output.groundtruth_rate", spec.output.groundtruth_rate, "Hz")?;
+        check_positive(
+            path,
+            "output.groundtruth_rate",
+            spec.output.groundtruth_rate,
+            "Hz",
+        )?;
         if spec.lidar.len() > MAX_LIDARS {
-            return Err(SpecError::new(path, "lidar", format!("expected at most {MAX_LIDARS} lasers (the CARMEN log's ROBOTLASER1 and ROBOTLASER2), found {}", spec.lidar.len())));
+            return Err(SpecError::new(
+                path,
+                "lidar",
+                format!(
+                    "expected at most {MAX_LIDARS} lasers (the CARMEN log's ROBOTLASER1 and ROBOTLASER2), found {}",
+                    spec.lidar.len()
+                ),
+            ));
         }
         let mut lidars = Vec::new();
         for (i, l) in spec.lidar.iter().enumerate() {
             let s = l.resolve(path, &format!("lidar[{i}]"))?;
             if spec.lidar[..i].iter().any(|o| o.name == l.name) {
-                return Err(SpecError::new(path, format!("lidar[{i}].name"), format!("laser name `{}` is used twice", l.name)));
+                return Err(SpecError::new(
+                    path,
+                    format!("lidar[{i}].name"),
+                    format!("laser name `{}` is used twice", l.name),
+                ));
             }
             lidars.push((l.clone(), s));
         }
-        spec.controller.validate().map_err(|(k, m)| SpecError::new(path, format!("controller.{k}"), m))?;
+        spec.controller
+            .validate()
+            .map_err(|(k, m)| SpecError::new(path, format!("controller.{k}"), m))?;
         let world_path = path.parent().unwrap_or(Path::new(".")).join(&spec.world);
         if !world_path.is_file() {
-            return Err(SpecError::new(path, "world", format!("world file {} does not exist", world_path.display())));
+            return Err(SpecError::new(
+                path,
+                "world",
+                format!("world file {} does not exist", world_path.display()),
+            ));
         }
         let world = World::load(&world_path)?;
         let start = match &spec.start {
             StartSpec::Spawn(name) => world.spawn(name).ok_or_else(|| {
-                SpecError::new(path, "start", format!("world `{}` has no spawn `{name}`; it has {:?}", world.name, world.spawns.iter().map(|(n, _)| n).collect::<Vec<_>>()))
+                SpecError::new(
+                    path,
+                    "start",
+                    format!(
+                        "world `{}` has no spawn `{name}`; it has {:?}",
+                        world.name,
+                        world.spawns.iter().map(|(n, _)| n).collect::<Vec<_>>()
+                    ),
+                )
             })?,
             StartSpec::Pose { x, y, yaw_deg } => {
                 if ![x, y, yaw_deg].iter().all(|v| v.is_finite()) {
-                    return Err(SpecError::new(path, "start", "expected finite x, y and yaw_deg"));
+                    return Err(SpecError::new(
+                        path,
+                        "start",
+                        "expected finite x, y and yaw_deg",
+                    ));
                 }
                 Pose2::new(*x, *y, yaw_deg.to_radians())
             }
         };
-        Ok(Scenario { spec, world, start, lidars })
+        Ok(Scenario {
+            spec,
+            world,
+            start,
+            lidars,
+        })
     }
 }

@@ -8,9 +8,13 @@ use std::path::Path;
 /// Writes `bytes` to `path` through a temporary file and a rename, so that `path` holds either
 /// its old content or the whole new one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension(format!("{}.partial", path.extension().and_then(|e| e.to_str()).unwrap_or("")));
+    let tmp = path.with_extension(format!(
+        "{}.partial",
+        path.extension().and_then(|e| e.to_str()).unwrap_or("")
+    ));
     std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
 }
 
 /// Which mesh formats to write.
@@ -35,7 +39,11 @@ pub struct ExportOptions {
 
 /// Writes `<name>.pgm`/`.yaml` (occupancy of the band) and the mesh files into `dir`; returns
 /// the paths written.
-pub fn export_world(world: &World, dir: &Path, o: &ExportOptions) -> Result<Vec<std::path::PathBuf>> {
+pub fn export_world(
+    world: &World,
+    dir: &Path,
+    o: &ExportOptions,
+) -> Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut written = Vec::new();
     let stem = &world.name;
@@ -45,7 +53,10 @@ pub fn export_world(world: &World, dir: &Path, o: &ExportOptions) -> Result<Vec<
         write_atomic(&pgm, &grid.to_pgm())?;
         let yaml = dir.join(format!("{stem}.yaml"));
         let mut y = grid.to_yaml(&format!("{stem}.pgm"));
-        y.push_str(&format!("# futago: static colliders intersecting z in [{}, {}] m of world `{}`\n", o.band.0, o.band.1, world.name));
+        y.push_str(&format!(
+            "# futago: static colliders intersecting z in [{}, {}] m of world `{}`\n",
+            o.band.0, o.band.1, world.name
+        ));
         write_atomic(&yaml, y.as_bytes())?;
         written.extend([pgm, yaml]);
     }
@@ -66,7 +77,11 @@ pub fn export_world(world: &World, dir: &Path, o: &ExportOptions) -> Result<Vec<
 /// A one-paragraph description of a world.
 pub fn describe(world: &World) -> String {
     let (lo, hi) = world.bounds();
-    let dynamic = world.objects.iter().filter(|o| o.motion != futago_sim::world::Motion::Static).count();
+    let dynamic = world
+        .objects
+        .iter()
+        .filter(|o| o.motion != futago_sim::world::Motion::Static)
+        .count();
     format!(
         "world `{}` ({}): {} objects ({} dynamic), {} triangles, {} materials, {} textures\nbounds: x {:.2}..{:.2}, y {:.2}..{:.2}, z {:.2}..{:.2} m\nspawns: {}",
         world.name,
@@ -82,7 +97,12 @@ pub fn describe(world: &World) -> String {
         hi.y,
         lo.z,
         hi.z,
-        world.spawns.iter().map(|(n, p)| format!("{n} ({:.2}, {:.2}, {:.0}°)", p.x, p.y, p.theta.to_degrees())).collect::<Vec<_>>().join(", ")
+        world
+            .spawns
+            .iter()
+            .map(|(n, p)| format!("{n} ({:.2}, {:.2}, {:.0}°)", p.x, p.y, p.theta.to_degrees()))
+            .collect::<Vec<_>>()
+            .join(", ")
     )
 }
 

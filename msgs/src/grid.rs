@@ -24,7 +24,13 @@ pub struct OccupancyGrid {
 impl OccupancyGrid {
     /// A grid of `width × height` unknown cells.
     pub fn new(resolution: f64, origin: [f64; 2], width: usize, height: usize) -> OccupancyGrid {
-        OccupancyGrid { resolution, origin, width, height, cells: vec![-1; width * height] }
+        OccupancyGrid {
+            resolution,
+            origin,
+            width,
+            height,
+            cells: vec![-1; width * height],
+        }
     }
 
     /// Value of cell `(i, j)`.
@@ -41,17 +47,25 @@ impl OccupancyGrid {
     pub fn cell_of(&self, x: f64, y: f64) -> Option<(usize, usize)> {
         let i = ((x - self.origin[0]) / self.resolution).floor();
         let j = ((y - self.origin[1]) / self.resolution).floor();
-        (i >= 0.0 && j >= 0.0 && (i as usize) < self.width && (j as usize) < self.height).then(|| (i as usize, j as usize))
+        (i >= 0.0 && j >= 0.0 && (i as usize) < self.width && (j as usize) < self.height)
+            .then(|| (i as usize, j as usize))
     }
 
     /// World coordinates of the centre of cell `(i, j)`.
     pub fn cell_center(&self, i: usize, j: usize) -> [f64; 2] {
-        [self.origin[0] + (i as f64 + 0.5) * self.resolution, self.origin[1] + (j as f64 + 0.5) * self.resolution]
+        [
+            self.origin[0] + (i as f64 + 0.5) * self.resolution,
+            self.origin[1] + (j as f64 + 0.5) * self.resolution,
+        ]
     }
 
     /// The trinary PGM (P5) image: occupied (≥ 65) black 0, free (≤ 19) white 254, other 205.
     pub fn to_pgm(&self) -> Vec<u8> {
-        let mut out = format!("P5\n# futago occupancy grid, resolution {} m\n{} {}\n255\n", self.resolution, self.width, self.height).into_bytes();
+        let mut out = format!(
+            "P5\n# futago occupancy grid, resolution {} m\n{} {}\n255\n",
+            self.resolution, self.width, self.height
+        )
+        .into_bytes();
         for j in (0..self.height).rev() {
             for i in 0..self.width {
                 out.push(match self.get(i, j) {
@@ -77,7 +91,10 @@ impl OccupancyGrid {
     /// Writes `stem.pgm` and `stem.yaml` into `dir`.
     pub fn write_map_server(&self, dir: &Path, stem: &str) -> io::Result<()> {
         std::fs::write(dir.join(format!("{stem}.pgm")), self.to_pgm())?;
-        std::fs::write(dir.join(format!("{stem}.yaml")), self.to_yaml(&format!("{stem}.pgm")))
+        std::fs::write(
+            dir.join(format!("{stem}.yaml")),
+            self.to_yaml(&format!("{stem}.pgm")),
+        )
     }
 
     /// Number of cells with occupancy ≥ 65.

@@ -18,7 +18,9 @@ use std::f64::consts::PI;
 ///
 /// Integer time keeps sensor schedules exact over long runs (no drift from summing
 /// floating-point periods), which the determinism guarantee relies on.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
+)]
 pub struct Time(pub i64);
 
 impl Time {
@@ -56,7 +58,9 @@ impl std::ops::Sub for Time {
 }
 
 /// A span of time in integer nanoseconds.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
+)]
 pub struct Duration(pub i64);
 
 impl Duration {
@@ -92,7 +96,11 @@ pub struct Pose2 {
 
 impl Pose2 {
     /// The identity pose.
-    pub const IDENTITY: Pose2 = Pose2 { x: 0.0, y: 0.0, theta: 0.0 };
+    pub const IDENTITY: Pose2 = Pose2 {
+        x: 0.0,
+        y: 0.0,
+        theta: 0.0,
+    };
 
     pub fn new(x: f64, y: f64, theta: f64) -> Pose2 {
         Pose2 { x, y, theta }
@@ -146,7 +154,10 @@ impl Pose3 {
     /// Lifts a planar pose to 3D at height `z`.
     pub fn from_pose2(p: &Pose2, z: f64) -> Pose3 {
         let (s, c) = (p.theta * 0.5).sin_cos();
-        Pose3 { translation: [p.x, p.y, z], rotation: [0.0, 0.0, s, c] }
+        Pose3 {
+            translation: [p.x, p.y, z],
+            rotation: [0.0, 0.0, s, c],
+        }
     }
 }
 
@@ -245,5 +256,8 @@ pub enum DriveCommand {
 
 impl DriveCommand {
     /// Stop both wheels.
-    pub const STOP: DriveCommand = DriveCommand::DriveDirect { left: 0.0, right: 0.0 };
+    pub const STOP: DriveCommand = DriveCommand::DriveDirect {
+        left: 0.0,
+        right: 0.0,
+    };
 }

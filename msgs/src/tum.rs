@@ -58,13 +58,22 @@ pub fn parse(text: &str) -> Result<Vec<Stamped>, ParseError> {
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        let err = |message: String| ParseError { line: i + 1, message };
+        let err = |message: String| ParseError {
+            line: i + 1,
+            message,
+        };
         let v: Vec<f64> = line
             .split_whitespace()
-            .map(|w| w.parse::<f64>().map_err(|_| err(format!("`{w}` is not a number"))))
+            .map(|w| {
+                w.parse::<f64>()
+                    .map_err(|_| err(format!("`{w}` is not a number")))
+            })
             .collect::<Result<_, _>>()?;
         if v.len() != 8 {
-            return Err(err(format!("expected 8 numbers (t tx ty tz qx qy qz qw), found {}", v.len())));
+            return Err(err(format!(
+                "expected 8 numbers (t tx ty tz qx qy qz qw), found {}",
+                v.len()
+            )));
         }
         if v.iter().any(|x| !x.is_finite()) {
             return Err(err("non-finite value".into()));
@@ -75,7 +84,10 @@ pub fn parse(text: &str) -> Result<Vec<Stamped>, ParseError> {
         }
         out.push(Stamped {
             stamp: Time::from_secs(v[0]),
-            pose: Pose3 { translation: [v[1], v[2], v[3]], rotation: [v[4], v[5], v[6], v[7]] },
+            pose: Pose3 {
+                translation: [v[1], v[2], v[3]],
+                rotation: [v[4], v[5], v[6], v[7]],
+            },
         });
     }
     Ok(out)
@@ -89,7 +101,10 @@ mod tests {
     #[test]
     fn round_trip_keeps_pose_to_format_precision() {
         let p = Pose2::new(1.25, -3.5, 2.0);
-        let s = Stamped { stamp: Time::from_secs(12.5), pose: Pose3::from_pose2(&p, 0.0) };
+        let s = Stamped {
+            stamp: Time::from_secs(12.5),
+            pose: Pose3::from_pose2(&p, 0.0),
+        };
         let mut text = String::from("# t x y z qx qy qz qw\n");
         format_line(&mut text, &s);
         let back = parse(&text).unwrap();

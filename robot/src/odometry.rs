@@ -20,8 +20,16 @@ impl OdometryIntegrator {
         let mid = self.pose.theta + o.angle / 2.0;
         // Chord length of an arc of length d turning by a: d·sinc(a/2).
         let half = o.angle / 2.0;
-        let chord = if half.abs() < 1e-9 { o.distance } else { o.distance * half.sin() / half };
-        self.pose = Pose2::new(self.pose.x + chord * mid.cos(), self.pose.y + chord * mid.sin(), wrap_angle(self.pose.theta + o.angle));
+        let chord = if half.abs() < 1e-9 {
+            o.distance
+        } else {
+            o.distance * half.sin() / half
+        };
+        self.pose = Pose2::new(
+            self.pose.x + chord * mid.cos(),
+            self.pose.y + chord * mid.sin(),
+            wrap_angle(self.pose.theta + o.angle),
+        );
         self.pose
     }
 }
@@ -37,12 +45,24 @@ mod tests {
         let mut o = OdometryIntegrator::new(Pose2::IDENTITY);
         let n = 100;
         for _ in 0..n {
-            o.integrate(&Odometry { stamp: Time::ZERO, distance: std::f64::consts::FRAC_PI_2 / n as f64, angle: std::f64::consts::FRAC_PI_2 / n as f64 });
+            o.integrate(&Odometry {
+                stamp: Time::ZERO,
+                distance: std::f64::consts::FRAC_PI_2 / n as f64,
+                angle: std::f64::consts::FRAC_PI_2 / n as f64,
+            });
         }
-        assert!((o.pose.x - 1.0).abs() < 1e-12 && (o.pose.y - 1.0).abs() < 1e-12, "{:?}", o.pose);
+        assert!(
+            (o.pose.x - 1.0).abs() < 1e-12 && (o.pose.y - 1.0).abs() < 1e-12,
+            "{:?}",
+            o.pose
+        );
         // One report of the whole arc gives the same, since the arc is exact.
         let mut one = OdometryIntegrator::new(Pose2::IDENTITY);
-        one.integrate(&Odometry { stamp: Time::ZERO, distance: std::f64::consts::FRAC_PI_2, angle: std::f64::consts::FRAC_PI_2 });
+        one.integrate(&Odometry {
+            stamp: Time::ZERO,
+            distance: std::f64::consts::FRAC_PI_2,
+            angle: std::f64::consts::FRAC_PI_2,
+        });
         assert!(one.pose.distance(&o.pose) < 1e-12);
     }
 }

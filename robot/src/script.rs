@@ -59,7 +59,10 @@ impl Segment {
     fn command(&self) -> DriveCommand {
         match self.wheels {
             Some([left, right]) => DriveCommand::DriveDirect { left, right },
-            None => DriveCommand::Drive { velocity: self.velocity, radius: self.radius.radius() },
+            None => DriveCommand::Drive {
+                velocity: self.velocity,
+                radius: self.radius.radius(),
+            },
         }
     }
 }
@@ -156,15 +159,27 @@ impl ControllerConfig {
                 }
                 for (i, s) in segments.iter().enumerate() {
                     if !(s.duration.is_finite() && s.duration > 0.0) {
-                        return Err((format!("segments[{i}].duration"), format!("expected a positive duration in s, found {}", s.duration)));
+                        return Err((
+                            format!("segments[{i}].duration"),
+                            format!("expected a positive duration in s, found {}", s.duration),
+                        ));
                     }
-                    if !s.velocity.is_finite() || s.wheels.is_some_and(|w| w.iter().any(|v| !v.is_finite())) {
-                        return Err((format!("segments[{i}]"), "expected finite velocities in m/s".into()));
+                    if !s.velocity.is_finite()
+                        || s.wheels.is_some_and(|w| w.iter().any(|v| !v.is_finite()))
+                    {
+                        return Err((
+                            format!("segments[{i}]"),
+                            "expected finite velocities in m/s".into(),
+                        ));
                     }
                     if let RadiusSpec::Metres(r) = s.radius
                         && !(r.is_finite() && r != 0.0)
                     {
-                        return Err((format!("segments[{i}].radius"), "expected a non-zero radius in m, or \"straight\", \"ccw\", \"cw\"".into()));
+                        return Err((
+                            format!("segments[{i}].radius"),
+                            "expected a non-zero radius in m, or \"straight\", \"ccw\", \"cw\""
+                                .into(),
+                        ));
                     }
                 }
                 Ok(())
@@ -182,7 +197,10 @@ impl ControllerConfig {
                     ("turn_speed", w.turn_speed, 0.01, 0.5),
                 ] {
                     if !(v.is_finite() && v >= lo && v <= hi) {
-                        return Err((k.to_string(), format!("expected a value in [{lo}, {hi}], found {v}")));
+                        return Err((
+                            k.to_string(),
+                            format!("expected a value in [{lo}, {hi}], found {v}"),
+                        ));
                     }
                 }
                 if w.laps == 0 {
@@ -235,7 +253,16 @@ impl ScriptedController {
             }
             _ => Vec::new(),
         };
-        ScriptedController { config, start, odometry: OdometryIntegrator::new(initial), target: 0, route, turning: false, last: None, done: false }
+        ScriptedController {
+            config,
+            start,
+            odometry: OdometryIntegrator::new(initial),
+            target: 0,
+            route,
+            turning: false,
+            last: None,
+            done: false,
+        }
     }
 
     /// True once the plan is complete (the robot has been told to stop).
@@ -333,8 +360,15 @@ impl ScriptedController {
             if self.turning {
                 // Slow down near the end of the turn so as not to overshoot.
                 let v = w.turn_speed.min(0.02 + err.abs() * 0.2);
-                let radius = if err > 0.0 { Radius::InPlaceCcw } else { Radius::InPlaceCw };
-                return DriveCommand::Drive { velocity: (v * 1000.0).round() / 1000.0, radius };
+                let radius = if err > 0.0 {
+                    Radius::InPlaceCcw
+                } else {
+                    Radius::InPlaceCw
+                };
+                return DriveCommand::Drive {
+                    velocity: (v * 1000.0).round() / 1000.0,
+                    radius,
+                };
             }
         }
         // Pure pursuit: the circle through the robot and the aim point, tangent to the heading.
@@ -342,15 +376,24 @@ impl ScriptedController {
         let speed = w.speed.min(0.05 + dist); // ease in to the last point
         let speed = (speed * 1000.0).round() / 1000.0;
         if local[1].abs() < 1e-4 {
-            return DriveCommand::Drive { velocity: speed, radius: Radius::Straight };
+            return DriveCommand::Drive {
+                velocity: speed,
+                radius: Radius::Straight,
+            };
         }
         let r = l2 / (2.0 * local[1]);
         // Commands are quantised to whole millimetres, as the OI's integer fields are.
         let r = (r * 1000.0).round() / 1000.0;
         if r.abs() > 2.0 {
-            DriveCommand::Drive { velocity: speed, radius: Radius::Straight }
+            DriveCommand::Drive {
+                velocity: speed,
+                radius: Radius::Straight,
+            }
         } else {
-            DriveCommand::Drive { velocity: speed, radius: Radius::Arc(r) }
+            DriveCommand::Drive {
+                velocity: speed,
+                radius: Radius::Arc(r),
+            }
         }
     }
 }
@@ -360,22 +403,53 @@ mod tests {
     use super::*;
 
     fn tick(c: &mut ScriptedController, t: f64, truth: Pose2) -> Option<DriveCommand> {
-        c.update(&ControlInput { now: Time::from_secs(t), odometry: &[], bumps: BumpsAndDrops::default(), ground_truth: Some(truth) })
+        c.update(&ControlInput {
+            now: Time::from_secs(t),
+            odometry: &[],
+            bumps: BumpsAndDrops::default(),
+            ground_truth: Some(truth),
+        })
     }
 
     #[test]
     fn segments_play_in_order_then_stop() {
         let cfg: ControllerConfig = ControllerConfig::Segments {
             segments: vec![
-                Segment { duration: 1.0, velocity: 0.2, radius: straight(), wheels: None },
-                Segment { duration: 2.0, velocity: 0.1, radius: RadiusSpec::Named(NamedRadius::Ccw), wheels: None },
+                Segment {
+                    duration: 1.0,
+                    velocity: 0.2,
+                    radius: straight(),
+                    wheels: None,
+                },
+                Segment {
+                    duration: 2.0,
+                    velocity: 0.1,
+                    radius: RadiusSpec::Named(NamedRadius::Ccw),
+                    wheels: None,
+                },
             ],
             repeat: 1,
         };
         let mut c = ScriptedController::new(cfg, Time::ZERO, Pose2::IDENTITY);
-        assert_eq!(tick(&mut c, 0.5, Pose2::IDENTITY), Some(DriveCommand::Drive { velocity: 0.2, radius: Radius::Straight }));
-        assert_eq!(tick(&mut c, 0.6, Pose2::IDENTITY), None, "unchanged commands are not resent");
-        assert_eq!(tick(&mut c, 1.5, Pose2::IDENTITY), Some(DriveCommand::Drive { velocity: 0.1, radius: Radius::InPlaceCcw }));
+        assert_eq!(
+            tick(&mut c, 0.5, Pose2::IDENTITY),
+            Some(DriveCommand::Drive {
+                velocity: 0.2,
+                radius: Radius::Straight
+            })
+        );
+        assert_eq!(
+            tick(&mut c, 0.6, Pose2::IDENTITY),
+            None,
+            "unchanged commands are not resent"
+        );
+        assert_eq!(
+            tick(&mut c, 1.5, Pose2::IDENTITY),
+            Some(DriveCommand::Drive {
+                velocity: 0.1,
+                radius: Radius::InPlaceCcw
+            })
+        );
         assert!(!c.finished());
         assert_eq!(tick(&mut c, 3.0, Pose2::IDENTITY), Some(DriveCommand::STOP));
         assert!(c.finished());
@@ -394,24 +468,38 @@ mod tests {
             laps: 1,
             pose_source: PoseSource::GroundTruth,
         };
-        let mut c = ScriptedController::new(ControllerConfig::Waypoints(w.clone()), Time::ZERO, Pose2::IDENTITY);
+        let mut c = ScriptedController::new(
+            ControllerConfig::Waypoints(w.clone()),
+            Time::ZERO,
+            Pose2::IDENTITY,
+        );
         match tick(&mut c, 0.0, Pose2::new(0.0, 0.0, 0.1)) {
-            Some(DriveCommand::Drive { radius: Radius::InPlaceCcw, .. }) => {}
+            Some(DriveCommand::Drive {
+                radius: Radius::InPlaceCcw,
+                ..
+            }) => {}
             other => panic!("expected a left turn in place, got {other:?}"),
         }
         let mut w2 = w;
         w2.waypoints = vec![[1.0, 0.5]];
-        let mut c = ScriptedController::new(ControllerConfig::Waypoints(w2), Time::ZERO, Pose2::IDENTITY);
+        let mut c =
+            ScriptedController::new(ControllerConfig::Waypoints(w2), Time::ZERO, Pose2::IDENTITY);
         match tick(&mut c, 0.0, Pose2::IDENTITY) {
             // Circle through (0, 0) and (1, 0.5), tangent to +x: R = (1 + 0.25) / (2 · 0.5).
-            Some(DriveCommand::Drive { velocity, radius: Radius::Arc(r) }) => {
+            Some(DriveCommand::Drive {
+                velocity,
+                radius: Radius::Arc(r),
+            }) => {
                 assert!(velocity > 0.0);
                 assert!((r - 1.25).abs() < 1e-9, "{r}");
             }
             other => panic!("expected an arc, got {other:?}"),
         }
         // Reached: stop and finish.
-        assert_eq!(tick(&mut c, 1.0, Pose2::new(1.0, 0.5, 0.0)), Some(DriveCommand::STOP));
+        assert_eq!(
+            tick(&mut c, 1.0, Pose2::new(1.0, 0.5, 0.0)),
+            Some(DriveCommand::STOP)
+        );
         assert!(c.finished());
     }
 }

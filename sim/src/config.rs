@@ -22,8 +22,17 @@ pub struct SpecError {
 
 impl SpecError {
     /// An error about `key` in `file`.
-    pub fn new(file: impl Into<PathBuf>, key: impl Into<String>, message: impl Into<String>) -> SpecError {
-        SpecError { file: file.into(), key: key.into(), line: None, message: message.into() }
+    pub fn new(
+        file: impl Into<PathBuf>,
+        key: impl Into<String>,
+        message: impl Into<String>,
+    ) -> SpecError {
+        SpecError {
+            file: file.into(),
+            key: key.into(),
+            line: None,
+            message: message.into(),
+        }
     }
 }
 
@@ -44,7 +53,8 @@ impl std::error::Error for SpecError {}
 
 /// Reads `path` as UTF-8 text, naming the file in the error.
 pub fn read_text(path: &Path) -> Result<String, SpecError> {
-    std::fs::read_to_string(path).map_err(|e| SpecError::new(path, "", format!("cannot read file: {e}")))
+    std::fs::read_to_string(path)
+        .map_err(|e| SpecError::new(path, "", format!("cannot read file: {e}")))
 }
 
 /// Parses TOML text into `T`, naming `path`, the key path and the line in errors.
@@ -75,11 +85,22 @@ pub fn load_toml<T: DeserializeOwned>(path: &Path) -> Result<T, SpecError> {
 }
 
 /// Checks that `value` is finite and within `[lo, hi]`; otherwise an error naming `key`.
-pub fn check_range(file: &Path, key: &str, value: f64, lo: f64, hi: f64, unit: &str) -> Result<(), SpecError> {
+pub fn check_range(
+    file: &Path,
+    key: &str,
+    value: f64,
+    lo: f64,
+    hi: f64,
+    unit: &str,
+) -> Result<(), SpecError> {
     if value.is_finite() && value >= lo && value <= hi {
         Ok(())
     } else {
-        Err(SpecError::new(file, key, format!("expected a value in [{lo}, {hi}] {unit}, found {value}")))
+        Err(SpecError::new(
+            file,
+            key,
+            format!("expected a value in [{lo}, {hi}] {unit}, found {value}"),
+        ))
     }
 }
 
@@ -88,7 +109,11 @@ pub fn check_positive(file: &Path, key: &str, value: f64, unit: &str) -> Result<
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(SpecError::new(file, key, format!("expected a positive number of {unit}, found {value}")))
+        Err(SpecError::new(
+            file,
+            key,
+            format!("expected a positive number of {unit}, found {value}"),
+        ))
     }
 }
 
@@ -115,10 +140,15 @@ mod tests {
     #[test]
     fn errors_name_key_path_and_line() {
         let p = Path::new("x.toml");
-        let e = parse_toml::<Outer>(p, "name = \"a\"\n[[lidar]]\nrange_max = \"far\"\n").unwrap_err();
+        let e =
+            parse_toml::<Outer>(p, "name = \"a\"\n[[lidar]]\nrange_max = \"far\"\n").unwrap_err();
         assert_eq!(e.key, "lidar[0].range_max");
         assert_eq!(e.line, Some(3));
-        assert!(e.to_string().starts_with("x.toml:3: key `lidar[0].range_max`"), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("x.toml:3: key `lidar[0].range_max`"),
+            "{e}"
+        );
 
         let e = parse_toml::<Outer>(p, "name = \"a\"\nlidar = []\nrange = 3\n").unwrap_err();
         assert!(e.message.contains("unknown field `range`"), "{e}");

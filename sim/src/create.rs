@@ -6,7 +6,7 @@
 //! ±0.5 m/s and ±2 m turning radius (Open Interface).
 //!
 //! **Wheels.** The firmware turns a Drive command into wheel speeds with its *nominal*
-//! geometry and ramps them at `max_wheel_accel`. The wheels turn at those speeds (their servos
+//! geometry and ramps them at `max_wheel_accel` (both wheels in proportion, keeping the radius). The wheels turn at those speeds (their servos
 //! are stiff); the floor pushes the body through a friction-limited contact under each drive
 //! wheel (a velocity-level Coulomb model, solved like a rigid-body friction constraint), so a
 //! blocked robot spins its wheels and the encoders count travel that never happened.
@@ -96,7 +96,12 @@ pub struct OdometryModel {
 
 impl Default for OdometryModel {
     fn default() -> Self {
-        OdometryModel { wheel_diameter_ratio: 1.0, wheel_base_ratio: 1.0, noise: 0.0, quantize: true }
+        OdometryModel {
+            wheel_diameter_ratio: 1.0,
+            wheel_base_ratio: 1.0,
+            noise: 0.0,
+            quantize: true,
+        }
     }
 }
 
@@ -108,24 +113,90 @@ impl CreateConfig {
         check_range(file, &k("radius"), self.radius, 0.02, 5.0, "m")?;
         check_range(file, &k("height"), self.height, 0.01, 5.0, "m")?;
         check_range(file, &k("clearance"), self.clearance, 0.0, 0.5, "m")?;
-        check_range(file, &k("wheel_base"), self.wheel_base, 0.01, 2.0 * self.radius, "m (at most the body diameter)")?;
+        check_range(
+            file,
+            &k("wheel_base"),
+            self.wheel_base,
+            0.01,
+            2.0 * self.radius,
+            "m (at most the body diameter)",
+        )?;
         check_range(file, &k("wheel_radius"), self.wheel_radius, 0.005, 1.0, "m")?;
         check_range(file, &k("max_speed"), self.max_speed, 0.01, 10.0, "m/s")?;
-        check_range(file, &k("max_wheel_accel"), self.max_wheel_accel, 0.01, 100.0, "m/s²")?;
-        check_range(file, &k("wheel_friction"), self.wheel_friction, 0.01, 5.0, "")?;
-        check_range(file, &k("drive_load_fraction"), self.drive_load_fraction, 0.05, 1.0, "")?;
-        check_range(file, &k("wheel_drop_travel"), self.wheel_drop_travel, 0.001, 0.5, "m")?;
-        check_range(file, &k("stream_period"), self.stream_period, 0.001, 10.0, "s")?;
-        check_range(file, &k("odometry.wheel_diameter_ratio"), self.odometry.wheel_diameter_ratio, 0.5, 2.0, "")?;
-        check_range(file, &k("odometry.wheel_base_ratio"), self.odometry.wheel_base_ratio, 0.5, 2.0, "")?;
-        check_range(file, &k("odometry.noise"), self.odometry.noise, 0.0, 1.0, "m/√m")?;
+        check_range(
+            file,
+            &k("max_wheel_accel"),
+            self.max_wheel_accel,
+            0.01,
+            100.0,
+            "m/s²",
+        )?;
+        check_range(
+            file,
+            &k("wheel_friction"),
+            self.wheel_friction,
+            0.01,
+            5.0,
+            "",
+        )?;
+        check_range(
+            file,
+            &k("drive_load_fraction"),
+            self.drive_load_fraction,
+            0.05,
+            1.0,
+            "",
+        )?;
+        check_range(
+            file,
+            &k("wheel_drop_travel"),
+            self.wheel_drop_travel,
+            0.001,
+            0.5,
+            "m",
+        )?;
+        check_range(
+            file,
+            &k("stream_period"),
+            self.stream_period,
+            0.001,
+            10.0,
+            "s",
+        )?;
+        check_range(
+            file,
+            &k("odometry.wheel_diameter_ratio"),
+            self.odometry.wheel_diameter_ratio,
+            0.5,
+            2.0,
+            "",
+        )?;
+        check_range(
+            file,
+            &k("odometry.wheel_base_ratio"),
+            self.odometry.wheel_base_ratio,
+            0.5,
+            2.0,
+            "",
+        )?;
+        check_range(
+            file,
+            &k("odometry.noise"),
+            self.odometry.noise,
+            0.0,
+            1.0,
+            "m/√m",
+        )?;
         Ok(())
     }
 
     /// Actual (left, right) wheel radii from the nominal radius and `E_d`.
     pub fn actual_wheel_radii(&self) -> (f64, f64) {
         let ed = self.odometry.wheel_diameter_ratio;
-        (self.wheel_radius * 2.0 / (ed + 1.0), self.wheel_radius * 2.0 * ed / (ed + 1.0))
+        (
+            self.wheel_radius * 2.0 / (ed + 1.0),
+            self.wheel_radius * 2.0 * ed / (ed + 1.0),
+        )
     }
 
     /// Actual wheel base.
@@ -150,15 +221,26 @@ impl CreateConfig {
                     Radius::InPlaceCcw => (-v, v),
                     Radius::InPlaceCw => (v, -v),
                     Radius::Arc(rad) => {
-                        let rad = if rad.abs() < 1e-3 { 1e-3f64.copysign(rad) } else { rad.clamp(-2.0, 2.0) };
+                        let rad = if rad.abs() < 1e-3 {
+                            1e-3f64.copysign(rad)
+                        } else {
+                            rad.clamp(-2.0, 2.0)
+                        };
                         (v * (rad - b / 2.0) / rad, v * (rad + b / 2.0) / rad)
                     }
                 }
             }
         };
-        let (l, r) = (if l.is_finite() { l } else { 0.0 }, if r.is_finite() { r } else { 0.0 });
+        let (l, r) = (
+            if l.is_finite() { l } else { 0.0 },
+            if r.is_finite() { r } else { 0.0 },
+        );
         let m = l.abs().max(r.abs());
-        if m > vmax { (l * vmax / m, r * vmax / m) } else { (l, r) }
+        if m > vmax {
+            (l * vmax / m, r * vmax / m)
+        } else {
+            (l, r)
+        }
     }
 }
 
@@ -194,7 +276,10 @@ pub fn wheel_traction(
     let rims = [rim.0, rim.1];
     let limits = [mu * loads.0 * dt, mu * loads.1 * dt];
     let mut acc = [[0.0f64; 2]; 2]; // [wheel][long, lat]
-    let k_long: Vec<f64> = ys.iter().map(|y| 1.0 / (1.0 / mass + y * y / yaw_inertia)).collect();
+    let k_long: Vec<f64> = ys
+        .iter()
+        .map(|y| 1.0 / (1.0 / mass + y * y / yaw_inertia))
+        .collect();
     for _ in 0..12 {
         for w in 0..2 {
             if limits[w] <= 0.0 {
@@ -206,7 +291,11 @@ pub fn wheel_traction(
             let err_lat = -v.lateral;
             let want = [acc[w][0] + err_long * k_long[w], acc[w][1] + err_lat * mass];
             let n = (want[0] * want[0] + want[1] * want[1]).sqrt();
-            let clamped = if n > limits[w] { [want[0] * limits[w] / n, want[1] * limits[w] / n] } else { want };
+            let clamped = if n > limits[w] {
+                [want[0] * limits[w] / n, want[1] * limits[w] / n]
+            } else {
+                want
+            };
             let d = [clamped[0] - acc[w][0], clamped[1] - acc[w][1]];
             acc[w] = clamped;
             v.forward += d[0] / mass;
@@ -232,7 +321,13 @@ pub struct CreateDrive {
 impl CreateDrive {
     /// A stopped drive; `encoder_rng` are the left and right encoder noise streams.
     pub fn new(config: CreateConfig, encoder_rng: [ChaCha8Rng; 2]) -> CreateDrive {
-        CreateDrive { config, wheel_speed: (0.0, 0.0), target: (0.0, 0.0), pending: (0.0, 0.0), encoder_rng }
+        CreateDrive {
+            config,
+            wheel_speed: (0.0, 0.0),
+            target: (0.0, 0.0),
+            pending: (0.0, 0.0),
+            encoder_rng,
+        }
     }
 
     /// Takes a new command (it holds until the next one, as on the real robot).
@@ -248,9 +343,16 @@ impl CreateDrive {
             self.target = (0.0, 0.0);
             self.wheel_speed = (0.0, 0.0);
         }
+        // Both wheels ramp together, the one with further to go at the limit, so that the
+        // turning radius holds while speeding up or slowing down.
         let a = self.config.max_wheel_accel * dt;
-        let ramp = |cur: f64, tgt: f64| cur + (tgt - cur).clamp(-a, a);
-        self.wheel_speed = (ramp(self.wheel_speed.0, self.target.0), ramp(self.wheel_speed.1, self.target.1));
+        let (dl, dr) = (
+            self.target.0 - self.wheel_speed.0,
+            self.target.1 - self.wheel_speed.1,
+        );
+        let m = dl.abs().max(dr.abs());
+        let k = if m > a { a / m } else { 1.0 };
+        self.wheel_speed = (self.wheel_speed.0 + dl * k, self.wheel_speed.1 + dr * k);
         // Encoders: wheel angle × nominal radius, plus random error.
         let sigma = self.config.odometry.noise;
         let mut travel = [self.wheel_speed.0 * dt, self.wheel_speed.1 * dt];
@@ -258,7 +360,9 @@ impl CreateDrive {
             for (s, rng) in travel.iter_mut().zip(self.encoder_rng.iter_mut()) {
                 let sd = sigma * s.abs().sqrt();
                 if sd > 0.0 {
-                    *s += Normal::new(0.0, sd).expect("finite positive sd").sample(rng);
+                    *s += Normal::new(0.0, sd)
+                        .expect("finite positive sd")
+                        .sample(rng);
                 }
             }
         } else {
@@ -279,12 +383,19 @@ impl CreateDrive {
     pub fn report(&mut self, stamp: Time) -> Odometry {
         let (d, a) = self.pending;
         let (qd, qa) = if self.config.odometry.quantize {
-            ((d * 1000.0).trunc() / 1000.0, (a.to_degrees().trunc()).to_radians())
+            (
+                (d * 1000.0).trunc() / 1000.0,
+                (a.to_degrees().trunc()).to_radians(),
+            )
         } else {
             (d, a)
         };
         self.pending = (d - qd, a - qa);
-        Odometry { stamp, distance: qd, angle: qa }
+        Odometry {
+            stamp,
+            distance: qd,
+            angle: qa,
+        }
     }
 }
 
@@ -300,24 +411,39 @@ mod tests {
     #[test]
     fn drive_command_maps_to_wheel_speeds() {
         let c = CreateConfig::default();
-        let (l, r) = c.wheel_targets(&DriveCommand::Drive { velocity: 0.2, radius: Radius::Arc(0.5) });
+        let (l, r) = c.wheel_targets(&DriveCommand::Drive {
+            velocity: 0.2,
+            radius: Radius::Arc(0.5),
+        });
         assert!(((l + r) / 2.0 - 0.2).abs() < 1e-12);
         // ω = v/R = (r − l)/b.
         assert!(((r - l) / c.wheel_base - 0.4).abs() < 1e-12);
-        let (l, r) = c.wheel_targets(&DriveCommand::Drive { velocity: 0.3, radius: Radius::InPlaceCw });
+        let (l, r) = c.wheel_targets(&DriveCommand::Drive {
+            velocity: 0.3,
+            radius: Radius::InPlaceCw,
+        });
         assert_eq!((l, r), (0.3, -0.3));
         // Over-speed is scaled down with the radius kept.
-        let (l, r) = c.wheel_targets(&DriveCommand::Drive { velocity: 0.5, radius: Radius::Arc(0.2) });
+        let (l, r) = c.wheel_targets(&DriveCommand::Drive {
+            velocity: 0.5,
+            radius: Radius::Arc(0.2),
+        });
         assert!((r - 0.5).abs() < 1e-12 && l > 0.0);
         assert!(((r - l) / c.wheel_base / ((l + r) / 2.0) - 1.0 / 0.2).abs() < 1e-9);
-        let (l, r) = c.wheel_targets(&DriveCommand::DriveDirect { left: -3.0, right: 0.1 });
+        let (l, r) = c.wheel_targets(&DriveCommand::DriveDirect {
+            left: -3.0,
+            right: 0.1,
+        });
         assert_eq!((l, r), (-0.5, 0.5 * 0.1 / 3.0));
     }
 
     #[test]
     fn wheels_ramp_at_the_acceleration_limit() {
         let mut d = drive(CreateConfig::default());
-        d.command(&DriveCommand::Drive { velocity: 0.5, radius: Radius::Straight });
+        d.command(&DriveCommand::Drive {
+            velocity: 0.5,
+            radius: Radius::Straight,
+        });
         let dt = 0.005;
         let mut t = 0.0;
         while d.wheel_speed.0 < 0.5 - 1e-12 {
@@ -335,7 +461,10 @@ mod tests {
             let mut cfg = CreateConfig::default();
             cfg.odometry.quantize = quantize;
             let mut d = drive(cfg);
-            d.command(&DriveCommand::Drive { velocity: 0.03, radius: Radius::InPlaceCcw });
+            d.command(&DriveCommand::Drive {
+                velocity: 0.03,
+                radius: Radius::InPlaceCcw,
+            });
             let mut reports = Vec::new();
             for k in 0..600 {
                 d.advance(0.005, false);
@@ -349,7 +478,10 @@ mod tests {
         let exact: f64 = run(false).iter().sum();
         // Each report is a whole number of degrees, most of them 0 at this rate (< 0.5° per
         // report), yet the carried remainders keep the sum within 1° of the truth.
-        assert!(q.iter().all(|a| (a.to_degrees() - a.to_degrees().round()).abs() < 1e-9));
+        assert!(
+            q.iter()
+                .all(|a| (a.to_degrees() - a.to_degrees().round()).abs() < 1e-9)
+        );
         assert!(q.iter().filter(|a| **a == 0.0).count() > q.len() / 2);
         let sum: f64 = q.iter().sum();
         assert!(exact > 10f64.to_radians());
@@ -361,15 +493,49 @@ mod tests {
         let m = 3.5;
         let i = 0.5 * m * 0.165 * 0.165;
         let loads = (m * GRAVITY * 0.425, m * GRAVITY * 0.425);
-        let v = wheel_traction(PlanarVelocity::default(), m, i, 0.258, (0.001, 0.003), loads, 0.8, 0.005);
+        let v = wheel_traction(
+            PlanarVelocity::default(),
+            m,
+            i,
+            0.258,
+            (0.001, 0.003),
+            loads,
+            0.8,
+            0.005,
+        );
         assert!((v.forward - 0.002).abs() < 1e-6, "{v:?}");
         assert!((v.yaw_rate - 0.002 / 0.258).abs() < 1e-5);
         // A large step in rim speed cannot be met in one step: Δv ≤ μ·g·dt per unit mass.
-        let v = wheel_traction(PlanarVelocity::default(), m, i, 0.258, (0.5, 0.5), loads, 0.8, 0.005);
+        let v = wheel_traction(
+            PlanarVelocity::default(),
+            m,
+            i,
+            0.258,
+            (0.5, 0.5),
+            loads,
+            0.8,
+            0.005,
+        );
         let dv_max = 0.8 * GRAVITY * 0.85 * 0.005;
-        assert!((v.forward - dv_max).abs() < 1e-6, "{} vs {dv_max}", v.forward);
+        assert!(
+            (v.forward - dv_max).abs() < 1e-6,
+            "{} vs {dv_max}",
+            v.forward
+        );
         // Sideways motion is resisted.
-        let v = wheel_traction(PlanarVelocity { lateral: 0.001, ..Default::default() }, m, i, 0.258, (0.0, 0.0), loads, 0.8, 0.005);
+        let v = wheel_traction(
+            PlanarVelocity {
+                lateral: 0.001,
+                ..Default::default()
+            },
+            m,
+            i,
+            0.258,
+            (0.0, 0.0),
+            loads,
+            0.8,
+            0.005,
+        );
         assert!(v.lateral.abs() < 1e-9);
     }
 }

@@ -171,10 +171,17 @@ impl LidarConfig {
     pub fn resolve(&self, file: &Path, key: &str) -> Result<LidarSpec, SpecError> {
         let k = |s: &str| format!("{key}.{s}");
         let mut s = self.preset.spec();
-        let fov = self.fov_deg.map(f64::to_radians).unwrap_or(s.angle_increment * (s.beams - 1) as f64);
+        let fov = self
+            .fov_deg
+            .map(f64::to_radians)
+            .unwrap_or(s.angle_increment * (s.beams - 1) as f64);
         if let Some(b) = self.beams {
             if !(2..=100_000).contains(&b) {
-                return Err(SpecError::new(file, k("beams"), format!("expected 2 to 100000 beams, found {b}")));
+                return Err(SpecError::new(
+                    file,
+                    k("beams"),
+                    format!("expected 2 to 100000 beams, found {b}"),
+                ));
             }
             s.beams = b;
         }
@@ -189,7 +196,14 @@ impl LidarConfig {
             s.range_max = v;
         }
         check_range(file, &k("range_min"), s.range_min, 0.0, 1000.0, "m")?;
-        check_range(file, &k("range_max"), s.range_max, s.range_min.max(1e-3), 1000.0, "m (above range_min)")?;
+        check_range(
+            file,
+            &k("range_max"),
+            s.range_max,
+            s.range_min.max(1e-3),
+            1000.0,
+            "m (above range_min)",
+        )?;
         if let Some(v) = self.rate {
             check_range(file, &k("rate"), v, 0.1, 1000.0, "Hz")?;
             s.time_increment *= s.rate / v;
@@ -206,14 +220,34 @@ impl LidarConfig {
             check_range(file, &k("sigma_rel"), v, 0.0, 1.0, "")?;
             s.sigma_rel = v;
         }
-        check_range(file, &k("dropout"), self.dropout, 0.0, 1.0, "(a probability)")?;
+        check_range(
+            file,
+            &k("dropout"),
+            self.dropout,
+            0.0,
+            1.0,
+            "(a probability)",
+        )?;
         for (i, v) in self.xyz.iter().chain(&self.rpy_deg).enumerate() {
             if !v.is_finite() {
-                return Err(SpecError::new(file, k(if i < 3 { "xyz" } else { "rpy_deg" }), "expected finite numbers"));
+                return Err(SpecError::new(
+                    file,
+                    k(if i < 3 { "xyz" } else { "rpy_deg" }),
+                    "expected finite numbers",
+                ));
             }
         }
-        if self.name.is_empty() || !self.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
-            return Err(SpecError::new(file, k("name"), "expected a name of letters, digits, '-' and '_'"));
+        if self.name.is_empty()
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        {
+            return Err(SpecError::new(
+                file,
+                k("name"),
+                "expected a name of letters, digits, '-' and '_'",
+            ));
         }
         Ok(s)
     }
@@ -253,7 +287,17 @@ impl Lidar {
                 Vec3::new(a.cos() as f32, a.sin() as f32, 0.0)
             })
             .collect();
-        Lidar { name: config.name.clone(), mount: config.mount(), dropout: config.dropout, sweep: config.sweep, rng, next_scan: 0, scan: None, directions, spec }
+        Lidar {
+            name: config.name.clone(),
+            mount: config.mount(),
+            dropout: config.dropout,
+            sweep: config.sweep,
+            rng,
+            next_scan: 0,
+            scan: None,
+            directions,
+            spec,
+        }
     }
 
     /// Start time of scan `k`.
@@ -264,7 +308,12 @@ impl Lidar {
     /// Called after every physics step at time `now` with the laser's world pose: casts the
     /// beams that fall due (with `cast(origin, direction, max_range)` returning the distance to
     /// the first hit) and returns a scan when its last beam is done.
-    pub fn update(&mut self, now: Time, laser_pose: &Pose, mut cast: impl FnMut(Vec3, Vec3, f32) -> Option<f32>) -> Option<LaserScan> {
+    pub fn update(
+        &mut self,
+        now: Time,
+        laser_pose: &Pose,
+        mut cast: impl FnMut(Vec3, Vec3, f32) -> Option<f32>,
+    ) -> Option<LaserScan> {
         if self.scan.is_none() {
             let start = self.scan_time(self.next_scan);
             if now < start {
@@ -277,7 +326,11 @@ impl Lidar {
                 stamp: start,
                 angle_min,
                 angle_increment: self.spec.angle_increment,
-                time_increment: if self.sweep { self.spec.time_increment } else { 0.0 },
+                time_increment: if self.sweep {
+                    self.spec.time_increment
+                } else {
+                    0.0
+                },
                 range_min: self.spec.range_min,
                 range_max: self.spec.range_max,
                 ranges: Vec::with_capacity(self.spec.beams),
@@ -315,7 +368,11 @@ impl Lidar {
             };
             scan.ranges.push(r);
         }
-        if scan.ranges.len() == self.spec.beams { self.scan.take() } else { None }
+        if scan.ranges.len() == self.spec.beams {
+            self.scan.take()
+        } else {
+            None
+        }
     }
 }
 
@@ -328,15 +385,27 @@ mod tests {
     fn presets_match_their_datasheets() {
         let u = LidarPreset::Urg04lx.spec();
         let fov = u.angle_increment * (u.beams - 1) as f64;
-        assert!((fov.to_degrees() - 239.4).abs() < 0.1, "{}", fov.to_degrees());
+        assert!(
+            (fov.to_degrees() - 239.4).abs() < 0.1,
+            "{}",
+            fov.to_degrees()
+        );
         let t = LidarPreset::Utm30lx.spec();
         assert!(((t.angle_increment * 1080.0).to_degrees() - 270.0).abs() < 1e-9);
         let s = LidarPreset::Seed000.spec();
         assert!(((s.angle_increment * 960.0).to_degrees() - 240.0).abs() < 1e-9);
         assert_eq!(s.range_max, 30.0);
-        for p in [LidarPreset::Urg04lx, LidarPreset::Utm30lx, LidarPreset::Lms200, LidarPreset::Seed000] {
+        for p in [
+            LidarPreset::Urg04lx,
+            LidarPreset::Utm30lx,
+            LidarPreset::Lms200,
+            LidarPreset::Seed000,
+        ] {
             let s = p.spec();
-            assert!(s.time_increment * s.beams as f64 <= 1.0 / s.rate, "{p:?} sweep fits its period");
+            assert!(
+                s.time_increment * s.beams as f64 <= 1.0 / s.rate,
+                "{p:?} sweep fits its period"
+            );
         }
     }
 

@@ -34,10 +34,24 @@ impl Default for PhysicsConfig {
 
 impl PhysicsConfig {
     pub fn validate(&self, file: &Path, key: &str) -> Result<(), SpecError> {
-        check_range(file, &format!("{key}.rate"), self.rate, 200.0, 100_000.0, "Hz")?;
+        check_range(
+            file,
+            &format!("{key}.rate"),
+            self.rate,
+            200.0,
+            100_000.0,
+            "Hz",
+        )?;
         let period = 1e9 / self.rate;
         if (period - period.round()).abs() > 1e-6 {
-            return Err(SpecError::new(file, format!("{key}.rate"), format!("expected a rate whose period is a whole number of nanoseconds, found {} Hz", self.rate)));
+            return Err(SpecError::new(
+                file,
+                format!("{key}.rate"),
+                format!(
+                    "expected a rate whose period is a whole number of nanoseconds, found {} Hz",
+                    self.rate
+                ),
+            ));
         }
         Ok(())
     }
@@ -84,6 +98,9 @@ pub struct Simulation {
 
 use futago_msgs::Duration;
 
+/// Force that closes a bumper switch, N.
+pub const BUMPER_FORCE: f64 = 0.5;
+
 /// Collision group of floor and ceiling slabs.
 const SLAB_GROUP: Group = Group::GROUP_2;
 /// Collision group of the robot body.
@@ -95,7 +112,14 @@ const ROBOT_SEGMENTS: u32 = 32;
 impl Simulation {
     /// Builds the rapier state from `world`, places the robot at `start` and seeds every noise
     /// stream from `seed`.
-    pub fn new(world: &World, physics: &PhysicsConfig, robot: &CreateConfig, lidars: &[(LidarConfig, crate::lidar::LidarSpec)], start: Pose2, seed: u64) -> Simulation {
+    pub fn new(
+        world: &World,
+        physics: &PhysicsConfig,
+        robot: &CreateConfig,
+        lidars: &[(LidarConfig, crate::lidar::LidarSpec)],
+        start: Pose2,
+        seed: u64,
+    ) -> Simulation {
         let mut p = PhysicsWorld::new();
         p.gravity = Vec3::new(0.0, 0.0, -GRAVITY as f32);
         p.integration_parameters.dt = (1.0 / physics.rate) as f32;
@@ -109,7 +133,11 @@ impl Simulation {
             if let Some(shape) = &o.shape {
                 let mut cb = ColliderBuilder::new(shape.clone()).friction(o.friction as f32);
                 if o.slab {
-                    cb = cb.collision_groups(InteractionGroups::new(SLAB_GROUP, Group::ALL, InteractionTestMode::And));
+                    cb = cb.collision_groups(InteractionGroups::new(
+                        SLAB_GROUP,
+                        Group::ALL,
+                        InteractionTestMode::And,
+                    ));
                 }
                 if let Motion::Dynamic { mass } = o.motion {
                     cb = cb.mass(mass as f32);
@@ -123,26 +151,57 @@ impl Simulation {
         let r = robot.radius as f32;
         let yaw_inertia = 0.5 * robot.mass * robot.radius * robot.radius;
         let body = RigidBodyBuilder::dynamic()
-            .pose(Pose::from_parts(Vec3::new(start.x as f32, start.y as f32, 0.0), Quat::from_rotation_z(start.theta as f32)))
+            .pose(Pose::from_parts(
+                Vec3::new(start.x as f32, start.y as f32, 0.0),
+                Quat::from_rotation_z(start.theta as f32),
+            ))
             .gravity_scale(0.0)
-            .locked_axes(LockedAxes::TRANSLATION_LOCKED_Z | LockedAxes::ROTATION_LOCKED_X | LockedAxes::ROTATION_LOCKED_Y)
-            .additional_mass_properties(MassProperties::new(Vec3::ZERO, m, Vec3::new(yaw_inertia as f32 / 2.0, yaw_inertia as f32 / 2.0, yaw_inertia as f32)))
+            .locked_axes(
+                LockedAxes::TRANSLATION_LOCKED_Z
+                    | LockedAxes::ROTATION_LOCKED_X
+                    | LockedAxes::ROTATION_LOCKED_Y,
+            )
+            .additional_mass_properties(MassProperties::new(
+                Vec3::ZERO,
+                m,
+                Vec3::new(
+                    yaw_inertia as f32 / 2.0,
+                    yaw_inertia as f32 / 2.0,
+                    yaw_inertia as f32,
+                ),
+            ))
             .build();
         let robot_body = p.bodies.insert(body);
         let hh = (robot.height / 2.0) as f32;
-        let hull = SharedShape::convex_hull(&TriMesh::prism_vertices(r, hh, ROBOT_SEGMENTS)).expect("a prism has a hull");
+        let hull = SharedShape::convex_hull(&TriMesh::prism_vertices(r, hh, ROBOT_SEGMENTS))
+            .expect("a prism has a hull");
         let col = ColliderBuilder::new(hull)
             .density(0.0)
             .friction(0.3)
-            .collision_groups(InteractionGroups::new(ROBOT_GROUP, Group::ALL.difference(SLAB_GROUP), InteractionTestMode::And))
+            .collision_groups(InteractionGroups::new(
+                ROBOT_GROUP,
+                Group::ALL.difference(SLAB_GROUP),
+                InteractionTestMode::And,
+            ))
             .translation(Vec3::new(0.0, 0.0, robot.clearance as f32 + hh))
             .build();
-        let robot_collider = p.colliders.insert_with_parent(col, robot_body, &mut p.bodies);
-        let drive = CreateDrive::new(robot.clone(), [stream(seed, "robot.encoder.left"), stream(seed, "robot.encoder.right")]);
-        let lidars = lidars.iter().map(|(c, s)| Lidar::new(c, s.clone(), stream(seed, &format!("lidar.{}", c.name)))).collect();
-        // Build the broad phase (and so the ray-cast structure) before the first step.
-        p.detect_collisions(&(), &());
-        let mut sim = Simulation {
+        let robot_collider = p
+            .colliders
+            .insert_with_parent(col, robot_body, &mut p.bodies);
+        let drive = CreateDrive::new(
+            robot.clone(),
+            [
+                stream(seed, "robot.encoder.left"),
+                stream(seed, "robot.encoder.right"),
+            ],
+        );
+        let lidars = lidars
+            .iter()
+            .map(|(c, s)| Lidar::new(c, s.clone(), stream(seed, &format!("lidar.{}", c.name))))
+            .collect();
+        // Note: rapier fills its broad phase (which ray casts use) in the first step; wheel
+        // drops are therefore first sampled with the first sensor packet.
+        Simulation {
             physics: p,
             dt: Duration((1e9 / physics.rate).round() as i64),
             time: Time::ZERO,
@@ -156,10 +215,7 @@ impl Simulation {
             next_stream: 1,
             bumps: BumpsAndDrops::default(),
             counters: Counters::default(),
-        };
-        let pose = sim.robot_pose();
-        sim.bumps = sim.wheel_drops(&pose);
-        sim
+        }
     }
 
     /// Simulation time.
@@ -197,7 +253,11 @@ impl Simulation {
         let v = b.linvel();
         let th = self.robot_pose().theta;
         let (s, c) = th.sin_cos();
-        PlanarVelocity { forward: c * v.x as f64 + s * v.y as f64, lateral: -s * v.x as f64 + c * v.y as f64, yaw_rate: b.angvel().z as f64 }
+        PlanarVelocity {
+            forward: c * v.x as f64 + s * v.y as f64,
+            lateral: -s * v.x as f64 + c * v.y as f64,
+            yaw_rate: b.angvel().z as f64,
+        }
     }
 
     /// Current nominal wheel speeds (left, right), m/s: what the firmware believes.
@@ -207,7 +267,10 @@ impl Simulation {
 
     /// Current pose of every world object, in [`World::objects`] order.
     pub fn object_poses(&self) -> Vec<Pose> {
-        self.object_bodies.iter().map(|&h| *self.physics.bodies[h].position()).collect()
+        self.object_bodies
+            .iter()
+            .map(|&h| *self.physics.bodies[h].position())
+            .collect()
     }
 
     /// Latest bumper and wheel-drop state.
@@ -215,38 +278,65 @@ impl Simulation {
         self.bumps
     }
 
-    /// Casts a ray against everything but the robot; distance to the first hit.
+    /// Casts a ray against everything but the robot; distance to the first hit. Sees nothing
+    /// before the first [`Simulation::step`], which builds rapier's query structure.
     pub fn cast_ray(&self, origin: Vec3, dir: Vec3, max: f32) -> Option<f32> {
-        let qp = self.physics.query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
-        qp.cast_ray(&Ray::new(origin, dir), max, true).map(|(_, d)| d)
+        let qp = self
+            .physics
+            .query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
+        qp.cast_ray(&Ray::new(origin, dir), max, true)
+            .map(|(_, d)| d)
     }
 
     /// Which wheels (left, right, caster) have no floor within their drop travel.
     fn wheel_drops(&self, pose: &Pose2) -> BumpsAndDrops {
         let c = &self.drive.config;
         let b = c.actual_wheel_base() / 2.0;
-        let qp = self.physics.query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
+        let qp = self
+            .physics
+            .query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
         let top = 0.05f32;
         let dropped = |x: f64, y: f64| {
             let p = pose.transform_point([x, y]);
-            qp.cast_ray(&Ray::new(Vec3::new(p[0] as f32, p[1] as f32, top), -Vec3::Z), top + c.wheel_drop_travel as f32, true).is_none()
+            qp.cast_ray(
+                &Ray::new(Vec3::new(p[0] as f32, p[1] as f32, top), -Vec3::Z),
+                top + c.wheel_drop_travel as f32,
+                true,
+            )
+            .is_none()
         };
-        BumpsAndDrops { drop_left: dropped(0.0, b), drop_right: dropped(0.0, -b), drop_caster: dropped(0.13f64.min(c.radius * 0.8), 0.0), ..Default::default() }
+        BumpsAndDrops {
+            drop_left: dropped(0.0, b),
+            drop_right: dropped(0.0, -b),
+            drop_caster: dropped(0.13f64.min(c.radius * 0.8), 0.0),
+            ..Default::default()
+        }
     }
 
-    /// Bumper state from the robot's contacts: a touching contact in the front half presses
-    /// the bumper on its side; one within ±15° of straight ahead presses both.
+    /// Bumper state from the robot's contacts: a contact in the front half that pushes with at
+    /// least [`BUMPER_FORCE`] presses the bumper on its side; one within ±15° of straight
+    /// ahead presses both.
     fn bumpers(&self) -> (bool, bool) {
         let (mut left, mut right) = (false, false);
-        for pair in self.physics.narrow_phase.contact_pairs_with(self.robot_collider) {
+        // The switch closes under a push of at least this force, N.
+        let min_impulse = (BUMPER_FORCE * self.dt.secs()) as f32;
+        for pair in self
+            .physics
+            .narrow_phase
+            .contact_pairs_with(self.robot_collider)
+        {
             let robot_first = pair.collider1 == self.robot_collider;
-            for m in pair.manifolds() {
+            for m in pair.solver_manifolds() {
                 for pt in &m.points {
-                    if pt.dist > 1e-3 {
+                    if pt.data.impulse < min_impulse {
                         continue;
                     }
                     // Contact points are in each collider's frame; the robot's turns with its body.
-                    let local = if robot_first { pt.local_p1 } else { pt.local_p2 };
+                    let local = if robot_first {
+                        pt.local_p1
+                    } else {
+                        pt.local_p2
+                    };
                     let bearing = (local.y as f64).atan2(local.x as f64);
                     if bearing.abs() > std::f64::consts::FRAC_PI_2 {
                         continue;
@@ -279,11 +369,30 @@ impl Simulation {
         // Wheel traction on the floor.
         let cfg = &self.drive.config;
         let w = cfg.mass * GRAVITY * cfg.drive_load_fraction / 2.0;
-        let loads = (if drops.drop_left { 0.0 } else { w }, if drops.drop_right { 0.0 } else { w });
-        let v = wheel_traction(self.robot_velocity(), cfg.mass, self.yaw_inertia, cfg.actual_wheel_base(), rims, loads, cfg.wheel_friction, dt);
+        let loads = (
+            if drops.drop_left { 0.0 } else { w },
+            if drops.drop_right { 0.0 } else { w },
+        );
+        let v = wheel_traction(
+            self.robot_velocity(),
+            cfg.mass,
+            self.yaw_inertia,
+            cfg.actual_wheel_base(),
+            rims,
+            loads,
+            cfg.wheel_friction,
+            dt,
+        );
         let (s, c) = pose.theta.sin_cos();
         let body = &mut self.physics.bodies[self.robot];
-        body.set_linvel(Vec3::new((c * v.forward - s * v.lateral) as f32, (s * v.forward + c * v.lateral) as f32, 0.0), true);
+        body.set_linvel(
+            Vec3::new(
+                (c * v.forward - s * v.lateral) as f32,
+                (s * v.forward + c * v.lateral) as f32,
+                0.0,
+            ),
+            true,
+        );
         body.set_angvel(Vec3::new(0.0, 0.0, v.yaw_rate as f32), true);
         self.physics.step();
         self.time = self.time + self.dt;
@@ -296,15 +405,25 @@ impl Simulation {
         // The wheel-drop switches are sampled with the sensor stream (every 15 ms on the
         // Create); between samples the last state holds, for the firmware and the traction.
         let stream_due = self.time.nanos() >= self.next_stream * self.stream_period.0;
-        let drops = if stream_due { self.wheel_drops(&self.robot_pose()) } else { self.bumps };
+        let drops = if stream_due {
+            self.wheel_drops(&self.robot_pose())
+        } else {
+            self.bumps
+        };
         if drops.dropped() {
             self.counters.wheel_drop_steps += 1;
         }
-        self.bumps = BumpsAndDrops { bump_left: bl, bump_right: br, ..drops };
+        self.bumps = BumpsAndDrops {
+            bump_left: bl,
+            bump_right: br,
+            ..drops
+        };
 
         // Lasers.
         let base = *self.physics.bodies[self.robot].position();
-        let qp = self.physics.query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
+        let qp = self
+            .physics
+            .query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
         let mut rays = 0u64;
         for (i, l) in self.lidars.iter_mut().enumerate() {
             let laser_pose = base * l.mount;

@@ -14,23 +14,47 @@ use rapier3d::parry::shape::Cuboid;
 /// A cell is occupied when its box `cell × [z_min, z_max]` intersects a collider (an exact
 /// parry intersection test, not a sampling). Dynamic bodies are left out: they move. Cells
 /// that intersect nothing are free, inside or outside the building alike.
-pub fn occupancy_grid(world: &World, resolution: f64, z_min: f64, z_max: f64, margin: f64) -> OccupancyGrid {
+pub fn occupancy_grid(
+    world: &World,
+    resolution: f64,
+    z_min: f64,
+    z_max: f64,
+    margin: f64,
+) -> OccupancyGrid {
     let (lo, hi) = world.bounds();
-    let origin = [((lo.x as f64 - margin) / resolution).floor() * resolution, ((lo.y as f64 - margin) / resolution).floor() * resolution];
-    let width = (((hi.x as f64 + margin) - origin[0]) / resolution).ceil().max(1.0) as usize;
-    let height = (((hi.y as f64 + margin) - origin[1]) / resolution).ceil().max(1.0) as usize;
+    let origin = [
+        ((lo.x as f64 - margin) / resolution).floor() * resolution,
+        ((lo.y as f64 - margin) / resolution).floor() * resolution,
+    ];
+    let width = (((hi.x as f64 + margin) - origin[0]) / resolution)
+        .ceil()
+        .max(1.0) as usize;
+    let height = (((hi.y as f64 + margin) - origin[1]) / resolution)
+        .ceil()
+        .max(1.0) as usize;
     let mut grid = OccupancyGrid::new(resolution, origin, width, height);
     grid.cells.fill(0);
-    let cell = Cuboid::new(Vec3::new(resolution as f32 / 2.0, resolution as f32 / 2.0, ((z_max - z_min) / 2.0) as f32));
+    // Cells shrink by a hair so that a face lying exactly on a cell border (a wall's inner
+    // face on a grid line) does not mark the free cell beside it.
+    let half = resolution as f32 / 2.0 - 1e-5;
+    let cell = Cuboid::new(Vec3::new(half, half, ((z_max - z_min) / 2.0) as f32));
     let zc = ((z_min + z_max) / 2.0) as f32;
-    for o in world.objects.iter().filter(|o| o.motion == super::Motion::Static) {
+    for o in world
+        .objects
+        .iter()
+        .filter(|o| o.motion == super::Motion::Static)
+    {
         let Some(shape) = &o.shape else { continue };
         let aabb = shape.compute_aabb(&o.pose);
         if aabb.maxs.z < z_min as f32 || aabb.mins.z > z_max as f32 {
             continue;
         }
-        let i0 = ((aabb.mins.x as f64 - origin[0]) / resolution).floor().max(0.0) as usize;
-        let j0 = ((aabb.mins.y as f64 - origin[1]) / resolution).floor().max(0.0) as usize;
+        let i0 = ((aabb.mins.x as f64 - origin[0]) / resolution)
+            .floor()
+            .max(0.0) as usize;
+        let j0 = ((aabb.mins.y as f64 - origin[1]) / resolution)
+            .floor()
+            .max(0.0) as usize;
         let i1 = (((aabb.maxs.x as f64 - origin[0]) / resolution).floor() as usize).min(width - 1);
         let j1 = (((aabb.maxs.y as f64 - origin[1]) / resolution).floor() as usize).min(height - 1);
         for j in j0..=j1 {
@@ -41,7 +65,9 @@ pub fn occupancy_grid(world: &World, resolution: f64, z_min: f64, z_max: f64, ma
                 let c = grid.cell_center(i, j);
                 let pos = Pose::from_translation(Vec3::new(c[0] as f32, c[1] as f32, zc));
                 // Shapes without an intersection routine (none of ours) count as free.
-                let hit = intersection_test(&pos, &cell, &o.pose, shape.as_ref()).map(|r| r.intersecting).unwrap_or(false);
+                let hit = intersection_test(&pos, &cell, &o.pose, shape.as_ref())
+                    .map(|r| r.intersecting)
+                    .unwrap_or(false);
                 if hit {
                     grid.set(i, j, 100);
                 }
@@ -54,7 +80,11 @@ pub fn occupancy_grid(world: &World, resolution: f64, z_min: f64, z_max: f64, ma
 /// The world's render meshes at their initial poses as a binary little-endian PLY with
 /// per-vertex normals and colours (a textured material gets its texture's mean colour).
 pub fn to_ply(world: &World) -> Vec<u8> {
-    let parts: Vec<_> = world.objects.iter().flat_map(|o| o.parts.iter().map(move |p| (o.pose, p))).collect();
+    let parts: Vec<_> = world
+        .objects
+        .iter()
+        .flat_map(|o| o.parts.iter().map(move |p| (o.pose, p)))
+        .collect();
     let nv: usize = parts.iter().map(|(_, p)| p.mesh.positions.len()).sum();
     let nf: usize = parts.iter().map(|(_, p)| p.mesh.indices.len()).sum();
     let mut out = format!(
@@ -66,7 +96,10 @@ pub fn to_ply(world: &World) -> Vec<u8> {
         .materials
         .iter()
         .map(|m| {
-            let c = m.texture.map(|t| world.textures[t].mean_color()).unwrap_or(m.color);
+            let c = m
+                .texture
+                .map(|t| world.textures[t].mean_color())
+                .unwrap_or(m.color);
             c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
         })
         .collect();

@@ -42,11 +42,19 @@ pub struct Loaded {
 
 fn linear_to_srgb(c: f32) -> f64 {
     let c = c.clamp(0.0, 1.0) as f64;
-    if c <= 0.0031308 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
+    if c <= 0.0031308 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
 }
 
 fn srgb_to_linear(c: f64) -> f64 {
-    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
 }
 
 /// glTF (Y-up) to futago (Z-up).
@@ -60,10 +68,20 @@ fn to_rgba8(img: &gltf::image::Data) -> Result<Vec<u8>, String> {
     let n = (img.width * img.height) as usize;
     let out: Vec<u8> = match img.format {
         R8G8B8A8 => px.clone(),
-        R8G8B8 => px.chunks_exact(3).flat_map(|c| [c[0], c[1], c[2], 255]).collect(),
-        R8G8 => px.chunks_exact(2).flat_map(|c| [c[0], c[0], c[0], c[1]]).collect(),
+        R8G8B8 => px
+            .chunks_exact(3)
+            .flat_map(|c| [c[0], c[1], c[2], 255])
+            .collect(),
+        R8G8 => px
+            .chunks_exact(2)
+            .flat_map(|c| [c[0], c[0], c[0], c[1]])
+            .collect(),
         R8 => px.iter().flat_map(|&c| [c, c, c, 255]).collect(),
-        other => return Err(format!("unsupported texture pixel format {other:?} (8-bit formats only)")),
+        other => {
+            return Err(format!(
+                "unsupported texture pixel format {other:?} (8-bit formats only)"
+            ));
+        }
     };
     if out.len() != n * 4 {
         return Err("texture pixel data does not match its size".into());
@@ -73,22 +91,32 @@ fn to_rgba8(img: &gltf::image::Data) -> Result<Vec<u8>, String> {
 
 /// Loads every triangle primitive of the default (or first) scene of a glTF file.
 pub fn load(path: &Path) -> Result<Loaded, String> {
-    let (doc, buffers, images) = gltf::import(path).map_err(|e| format!("cannot load glTF file {}: {e}", path.display()))?;
+    let (doc, buffers, images) =
+        gltf::import(path).map_err(|e| format!("cannot load glTF file {}: {e}", path.display()))?;
     let mut textures = Vec::new();
     let mut materials = Vec::new();
     // Materials, with factor baked into the texture (see module docs).
     for (i, m) in doc.materials().enumerate() {
         let pbr = m.pbr_metallic_roughness();
         let f = pbr.base_color_factor();
-        let color = [linear_to_srgb(f[0]), linear_to_srgb(f[1]), linear_to_srgb(f[2])];
+        let color = [
+            linear_to_srgb(f[0]),
+            linear_to_srgb(f[1]),
+            linear_to_srgb(f[2]),
+        ];
         let texture = match pbr.base_color_texture() {
             None => None,
             Some(info) => {
                 if info.tex_coord() != 0 {
-                    return Err(format!("{}: material {i} uses texture coordinate set {}; only set 0 is supported", path.display(), info.tex_coord()));
+                    return Err(format!(
+                        "{}: material {i} uses texture coordinate set {}; only set 0 is supported",
+                        path.display(),
+                        info.tex_coord()
+                    ));
                 }
                 let img = &images[info.texture().source().index()];
-                let mut rgba = to_rgba8(img).map_err(|e| format!("{}: texture of material {i}: {e}", path.display()))?;
+                let mut rgba = to_rgba8(img)
+                    .map_err(|e| format!("{}: texture of material {i}: {e}", path.display()))?;
                 if f.iter().take(3).any(|&c| (c - 1.0).abs() > 1e-6) {
                     for px in rgba.chunks_exact_mut(4) {
                         for c in 0..3 {
@@ -97,16 +125,39 @@ pub fn load(path: &Path) -> Result<Loaded, String> {
                         }
                     }
                 }
-                textures.push(Texture::from_rgba(format!("{}#image{}", path.display(), info.texture().source().index()), img.width, img.height, rgba));
+                textures.push(Texture::from_rgba(
+                    format!(
+                        "{}#image{}",
+                        path.display(),
+                        info.texture().source().index()
+                    ),
+                    img.width,
+                    img.height,
+                    rgba,
+                ));
                 Some(textures.len() - 1)
             }
         };
-        materials.push(LoadedMaterial { name: m.name().map(str::to_string).unwrap_or_else(|| format!("material{i}")), color, texture });
+        materials.push(LoadedMaterial {
+            name: m
+                .name()
+                .map(str::to_string)
+                .unwrap_or_else(|| format!("material{i}")),
+            color,
+            texture,
+        });
     }
     let default_material = materials.len();
-    materials.push(LoadedMaterial { name: "default".into(), color: [0.8, 0.8, 0.8], texture: None });
+    materials.push(LoadedMaterial {
+        name: "default".into(),
+        color: [0.8, 0.8, 0.8],
+        texture: None,
+    });
 
-    let scene = doc.default_scene().or_else(|| doc.scenes().next()).ok_or_else(|| format!("{}: the glTF file has no scene", path.display()))?;
+    let scene = doc
+        .default_scene()
+        .or_else(|| doc.scenes().next())
+        .ok_or_else(|| format!("{}: the glTF file has no scene", path.display()))?;
     let mut parts = Vec::new();
     let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, y_up_to_z_up())).collect();
     while let Some((node, parent)) = stack.pop() {
@@ -119,10 +170,17 @@ pub fn load(path: &Path) -> Result<Loaded, String> {
         for (pi, prim) in mesh.primitives().enumerate() {
             let what = format!("{}: mesh {} primitive {pi}", path.display(), mesh.index());
             if prim.mode() != gltf::mesh::Mode::Triangles {
-                return Err(format!("{what}: mode {:?} is not supported (triangles only)", prim.mode()));
+                return Err(format!(
+                    "{what}: mode {:?} is not supported (triangles only)",
+                    prim.mode()
+                ));
             }
             let reader = prim.reader(|b| Some(&buffers[b.index()]));
-            let positions: Vec<Vec3> = reader.read_positions().ok_or_else(|| format!("{what}: no POSITION attribute"))?.map(|p| m.transform_point3(Vec3::from(p))).collect();
+            let positions: Vec<Vec3> = reader
+                .read_positions()
+                .ok_or_else(|| format!("{what}: no POSITION attribute"))?
+                .map(|p| m.transform_point3(Vec3::from(p)))
+                .collect();
             if positions.iter().any(|p| !p.is_finite()) {
                 return Err(format!("{what}: non-finite vertex positions"));
             }
@@ -132,7 +190,10 @@ pub fn load(path: &Path) -> Result<Loaded, String> {
                 None => (0..n as u32).collect(),
             };
             if indices.len() % 3 != 0 {
-                return Err(format!("{what}: {} indices is not a whole number of triangles", indices.len()));
+                return Err(format!(
+                    "{what}: {} indices is not a whole number of triangles",
+                    indices.len()
+                ));
             }
             if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
                 return Err(format!("{what}: index {bad} out of range ({n} vertices)"));
@@ -141,30 +202,60 @@ pub fn load(path: &Path) -> Result<Loaded, String> {
                 Some(t) => t.into_f32().map(Vec2::from).collect(),
                 None => vec![Vec2::ZERO; n],
             };
-            let mut tm = TriMesh { positions, normals: Vec::new(), uvs, indices: indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect() };
+            let mut tm = TriMesh {
+                positions,
+                normals: Vec::new(),
+                uvs,
+                indices: indices
+                    .chunks_exact(3)
+                    .map(|t| [t[0], t[1], t[2]])
+                    .collect(),
+            };
             match reader.read_normals() {
-                Some(ns) => tm.normals = ns.map(|v| (nmat * Vec3::from(v)).normalize_or(Vec3::Z)).collect(),
+                Some(ns) => {
+                    tm.normals = ns
+                        .map(|v| (nmat * Vec3::from(v)).normalize_or(Vec3::Z))
+                        .collect()
+                }
                 None => tm.compute_normals(),
             }
             if tm.normals.len() != n || tm.uvs.len() != n {
-                return Err(format!("{what}: attribute counts differ from the vertex count"));
+                return Err(format!(
+                    "{what}: attribute counts differ from the vertex count"
+                ));
             }
             tm.remove_degenerate();
             if tm.indices.is_empty() {
                 continue;
             }
-            parts.push(LoadedPart { material: prim.material().index().unwrap_or(default_material), mesh: tm });
+            parts.push(LoadedPart {
+                material: prim.material().index().unwrap_or(default_material),
+                mesh: tm,
+            });
         }
     }
     if parts.is_empty() {
-        return Err(format!("{}: the glTF file has no non-degenerate triangles", path.display()));
+        return Err(format!(
+            "{}: the glTF file has no non-degenerate triangles",
+            path.display()
+        ));
     }
     let material_count = materials.len();
-    Ok(Loaded { parts, materials, material_count, textures })
+    Ok(Loaded {
+        parts,
+        materials,
+        material_count,
+        textures,
+    })
 }
 
 /// Appends `bytes` to the binary chunk as a buffer view, 4-byte aligned; returns its index.
-fn push_view(bin: &mut Vec<u8>, views: &mut Vec<Value>, bytes: &[u8], target: Option<u32>) -> usize {
+fn push_view(
+    bin: &mut Vec<u8>,
+    views: &mut Vec<Value>,
+    bytes: &[u8],
+    target: Option<u32>,
+) -> usize {
     while bin.len() % 4 != 0 {
         bin.push(0);
     }
@@ -186,7 +277,8 @@ fn f32_bytes(v: impl IntoIterator<Item = f32>) -> Vec<u8> {
 /// embedded PNG, under a root node that turns Z-up into glTF's Y-up.
 pub fn export_glb(world: &World, poses: &[rapier3d::math::Pose]) -> Vec<u8> {
     let mut bin = Vec::new();
-    let (mut views, mut accessors, mut meshes, mut nodes) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut views, mut accessors, mut meshes, mut nodes) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut images = Vec::new();
     let mut textures = Vec::new();
     let mut texture_of = vec![None; world.textures.len()];
@@ -198,7 +290,8 @@ pub fn export_glb(world: &World, poses: &[rapier3d::math::Pose]) -> Vec<u8> {
             match m.texture {
                 Some(t) => {
                     let ti = *texture_of[t].get_or_insert_with(|| {
-                        let view = push_view(&mut bin, &mut views, &world.textures[t].to_png(), None);
+                        let view =
+                            push_view(&mut bin, &mut views, &world.textures[t].to_png(), None);
                         images.push(json!({ "bufferView": view, "mimeType": "image/png" }));
                         textures.push(json!({ "source": images.len() - 1, "sampler": 0 }));
                         textures.len() - 1
@@ -220,14 +313,37 @@ pub fn export_glb(world: &World, poses: &[rapier3d::math::Pose]) -> Vec<u8> {
             if m.indices.is_empty() {
                 continue;
             }
-            let (lo, hi) = m.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-            let pv = push_view(&mut bin, &mut views, &f32_bytes(m.positions.iter().flat_map(|v| v.to_array())), Some(34962));
+            let (lo, hi) = m.positions.iter().fold(
+                (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+                |(lo, hi), &v| (lo.min(v), hi.max(v)),
+            );
+            let pv = push_view(
+                &mut bin,
+                &mut views,
+                &f32_bytes(m.positions.iter().flat_map(|v| v.to_array())),
+                Some(34962),
+            );
             accessors.push(json!({ "bufferView": pv, "componentType": 5126, "count": m.positions.len(), "type": "VEC3", "min": lo.to_array(), "max": hi.to_array() }));
-            let nv = push_view(&mut bin, &mut views, &f32_bytes(m.normals.iter().flat_map(|v| v.to_array())), Some(34962));
+            let nv = push_view(
+                &mut bin,
+                &mut views,
+                &f32_bytes(m.normals.iter().flat_map(|v| v.to_array())),
+                Some(34962),
+            );
             accessors.push(json!({ "bufferView": nv, "componentType": 5126, "count": m.normals.len(), "type": "VEC3" }));
-            let tv = push_view(&mut bin, &mut views, &f32_bytes(m.uvs.iter().flat_map(|v| v.to_array())), Some(34962));
+            let tv = push_view(
+                &mut bin,
+                &mut views,
+                &f32_bytes(m.uvs.iter().flat_map(|v| v.to_array())),
+                Some(34962),
+            );
             accessors.push(json!({ "bufferView": tv, "componentType": 5126, "count": m.uvs.len(), "type": "VEC2" }));
-            let idx: Vec<u8> = m.indices.iter().flatten().flat_map(|i| i.to_le_bytes()).collect();
+            let idx: Vec<u8> = m
+                .indices
+                .iter()
+                .flatten()
+                .flat_map(|i| i.to_le_bytes())
+                .collect();
             let iv = push_view(&mut bin, &mut views, &idx, Some(34963));
             accessors.push(json!({ "bufferView": iv, "componentType": 5125, "count": m.indices.len() * 3, "type": "SCALAR" }));
             let a = accessors.len();
@@ -267,12 +383,17 @@ pub fn export_glb(world: &World, poses: &[rapier3d::math::Pose]) -> Vec<u8> {
         doc["images"] = json!(images);
         doc["textures"] = json!(textures);
     }
-    let mut json_bytes = serde_json::to_vec(&doc).expect("JSON serialisation of plain values cannot fail");
+    let mut json_bytes =
+        serde_json::to_vec(&doc).expect("JSON serialisation of plain values cannot fail");
     while json_bytes.len() % 4 != 0 {
         json_bytes.push(b' ');
     }
     let glb = gltf::binary::Glb {
-        header: gltf::binary::Header { magic: *b"glTF", version: 2, length: 0 },
+        header: gltf::binary::Header {
+            magic: *b"glTF",
+            version: 2,
+            length: 0,
+        },
         json: json_bytes.into(),
         bin: Some(bin.into()),
     };

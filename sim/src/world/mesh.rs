@@ -139,7 +139,11 @@ impl TriMesh {
     /// Applies a rigid transform (and uniform scale) to positions and normals.
     pub fn transformed(&self, rotation: glam::Quat, translation: Vec3, scale: f32) -> TriMesh {
         TriMesh {
-            positions: self.positions.iter().map(|&p| rotation * (p * scale) + translation).collect(),
+            positions: self
+                .positions
+                .iter()
+                .map(|&p| rotation * (p * scale) + translation)
+                .collect(),
             normals: self.normals.iter().map(|&n| rotation * n).collect(),
             uvs: self.uvs.clone(),
             indices: self.indices.clone(),
@@ -164,13 +168,20 @@ impl TriMesh {
     pub fn compute_normals(&mut self) {
         let mut normals = vec![Vec3::ZERO; self.positions.len()];
         for t in &self.indices {
-            let (a, b, c) = (self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]);
+            let (a, b, c) = (
+                self.positions[t[0] as usize],
+                self.positions[t[1] as usize],
+                self.positions[t[2] as usize],
+            );
             let n = (b - a).cross(c - a);
             for &i in t {
                 normals[i as usize] += n;
             }
         }
-        self.normals = normals.into_iter().map(|n| n.normalize_or(Vec3::Z)).collect();
+        self.normals = normals
+            .into_iter()
+            .map(|n| n.normalize_or(Vec3::Z))
+            .collect();
     }
 
     /// Total surface area, m².
@@ -178,7 +189,11 @@ impl TriMesh {
         self.indices
             .iter()
             .map(|t| {
-                let (a, b, c) = (self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]);
+                let (a, b, c) = (
+                    self.positions[t[0] as usize],
+                    self.positions[t[1] as usize],
+                    self.positions[t[2] as usize],
+                );
                 0.5 * (b - a).cross(c - a).length()
             })
             .sum()
@@ -196,7 +211,11 @@ mod tests {
         let area = 2.0 * (2.0 * 1.0 + 2.0 * 0.5 + 1.0 * 0.5) * 4.0 / 4.0;
         assert!((m.area() - area).abs() < 1e-5, "{} vs {}", m.area(), area);
         for t in &m.indices {
-            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            let (a, b, c) = (
+                m.positions[t[0] as usize],
+                m.positions[t[1] as usize],
+                m.positions[t[2] as usize],
+            );
             let n = (b - a).cross(c - a);
             let centroid = (a + b + c) / 3.0;
             assert!(n.dot(centroid) > 0.0, "triangle {t:?} winds inward");
@@ -208,7 +227,11 @@ mod tests {
     fn prism_winds_outward_and_tiles_by_size() {
         let m = TriMesh::prism(0.5, 1.0, 16, UvMap::Tiled(Vec2::new(1.0, 1.0)));
         for t in &m.indices {
-            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            let (a, b, c) = (
+                m.positions[t[0] as usize],
+                m.positions[t[1] as usize],
+                m.positions[t[2] as usize],
+            );
             let n = (b - a).cross(c - a);
             assert!(n.dot((a + b + c) / 3.0) > 0.0);
         }

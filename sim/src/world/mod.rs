@@ -113,35 +113,65 @@ impl World {
 
     /// Total triangle count of all render meshes.
     pub fn triangle_count(&self) -> usize {
-        self.objects.iter().flat_map(|o| &o.parts).map(|p| p.mesh.triangle_count()).sum()
+        self.objects
+            .iter()
+            .flat_map(|o| &o.parts)
+            .map(|p| p.mesh.triangle_count())
+            .sum()
     }
 }
 
 /// Builds the world from its parsed spec; `path` resolves relative asset paths and names the
 /// file in errors.
 pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
-    let mut c = Compiler { path, dir: path.parent().unwrap_or(Path::new(".")), world: World {
-        name: spec.name.clone(),
-        description: spec.description.clone(),
-        source: path.to_path_buf(),
-        materials: Vec::new(),
-        textures: Vec::new(),
-        objects: Vec::new(),
-        spawns: Vec::new(),
-    }, material_ids: HashMap::new(), gltf_cache: HashMap::new(), tiles: Vec::new() };
-    if spec.name.is_empty() || !spec.name.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '-' || ch == '_') {
-        return Err(SpecError::new(path, "name", "expected a non-empty name of letters, digits, '-' and '_'"));
+    let mut c = Compiler {
+        path,
+        dir: path.parent().unwrap_or(Path::new(".")),
+        world: World {
+            name: spec.name.clone(),
+            description: spec.description.clone(),
+            source: path.to_path_buf(),
+            materials: Vec::new(),
+            textures: Vec::new(),
+            objects: Vec::new(),
+            spawns: Vec::new(),
+        },
+        material_ids: HashMap::new(),
+        gltf_cache: HashMap::new(),
+        tiles: Vec::new(),
+    };
+    if spec.name.is_empty()
+        || !spec
+            .name
+            .chars()
+            .all(|ch| ch.is_ascii_alphanumeric() || ch == '-' || ch == '_')
+    {
+        return Err(SpecError::new(
+            path,
+            "name",
+            "expected a non-empty name of letters, digits, '-' and '_'",
+        ));
     }
     c.materials(&spec.materials)?;
     for (i, s) in spec.spawn.iter().enumerate() {
         let key = format!("spawn[{i}]");
         if !(s.x.is_finite() && s.y.is_finite() && s.yaw_deg.is_finite()) {
-            return Err(SpecError::new(path, key, "expected finite x, y and yaw_deg"));
+            return Err(SpecError::new(
+                path,
+                key,
+                "expected finite x, y and yaw_deg",
+            ));
         }
         if c.world.spawns.iter().any(|(n, _)| *n == s.name) {
-            return Err(SpecError::new(path, format!("{key}.name"), format!("spawn `{}` is defined twice", s.name)));
+            return Err(SpecError::new(
+                path,
+                format!("{key}.name"),
+                format!("spawn `{}` is defined twice", s.name),
+            ));
         }
-        c.world.spawns.push((s.name.clone(), Pose2::new(s.x, s.y, s.yaw_deg.to_radians())));
+        c.world
+            .spawns
+            .push((s.name.clone(), Pose2::new(s.x, s.y, s.yaw_deg.to_radians())));
     }
     for (i, w) in spec.walls.iter().enumerate() {
         c.wall(w, &format!("walls[{i}]"))?;
@@ -159,13 +189,28 @@ pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
     for (i, inst) in spec.instances.iter().enumerate() {
         let key = format!("instances[{i}]");
         let prefab = spec.prefabs.get(&inst.prefab).ok_or_else(|| {
-            SpecError::new(path, format!("{key}.prefab"), format!("unknown prefab `{}`; defined: {:?}", inst.prefab, spec.prefabs.keys().collect::<Vec<_>>()))
+            SpecError::new(
+                path,
+                format!("{key}.prefab"),
+                format!(
+                    "unknown prefab `{}`; defined: {:?}",
+                    inst.prefab,
+                    spec.prefabs.keys().collect::<Vec<_>>()
+                ),
+            )
         })?;
         for (j, at) in inst.at.iter().enumerate() {
             if at.iter().any(|v| !v.is_finite()) {
-                return Err(SpecError::new(path, format!("{key}.at[{j}]"), "expected finite [x, y, yaw_deg]"));
+                return Err(SpecError::new(
+                    path,
+                    format!("{key}.at[{j}]"),
+                    "expected finite [x, y, yaw_deg]",
+                ));
             }
-            let frame = Pose::from_parts(Vec3::new(at[0] as f32, at[1] as f32, 0.0), Quat::from_rotation_z(at[2].to_radians() as f32));
+            let frame = Pose::from_parts(
+                Vec3::new(at[0] as f32, at[1] as f32, 0.0),
+                Quat::from_rotation_z(at[2].to_radians() as f32),
+            );
             let pk = format!("prefabs.{}", inst.prefab);
             for (k, b) in prefab.boxes.iter().enumerate() {
                 c.cuboid(b, &frame, &format!("{pk}.boxes[{k}]"))?;
@@ -181,7 +226,10 @@ pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
     // Floor and ceiling last: their default extent is that of everything else.
     let (lo, hi) = c.world.bounds();
     let have_extent = lo.x.is_finite();
-    for (slab, is_ceiling, key) in [(&spec.floor, false, "floor"), (&spec.ceiling, true, "ceiling")] {
+    for (slab, is_ceiling, key) in [
+        (&spec.floor, false, "floor"),
+        (&spec.ceiling, true, "ceiling"),
+    ] {
         let Some(s) = slab else { continue };
         let ext = match s.extent {
             Some(e) => e,
@@ -191,38 +239,73 @@ pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
                 (hi.x + s.margin as f32) as f64,
                 (hi.y + s.margin as f32) as f64,
             ],
-            None => return Err(SpecError::new(path, format!("{key}.extent"), "expected an extent [xmin, ymin, xmax, ymax]: the world has no other geometry to take it from")),
+            None => {
+                return Err(SpecError::new(
+                    path,
+                    format!("{key}.extent"),
+                    "expected an extent [xmin, ymin, xmax, ymax]: the world has no other geometry to take it from",
+                ));
+            }
         };
         if !(ext.iter().all(|v| v.is_finite()) && ext[2] > ext[0] && ext[3] > ext[1]) {
-            return Err(SpecError::new(path, format!("{key}.extent"), "expected [xmin, ymin, xmax, ymax] with max > min"));
+            return Err(SpecError::new(
+                path,
+                format!("{key}.extent"),
+                "expected [xmin, ymin, xmax, ymax] with max > min",
+            ));
         }
         check_positive(path, &format!("{key}.thickness"), s.thickness, "m")?;
         let z0 = if is_ceiling {
-            let h = s.height.ok_or_else(|| SpecError::new(path, format!("{key}.height"), "expected the height of the ceiling's underside, m"))?;
+            let h = s.height.ok_or_else(|| {
+                SpecError::new(
+                    path,
+                    format!("{key}.height"),
+                    "expected the height of the ceiling's underside, m",
+                )
+            })?;
             check_range(path, &format!("{key}.height"), h, 0.1, 100.0, "m")?;
             h
         } else {
             if s.height.is_some() {
-                return Err(SpecError::new(path, format!("{key}.height"), "the floor's top is z = 0 by definition; remove `height`"));
+                return Err(SpecError::new(
+                    path,
+                    format!("{key}.height"),
+                    "the floor's top is z = 0 by definition; remove `height`",
+                ));
             }
             -s.thickness
         };
         let mat = c.material(&s.material, &format!("{key}.material"))?;
-        let half = Vec3::new(((ext[2] - ext[0]) / 2.0) as f32, ((ext[3] - ext[1]) / 2.0) as f32, (s.thickness / 2.0) as f32);
-        let centre = Vec3::new(((ext[0] + ext[2]) / 2.0) as f32, ((ext[1] + ext[3]) / 2.0) as f32, (z0 + s.thickness / 2.0) as f32);
+        let half = Vec3::new(
+            ((ext[2] - ext[0]) / 2.0) as f32,
+            ((ext[3] - ext[1]) / 2.0) as f32,
+            (s.thickness / 2.0) as f32,
+        );
+        let centre = Vec3::new(
+            ((ext[0] + ext[2]) / 2.0) as f32,
+            ((ext[1] + ext[3]) / 2.0) as f32,
+            (z0 + s.thickness / 2.0) as f32,
+        );
         let uv = c.uv(mat);
         c.world.objects.push(Object {
             name: key.to_string(),
             pose: Pose::from_translation(centre),
             shape: Some(SharedShape::cuboid(half.x, half.y, half.z)),
-            parts: vec![MeshPart { material: mat, mesh: TriMesh::cuboid(half, uv) }],
+            parts: vec![MeshPart {
+                material: mat,
+                mesh: TriMesh::cuboid(half, uv),
+            }],
             motion: Motion::Static,
             friction: 0.8,
             slab: true,
         });
     }
     if c.world.objects.is_empty() {
-        return Err(SpecError::new(path, "", "the world has no geometry: expected walls, boxes, cylinders, meshes or a floor"));
+        return Err(SpecError::new(
+            path,
+            "",
+            "the world has no geometry: expected walls, boxes, cylinders, meshes or a floor",
+        ));
     }
     Ok(c.world)
 }
@@ -247,7 +330,10 @@ impl Compiler<'_> {
         for (name, m) in specs {
             let key = format!("materials.{name}");
             if m.color.iter().any(|c| !(0.0..=1.0).contains(c)) {
-                return Err(self.err(format!("{key}.color"), format!("expected sRGB components in [0, 1], found {:?}", m.color)));
+                return Err(self.err(
+                    format!("{key}.color"),
+                    format!("expected sRGB components in [0, 1], found {:?}", m.color),
+                ));
             }
             let mut tile = UvMap::Tiled(Vec2::ONE);
             let texture = match &m.texture {
@@ -255,9 +341,19 @@ impl Compiler<'_> {
                 Some(t) => {
                     let tk = format!("{key}.texture");
                     if t.size.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-                        return Err(self.err(format!("{tk}.size"), format!("expected a positive tile size [w, h] in m, found {:?}", t.size)));
+                        return Err(self.err(
+                            format!("{tk}.size"),
+                            format!(
+                                "expected a positive tile size [w, h] in m, found {:?}",
+                                t.size
+                            ),
+                        ));
                     }
-                    tile = if t.fit { UvMap::Fit } else { UvMap::Tiled(Vec2::new(t.size[0] as f32, t.size[1] as f32)) };
+                    tile = if t.fit {
+                        UvMap::Fit
+                    } else {
+                        UvMap::Tiled(Vec2::new(t.size[0] as f32, t.size[1] as f32))
+                    };
                     let tex = match (&t.image, t.pattern) {
                         (Some(img), None) => {
                             let p = self.dir.join(img);
@@ -265,22 +361,38 @@ impl Compiler<'_> {
                         }
                         (None, Some(pattern)) => {
                             if !(8..=4096).contains(&t.resolution) {
-                                return Err(self.err(format!("{tk}.resolution"), format!("expected 8 to 4096 pixels, found {}", t.resolution)));
+                                return Err(self.err(
+                                    format!("{tk}.resolution"),
+                                    format!("expected 8 to 4096 pixels, found {}", t.resolution),
+                                ));
                             }
                             let c2 = t.color2.unwrap_or(m.color.map(|c| c * 0.6));
                             if c2.iter().any(|c| !(0.0..=1.0).contains(c)) {
-                                return Err(self.err(format!("{tk}.color2"), "expected sRGB components in [0, 1]"));
+                                return Err(self.err(
+                                    format!("{tk}.color2"),
+                                    "expected sRGB components in [0, 1]",
+                                ));
                             }
                             texture::procedural(pattern, m.color, c2, t.seed, t.resolution)
                         }
-                        _ => return Err(self.err(tk, "expected exactly one of `image` (a PNG file) or `pattern`")),
+                        _ => {
+                            return Err(self.err(
+                                tk,
+                                "expected exactly one of `image` (a PNG file) or `pattern`",
+                            ));
+                        }
                     };
                     self.world.textures.push(tex);
                     Some(self.world.textures.len() - 1)
                 }
             };
-            self.material_ids.insert(name.clone(), self.world.materials.len());
-            self.world.materials.push(Material { name: name.clone(), color: m.color, texture });
+            self.material_ids
+                .insert(name.clone(), self.world.materials.len());
+            self.world.materials.push(Material {
+                name: name.clone(),
+                color: m.color,
+                texture,
+            });
             self.tiles.push(tile);
         }
         Ok(())
@@ -288,7 +400,17 @@ impl Compiler<'_> {
 
     fn material(&self, name: &str, key: &str) -> Result<usize, SpecError> {
         self.material_ids.get(name).copied().ok_or_else(|| {
-            self.err(key, format!("unknown material `{name}`; defined: {:?}", self.world.materials.iter().map(|m| &m.name).collect::<Vec<_>>()))
+            self.err(
+                key,
+                format!(
+                    "unknown material `{name}`; defined: {:?}",
+                    self.world
+                        .materials
+                        .iter()
+                        .map(|m| &m.name)
+                        .collect::<Vec<_>>()
+                ),
+            )
         })
     }
 
@@ -298,14 +420,26 @@ impl Compiler<'_> {
 
     fn body(&self, b: &BodySpec, key: &str) -> Result<(Motion, f64), SpecError> {
         let friction = b.friction.unwrap_or(0.6);
-        check_range(self.path, &format!("{key}.friction"), friction, 0.0, 10.0, "")?;
+        check_range(
+            self.path,
+            &format!("{key}.friction"),
+            friction,
+            0.0,
+            10.0,
+            "",
+        )?;
         let motion = if b.dynamic {
-            let m = b.mass.ok_or_else(|| self.err(format!("{key}.mass"), "a dynamic body needs its mass, kg"))?;
+            let m = b.mass.ok_or_else(|| {
+                self.err(format!("{key}.mass"), "a dynamic body needs its mass, kg")
+            })?;
             check_range(self.path, &format!("{key}.mass"), m, 1e-3, 1e4, "kg")?;
             Motion::Dynamic { mass: m }
         } else {
             if b.mass.is_some() {
-                return Err(self.err(format!("{key}.mass"), "mass applies to dynamic bodies only (set dynamic = true)"));
+                return Err(self.err(
+                    format!("{key}.mass"),
+                    "mass applies to dynamic bodies only (set dynamic = true)",
+                ));
             }
             Motion::Static
         };
@@ -314,19 +448,43 @@ impl Compiler<'_> {
 
     fn wall(&mut self, w: &WallSpec, key: &str) -> Result<(), SpecError> {
         let mat = self.material(&w.material, &format!("{key}.material"))?;
-        check_range(self.path, &format!("{key}.height"), w.height, 0.01, 100.0, "m")?;
-        check_range(self.path, &format!("{key}.thickness"), w.thickness, 0.001, 10.0, "m")?;
+        check_range(
+            self.path,
+            &format!("{key}.height"),
+            w.height,
+            0.01,
+            100.0,
+            "m",
+        )?;
+        check_range(
+            self.path,
+            &format!("{key}.thickness"),
+            w.thickness,
+            0.001,
+            10.0,
+            "m",
+        )?;
         if w.points.len() < 2 || w.points.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(self.err(format!("{key}.points"), "expected at least two finite [x, y] points"));
+            return Err(self.err(
+                format!("{key}.points"),
+                "expected at least two finite [x, y] points",
+            ));
         }
-        let mut pts: Vec<Vec2> = w.points.iter().map(|p| Vec2::new(p[0] as f32, p[1] as f32)).collect();
+        let mut pts: Vec<Vec2> = w
+            .points
+            .iter()
+            .map(|p| Vec2::new(p[0] as f32, p[1] as f32))
+            .collect();
         if w.closed {
             pts.push(pts[0]);
         }
         let nseg = pts.len() - 1;
         for i in 0..nseg {
             if (pts[i + 1] - pts[i]).length() < 1e-4 {
-                return Err(self.err(format!("{key}.points[{}]", i + 1), "expected distinct consecutive points (segment of zero length)"));
+                return Err(self.err(
+                    format!("{key}.points[{}]", i + 1),
+                    "expected distinct consecutive points (segment of zero length)",
+                ));
             }
         }
         // Cut the openings: per segment, intervals along it with (bottom, top) gaps.
@@ -335,8 +493,22 @@ impl Compiler<'_> {
             let ok = format!("{key}.openings[{k}]");
             check_range(self.path, &format!("{ok}.width"), o.width, 0.01, 100.0, "m")?;
             let top = o.top.unwrap_or(w.height);
-            check_range(self.path, &format!("{ok}.top"), top, 0.01, w.height, "m (at most the wall height)")?;
-            check_range(self.path, &format!("{ok}.sill"), o.sill, 0.0, top - 0.01, "m (below the top)")?;
+            check_range(
+                self.path,
+                &format!("{ok}.top"),
+                top,
+                0.01,
+                w.height,
+                "m (at most the wall height)",
+            )?;
+            check_range(
+                self.path,
+                &format!("{ok}.sill"),
+                o.sill,
+                0.0,
+                top - 0.01,
+                "m (below the top)",
+            )?;
             let at = Vec2::new(o.at[0] as f32, o.at[1] as f32);
             let (seg, s, d) = (0..nseg)
                 .map(|i| {
@@ -348,7 +520,12 @@ impl Compiler<'_> {
                 .min_by(|x, y| x.2.total_cmp(&y.2))
                 .expect("a wall has segments");
             if d > w.thickness as f32 {
-                return Err(self.err(format!("{ok}.at"), format!("expected a point on the wall; the nearest wall point is {d:.3} m away")));
+                return Err(self.err(
+                    format!("{ok}.at"),
+                    format!(
+                        "expected a point on the wall; the nearest wall point is {d:.3} m away"
+                    ),
+                ));
             }
             let half = o.width as f32 / 2.0;
             cuts[seg].push((s - half, s + half, o.sill as f32, top as f32));
@@ -387,12 +564,18 @@ impl Compiler<'_> {
             for (k, (p0, p1, z0, z1)) in pieces.into_iter().enumerate() {
                 let half = Vec3::new((p1 - p0) / 2.0, t / 2.0, (z1 - z0) / 2.0);
                 let mid = a + dir * (p0 + p1) / 2.0;
-                let pose = Pose::from_parts(Vec3::new(mid.x, mid.y, (z0 + z1) / 2.0), Quat::from_rotation_z(dir.y.atan2(dir.x)));
+                let pose = Pose::from_parts(
+                    Vec3::new(mid.x, mid.y, (z0 + z1) / 2.0),
+                    Quat::from_rotation_z(dir.y.atan2(dir.x)),
+                );
                 self.world.objects.push(Object {
                     name: format!("{key}.segment{i}.piece{k}"),
                     pose,
                     shape: Some(SharedShape::cuboid(half.x, half.y, half.z)),
-                    parts: vec![MeshPart { material: mat, mesh: TriMesh::cuboid(half, uv) }],
+                    parts: vec![MeshPart {
+                        material: mat,
+                        mesh: TriMesh::cuboid(half, uv),
+                    }],
                     motion: Motion::Static,
                     friction: 0.6,
                     slab: false,
@@ -405,22 +588,40 @@ impl Compiler<'_> {
     fn cuboid(&mut self, b: &BoxSpec, frame: &Pose, key: &str) -> Result<(), SpecError> {
         let mat = self.material(&b.material, &format!("{key}.material"))?;
         for (k, s) in b.size.iter().enumerate() {
-            check_range(self.path, &format!("{key}.size[{k}]"), *s, 1e-4, 1000.0, "m")?;
+            check_range(
+                self.path,
+                &format!("{key}.size[{k}]"),
+                *s,
+                1e-4,
+                1000.0,
+                "m",
+            )?;
         }
-        if b.center.iter().chain([&b.base, &b.yaw_deg]).any(|v| !v.is_finite()) {
+        if b.center
+            .iter()
+            .chain([&b.base, &b.yaw_deg])
+            .any(|v| !v.is_finite())
+        {
             return Err(self.err(key, "expected finite center, base and yaw_deg"));
         }
         let (motion, friction) = self.body(&b.body, key)?;
         let half = Vec3::new(b.size[0] as f32, b.size[1] as f32, b.size[2] as f32) / 2.0;
         let local = Pose::from_parts(
-            Vec3::new(b.center[0] as f32, b.center[1] as f32, b.base as f32 + half.z),
+            Vec3::new(
+                b.center[0] as f32,
+                b.center[1] as f32,
+                b.base as f32 + half.z,
+            ),
             Quat::from_rotation_z(b.yaw_deg.to_radians() as f32),
         );
         self.world.objects.push(Object {
             name: b.name.clone().unwrap_or_else(|| key.to_string()),
             pose: *frame * local,
             shape: Some(SharedShape::cuboid(half.x, half.y, half.z)),
-            parts: vec![MeshPart { material: mat, mesh: TriMesh::cuboid(half, self.uv(mat)) }],
+            parts: vec![MeshPart {
+                material: mat,
+                mesh: TriMesh::cuboid(half, self.uv(mat)),
+            }],
             motion,
             friction,
             slab: false,
@@ -430,10 +631,27 @@ impl Compiler<'_> {
 
     fn cylinder(&mut self, cy: &CylinderSpec, frame: &Pose, key: &str) -> Result<(), SpecError> {
         let mat = self.material(&cy.material, &format!("{key}.material"))?;
-        check_range(self.path, &format!("{key}.radius"), cy.radius, 1e-4, 1000.0, "m")?;
-        check_range(self.path, &format!("{key}.height"), cy.height, 1e-4, 1000.0, "m")?;
+        check_range(
+            self.path,
+            &format!("{key}.radius"),
+            cy.radius,
+            1e-4,
+            1000.0,
+            "m",
+        )?;
+        check_range(
+            self.path,
+            &format!("{key}.height"),
+            cy.height,
+            1e-4,
+            1000.0,
+            "m",
+        )?;
         if !(3..=256).contains(&cy.segments) {
-            return Err(self.err(format!("{key}.segments"), format!("expected 3 to 256 sides, found {}", cy.segments)));
+            return Err(self.err(
+                format!("{key}.segments"),
+                format!("expected 3 to 256 sides, found {}", cy.segments),
+            ));
         }
         if cy.center.iter().chain([&cy.base]).any(|v| !v.is_finite()) {
             return Err(self.err(key, "expected finite center and base"));
@@ -442,12 +660,19 @@ impl Compiler<'_> {
         let (r, hh) = (cy.radius as f32, cy.height as f32 / 2.0);
         let shape = SharedShape::convex_hull(&TriMesh::prism_vertices(r, hh, cy.segments))
             .ok_or_else(|| self.err(key, "degenerate cylinder"))?;
-        let local = Pose::from_translation(Vec3::new(cy.center[0] as f32, cy.center[1] as f32, cy.base as f32 + hh));
+        let local = Pose::from_translation(Vec3::new(
+            cy.center[0] as f32,
+            cy.center[1] as f32,
+            cy.base as f32 + hh,
+        ));
         self.world.objects.push(Object {
             name: cy.name.clone().unwrap_or_else(|| key.to_string()),
             pose: *frame * local,
             shape: Some(shape),
-            parts: vec![MeshPart { material: mat, mesh: TriMesh::prism(r, hh, cy.segments, self.uv(mat)) }],
+            parts: vec![MeshPart {
+                material: mat,
+                mesh: TriMesh::prism(r, hh, cy.segments, self.uv(mat)),
+            }],
             motion,
             friction,
             slab: false,
@@ -465,11 +690,17 @@ impl Compiler<'_> {
             return Err(self.err(format!("{key}.collider"), "a dynamic mesh needs collider = \"convex_hull\" (triangle meshes are for static geometry)"));
         }
         let file = self.dir.join(&m.file);
-        let canonical = file.canonicalize().map_err(|e| self.err(format!("{key}.file"), format!("cannot open mesh file {}: {e}", file.display())))?;
+        let canonical = file.canonicalize().map_err(|e| {
+            self.err(
+                format!("{key}.file"),
+                format!("cannot open mesh file {}: {e}", file.display()),
+            )
+        })?;
         let parts = match self.gltf_cache.get(&canonical) {
             Some(p) => p.clone(),
             None => {
-                let loaded = gltf_io::load(&file).map_err(|e| self.err(format!("{key}.file"), e))?;
+                let loaded =
+                    gltf_io::load(&file).map_err(|e| self.err(format!("{key}.file"), e))?;
                 let mut parts = Vec::new();
                 let first_tex = self.world.textures.len();
                 self.world.textures.extend(loaded.textures);
@@ -484,7 +715,10 @@ impl Compiler<'_> {
                 }
                 let first_mat = self.world.materials.len() - loaded.material_count;
                 for p in loaded.parts {
-                    parts.push(MeshPart { material: first_mat + p.material, mesh: p.mesh });
+                    parts.push(MeshPart {
+                        material: first_mat + p.material,
+                        mesh: p.mesh,
+                    });
                 }
                 self.gltf_cache.insert(canonical, parts.clone());
                 parts
@@ -493,17 +727,30 @@ impl Compiler<'_> {
         let s = m.scale as f32;
         let parts: Vec<MeshPart> = parts
             .into_iter()
-            .map(|p| MeshPart { material: p.material, mesh: p.mesh.transformed(Quat::IDENTITY, Vec3::ZERO, s) })
+            .map(|p| MeshPart {
+                material: p.material,
+                mesh: p.mesh.transformed(Quat::IDENTITY, Vec3::ZERO, s),
+            })
             .collect();
         let shape = match m.collider {
             MeshCollider::None => None,
             MeshCollider::Trimesh => {
                 let (v, i) = merged(&parts);
-                Some(SharedShape::trimesh(v, i).map_err(|e| self.err(format!("{key}.file"), format!("cannot build a triangle-mesh collider: {e:?}")))?)
+                Some(SharedShape::trimesh(v, i).map_err(|e| {
+                    self.err(
+                        format!("{key}.file"),
+                        format!("cannot build a triangle-mesh collider: {e:?}"),
+                    )
+                })?)
             }
             MeshCollider::ConvexHull => {
                 let (v, _) = merged(&parts);
-                Some(SharedShape::convex_hull(&v).ok_or_else(|| self.err(format!("{key}.collider"), "the mesh's convex hull is degenerate (flat or empty)"))?)
+                Some(SharedShape::convex_hull(&v).ok_or_else(|| {
+                    self.err(
+                        format!("{key}.collider"),
+                        "the mesh's convex hull is degenerate (flat or empty)",
+                    )
+                })?)
             }
         };
         let [r, p, y] = m.rpy_deg.map(|a| a.to_radians() as f32);
@@ -561,9 +808,22 @@ mod tests {
                 (o.pose.translation.x - c.x, o.pose.translation.x + c.x)
             })
             .collect();
-        assert!(spans.iter().any(|&(a, b)| a.abs() < 1e-5 && (b - 1.5).abs() < 1e-5), "{spans:?}");
-        assert!(spans.iter().any(|&(a, b)| (a - 2.5).abs() < 1e-5 && (b - 4.0).abs() < 1e-5));
-        let lintel = w.objects.iter().find(|o| o.pose.translation.z > 2.0).unwrap();
+        assert!(
+            spans
+                .iter()
+                .any(|&(a, b)| a.abs() < 1e-5 && (b - 1.5).abs() < 1e-5),
+            "{spans:?}"
+        );
+        assert!(
+            spans
+                .iter()
+                .any(|&(a, b)| (a - 2.5).abs() < 1e-5 && (b - 4.0).abs() < 1e-5)
+        );
+        let lintel = w
+            .objects
+            .iter()
+            .find(|o| o.pose.translation.z > 2.0)
+            .unwrap();
         assert!((lintel.pose.translation.z - 2.25).abs() < 1e-5);
     }
 
@@ -572,19 +832,34 @@ mod tests {
         let w = world(&format!("name = \"t\"\n{MATS}[[walls]]\nmaterial = \"w\"\npoints = [[0, 0], [4, 0], [4, 3], [0, 3]]\nclosed = true\nthickness = 0.2\n")).unwrap();
         assert_eq!(w.objects.len(), 4);
         let first = &w.objects[0];
-        let half = first.shape.as_ref().unwrap().as_cuboid().unwrap().half_extents;
-        assert!((half.x - 2.1).abs() < 1e-5, "segments extend by half the thickness at joints");
+        let half = first
+            .shape
+            .as_ref()
+            .unwrap()
+            .as_cuboid()
+            .unwrap()
+            .half_extents;
+        assert!(
+            (half.x - 2.1).abs() < 1e-5,
+            "segments extend by half the thickness at joints"
+        );
     }
 
     #[test]
     fn errors_name_the_key() {
         let e = world(&format!("name = \"t\"\n{MATS}[[boxes]]\nmaterial = \"nope\"\ncenter = [0, 0]\nsize = [1, 1, 1]\n")).unwrap_err();
         assert_eq!(e.key, "boxes[0].material");
-        let e = world(&format!("name = \"t\"\n{MATS}[[boxes]]\nmaterial = \"w\"\ncenter = [0, 0]\nsize = [1, -1, 1]\n")).unwrap_err();
+        let e = world(&format!(
+            "name = \"t\"\n{MATS}[[boxes]]\nmaterial = \"w\"\ncenter = [0, 0]\nsize = [1, -1, 1]\n"
+        ))
+        .unwrap_err();
         assert_eq!(e.key, "boxes[0].size[1]");
         let e = world(&format!("name = \"t\"\n{MATS}[[walls]]\nmaterial = \"w\"\npoints = [[0, 0], [4, 0]]\nopenings = [{{ at = [2, 3], width = 1.0 }}]\n")).unwrap_err();
         assert_eq!(e.key, "walls[0].openings[0].at");
-        let e = world(&format!("name = \"t\"\n{MATS}[[meshes]]\nfile = \"missing.glb\"\n")).unwrap_err();
+        let e = world(&format!(
+            "name = \"t\"\n{MATS}[[meshes]]\nfile = \"missing.glb\"\n"
+        ))
+        .unwrap_err();
         assert_eq!(e.key, "meshes[0].file");
         let e = world(&format!("name = \"t\"\n{MATS}[materials.x]\ncolor = [1, 1, 1]\ntexture = {{ image = \"nothere.png\" }}\n")).unwrap_err();
         assert_eq!(e.key, "materials.x.texture.image");
@@ -600,6 +875,9 @@ mod tests {
         .unwrap();
         assert_eq!(w.objects.len(), 2);
         let p = w.objects[0].pose.translation;
-        assert!((p.x - 10.0).abs() < 1e-5 && (p.y - 1.0).abs() < 1e-5 && (p.z - 0.25).abs() < 1e-5, "{p:?}");
+        assert!(
+            (p.x - 10.0).abs() < 1e-5 && (p.y - 1.0).abs() < 1e-5 && (p.z - 0.25).abs() < 1e-5,
+            "{p:?}"
+        );
     }
 }

@@ -22,17 +22,28 @@ pub struct Texture {
 impl Texture {
     /// Loads a PNG file; `key` names the world-file key for errors.
     pub fn load_png(path: &Path) -> Result<Texture, String> {
-        let img = image::open(path).map_err(|e| format!("cannot load texture image {}: {e}", path.display()))?;
+        let img = image::open(path)
+            .map_err(|e| format!("cannot load texture image {}: {e}", path.display()))?;
         let img = img.to_rgba8();
         if img.width() == 0 || img.height() == 0 {
             return Err(format!("texture image {} is empty", path.display()));
         }
-        Ok(Texture { name: path.display().to_string(), width: img.width(), height: img.height(), rgba: img.into_raw() })
+        Ok(Texture {
+            name: path.display().to_string(),
+            width: img.width(),
+            height: img.height(),
+            rgba: img.into_raw(),
+        })
     }
 
     /// Wraps decoded pixels (e.g. from a glTF file).
     pub fn from_rgba(name: String, width: u32, height: u32, rgba: Vec<u8>) -> Texture {
-        Texture { name, width, height, rgba }
+        Texture {
+            name,
+            width,
+            height,
+            rgba,
+        }
     }
 
     /// Mean colour (sRGB, 0–1), used where a single colour stands for the texture (PLY export).
@@ -50,8 +61,10 @@ impl Texture {
     /// Encodes as PNG (for glTF export).
     pub fn to_png(&self) -> Vec<u8> {
         let mut out = Vec::new();
-        let img = image::RgbaImage::from_raw(self.width, self.height, self.rgba.clone()).expect("texture size matches its pixels");
-        img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png).expect("PNG encoding to memory cannot fail");
+        let img = image::RgbaImage::from_raw(self.width, self.height, self.rgba.clone())
+            .expect("texture size matches its pixels");
+        img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+            .expect("PNG encoding to memory cannot fail");
         out
     }
 }
@@ -62,7 +75,11 @@ fn to_u8(c: [f64; 3]) -> [u8; 4] {
 }
 
 fn mix(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
-    [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t, a[2] + (b[2] - a[2]) * t]
+    [
+        a[0] + (b[0] - a[0]) * t,
+        a[1] + (b[1] - a[1]) * t,
+        a[2] + (b[2] - a[2]) * t,
+    ]
 }
 
 /// Smooth value noise on a `cells`-periodic lattice, in [0, 1].
@@ -79,7 +96,13 @@ fn value_noise(lattice: &[f64], cells: usize, u: f64, v: f64) -> f64 {
 }
 
 /// Rasterises a procedural pattern to a square `resolution`² texture, tileable.
-pub fn procedural(pattern: Pattern, c1: [f64; 3], c2: [f64; 3], seed: u64, resolution: u32) -> Texture {
+pub fn procedural(
+    pattern: Pattern,
+    c1: [f64; 3],
+    c2: [f64; 3],
+    seed: u64,
+    resolution: u32,
+) -> Texture {
     let n = resolution as usize;
     let mut rgba = vec![0u8; n * n * 4];
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7465_7874_7572_6500);
@@ -111,19 +134,31 @@ pub fn procedural(pattern: Pattern, c1: [f64; 3], c2: [f64; 3], seed: u64, resol
                 for i in 0..n {
                     let x = (i + offset) % (n / 2);
                     let y = j % (n / 4);
-                    let shade = 0.9 + 0.1 * (((i + offset) / (n / 2) + course * 3) % 3) as f64 / 2.0;
-                    let c = if x < mortar || y < mortar { c2 } else { c1.map(|v| v * shade) };
+                    let shade =
+                        0.9 + 0.1 * (((i + offset) / (n / 2) + course * 3) % 3) as f64 / 2.0;
+                    let c = if x < mortar || y < mortar {
+                        c2
+                    } else {
+                        c1.map(|v| v * shade)
+                    };
                     put(&mut rgba, i, j, c);
                 }
             }
         }
         Pattern::Noise => {
             let octaves = [(4usize, 0.5), (16, 0.3), (64, 0.2)];
-            let lattices: Vec<Vec<f64>> = octaves.iter().map(|&(c, _)| (0..c * c).map(|_| rng.random::<f64>()).collect()).collect();
+            let lattices: Vec<Vec<f64>> = octaves
+                .iter()
+                .map(|&(c, _)| (0..c * c).map(|_| rng.random::<f64>()).collect())
+                .collect();
             for j in 0..n {
                 for i in 0..n {
                     let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
-                    let t: f64 = octaves.iter().zip(&lattices).map(|(&(c, w), l)| w * value_noise(l, c, u, v)).sum();
+                    let t: f64 = octaves
+                        .iter()
+                        .zip(&lattices)
+                        .map(|(&(c, w), l)| w * value_noise(l, c, u, v))
+                        .sum();
                     put(&mut rgba, i, j, mix(c1, c2, t));
                 }
             }
@@ -149,9 +184,19 @@ pub fn procedural(pattern: Pattern, c1: [f64; 3], c2: [f64; 3], seed: u64, resol
             rect(&mut rgba, 0, 0, border, n, c2);
             rect(&mut rgba, n - border, 0, border, n, c2);
             for _ in 0..6 {
-                let c = [rng.random::<f64>(), rng.random::<f64>(), rng.random::<f64>()];
-                let (w, h) = (rng.random_range(n / 8..n / 3), rng.random_range(n / 8..n / 3));
-                let (x, y) = (rng.random_range(border..n - border - w), rng.random_range(border..n / 2));
+                let c = [
+                    rng.random::<f64>(),
+                    rng.random::<f64>(),
+                    rng.random::<f64>(),
+                ];
+                let (w, h) = (
+                    rng.random_range(n / 8..n / 3),
+                    rng.random_range(n / 8..n / 3),
+                );
+                let (x, y) = (
+                    rng.random_range(border..n - border - w),
+                    rng.random_range(border..n / 2),
+                );
                 rect(&mut rgba, x, y, w, h, c);
             }
             let line_h = (n / 32).max(1);
@@ -189,7 +234,12 @@ pub fn procedural(pattern: Pattern, c1: [f64; 3], c2: [f64; 3], seed: u64, resol
             }
         }
     }
-    Texture { name: format!("{pattern:?}").to_lowercase(), width: resolution, height: resolution, rgba }
+    Texture {
+        name: format!("{pattern:?}").to_lowercase(),
+        width: resolution,
+        height: resolution,
+        rgba,
+    }
 }
 
 #[cfg(test)]
