@@ -167,7 +167,7 @@ fn real_main() -> Result<()> {
                 mesh,
                 no_grid,
             } => {
-                if !(resolution.is_finite() && resolution >= 0.001 && resolution <= 10.0) {
+                if !(resolution.is_finite() && (0.001..=10.0).contains(&resolution)) {
                     bail!(
                         "--resolution: expected a cell size in [0.001, 10] m, found {resolution}"
                     );

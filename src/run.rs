@@ -270,7 +270,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
             pending.clear();
         }
         if let Some(b) = &bar
-            && sim.counters().steps % 200 == 0
+            && sim.counters().steps.is_multiple_of(200)
         {
             b.set_position((now.secs() * 1000.0) as u64);
         }

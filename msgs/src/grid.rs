@@ -48,7 +48,7 @@ impl OccupancyGrid {
         let i = ((x - self.origin[0]) / self.resolution).floor();
         let j = ((y - self.origin[1]) / self.resolution).floor();
         (i >= 0.0 && j >= 0.0 && (i as usize) < self.width && (j as usize) < self.height)
-            .then(|| (i as usize, j as usize))
+            .then_some((i as usize, j as usize))
     }
 
     /// World coordinates of the centre of cell `(i, j)`.

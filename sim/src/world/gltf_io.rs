@@ -189,7 +189,7 @@ pub fn load(path: &Path) -> Result<Loaded, String> {
                 Some(i) => i.into_u32().collect(),
                 None => (0..n as u32).collect(),
             };
-            if indices.len() % 3 != 0 {
+            if !indices.len().is_multiple_of(3) {
                 return Err(format!(
                     "{what}: {} indices is not a whole number of triangles",
                     indices.len()
@@ -256,7 +256,7 @@ fn push_view(
     bytes: &[u8],
     target: Option<u32>,
 ) -> usize {
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let mut v = json!({ "buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len() });
@@ -385,7 +385,7 @@ pub fn export_glb(world: &World, poses: &[rapier3d::math::Pose]) -> Vec<u8> {
     }
     let mut json_bytes =
         serde_json::to_vec(&doc).expect("JSON serialisation of plain values cannot fail");
-    while json_bytes.len() % 4 != 0 {
+    while !json_bytes.len().is_multiple_of(4) {
         json_bytes.push(b' ');
     }
     let glb = gltf::binary::Glb {

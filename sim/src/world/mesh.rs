@@ -117,8 +117,8 @@ impl TriMesh {
             m.positions.push(Vec3::new(0.0, 0.0, z));
             m.normals.push(n);
             m.uvs.push(cap_uv(Vec3::ZERO));
-            for i in 0..s {
-                let p = Vec3::new(verts[i].x, verts[i].y, z);
+            for v in &verts[..s] {
+                let p = Vec3::new(v.x, v.y, z);
                 m.positions.push(p);
                 m.normals.push(n);
                 m.uvs.push(cap_uv(p));

@@ -1,0 +1,406 @@
+//! End-to-end tests of the `futago` command.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn futago(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_futago"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("futago runs")
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn ok(o: &Output) {
+    assert!(
+        o.status.success(),
+        "futago failed:\nstdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn help_explains_every_command() {
+    let o = futago(&["--help"]);
+    ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout);
+    for c in ["run", "world", "bench"] {
+        assert!(text.contains(c), "{c} missing from --help:\n{text}");
+    }
+    let o = futago(&["world", "--help"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("export") && text.contains("info"));
+}
+
+#[test]
+fn a_run_writes_whole_results_byte_identical_for_its_seed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b, c) = (
+        tmp.path().join("a"),
+        tmp.path().join("b"),
+        tmp.path().join("c"),
+    );
+    for (dir, seed) in [(&a, "9"), (&b, "9"), (&c, "10")] {
+        ok(&futago(&[
+            "run",
+            "scenarios/lab-push.toml",
+            "--out",
+            dir.to_str().unwrap(),
+            "--seed",
+            seed,
+            "-q",
+        ]));
+    }
+    for f in ["groundtruth.txt", "odometry.txt", "scans.clf"] {
+        let (x, y) = (
+            std::fs::read(a.join(f)).unwrap(),
+            std::fs::read(b.join(f)).unwrap(),
+        );
+        assert!(!x.is_empty());
+        assert_eq!(x, y, "{f} differs between two runs with the same seed");
+    }
+    let (mut sa, mut sb) = (summary(&a), summary(&b));
+    sa.as_object_mut().unwrap().remove("performance");
+    sb.as_object_mut().unwrap().remove("performance");
+    assert_eq!(sa, sb);
+    assert_ne!(
+        std::fs::read(a.join("scans.clf")).unwrap(),
+        std::fs::read(c.join("scans.clf")).unwrap(),
+        "laser noise follows the seed"
+    );
+
+    // The summary agrees with the files.
+    let scans = sa["lidar"][0]["scans"].as_u64().unwrap();
+    let log = std::fs::read_to_string(a.join("scans.clf")).unwrap();
+    assert_eq!(
+        log.lines()
+            .filter(|l| l.starts_with("ROBOTLASER1 "))
+            .count() as u64,
+        scans
+    );
+    assert!(scans >= 130, "10 Hz for 14 s: {scans}");
+    let beams: usize = log
+        .lines()
+        .find(|l| l.starts_with("ROBOTLASER1 "))
+        .unwrap()
+        .split_whitespace()
+        .nth(8)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(beams, 682);
+    let gt = std::fs::read_to_string(a.join("groundtruth.txt")).unwrap();
+    let rows: Vec<Vec<f64>> = gt
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split_whitespace().map(|w| w.parse().unwrap()).collect())
+        .collect();
+    assert!(rows.iter().all(|r| r.len() == 8));
+    assert!(
+        rows.windows(2).all(|w| w[1][0] > w[0][0]),
+        "timestamps increase"
+    );
+    let sim_time = sa["sim_time_s"].as_f64().unwrap();
+    assert!((rows.last().unwrap()[0] - sim_time).abs() < 0.021);
+    // The robot met the box, pressed its bumpers and pushed it on (its wheels have the grip
+    // to push a 1.5 kg box: 3 m forward, then back off 0.4 m).
+    assert!(sa["robot"]["bump_events"].as_u64().unwrap() >= 1);
+    let travelled = sa["robot"]["distance_travelled_m"].as_f64().unwrap();
+    assert!((travelled - 3.4).abs() < 0.2, "{travelled}");
+}
+
+/// The pose of a robot that drives an odometry-perfect square (legs of `side`, in-place turns
+/// of ±90° by odometry) with actual wheel radii `E_d` apart and actual wheel base `E_b` times
+/// the nominal one: Borenstein's UMBmark error model in closed form.
+fn umbmark_prediction(start: [f64; 3], side: f64, ccw: bool, ed: f64, eb: f64) -> [f64; 3] {
+    let (r, b) = (0.036, 0.258);
+    let (rl, rr) = (r * 2.0 / (ed + 1.0), r * 2.0 * ed / (ed + 1.0));
+    let ba = b * eb;
+    let [mut x, mut y, mut th] = start;
+    let n = 10_000;
+    for leg in 0..4 {
+        // Straight by the encoders: both wheels turn by φ = side / r.
+        let phi = side / r;
+        for _ in 0..n {
+            let (sl, sr) = (rl * phi / n as f64, rr * phi / n as f64);
+            let d = (sl + sr) / 2.0;
+            let dth = (sr - sl) / ba;
+            x += d * (th + dth / 2.0).cos();
+            y += d * (th + dth / 2.0).sin();
+            th += dth;
+        }
+        if leg == 3 {
+            break;
+        }
+        // Turn in place by the encoders: ±90° = (s_r − s_l) / b with s_r = −s_l.
+        let sign = if ccw { 1.0 } else { -1.0 };
+        let phi = std::f64::consts::FRAC_PI_2 * b / (2.0 * r);
+        for _ in 0..n {
+            let (sl, sr) = (-sign * rl * phi / n as f64, sign * rr * phi / n as f64);
+            let d = (sl + sr) / 2.0;
+            let dth = (sr - sl) / ba;
+            x += d * (th + dth / 2.0).cos();
+            y += d * (th + dth / 2.0).sin();
+            th += dth;
+        }
+    }
+    [x, y, th]
+}
+
+fn umbmark_scenario(dir: &Path, ccw: bool, ed: f64, eb: f64) -> PathBuf {
+    let world = root().join("worlds/lab.toml");
+    let (start, pts) = if ccw {
+        (
+            [4.5, 1.8],
+            "[[8.5, 1.8], [8.5, 5.8], [4.5, 5.8], [4.5, 1.8]]",
+        )
+    } else {
+        (
+            [4.5, 5.8],
+            "[[8.5, 5.8], [8.5, 1.8], [4.5, 1.8], [4.5, 5.8]]",
+        )
+    };
+    let text = format!(
+        "name = \"umbmark\"\nworld = {world:?}\nduration = 300.0\nstart = {{ x = {}, y = {}, yaw_deg = 0.0 }}\n[robot.odometry]\nwheel_diameter_ratio = {ed}\nwheel_base_ratio = {eb}\nquantize = false\n[controller]\ntype = \"waypoints\"\npose_source = \"odometry\"\nspeed = 0.2\nlookahead = 0.3\nturn_in_place_deg = 20.0\nturn_tolerance_deg = 0.05\nturn_speed = 0.08\ntolerance = 0.005\nwaypoints = {pts}\n",
+        start[0], start[1]
+    );
+    let p = dir.join(format!(
+        "umbmark-{}-{ed}-{eb}.toml",
+        if ccw { "ccw" } else { "cw" }
+    ));
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn umbmark_square_shows_the_configured_odometry_errors_and_none_without_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (ed, eb) in [(1.0, 1.0), (1.0, 1.02), (1.006, 1.0), (1.004, 0.985)] {
+        let mut errors = Vec::new();
+        for ccw in [false, true] {
+            let scenario = umbmark_scenario(tmp.path(), ccw, ed, eb);
+            let out = tmp.path().join(format!("out-{ccw}-{ed}-{eb}"));
+            ok(&futago(&[
+                "run",
+                scenario.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "-q",
+            ]));
+            let s = summary(&out);
+            assert!(
+                s["controller_finished"].as_bool().unwrap(),
+                "the square was completed"
+            );
+            let fin: Vec<f64> = s["robot"]["final_pose"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect();
+            let start: Vec<f64> = s["robot"]["start"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect();
+            let predicted = umbmark_prediction([start[0], start[1], start[2]], 4.0, ccw, ed, eb);
+            let (ex, ey) = (fin[0] - start[0], fin[1] - start[1]);
+            let miss = (fin[0] - predicted[0]).hypot(fin[1] - predicted[1]);
+            let expected = (predicted[0] - start[0]).hypot(predicted[1] - start[1]);
+            errors.push((ex, ey));
+            if ed == 1.0 && eb == 1.0 {
+                assert!(
+                    ex.hypot(ey) < 0.02,
+                    "no error model: return error {ex:.4}, {ey:.4}"
+                );
+            } else {
+                assert!(
+                    expected > 0.15,
+                    "the model predicts a visible error ({expected})"
+                );
+                assert!(
+                    miss < 0.04 + 0.05 * expected,
+                    "E_d {ed}, E_b {eb}, ccw {ccw}: ended {miss:.3} m from the UMBmark prediction (error {expected:.3} m)"
+                );
+            }
+        }
+        if ed == 1.0 && eb != 1.0 {
+            // A wheel-base error alone: the clockwise and counter-clockwise return errors mirror
+            // each other across the first leg's direction (x), Borenstein's type A pattern.
+            let ((x1, y1), (x2, y2)) = (errors[0], errors[1]);
+            assert!(
+                (x1 - x2).abs() < 0.05 && (y1 + y2).abs() < 0.05,
+                "{errors:?}"
+            );
+        }
+    }
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn bad_input_names_the_file_and_key_and_writes_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let world = root().join("worlds/lab.toml");
+    let good = format!(
+        "name = \"x\"\nworld = {world:?}\nduration = 1.0\nstart = \"centre\"\n[controller]\ntype = \"idle\"\n"
+    );
+    write(
+        d,
+        "bad.world.toml",
+        "name = \"w\"\n[materials.m]\ncolor = [0.5, 0.5, 0.5]\n[[meshes]]\nfile = \"nowhere.glb\"\n",
+    );
+    let cases: Vec<(String, &str, &str)> = vec![
+        (good.replace("duration = 1.0", "duration = "), "syntax", ""),
+        (
+            good.replace("duration = 1.0", "duration = 1.0\nspeed = 3"),
+            "unknown field `speed`",
+            "",
+        ),
+        (
+            good.clone() + "[[lidar]]\npreset = \"urg-04lx\"\nrange_max = -2.0\n",
+            "lidar[0].range_max",
+            "expected",
+        ),
+        (
+            good.clone() + "[[lidar]]\npreset = \"hokuyo-9000\"\n",
+            "lidar[0].preset",
+            "urg-04lx",
+        ),
+        (
+            good.replace("start = \"centre\"", "start = \"nowhere\""),
+            "start",
+            "spawn",
+        ),
+        (
+            good.replace(
+                &format!("{world:?}"),
+                &format!("{:?}", d.join("bad.world.toml")),
+            ),
+            "meshes[0].file",
+            "nowhere.glb",
+        ),
+        (
+            good.replace(&format!("{world:?}"), "\"missing.toml\""),
+            "world",
+            "does not exist",
+        ),
+        (
+            good.clone() + "[robot]\nwheel_base = 2.0\n",
+            "robot.wheel_base",
+            "expected",
+        ),
+        (
+            good.clone() + "[physics]\nrate = 50.0\n",
+            "physics.rate",
+            "expected",
+        ),
+        (
+            good.replace(
+                "type = \"idle\"",
+                "type = \"segments\"\nsegments = [{ duration = -1.0 }]",
+            ),
+            "controller.segments[0].duration",
+            "positive",
+        ),
+    ];
+    for (i, (text, key, expect)) in cases.iter().enumerate() {
+        let p = write(d, &format!("case{i}.toml"), text);
+        let out = d.join(format!("out{i}"));
+        let o = futago(&[
+            "run",
+            p.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "case {i} should fail");
+        assert!(
+            err.contains(key) && err.contains(expect),
+            "case {i}: expected `{key}` and `{expect}` in: {err}"
+        );
+        assert!(err.contains(".toml"), "case {i}: names the file: {err}");
+        assert!(!err.contains("panicked"), "case {i} panicked: {err}");
+        assert!(!out.exists(), "case {i} left output behind");
+    }
+    // Nothing half-written beside the outputs either.
+    let leftovers: Vec<_> = std::fs::read_dir(d)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("partial"))
+        .collect();
+    assert!(leftovers.is_empty());
+    let o = futago(&[
+        "world",
+        "export",
+        "worlds/lab.toml",
+        "--band",
+        "0.3:0.1",
+        "--out",
+        d.join("w").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--band"));
+}
+
+#[test]
+fn world_export_writes_map_server_grid_and_meshes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("office");
+    ok(&futago(&[
+        "world",
+        "export",
+        "worlds/office.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--resolution",
+        "0.05",
+    ]));
+    let yaml = std::fs::read_to_string(out.join("office.yaml")).unwrap();
+    assert!(
+        yaml.contains("image: office.pgm")
+            && yaml.contains("resolution: 0.05")
+            && yaml.contains("mode: trinary")
+    );
+    let pgm = std::fs::read(out.join("office.pgm")).unwrap();
+    let header: Vec<&str> = std::str::from_utf8(&pgm[..80])
+        .unwrap_or_else(|e| std::str::from_utf8(&pgm[..e.valid_up_to()]).unwrap())
+        .lines()
+        .take(4)
+        .collect();
+    assert_eq!(header[0], "P5");
+    let dims: Vec<usize> = header[2]
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    // 30 m × 16 m floor plus walls and a 0.5 m margin, at 5 cm.
+    assert!(
+        (dims[0] as f64 * 0.05 - 31.75).abs() < 0.2 && (dims[1] as f64 * 0.05 - 17.75).abs() < 0.2,
+        "{dims:?}"
+    );
+    let px = &pgm[pgm.len() - dims[0] * dims[1]..];
+    let occupied = px.iter().filter(|&&v| v == 0).count() as f64 / px.len() as f64;
+    assert!(
+        occupied > 0.02 && occupied < 0.2,
+        "occupied fraction {occupied}"
+    );
+    assert!(out.join("office.glb").exists() && out.join("office.ply").exists());
+    let o = futago(&["world", "info", "worlds/office.toml"]);
+    ok(&o);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("spawns: dock"));
+}
