@@ -63,8 +63,7 @@ fn pose_at(history: &VecDeque<(Time, Pose2)>, t: Time) -> Pose2 {
     if t >= t_last {
         return p_last;
     }
-    for w in history.iter().collect::<Vec<_>>().windows(2) {
-        let ((t0, p0), (t1, p1)) = (*w[0], *w[1]);
+    for (&(t0, p0), &(t1, p1)) in history.iter().zip(history.iter().skip(1)) {
         if t >= t0 && t <= t1 {
             let a = if t1 > t0 {
                 (t - t0).secs() / (t1 - t0).secs()
@@ -333,7 +332,7 @@ pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
             "final_position_error_m": err,
             "final_heading_error_deg": herr,
         },
-        "lidar": s.lidars.iter().zip(&o.scans).map(|((c, _), n)| json!({ "name": c.name, "preset": format!("{:?}", c.preset), "scans": n })).collect::<Vec<_>>(),
+        "lidar": s.lidars.iter().zip(&o.scans).map(|((c, _), n)| json!({ "name": c.name, "preset": c.preset.name(), "scans": n })).collect::<Vec<_>>(),
         "laser_rays": o.laser_rays,
         "files": files,
     })

@@ -404,3 +404,38 @@ fn world_export_writes_map_server_grid_and_meshes() {
     ok(&o);
     assert!(String::from_utf8_lossy(&o.stdout).contains("spawns: dock"));
 }
+
+#[test]
+fn every_shipped_scenario_loads_and_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut n = 0;
+    for e in std::fs::read_dir(root().join("scenarios")).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().and_then(|x| x.to_str()) != Some("toml") {
+            continue;
+        }
+        n += 1;
+        let out = tmp.path().join(p.file_stem().unwrap());
+        ok(&futago(&[
+            "run",
+            p.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--duration",
+            "2",
+            "-q",
+        ]));
+        let s = summary(&out);
+        assert!(
+            (s["sim_time_s"].as_f64().unwrap() - 2.0).abs() < 1e-9
+                || s["controller_finished"].as_bool().unwrap()
+        );
+        assert_eq!(
+            s["robot"]["wheel_drop_steps"].as_u64().unwrap(),
+            0,
+            "{}",
+            p.display()
+        );
+    }
+    assert!(n >= 5, "scenarios found: {n}");
+}

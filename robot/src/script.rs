@@ -242,7 +242,9 @@ impl ScriptedController {
     pub fn new(config: ControllerConfig, start: Time, initial: Pose2) -> ScriptedController {
         let route = match &config {
             ControllerConfig::Waypoints(w) => {
-                let mut r = Vec::new();
+                // The start is the first point of the route, so that the follower tracks the
+                // line to the first waypoint as it does the later ones.
+                let mut r = vec![[initial.x, initial.y]];
                 for _ in 0..w.laps {
                     r.extend_from_slice(&w.waypoints);
                 }
@@ -257,7 +259,7 @@ impl ScriptedController {
             config,
             start,
             odometry: OdometryIntegrator::new(initial),
-            target: 0,
+            target: 1,
             route,
             turning: false,
             last: None,
@@ -277,7 +279,7 @@ impl ScriptedController {
 
     /// Index of the waypoint being approached (waypoint follower).
     pub fn progress(&self) -> usize {
-        self.target
+        self.target.saturating_sub(1)
     }
 
     /// One control tick: returns a command when it differs from the last one sent.
@@ -342,7 +344,7 @@ impl ScriptedController {
         let goal = self.route[self.target];
         let dist = (goal[0] - pose.x).hypot(goal[1] - pose.y);
         // Aim point: the goal, or a point `lookahead` along the segment from the previous one.
-        let aim = if dist <= w.lookahead || self.target == 0 {
+        let aim = if dist <= w.lookahead {
             goal
         } else {
             let prev = self.route[self.target - 1];
@@ -375,28 +377,34 @@ impl ScriptedController {
         let l2 = local[0] * local[0] + local[1] * local[1];
         let speed = w.speed.min(0.05 + dist); // ease in to the last point
         let speed = (speed * 1000.0).round() / 1000.0;
-        if local[1].abs() < 1e-4 {
+        let curvature = 2.0 * local[1] / l2;
+        if curvature.abs() < 1e-4 {
             return DriveCommand::Drive {
                 velocity: speed,
                 radius: Radius::Straight,
             };
         }
-        let r = l2 / (2.0 * local[1]);
-        // Commands are quantised to whole millimetres, as the OI's integer fields are.
-        let r = (r * 1000.0).round() / 1000.0;
-        if r.abs() > 2.0 {
+        // The OI's Drive takes radii up to 2 m; gentler arcs go out as Drive Direct wheel
+        // speeds. Both are quantised to whole millimetres, as the OI's integer fields are.
+        let r = 1.0 / curvature;
+        if r.abs() <= 2.0 {
             DriveCommand::Drive {
                 velocity: speed,
-                radius: Radius::Straight,
+                radius: Radius::Arc((r * 1000.0).round() / 1000.0),
             }
         } else {
-            DriveCommand::Drive {
-                velocity: speed,
-                radius: Radius::Arc(r),
+            let half = curvature * CREATE_WHEEL_BASE / 2.0;
+            let q = |v: f64| (v * 1000.0).round() / 1000.0;
+            DriveCommand::DriveDirect {
+                left: q(speed * (1.0 - half)),
+                right: q(speed * (1.0 + half)),
             }
         }
     }
 }
+
+/// The Create's nominal wheel base, m (libcreate), for turning arcs into wheel speeds.
+pub const CREATE_WHEEL_BASE: f64 = 0.258;
 
 #[cfg(test)]
 mod tests {
@@ -480,20 +488,33 @@ mod tests {
             }) => {}
             other => panic!("expected a left turn in place, got {other:?}"),
         }
-        let mut w2 = w;
+        let mut w2 = w.clone();
         w2.waypoints = vec![[1.0, 0.5]];
         let mut c =
             ScriptedController::new(ControllerConfig::Waypoints(w2), Time::ZERO, Pose2::IDENTITY);
         match tick(&mut c, 0.0, Pose2::IDENTITY) {
-            // Circle through (0, 0) and (1, 0.5), tangent to +x: R = (1 + 0.25) / (2 · 0.5).
+            // The aim point is 0.4 m along the line to (1, 0.5), at bearing φ = atan(0.5); the
+            // circle through it tangent to +x has R = 0.4 / (2 sin φ).
             Some(DriveCommand::Drive {
                 velocity,
                 radius: Radius::Arc(r),
             }) => {
                 assert!(velocity > 0.0);
-                assert!((r - 1.25).abs() < 1e-9, "{r}");
+                let expected = 0.4 / (2.0 * 0.5f64.atan().sin());
+                assert!((r - expected).abs() < 1e-3, "{r} vs {expected}");
             }
             other => panic!("expected an arc, got {other:?}"),
+        }
+        // Gentler than the OI's 2 m limit: wheel speeds, the right one faster for a left arc.
+        let mut w3 = w.clone();
+        w3.waypoints = vec![[3.0, 0.1]];
+        let mut c3 =
+            ScriptedController::new(ControllerConfig::Waypoints(w3), Time::ZERO, Pose2::IDENTITY);
+        match tick(&mut c3, 0.0, Pose2::new(0.0, -0.005, 0.0)) {
+            Some(DriveCommand::DriveDirect { left, right }) => {
+                assert!(right > left && left > 0.0, "{left} {right}")
+            }
+            other => panic!("expected wheel speeds, got {other:?}"),
         }
         // Reached: stop and finish.
         assert_eq!(

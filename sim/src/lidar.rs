@@ -56,6 +56,16 @@ pub struct LidarSpec {
 }
 
 impl LidarPreset {
+    /// The name scenario files use.
+    pub fn name(self) -> &'static str {
+        match self {
+            LidarPreset::Urg04lx => "urg-04lx",
+            LidarPreset::Utm30lx => "utm-30lx",
+            LidarPreset::Lms200 => "lms200",
+            LidarPreset::Seed000 => "seed000",
+        }
+    }
+
     /// The preset's parameters.
     pub fn spec(self) -> LidarSpec {
         let deg = std::f64::consts::PI / 180.0;

@@ -704,8 +704,7 @@ impl Compiler<'_> {
                 let mut parts = Vec::new();
                 let first_tex = self.world.textures.len();
                 self.world.textures.extend(loaded.textures);
-                for (mi, lm) in loaded.materials.into_iter().enumerate() {
-                    let _ = mi;
+                for lm in loaded.materials {
                     self.world.materials.push(Material {
                         name: format!("{}#{}", m.file, lm.name),
                         color: lm.color,

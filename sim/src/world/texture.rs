@@ -20,7 +20,7 @@ pub struct Texture {
 }
 
 impl Texture {
-    /// Loads a PNG file; `key` names the world-file key for errors.
+    /// Loads a PNG file; the error names the file.
     pub fn load_png(path: &Path) -> Result<Texture, String> {
         let img = image::open(path)
             .map_err(|e| format!("cannot load texture image {}: {e}", path.display()))?;
