@@ -7,7 +7,7 @@
 
 use futago_msgs::Pose2;
 use futago_robot::script::ControllerConfig;
-use futago_sim::config::{SpecError, check_positive, check_range, load_toml};
+use futago_sim::config::{SpecError, check_name, check_positive, check_range, load_toml};
 use futago_sim::create::CreateConfig;
 use futago_sim::lidar::{LidarConfig, LidarSpec};
 use futago_sim::{PhysicsConfig, World};
@@ -94,18 +94,7 @@ impl Scenario {
 
     /// Checks a parsed scenario and compiles its world.
     pub fn from_spec(path: &Path, spec: ScenarioSpec) -> Result<Scenario, SpecError> {
-        if spec.name.is_empty()
-            || !spec
-                .name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-        {
-            return Err(SpecError::new(
-                path,
-                "name",
-                "expected a non-empty name of letters, digits, '-' and '_'",
-            ));
-        }
+        check_name(path, "name", &spec.name)?;
         check_range(path, "duration", spec.duration, 1e-3, 1e7, "s")?;
         spec.physics.validate(path, "physics")?;
         spec.robot.validate(path, "robot")?;

@@ -117,6 +117,23 @@ pub fn check_positive(file: &Path, key: &str, value: f64, unit: &str) -> Result<
     }
 }
 
+/// Checks a name used in file names and frames: non-empty ASCII letters, digits, `-`, `_`.
+pub fn check_name(file: &Path, key: &str, name: &str) -> Result<(), SpecError> {
+    if !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
+        Ok(())
+    } else {
+        Err(SpecError::new(
+            file,
+            key,
+            format!("expected a non-empty name of letters, digits, '-' and '_', found `{name}`"),
+        ))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,7 +7,7 @@
 //! a beam returns nothing beyond `range_max`, below `range_min` (reported −∞), or with
 //! probability `dropout`.
 
-use crate::config::{SpecError, check_range};
+use crate::config::{SpecError, check_name, check_range};
 use futago_msgs::{LaserScan, Time};
 use glam::{Quat, Vec3};
 use rand::Rng;
@@ -247,18 +247,7 @@ impl LidarConfig {
                 ));
             }
         }
-        if self.name.is_empty()
-            || !self
-                .name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-        {
-            return Err(SpecError::new(
-                file,
-                k("name"),
-                "expected a name of letters, digits, '-' and '_'",
-            ));
-        }
+        check_name(file, &k("name"), &self.name)?;
         Ok(s)
     }
 

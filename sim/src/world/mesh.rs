@@ -31,6 +31,15 @@ impl TriMesh {
         self.indices.len()
     }
 
+    /// The corners of triangle `t`.
+    pub fn corners(&self, t: &[u32; 3]) -> (Vec3, Vec3, Vec3) {
+        (
+            self.positions[t[0] as usize],
+            self.positions[t[1] as usize],
+            self.positions[t[2] as usize],
+        )
+    }
+
     /// Appends a planar quad `o, o+u, o+u+v, o+v` (counter-clockwise seen from `n`).
     fn quad(&mut self, o: Vec3, u: Vec3, v: Vec3, uv: UvMap) {
         let n = u.cross(v).normalize();
@@ -168,11 +177,7 @@ impl TriMesh {
     pub fn compute_normals(&mut self) {
         let mut normals = vec![Vec3::ZERO; self.positions.len()];
         for t in &self.indices {
-            let (a, b, c) = (
-                self.positions[t[0] as usize],
-                self.positions[t[1] as usize],
-                self.positions[t[2] as usize],
-            );
+            let (a, b, c) = self.corners(t);
             let n = (b - a).cross(c - a);
             for &i in t {
                 normals[i as usize] += n;
@@ -189,11 +194,7 @@ impl TriMesh {
         self.indices
             .iter()
             .map(|t| {
-                let (a, b, c) = (
-                    self.positions[t[0] as usize],
-                    self.positions[t[1] as usize],
-                    self.positions[t[2] as usize],
-                );
+                let (a, b, c) = self.corners(t);
                 0.5 * (b - a).cross(c - a).length()
             })
             .sum()
@@ -211,11 +212,7 @@ mod tests {
         let area = 2.0 * (2.0 * 1.0 + 2.0 * 0.5 + 1.0 * 0.5) * 4.0 / 4.0;
         assert!((m.area() - area).abs() < 1e-5, "{} vs {}", m.area(), area);
         for t in &m.indices {
-            let (a, b, c) = (
-                m.positions[t[0] as usize],
-                m.positions[t[1] as usize],
-                m.positions[t[2] as usize],
-            );
+            let (a, b, c) = m.corners(t);
             let n = (b - a).cross(c - a);
             let centroid = (a + b + c) / 3.0;
             assert!(n.dot(centroid) > 0.0, "triangle {t:?} winds inward");
@@ -227,11 +224,7 @@ mod tests {
     fn prism_winds_outward_and_tiles_by_size() {
         let m = TriMesh::prism(0.5, 1.0, 16, UvMap::Tiled(Vec2::new(1.0, 1.0)));
         for t in &m.indices {
-            let (a, b, c) = (
-                m.positions[t[0] as usize],
-                m.positions[t[1] as usize],
-                m.positions[t[2] as usize],
-            );
+            let (a, b, c) = m.corners(t);
             let n = (b - a).cross(c - a);
             assert!(n.dot((a + b + c) / 3.0) > 0.0);
         }

@@ -12,7 +12,7 @@ pub mod mesh;
 pub mod spec;
 pub mod texture;
 
-use crate::config::{SpecError, check_positive, check_range, load_toml};
+use crate::config::{SpecError, check_name, check_positive, check_range, load_toml};
 use futago_msgs::Pose2;
 use glam::{Quat, Vec2, Vec3};
 use mesh::{TriMesh, UvMap};
@@ -140,18 +140,7 @@ pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
         gltf_cache: HashMap::new(),
         tiles: Vec::new(),
     };
-    if spec.name.is_empty()
-        || !spec
-            .name
-            .chars()
-            .all(|ch| ch.is_ascii_alphanumeric() || ch == '-' || ch == '_')
-    {
-        return Err(SpecError::new(
-            path,
-            "name",
-            "expected a non-empty name of letters, digits, '-' and '_'",
-        ));
-    }
+    check_name(path, "name", &spec.name)?;
     c.materials(&spec.materials)?;
     for (i, s) in spec.spawn.iter().enumerate() {
         let key = format!("spawn[{i}]");
