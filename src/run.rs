@@ -94,7 +94,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         s.start,
         seed,
     );
-    let mut ctl = ScriptedController::new(spec.controller.clone(), Time::ZERO, s.start);
+    let mut ctl = ScriptedController::new(s.controller.clone(), Time::ZERO, s.start);
     let mut odo = OdometryIntegrator::new(s.start);
     let mut history: VecDeque<(Time, Pose2)> = VecDeque::from([(Time::ZERO, s.start)]);
     let gt_period = Duration::from_secs(1.0 / spec.output.groundtruth_rate);

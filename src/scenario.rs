@@ -35,7 +35,9 @@ pub struct ScenarioSpec {
     pub robot: CreateConfig,
     #[serde(default)]
     pub lidar: Vec<LidarConfig>,
-    pub controller: ControllerConfig,
+    /// Read as a table and typed by [`controller_config`], so that errors inside it carry
+    /// their full key path.
+    pub controller: toml::Table,
     #[serde(default)]
     pub output: OutputConfig,
 }
@@ -75,11 +77,71 @@ impl Default for OutputConfig {
 /// A loaded, checked scenario with its world compiled.
 #[derive(Debug, Clone)]
 pub struct Scenario {
+    pub controller: ControllerConfig,
     pub spec: ScenarioSpec,
     pub world: World,
     pub start: Pose2,
     /// Resolved laser parameters, in `spec.lidar` order.
     pub lidars: Vec<(LidarConfig, LidarSpec)>,
+}
+
+/// Types the `[controller]` table by its `type` key, naming `controller.KEY` in errors.
+pub fn controller_config(path: &Path, table: &toml::Table) -> Result<ControllerConfig, SpecError> {
+    let mut rest = table.clone();
+    let ty = match rest.remove("type") {
+        Some(toml::Value::String(t)) => t,
+        Some(other) => {
+            return Err(SpecError::new(
+                path,
+                "controller.type",
+                format!(
+                    "expected a string, one of {:?}; found {other}",
+                    ControllerConfig::TYPES
+                ),
+            ));
+        }
+        None => {
+            return Err(SpecError::new(
+                path,
+                "controller.type",
+                format!("missing; expected one of {:?}", ControllerConfig::TYPES),
+            ));
+        }
+    };
+    fn typed<T: serde::de::DeserializeOwned>(
+        path: &Path,
+        rest: toml::Table,
+    ) -> Result<T, SpecError> {
+        serde_path_to_error::deserialize(toml::Value::Table(rest)).map_err(|e| {
+            let key = e.path().to_string();
+            let key = if key == "." {
+                "controller".to_string()
+            } else {
+                format!("controller.{key}")
+            };
+            SpecError::new(path, key, e.into_inner().message().to_string())
+        })
+    }
+    match ty.as_str() {
+        "idle" => match rest.keys().next() {
+            None => Ok(ControllerConfig::Idle),
+            Some(k) => Err(SpecError::new(
+                path,
+                format!("controller.{k}"),
+                "unknown field: an idle controller takes no parameters",
+            )),
+        },
+        "segments" => Ok(ControllerConfig::Segments(typed(path, rest)?)),
+        "waypoints" => Ok(ControllerConfig::Waypoints(typed(path, rest)?)),
+        other => Err(SpecError::new(
+            path,
+            "controller.type",
+            format!(
+                "unknown controller `{other}`; expected one of {:?}",
+                ControllerConfig::TYPES
+            ),
+        )),
+    }
 }
 
 /// The most lasers a CARMEN log has channels for (ROBOTLASER1, ROBOTLASER2).
@@ -126,7 +188,8 @@ impl Scenario {
             }
             lidars.push((l.clone(), s));
         }
-        spec.controller
+        let controller = controller_config(path, &spec.controller)?;
+        controller
             .validate()
             .map_err(|(k, m)| SpecError::new(path, format!("controller.{k}"), m))?;
         let world_path = path.parent().unwrap_or(Path::new(".")).join(&spec.world);
@@ -162,6 +225,7 @@ impl Scenario {
             }
         };
         Ok(Scenario {
+            controller,
             spec,
             world,
             start,

@@ -9,20 +9,48 @@ use futago_msgs::{BumpsAndDrops, DriveCommand, Odometry, Pose2, Radius, Time, wr
 use serde::Deserialize;
 
 /// A turning radius as written in a scenario: metres, or `"straight"`, `"ccw"`, `"cw"`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(untagged)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum RadiusSpec {
     Metres(f64),
     Named(NamedRadius),
 }
 
 /// The special radii of the OI Drive command.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NamedRadius {
     Straight,
     Ccw,
     Cw,
+}
+
+impl<'de> Deserialize<'de> for RadiusSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = RadiusSpec;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a radius in m, or \"straight\", \"ccw\" or \"cw\"")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<RadiusSpec, E> {
+                Ok(RadiusSpec::Metres(v))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<RadiusSpec, E> {
+                Ok(RadiusSpec::Metres(v as f64))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<RadiusSpec, E> {
+                Ok(RadiusSpec::Metres(v as f64))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<RadiusSpec, E> {
+                match v {
+                    "straight" => Ok(RadiusSpec::Named(NamedRadius::Straight)),
+                    "ccw" => Ok(RadiusSpec::Named(NamedRadius::Ccw)),
+                    "cw" => Ok(RadiusSpec::Named(NamedRadius::Cw)),
+                    other => Err(E::invalid_value(serde::de::Unexpected::Str(other), &self)),
+                }
+            }
+        }
+        d.deserialize_any(V)
+    }
 }
 
 impl RadiusSpec {
@@ -131,20 +159,30 @@ fn one() -> u32 {
     1
 }
 
-/// A scripted controller as a scenario's `[controller]` table declares it.
+/// Timed commands, in order, `repeat` times.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentsConfig {
+    pub segments: Vec<Segment>,
+    #[serde(default = "one")]
+    pub repeat: u32,
+}
+
+/// A scripted controller as a scenario's `[controller]` table declares it, selected by its
+/// `type` key.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum ControllerConfig {
     /// Stand still.
     Idle,
-    /// Timed commands, in order, `repeat` times.
-    Segments {
-        segments: Vec<Segment>,
-        #[serde(default = "one")]
-        repeat: u32,
-    },
+    Segments(SegmentsConfig),
     /// Follow waypoints.
     Waypoints(WaypointConfig),
+}
+
+impl ControllerConfig {
+    /// The `type` names, in declaration order.
+    pub const TYPES: [&'static str; 3] = ["idle", "segments", "waypoints"];
 }
 
 impl ControllerConfig {
@@ -153,7 +191,7 @@ impl ControllerConfig {
         let bad = |k: &str, m: &str| Err((k.to_string(), m.to_string()));
         match self {
             ControllerConfig::Idle => Ok(()),
-            ControllerConfig::Segments { segments, repeat } => {
+            ControllerConfig::Segments(SegmentsConfig { segments, repeat }) => {
                 if segments.is_empty() || *repeat == 0 {
                     return bad("segments", "expected at least one segment and repeat ≥ 1");
                 }
@@ -292,7 +330,7 @@ impl ScriptedController {
                 self.done = true;
                 DriveCommand::STOP
             }
-            ControllerConfig::Segments { segments, repeat } => {
+            ControllerConfig::Segments(SegmentsConfig { segments, repeat }) => {
                 let mut t = (input.now - self.start).secs();
                 let period: f64 = segments.iter().map(|s| s.duration).sum();
                 if t >= period * *repeat as f64 {
@@ -421,7 +459,7 @@ mod tests {
 
     #[test]
     fn segments_play_in_order_then_stop() {
-        let cfg: ControllerConfig = ControllerConfig::Segments {
+        let cfg: ControllerConfig = ControllerConfig::Segments(SegmentsConfig {
             segments: vec![
                 Segment {
                     duration: 1.0,
@@ -437,7 +475,7 @@ mod tests {
                 },
             ],
             repeat: 1,
-        };
+        });
         let mut c = ScriptedController::new(cfg, Time::ZERO, Pose2::IDENTITY);
         assert_eq!(
             tick(&mut c, 0.5, Pose2::IDENTITY),
