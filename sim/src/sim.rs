@@ -11,7 +11,7 @@ use crate::lidar::{Lidar, LidarConfig};
 use crate::noise::stream;
 use crate::world::mesh::TriMesh;
 use crate::world::{Motion, World};
-use futago_msgs::{BumpsAndDrops, DriveCommand, LaserScan, Odometry, Pose2, Time};
+use futago_msgs::{BumpsAndDrops, DriveCommand, Duration, LaserScan, Odometry, Pose2, Time};
 use glam::{Quat, Vec3};
 use rapier3d::math::Pose;
 use rapier3d::prelude::*;
@@ -22,7 +22,8 @@ use std::path::Path;
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct PhysicsConfig {
-    /// Fixed physics rate, Hz (at least 200).
+    /// Fixed physics rate, Hz (at least 200). The step is the nearest whole number of
+    /// nanoseconds to its period, so that the clock never drifts.
     pub rate: f64,
 }
 
@@ -42,17 +43,6 @@ impl PhysicsConfig {
             100_000.0,
             "Hz",
         )?;
-        let period = 1e9 / self.rate;
-        if (period - period.round()).abs() > 1e-6 {
-            return Err(SpecError::new(
-                file,
-                format!("{key}.rate"),
-                format!(
-                    "expected a rate whose period is a whole number of nanoseconds, found {} Hz",
-                    self.rate
-                ),
-            ));
-        }
         Ok(())
     }
 }
@@ -96,8 +86,6 @@ pub struct Simulation {
     counters: Counters,
 }
 
-use futago_msgs::Duration;
-
 /// Force that closes a bumper switch, N.
 pub const BUMPER_FORCE: f64 = 0.5;
 
@@ -122,7 +110,8 @@ impl Simulation {
     ) -> Simulation {
         let mut p = PhysicsWorld::new();
         p.gravity = Vec3::new(0.0, 0.0, -GRAVITY as f32);
-        p.integration_parameters.dt = (1.0 / physics.rate) as f32;
+        let dt = Duration((1e9 / physics.rate).round() as i64);
+        p.integration_parameters.dt = dt.secs() as f32;
         let mut object_bodies = Vec::with_capacity(world.objects.len());
         for o in &world.objects {
             let body = match o.motion {
@@ -203,7 +192,7 @@ impl Simulation {
         // drops are therefore first sampled with the first sensor packet.
         Simulation {
             physics: p,
-            dt: Duration((1e9 / physics.rate).round() as i64),
+            dt,
             time: Time::ZERO,
             robot: robot_body,
             robot_collider,
@@ -242,9 +231,10 @@ impl Simulation {
     pub fn robot_pose(&self) -> Pose2 {
         let b = &self.physics.bodies[self.robot];
         let t = b.translation();
-        let (axis, angle) = b.rotation().to_axis_angle();
-        let yaw = if axis.z >= 0.0 { angle } else { -angle };
-        Pose2::new(t.x as f64, t.y as f64, futago_msgs::wrap_angle(yaw as f64))
+        // Roll and pitch are locked, so the rotation is about z alone.
+        let q = b.rotation();
+        let yaw = 2.0 * (q.z as f64).atan2(q.w as f64);
+        Pose2::new(t.x as f64, t.y as f64, futago_msgs::wrap_angle(yaw))
     }
 
     /// Ground-truth velocity of the robot in its own frame.
