@@ -125,35 +125,32 @@ fn umbmark_prediction(start: [f64; 3], side: f64, ccw: bool, ed: f64, eb: f64) -
     let (r, b) = (0.036, 0.258);
     let (rl, rr) = (r * 2.0 / (ed + 1.0), r * 2.0 * ed / (ed + 1.0));
     let ba = b * eb;
-    let [mut x, mut y, mut th] = start;
-    let n = 10_000;
+    let mut pose = start;
+    // Turns the left and right wheels by `phi_l`, `phi_r` (rad) in small equal steps.
+    let mut roll = |phi_l: f64, phi_r: f64| {
+        let n = 10_000;
+        let (sl, sr) = (rl * phi_l / n as f64, rr * phi_r / n as f64);
+        let (d, dth) = ((sl + sr) / 2.0, (sr - sl) / ba);
+        for _ in 0..n {
+            let [x, y, th] = pose;
+            pose = [
+                x + d * (th + dth / 2.0).cos(),
+                y + d * (th + dth / 2.0).sin(),
+                th + dth,
+            ];
+        }
+    };
+    let sign = if ccw { 1.0 } else { -1.0 };
     for leg in 0..4 {
-        // Straight by the encoders: both wheels turn by φ = side / r.
-        let phi = side / r;
-        for _ in 0..n {
-            let (sl, sr) = (rl * phi / n as f64, rr * phi / n as f64);
-            let d = (sl + sr) / 2.0;
-            let dth = (sr - sl) / ba;
-            x += d * (th + dth / 2.0).cos();
-            y += d * (th + dth / 2.0).sin();
-            th += dth;
-        }
-        if leg == 3 {
-            break;
-        }
-        // Turn in place by the encoders: ±90° = (s_r − s_l) / b with s_r = −s_l.
-        let sign = if ccw { 1.0 } else { -1.0 };
-        let phi = std::f64::consts::FRAC_PI_2 * b / (2.0 * r);
-        for _ in 0..n {
-            let (sl, sr) = (-sign * rl * phi / n as f64, sign * rr * phi / n as f64);
-            let d = (sl + sr) / 2.0;
-            let dth = (sr - sl) / ba;
-            x += d * (th + dth / 2.0).cos();
-            y += d * (th + dth / 2.0).sin();
-            th += dth;
+        // Straight by the encoders: both wheels turn by side / r.
+        roll(side / r, side / r);
+        if leg < 3 {
+            // In place by the encoders: ±90° = (s_r − s_l) / b with s_r = −s_l.
+            let phi = std::f64::consts::FRAC_PI_2 * b / (2.0 * r);
+            roll(-sign * phi, sign * phi);
         }
     }
-    [x, y, th]
+    pose
 }
 
 fn umbmark_scenario(dir: &Path, ccw: bool, ed: f64, eb: f64) -> PathBuf {

@@ -85,33 +85,21 @@ fn ply_export_counts_every_vertex_and_face() {
     assert_eq!(ply.len(), header + nv * 27 + w.triangle_count() * 13);
 }
 
-/// Free space along ±y from a point, by ray casts in a stepped simulation.
-fn width_across(w: &World, x: f64, y: f64) -> f64 {
+/// Free span through `(x, y, z)` along ±`axis` (to the nearest surfaces both ways), by ray
+/// casts in a stepped simulation.
+fn span(w: &World, x: f64, y: f64, z: f32, axis: Vec3) -> f64 {
     let mut s = sim(w, &CreateConfig::default(), &[], Pose2::new(x, y, 0.0), 0);
     s.step(Some(&DriveCommand::STOP));
-    let o = Vec3::new(x as f32, y as f32, 0.2);
-    (s.cast_ray(o, Vec3::Y, 10.0).unwrap() + s.cast_ray(o, -Vec3::Y, 10.0).unwrap()) as f64
+    let o = Vec3::new(x as f32, y as f32, z);
+    (s.cast_ray(o, axis, 50.0).unwrap() + s.cast_ray(o, -axis, 50.0).unwrap()) as f64
 }
 
 #[test]
 fn shipped_worlds_have_their_promised_features() {
     let office = shipped("office");
-    let narrow = width_across(&office, 15.0, 12.0);
-    let narrow = narrow.min({
-        // Across x at the narrow corridor: cast along ±x instead.
-        let mut s = sim(
-            &office,
-            &CreateConfig::default(),
-            &[],
-            Pose2::new(15.0, 11.0, 0.0),
-            0,
-        );
-        s.step(None);
-        let o = Vec3::new(15.0, 11.0, 0.2);
-        (s.cast_ray(o, Vec3::X, 10.0).unwrap() + s.cast_ray(o, -Vec3::X, 10.0).unwrap()) as f64
-    });
+    let narrow = span(&office, 15.0, 11.0, 0.2, Vec3::X);
     assert!(narrow <= 1.2 && narrow > 0.8, "narrow corridor {narrow} m");
-    let wide = width_across(&office, 5.0, 8.0);
+    let wide = span(&office, 5.0, 8.0, 0.2, Vec3::Y);
     assert!(wide > 1.2, "wide corridor {wide} m");
     assert!(office.spawn("dock").is_some());
     assert!(office.textures.len() >= 4, "posters, doors, plaster");
@@ -121,21 +109,13 @@ fn shipped_worlds_have_their_promised_features() {
     );
 
     let lab = shipped("lab");
-    let (lo, hi) = (width_across(&lab, 6.5, 3.5), {
-        let mut s = sim(
-            &lab,
-            &CreateConfig::default(),
-            &[],
-            Pose2::new(6.5, 3.5, 0.0),
-            0,
-        );
-        s.step(None);
-        let o = Vec3::new(6.5, 3.5, 2.0);
-        (s.cast_ray(o, Vec3::X, 20.0).unwrap() + s.cast_ray(o, -Vec3::X, 20.0).unwrap()) as f64
-    });
+    let (w, l) = (
+        span(&lab, 6.5, 3.5, 2.0, Vec3::Y),
+        span(&lab, 6.5, 3.5, 2.0, Vec3::X),
+    );
     assert!(
-        (lo - 7.0).abs() < 0.01 && (hi - 13.0).abs() < 0.15,
-        "lab {hi} × {lo} m"
+        (w - 7.0).abs() < 0.01 && (l - 13.0).abs() < 0.01,
+        "lab {l} × {w} m"
     );
 
     let hall = shipped("hall");
@@ -146,8 +126,8 @@ fn shipped_worlds_have_their_promised_features() {
             .count()
             >= 10
     );
-    let corridor = width_across(&hall, 5.0, 0.0);
-    let open = width_across(&hall, 20.0, 2.2);
+    let corridor = span(&hall, 5.0, 0.0, 0.2, Vec3::Y);
+    let open = span(&hall, 20.0, 2.2, 0.2, Vec3::Y);
     assert!(
         corridor < 2.5 && open > 6.0,
         "corridor {corridor} m opening to the hall"
