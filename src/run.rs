@@ -31,7 +31,7 @@ pub struct RunOptions {
     pub progress: bool,
 }
 
-/// Text sinks of a run; `None` when only timing matters (benchmarks).
+/// Text sinks of a run (benchmarks run with none).
 struct Sinks {
     groundtruth: BufWriter<File>,
     odometry: BufWriter<File>,

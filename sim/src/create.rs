@@ -108,85 +108,51 @@ impl Default for OdometryModel {
 impl CreateConfig {
     /// Checks ranges; `key` is where this table sits in `file` (e.g. `robot`).
     pub fn validate(&self, file: &Path, key: &str) -> Result<(), SpecError> {
-        let k = |s: &str| format!("{key}.{s}");
-        check_range(file, &k("mass"), self.mass, 0.1, 1000.0, "kg")?;
-        check_range(file, &k("radius"), self.radius, 0.02, 5.0, "m")?;
-        check_range(file, &k("height"), self.height, 0.01, 5.0, "m")?;
-        check_range(file, &k("clearance"), self.clearance, 0.0, 0.5, "m")?;
-        check_range(
-            file,
-            &k("wheel_base"),
-            self.wheel_base,
-            0.01,
-            2.0 * self.radius,
-            "m (at most the body diameter)",
-        )?;
-        check_range(file, &k("wheel_radius"), self.wheel_radius, 0.005, 1.0, "m")?;
-        check_range(file, &k("max_speed"), self.max_speed, 0.01, 10.0, "m/s")?;
-        check_range(
-            file,
-            &k("max_wheel_accel"),
-            self.max_wheel_accel,
-            0.01,
-            100.0,
-            "m/s²",
-        )?;
-        check_range(
-            file,
-            &k("wheel_friction"),
-            self.wheel_friction,
-            0.01,
-            5.0,
-            "",
-        )?;
-        check_range(
-            file,
-            &k("drive_load_fraction"),
-            self.drive_load_fraction,
-            0.05,
-            1.0,
-            "",
-        )?;
-        check_range(
-            file,
-            &k("wheel_drop_travel"),
-            self.wheel_drop_travel,
-            0.001,
-            0.5,
-            "m",
-        )?;
-        check_range(
-            file,
-            &k("stream_period"),
-            self.stream_period,
-            0.001,
-            10.0,
-            "s",
-        )?;
-        check_range(
-            file,
-            &k("odometry.wheel_diameter_ratio"),
-            self.odometry.wheel_diameter_ratio,
-            0.5,
-            2.0,
-            "",
-        )?;
-        check_range(
-            file,
-            &k("odometry.wheel_base_ratio"),
-            self.odometry.wheel_base_ratio,
-            0.5,
-            2.0,
-            "",
-        )?;
-        check_range(
-            file,
-            &k("odometry.noise"),
-            self.odometry.noise,
-            0.0,
-            1.0,
-            "m/√m",
-        )?;
+        let o = &self.odometry;
+        let limits: [(&str, f64, f64, f64, &str); 15] = [
+            ("mass", self.mass, 0.1, 1000.0, "kg"),
+            ("radius", self.radius, 0.02, 5.0, "m"),
+            ("height", self.height, 0.01, 5.0, "m"),
+            ("clearance", self.clearance, 0.0, 0.5, "m"),
+            (
+                "wheel_base",
+                self.wheel_base,
+                0.01,
+                2.0 * self.radius,
+                "m (at most the body diameter)",
+            ),
+            ("wheel_radius", self.wheel_radius, 0.005, 1.0, "m"),
+            ("max_speed", self.max_speed, 0.01, 10.0, "m/s"),
+            ("max_wheel_accel", self.max_wheel_accel, 0.01, 100.0, "m/s²"),
+            ("wheel_friction", self.wheel_friction, 0.01, 5.0, ""),
+            (
+                "drive_load_fraction",
+                self.drive_load_fraction,
+                0.05,
+                1.0,
+                "",
+            ),
+            ("wheel_drop_travel", self.wheel_drop_travel, 0.001, 0.5, "m"),
+            ("stream_period", self.stream_period, 0.001, 10.0, "s"),
+            (
+                "odometry.wheel_diameter_ratio",
+                o.wheel_diameter_ratio,
+                0.5,
+                2.0,
+                "",
+            ),
+            (
+                "odometry.wheel_base_ratio",
+                o.wheel_base_ratio,
+                0.5,
+                2.0,
+                "",
+            ),
+            ("odometry.noise", o.noise, 0.0, 1.0, "m/√m"),
+        ];
+        for (name, value, lo, hi, unit) in limits {
+            check_range(file, &format!("{key}.{name}"), value, lo, hi, unit)?;
+        }
         Ok(())
     }
 
