@@ -6,6 +6,7 @@
 //! - [`create`]: the iRobot Create's drive, wheel traction and odometry;
 //! - [`lidar`]: ray-cast laser range finders;
 //! - [`noise`]: seeded random streams per noise source;
+//! - [`render`]: wgpu camera rendering (RGB and metric depth, single views and batches);
 //! - [`config`]: TOML loading with errors that name file, key and expectation.
 //!
 //! The simulator knows nothing of the robot stack: it takes [`futago_msgs::DriveCommand`]s and
@@ -15,6 +16,7 @@ pub mod config;
 pub mod create;
 pub mod lidar;
 pub mod noise;
+pub mod render;
 pub mod sim;
 pub mod world;
 

@@ -1,0 +1,1261 @@
+//! Camera rendering with wgpu: registered RGB and metric depth of a [`Scene`], headless.
+//!
+//! A [`Renderer`] uploads a scene once (static geometry merged per material, movable bodies
+//! kept apart with a transform each) and then draws it from any camera pose:
+//! [`Renderer::render`] gives an RGB image and the depth registered to it,
+//! [`Renderer::render_depth`] depth alone, and [`Renderer::render_depth_batch`] many small depth
+//! images from many poses in one GPU submission (a particle filter's predicted views).
+//!
+//! Depth is the distance along the optical axis (z in the camera's optical frame), as an RGB-D
+//! camera reports it, in metres; 0 where no surface was drawn. It is computed per fragment from
+//! the interpolated camera-frame position, not read from the z-buffer, so it carries no
+//! projection non-linearity: noise-free renders agree with a ray cast to well under a
+//! millimetre.
+//!
+//! Poses follow REP 103: a camera pose is the pose of a body frame (x forward, y left, z up)
+//! in the world; [`optical_from_body`] gives the optical frame (x right, y down, z forward)
+//! used for pixels and for TUM trajectories.
+
+pub mod gpu;
+
+use crate::world::mesh::TriMesh;
+use crate::world::{Material, MeshPart, Motion, Texture, World};
+use glam::{Mat3, Mat4, Quat, Vec3};
+use gpu::{BackendChoice, Gpu};
+use rapier3d::math::Pose;
+use std::collections::HashMap;
+use std::time::Duration as StdDuration;
+use thiserror::Error;
+
+/// Why a render could not be made.
+#[derive(Debug, Error)]
+pub enum RenderError {
+    /// No Vulkan or GL adapter could be opened; says what to install.
+    #[error("no GPU adapter for rendering: {0}")]
+    NoAdapter(String),
+    #[error("GPU device error: {0}")]
+    Device(String),
+    #[error("GPU device lost: {0}")]
+    DeviceLost(String),
+    /// Bad input: image size, field of view, scene content.
+    #[error("{0}")]
+    Config(String),
+}
+
+/// Pinhole intrinsics of an image, in pixels; pixel (0, 0)'s centre is at (0, 0) (OpenCV and
+/// TUM convention: `cx = (width - 1) / 2` for a centred axis).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Intrinsics {
+    pub width: u32,
+    pub height: u32,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+}
+
+/// Largest image side the renderer accepts.
+pub const MAX_IMAGE_SIDE: u32 = 8192;
+
+impl Intrinsics {
+    /// A centred camera with the given horizontal and vertical fields of view, radians.
+    pub fn from_fov(width: u32, height: u32, fov_h: f64, fov_v: f64) -> Result<Self, String> {
+        check_size(width, height)?;
+        for (name, f) in [("horizontal", fov_h), ("vertical", fov_v)] {
+            if !(f > 1f64.to_radians() && f < 170f64.to_radians()) {
+                return Err(format!(
+                    "{name} field of view {:.3}° is out of range: expected 1° to 170°",
+                    f.to_degrees()
+                ));
+            }
+        }
+        Ok(Intrinsics {
+            width,
+            height,
+            fx: width as f64 / 2.0 / (fov_h / 2.0).tan(),
+            fy: height as f64 / 2.0 / (fov_v / 2.0).tan(),
+            cx: (width as f64 - 1.0) / 2.0,
+            cy: (height as f64 - 1.0) / 2.0,
+        })
+    }
+
+    /// The same camera at another resolution (same field of view).
+    pub fn scaled(&self, width: u32, height: u32) -> Intrinsics {
+        let sx = width as f64 / self.width as f64;
+        let sy = height as f64 / self.height as f64;
+        Intrinsics {
+            width,
+            height,
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: (self.cx + 0.5) * sx - 0.5,
+            cy: (self.cy + 0.5) * sy - 0.5,
+        }
+    }
+
+    /// Checks size and focal lengths.
+    pub fn validate(&self) -> Result<(), String> {
+        check_size(self.width, self.height)?;
+        if !(self.fx.is_finite() && self.fy.is_finite() && self.fx > 0.0 && self.fy > 0.0) {
+            return Err(format!(
+                "focal lengths fx {} and fy {} must be positive pixels",
+                self.fx, self.fy
+            ));
+        }
+        if !(self.cx.is_finite() && self.cy.is_finite()) {
+            return Err("principal point must be finite".into());
+        }
+        Ok(())
+    }
+
+    /// Direction through pixel coordinates `(u, v)` in the optical frame, with z = 1.
+    pub fn ray(&self, u: f64, v: f64) -> Vec3 {
+        Vec3::new(
+            ((u - self.cx) / self.fx) as f32,
+            ((v - self.cy) / self.fy) as f32,
+            1.0,
+        )
+    }
+
+    /// Back-projects pixel `(u, v)` at depth `z` into the optical frame.
+    pub fn back_project(&self, u: f64, v: f64, z: f64) -> [f64; 3] {
+        [(u - self.cx) / self.fx * z, (v - self.cy) / self.fy * z, z]
+    }
+
+    /// Perspective projection from the optical frame to wgpu clip space (y up, depth 0..1).
+    fn projection(&self, near: f32, far: f32) -> Mat4 {
+        let (w, h) = (self.width as f32, self.height as f32);
+        let (fx, fy) = (self.fx as f32, self.fy as f32);
+        // The rasteriser samples pixel i at window coordinate i + 0.5.
+        let (cx, cy) = (self.cx as f32 + 0.5, self.cy as f32 + 0.5);
+        let a = far / (far - near);
+        Mat4::from_cols_array(&[
+            2.0 * fx / w,
+            0.0,
+            2.0 * cx / w - 1.0,
+            0.0,
+            0.0,
+            -2.0 * fy / h,
+            1.0 - 2.0 * cy / h,
+            0.0,
+            0.0,
+            0.0,
+            a,
+            -a * near,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+        ])
+        .transpose()
+    }
+}
+
+fn check_size(width: u32, height: u32) -> Result<(), String> {
+    if width == 0 || height == 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        return Err(format!(
+            "image size {width}×{height} is out of range: expected 1 to {MAX_IMAGE_SIDE} pixels a side"
+        ));
+    }
+    Ok(())
+}
+
+/// Rotation from a body frame (x forward, y left, z up) to its optical frame (x right, y down,
+/// z forward): the optical axes expressed in the body frame.
+pub fn optical_rotation() -> Quat {
+    Quat::from_mat3(&Mat3::from_cols(
+        Vec3::new(0.0, -1.0, 0.0),
+        Vec3::new(0.0, 0.0, -1.0),
+        Vec3::new(1.0, 0.0, 0.0),
+    ))
+}
+
+/// The optical frame of a camera whose body frame has pose `body` in the world.
+pub fn optical_from_body(body: &Pose) -> Pose {
+    Pose::from_parts(body.translation, body.rotation * optical_rotation())
+}
+
+/// A depth image: optical-axis distance in metres, row-major from the top-left; 0 is invalid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthImage {
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<f32>,
+}
+
+impl DepthImage {
+    pub fn at(&self, u: u32, v: u32) -> f32 {
+        self.data[(v * self.width + u) as usize]
+    }
+}
+
+/// An 8-bit sRGB image, row-major RGB from the top-left.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RgbImage {
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<u8>,
+}
+
+impl RgbImage {
+    pub fn at(&self, u: u32, v: u32) -> [u8; 3] {
+        let i = 3 * (v * self.width + u) as usize;
+        [self.data[i], self.data[i + 1], self.data[i + 2]]
+    }
+}
+
+/// One body of a scene: render meshes in the body frame and a pose.
+#[derive(Debug, Clone)]
+pub struct SceneBody {
+    pub name: String,
+    /// Initial pose; a movable body's pose is set with [`Renderer::set_poses`].
+    pub pose: Pose,
+    /// Whether the body moves (then drawn with its own transform).
+    pub movable: bool,
+    pub parts: Vec<MeshPart>,
+}
+
+/// What a renderer draws: materials, textures and bodies. [`Scene::from_world`] takes a
+/// world's objects in order; bodies the world does not list (the robot) are added after them.
+#[derive(Debug, Clone, Default)]
+pub struct Scene {
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub bodies: Vec<SceneBody>,
+}
+
+impl Scene {
+    /// Every object of `world`, in [`World::objects`] order.
+    pub fn from_world(world: &World) -> Scene {
+        Scene {
+            materials: world.materials.clone(),
+            textures: world.textures.clone(),
+            bodies: world
+                .objects
+                .iter()
+                .map(|o| SceneBody {
+                    name: o.name.clone(),
+                    pose: o.pose,
+                    movable: matches!(o.motion, Motion::Dynamic { .. }),
+                    parts: o.parts.clone(),
+                })
+                .collect(),
+        }
+    }
+
+    /// Adds a movable body with its own untextured materials; returns its index.
+    pub fn add_body(&mut self, name: &str, pose: Pose, parts: Vec<(Material, TriMesh)>) -> usize {
+        let parts = parts
+            .into_iter()
+            .map(|(mut m, mesh)| {
+                m.texture = None;
+                self.materials.push(m);
+                MeshPart {
+                    material: self.materials.len() - 1,
+                    mesh,
+                }
+            })
+            .collect();
+        self.bodies.push(SceneBody {
+            name: name.to_string(),
+            pose,
+            movable: true,
+            parts,
+        });
+        self.bodies.len() - 1
+    }
+
+    /// Checks indices, finiteness and texture sizes; errors name the body or texture.
+    pub fn validate(&self) -> Result<(), String> {
+        for (i, t) in self.textures.iter().enumerate() {
+            if t.width == 0 || t.height == 0 || t.rgba.len() != (t.width * t.height * 4) as usize {
+                return Err(format!(
+                    "texture {i} ({}) is {}×{} with {} bytes: expected a non-empty RGBA8 image",
+                    t.name,
+                    t.width,
+                    t.height,
+                    t.rgba.len()
+                ));
+            }
+        }
+        for m in &self.materials {
+            if let Some(t) = m.texture
+                && t >= self.textures.len()
+            {
+                return Err(format!(
+                    "material `{}` refers to texture {t}, but the scene has {}",
+                    m.name,
+                    self.textures.len()
+                ));
+            }
+        }
+        for b in &self.bodies {
+            for (k, p) in b.parts.iter().enumerate() {
+                let m = &p.mesh;
+                let what = || format!("body `{}` mesh part {k}", b.name);
+                if p.material >= self.materials.len() {
+                    return Err(format!(
+                        "{}: material {} does not exist",
+                        what(),
+                        p.material
+                    ));
+                }
+                if m.normals.len() != m.positions.len() || m.uvs.len() != m.positions.len() {
+                    return Err(format!(
+                        "{}: {} positions but {} normals and {} texture coordinates",
+                        what(),
+                        m.positions.len(),
+                        m.normals.len(),
+                        m.uvs.len()
+                    ));
+                }
+                if !m.positions.iter().all(|v| v.is_finite()) {
+                    return Err(format!("{}: a vertex position is not finite", what()));
+                }
+                let n = m.positions.len() as u32;
+                if let Some(t) = m.indices.iter().find(|t| t.iter().any(|&i| i >= n)) {
+                    return Err(format!(
+                        "{}: triangle {t:?} indexes past its {n} vertices",
+                        what()
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The fixed light of the RGB image: direction towards it (world frame) and ambient share.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lighting {
+    pub towards_light: Vec3,
+    pub ambient: f32,
+}
+
+impl Default for Lighting {
+    fn default() -> Self {
+        Lighting {
+            towards_light: Vec3::new(0.35, 0.25, 0.9).normalize(),
+            ambient: 0.5,
+        }
+    }
+}
+
+impl Lighting {
+    /// Shading factor (linear) of a surface with unit normal `n` (two-sided Lambert).
+    pub fn shade(&self, n: Vec3) -> f32 {
+        self.ambient + (1.0 - self.ambient) * n.dot(self.towards_light).abs()
+    }
+}
+
+/// sRGB transfer function, encoded [0, 1] to linear.
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// sRGB transfer function, linear [0, 1] to encoded.
+pub fn linear_to_srgb(c: f32) -> f32 {
+    if c <= 0.0031308 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Nearest surface drawn; closer geometry is clipped.
+pub const NEAR_PLANE: f32 = 0.02;
+/// Farthest surface drawn, m: beyond any indoor depth camera's range.
+pub const FAR_PLANE: f32 = 100.0;
+/// How long a frame may take before the device is declared hung.
+const FRAME_TIMEOUT: StdDuration = StdDuration::from_secs(60);
+
+const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+const DEPTH_BITS_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
+const ZBUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Vertex {
+    position: [f32; 3],
+    normal: [f32; 3],
+    uv: [f32; 2],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct CameraUniform {
+    view_proj: [f32; 16],
+    view: [f32; 16],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct MaterialUniform {
+    color: [f32; 4],
+    light: [f32; 4],
+}
+
+/// A run of indices drawn with one material and one transform slot.
+#[derive(Debug, Clone)]
+struct Draw {
+    material: usize,
+    /// Transform slot (0: identity, for static geometry baked into world coordinates).
+    slot: u32,
+    indices: std::ops::Range<u32>,
+}
+
+/// Appends `mesh` (moved by `pose` if given) to the geometry; returns its index range.
+fn push_mesh(
+    vertices: &mut Vec<Vertex>,
+    indices: &mut Vec<u32>,
+    mesh: &TriMesh,
+    pose: Option<&Pose>,
+) -> std::ops::Range<u32> {
+    let base = vertices.len() as u32;
+    for i in 0..mesh.positions.len() {
+        let (p, n) = match pose {
+            Some(t) => (*t * mesh.positions[i], t.rotation * mesh.normals[i]),
+            None => (mesh.positions[i], mesh.normals[i]),
+        };
+        vertices.push(Vertex {
+            position: p.to_array(),
+            normal: n.to_array(),
+            uv: mesh.uvs[i].to_array(),
+        });
+    }
+    let start = indices.len() as u32;
+    indices.extend(mesh.indices.iter().flatten().map(|&i| base + i));
+    start..indices.len() as u32
+}
+
+/// Render targets and read-back buffers of one image size or atlas layout.
+struct Targets {
+    color: Option<(wgpu::Texture, wgpu::Buffer)>,
+    depth: wgpu::Texture,
+    depth_buffer: wgpu::Buffer,
+    zbuffer: wgpu::Texture,
+    width: u32,
+    height: u32,
+}
+
+/// Bytes per row of a read-back buffer: 4-byte texels padded to wgpu's copy alignment.
+fn padded_row(width: u32) -> u32 {
+    let a = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    (width * 4).div_ceil(a) * a
+}
+
+/// Draws a [`Scene`] from camera poses. Owns its GPU device.
+pub struct Renderer {
+    gpu: Gpu,
+    lighting: Lighting,
+    color_pipeline: wgpu::RenderPipeline,
+    depth_pipeline: wgpu::RenderPipeline,
+    frame_layout: wgpu::BindGroupLayout,
+    frame_group: wgpu::BindGroup,
+    camera_buffer: wgpu::Buffer,
+    camera_capacity: u32,
+    model_buffer: wgpu::Buffer,
+    uniform_stride: u32,
+    material_groups: Vec<wgpu::BindGroup>,
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    /// Colour draws: static runs per material, then movable parts.
+    draws: Vec<Draw>,
+    /// Depth-only draws: all static geometry in one run, then one run per movable body.
+    depth_draws: Vec<Draw>,
+    /// Transform slot of each body (0 for static bodies).
+    body_slots: Vec<u32>,
+    targets: HashMap<(bool, u32, u32), Targets>,
+    frames: u64,
+}
+
+impl Renderer {
+    /// Opens a device (backend from [`gpu::BACKEND_ENV`]) and uploads `scene`.
+    pub fn new(scene: &Scene) -> Result<Renderer, RenderError> {
+        Renderer::with_backend(scene, BackendChoice::from_env()?)
+    }
+
+    /// Opens a device with the given backend choice and uploads `scene`.
+    pub fn with_backend(scene: &Scene, choice: BackendChoice) -> Result<Renderer, RenderError> {
+        scene.validate().map_err(RenderError::Config)?;
+        let gpu = Gpu::open(choice)?;
+        let r = Renderer::build(gpu, scene)?;
+        r.gpu.check()?;
+        Ok(r)
+    }
+
+    /// The adapter in use, in words.
+    pub fn adapter(&self) -> String {
+        self.gpu.describe()
+    }
+
+    /// The wgpu backend in use.
+    pub fn backend(&self) -> wgpu::Backend {
+        self.gpu.info.backend
+    }
+
+    /// Frames (or batches) rendered so far.
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// The lighting of RGB images.
+    pub fn lighting(&self) -> Lighting {
+        self.lighting
+    }
+
+    fn build(gpu: Gpu, scene: &Scene) -> Result<Renderer, RenderError> {
+        let device = &gpu.device;
+        let lighting = Lighting::default();
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("futago camera"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("shader.wgsl").into()),
+        });
+        let uniform_stride = gpu.limits.min_uniform_buffer_offset_alignment.max(256);
+        let uniform_entry =
+            |binding: u32, size: u64, vis: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: vis,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: true,
+                    min_binding_size: wgpu::BufferSize::new(size),
+                },
+                count: None,
+            };
+        let cam_size = std::mem::size_of::<CameraUniform>() as u64;
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("frame"),
+            entries: &[
+                uniform_entry(0, cam_size, wgpu::ShaderStages::VERTEX),
+                uniform_entry(1, 64, wgpu::ShaderStages::VERTEX),
+            ],
+        });
+        let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("material"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let vertex_layout = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<Vertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2],
+        };
+        let depth_stencil = wgpu::DepthStencilState {
+            format: ZBUFFER_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        };
+        let primitive = wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            cull_mode: None,
+            ..Default::default()
+        };
+        let pipeline = |label: &str,
+                        layouts: &[Option<&wgpu::BindGroupLayout>],
+                        fs: &str,
+                        targets: &[Option<wgpu::ColorTargetState>]| {
+            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: layouts,
+                immediate_size: 0,
+            });
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&layout),
+                vertex: wgpu::VertexState {
+                    module: &shader,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout.clone())],
+                },
+                primitive,
+                depth_stencil: Some(depth_stencil.clone()),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &shader,
+                    entry_point: Some(fs),
+                    compilation_options: Default::default(),
+                    targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let color_pipeline = pipeline(
+            "colour+depth",
+            &[Some(&frame_layout), Some(&material_layout)],
+            "fs_color",
+            &[Some(COLOR_FORMAT.into()), Some(DEPTH_BITS_FORMAT.into())],
+        );
+        let depth_pipeline = pipeline(
+            "depth",
+            &[Some(&frame_layout)],
+            "fs_depth",
+            &[Some(DEPTH_BITS_FORMAT.into())],
+        );
+
+        // Geometry: static bodies baked into world coordinates and grouped by material, then
+        // each movable body in its own frame.
+        let mut vertices: Vec<Vertex> = Vec::new();
+        let mut indices: Vec<u32> = Vec::new();
+        let mut draws = Vec::new();
+        let mut static_parts: Vec<(usize, &MeshPart, &Pose)> = Vec::new();
+        for b in scene.bodies.iter().filter(|b| !b.movable) {
+            for p in &b.parts {
+                static_parts.push((p.material, p, &b.pose));
+            }
+        }
+        static_parts.sort_by_key(|s| s.0);
+        for (material, part, pose) in static_parts {
+            let range = push_mesh(&mut vertices, &mut indices, &part.mesh, Some(pose));
+            match draws.last_mut() {
+                Some(Draw {
+                    material: m,
+                    indices,
+                    ..
+                }) if *m == material && indices.end == range.start => indices.end = range.end,
+                _ => draws.push(Draw {
+                    material,
+                    slot: 0,
+                    indices: range,
+                }),
+            }
+        }
+        let static_end = draws.last().map(|d| d.indices.end).unwrap_or(0);
+        let mut depth_draws = vec![];
+        if static_end > 0 {
+            depth_draws.push(Draw {
+                material: 0,
+                slot: 0,
+                indices: 0..static_end,
+            });
+        }
+        let mut body_slots = vec![0u32; scene.bodies.len()];
+        let mut slot = 0;
+        for (bi, b) in scene.bodies.iter().enumerate() {
+            if !b.movable {
+                continue;
+            }
+            slot += 1;
+            body_slots[bi] = slot;
+            let start = indices.len() as u32;
+            for p in &b.parts {
+                let range = push_mesh(&mut vertices, &mut indices, &p.mesh, None);
+                draws.push(Draw {
+                    material: p.material,
+                    slot,
+                    indices: range,
+                });
+            }
+            if indices.len() as u32 > start {
+                depth_draws.push(Draw {
+                    material: 0,
+                    slot,
+                    indices: start..indices.len() as u32,
+                });
+            }
+        }
+        let max_buffer = gpu.limits.max_buffer_size;
+        let vbytes = (vertices.len() * std::mem::size_of::<Vertex>()) as u64;
+        if vbytes > max_buffer {
+            return Err(RenderError::Config(format!(
+                "scene has {} vertices ({vbytes} bytes), more than this GPU's buffer limit of {max_buffer} bytes",
+                vertices.len()
+            )));
+        }
+        // wgpu rejects empty buffers: keep one dummy vertex and triangle.
+        if vertices.is_empty() {
+            vertices.push(Vertex {
+                position: [0.0; 3],
+                normal: [0.0, 0.0, 1.0],
+                uv: [0.0; 2],
+            });
+        }
+        if indices.is_empty() {
+            indices.extend([0, 0, 0]);
+        }
+        use wgpu::util::DeviceExt;
+        let vertex_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("vertices"),
+            contents: bytemuck::cast_slice(&vertices),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let index_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("indices"),
+            contents: bytemuck::cast_slice(&indices),
+            usage: wgpu::BufferUsages::INDEX,
+        });
+
+        // Textures: sRGB, so sampling returns linear values; a white texel for plain materials.
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("base colour"),
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::Repeat,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let max_tex = gpu.limits.max_texture_dimension_2d;
+        let upload = |t: &Texture| -> Result<wgpu::TextureView, RenderError> {
+            if t.width > max_tex || t.height > max_tex {
+                return Err(RenderError::Config(format!(
+                    "texture {} is {}×{}, larger than this GPU's {max_tex}-texel limit",
+                    t.name, t.width, t.height
+                )));
+            }
+            let tex = device.create_texture_with_data(
+                &gpu.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some(&t.name),
+                    size: wgpu::Extent3d {
+                        width: t.width,
+                        height: t.height,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                &t.rgba,
+            );
+            Ok(tex.create_view(&Default::default()))
+        };
+        let white = upload(&Texture::from_rgba(
+            "white".into(),
+            1,
+            1,
+            vec![255, 255, 255, 255],
+        ))?;
+        let views = scene
+            .textures
+            .iter()
+            .map(upload)
+            .collect::<Result<Vec<_>, _>>()?;
+        let material_groups = scene
+            .materials
+            .iter()
+            .map(|m| {
+                let c = m.color.map(|c| srgb_to_linear(c as f32));
+                let u = MaterialUniform {
+                    color: [c[0], c[1], c[2], 1.0],
+                    light: [
+                        lighting.towards_light.x,
+                        lighting.towards_light.y,
+                        lighting.towards_light.z,
+                        lighting.ambient,
+                    ],
+                };
+                let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(&m.name),
+                    contents: bytemuck::bytes_of(&u),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+                let view = m.texture.map(|t| &views[t]).unwrap_or(&white);
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some(&m.name),
+                    layout: &material_layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: buffer.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: wgpu::BindingResource::TextureView(view),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::Sampler(&sampler),
+                        },
+                    ],
+                })
+            })
+            .collect();
+
+        let model_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("models"),
+            size: uniform_stride as u64 * (slot as u64 + 1),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let camera_capacity = 1;
+        let camera_buffer = Self::camera_buffer(device, uniform_stride, camera_capacity);
+        let frame_group = Self::frame_group(
+            device,
+            &frame_layout,
+            &camera_buffer,
+            &model_buffer,
+            cam_size,
+        );
+        let mut r = Renderer {
+            gpu,
+            lighting,
+            color_pipeline,
+            depth_pipeline,
+            frame_layout,
+            frame_group,
+            camera_buffer,
+            camera_capacity,
+            model_buffer,
+            uniform_stride,
+            material_groups,
+            vertices: vertex_buffer,
+            indices: index_buffer,
+            draws,
+            depth_draws,
+            body_slots,
+            targets: HashMap::new(),
+            frames: 0,
+        };
+        let poses: Vec<Pose> = scene.bodies.iter().map(|b| b.pose).collect();
+        r.write_models(&poses);
+        Ok(r)
+    }
+
+    fn camera_buffer(device: &wgpu::Device, stride: u32, capacity: u32) -> wgpu::Buffer {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("cameras"),
+            size: stride as u64 * capacity as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    fn frame_group(
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        cameras: &wgpu::Buffer,
+        models: &wgpu::Buffer,
+        cam_size: u64,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: cameras,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(cam_size),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: models,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(64),
+                    }),
+                },
+            ],
+        })
+    }
+
+    fn write_models(&mut self, poses: &[Pose]) {
+        let stride = self.uniform_stride as usize;
+        let slots = self.body_slots.iter().copied().max().unwrap_or(0) as usize + 1;
+        let mut data = vec![0u8; stride * slots];
+        data[..64].copy_from_slice(bytemuck::bytes_of(&Mat4::IDENTITY.to_cols_array()));
+        for (b, &slot) in self.body_slots.iter().enumerate() {
+            if slot > 0 {
+                let m = poses[b].to_mat4().to_cols_array();
+                let o = slot as usize * stride;
+                data[o..o + 64].copy_from_slice(bytemuck::bytes_of(&m));
+            }
+        }
+        self.gpu.queue.write_buffer(&self.model_buffer, 0, &data);
+    }
+
+    /// Sets the pose of every body, in [`Scene::bodies`] order (static bodies' poses are
+    /// ignored: they are baked into the geometry).
+    pub fn set_poses(&mut self, poses: &[Pose]) -> Result<(), RenderError> {
+        if poses.len() != self.body_slots.len() {
+            return Err(RenderError::Config(format!(
+                "{} poses given for a scene of {} bodies",
+                poses.len(),
+                self.body_slots.len()
+            )));
+        }
+        self.write_models(poses);
+        Ok(())
+    }
+
+    /// Uploads one camera uniform per pose, growing the buffer as needed.
+    fn write_cameras(&mut self, intr: &Intrinsics, cameras: &[Pose]) {
+        let n = cameras.len() as u32;
+        if n > self.camera_capacity {
+            self.camera_capacity = n.next_power_of_two();
+            self.camera_buffer =
+                Self::camera_buffer(&self.gpu.device, self.uniform_stride, self.camera_capacity);
+            self.frame_group = Self::frame_group(
+                &self.gpu.device,
+                &self.frame_layout,
+                &self.camera_buffer,
+                &self.model_buffer,
+                std::mem::size_of::<CameraUniform>() as u64,
+            );
+        }
+        let proj = intr.projection(NEAR_PLANE, FAR_PLANE);
+        let stride = self.uniform_stride as usize;
+        let mut data = vec![0u8; stride * cameras.len()];
+        for (i, c) in cameras.iter().enumerate() {
+            let view = optical_from_body(c).inverse().to_mat4();
+            let u = CameraUniform {
+                view_proj: (proj * view).to_cols_array(),
+                view: view.to_cols_array(),
+            };
+            data[i * stride..i * stride + std::mem::size_of::<CameraUniform>()]
+                .copy_from_slice(bytemuck::bytes_of(&u));
+        }
+        self.gpu.queue.write_buffer(&self.camera_buffer, 0, &data);
+    }
+
+    fn targets(&mut self, color: bool, width: u32, height: u32) -> &Targets {
+        let device = &self.gpu.device;
+        self.targets
+            .entry((color, width, height))
+            .or_insert_with(|| {
+                let size = wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                };
+                let texture = |label: &str, format: wgpu::TextureFormat, copy: bool| {
+                    let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
+                    if copy {
+                        usage |= wgpu::TextureUsages::COPY_SRC;
+                    }
+                    device.create_texture(&wgpu::TextureDescriptor {
+                        label: Some(label),
+                        size,
+                        mip_level_count: 1,
+                        sample_count: 1,
+                        dimension: wgpu::TextureDimension::D2,
+                        format,
+                        usage,
+                        view_formats: &[],
+                    })
+                };
+                let buffer = |label: &str| {
+                    device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some(label),
+                        size: padded_row(width) as u64 * height as u64,
+                        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                        mapped_at_creation: false,
+                    })
+                };
+                Targets {
+                    color: color.then(|| {
+                        (
+                            texture("colour", COLOR_FORMAT, true),
+                            buffer("colour read-back"),
+                        )
+                    }),
+                    depth: texture("depth bits", DEPTH_BITS_FORMAT, true),
+                    depth_buffer: buffer("depth read-back"),
+                    zbuffer: texture("z-buffer", ZBUFFER_FORMAT, false),
+                    width,
+                    height,
+                }
+            })
+    }
+
+    /// Records one render pass drawing `views` (tile origin and camera slot) into `t`.
+    fn encode_pass(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        t: &Targets,
+        tile: (u32, u32),
+        views: &[((u32, u32), u32)],
+    ) {
+        let depth_view = t.depth.create_view(&Default::default());
+        let color_view = t
+            .color
+            .as_ref()
+            .map(|c| c.0.create_view(&Default::default()));
+        let z_view = t.zbuffer.create_view(&Default::default());
+        let attachment = |view| {
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })
+        };
+        let attachments = match &color_view {
+            Some(cv) => vec![attachment(cv), attachment(&depth_view)],
+            None => vec![attachment(&depth_view)],
+        };
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("camera"),
+            color_attachments: &attachments,
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &z_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        let color = t.color.is_some();
+        pass.set_pipeline(if color {
+            &self.color_pipeline
+        } else {
+            &self.depth_pipeline
+        });
+        pass.set_vertex_buffer(0, self.vertices.slice(..));
+        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+        let stride = self.uniform_stride;
+        let draws = if color {
+            &self.draws
+        } else {
+            &self.depth_draws
+        };
+        for &((x, y), cam) in views {
+            pass.set_viewport(x as f32, y as f32, tile.0 as f32, tile.1 as f32, 0.0, 1.0);
+            pass.set_scissor_rect(x, y, tile.0, tile.1);
+            let mut bound = (u32::MAX, usize::MAX);
+            for d in draws {
+                if bound.0 != d.slot {
+                    pass.set_bind_group(0, &self.frame_group, &[cam * stride, d.slot * stride]);
+                    bound.0 = d.slot;
+                }
+                if color && bound.1 != d.material {
+                    pass.set_bind_group(1, &self.material_groups[d.material], &[]);
+                    bound.1 = d.material;
+                }
+                pass.draw_indexed(d.indices.clone(), 0, 0..1);
+            }
+        }
+    }
+
+    fn copy_out(encoder: &mut wgpu::CommandEncoder, t: &Targets) {
+        let copy = |tex: &wgpu::Texture, buf: &wgpu::Buffer, encoder: &mut wgpu::CommandEncoder| {
+            encoder.copy_texture_to_buffer(
+                wgpu::TexelCopyTextureInfo {
+                    texture: tex,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::TexelCopyBufferInfo {
+                    buffer: buf,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(padded_row(t.width)),
+                        rows_per_image: Some(t.height),
+                    },
+                },
+                wgpu::Extent3d {
+                    width: t.width,
+                    height: t.height,
+                    depth_or_array_layers: 1,
+                },
+            )
+        };
+        if let Some((tex, buf)) = &t.color {
+            copy(tex, buf, encoder);
+        }
+        copy(&t.depth, &t.depth_buffer, encoder);
+    }
+
+    /// Renders, submits and maps the targets of `key`; calls `read` with the mapped bytes of
+    /// (colour, depth) and unmaps.
+    fn run<R>(
+        &mut self,
+        key: (bool, u32, u32),
+        tile: (u32, u32),
+        views: &[((u32, u32), u32)],
+        read: impl FnOnce(Option<&[u8]>, &[u8], u32) -> R,
+    ) -> Result<R, RenderError> {
+        self.gpu.check()?;
+        self.targets(key.0, key.1, key.2);
+        let t = &self.targets[&key];
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("camera"),
+            });
+        self.encode_pass(&mut encoder, t, tile, views);
+        Self::copy_out(&mut encoder, t);
+        let index = self.gpu.queue.submit([encoder.finish()]);
+        let mut buffers = vec![&t.depth_buffer];
+        if let Some((_, b)) = &t.color {
+            buffers.push(b);
+        }
+        self.gpu.map_read(&buffers, index, FRAME_TIMEOUT)?;
+        let mapped = |b: &wgpu::Buffer| {
+            b.get_mapped_range(..)
+                .map_err(|e| RenderError::Device(format!("read-back: {e}")))
+        };
+        let out = {
+            let depth = mapped(&t.depth_buffer)?;
+            let color = match &t.color {
+                Some((_, b)) => Some(mapped(b)?),
+                None => None,
+            };
+            read(color.as_deref(), &depth, padded_row(t.width))
+        };
+        t.depth_buffer.unmap();
+        if let Some((_, b)) = &t.color {
+            b.unmap();
+        }
+        self.frames += 1;
+        Ok(out)
+    }
+
+    /// Renders RGB and registered depth from a camera whose body frame has pose `camera`.
+    pub fn render(
+        &mut self,
+        intr: &Intrinsics,
+        camera: &Pose,
+    ) -> Result<(RgbImage, DepthImage), RenderError> {
+        intr.validate().map_err(RenderError::Config)?;
+        self.write_cameras(intr, std::slice::from_ref(camera));
+        let (w, h) = (intr.width, intr.height);
+        self.run((true, w, h), (w, h), &[((0, 0), 0)], |color, depth, row| {
+            let color = color.expect("colour target requested");
+            let mut rgb = Vec::with_capacity((w * h * 3) as usize);
+            let mut z = Vec::with_capacity((w * h) as usize);
+            for v in 0..h as usize {
+                let r = &color[v * row as usize..][..w as usize * 4];
+                for px in r.chunks_exact(4) {
+                    rgb.extend_from_slice(&px[..3]);
+                }
+                let d = &depth[v * row as usize..][..w as usize * 4];
+                z.extend(
+                    d.chunks_exact(4)
+                        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                );
+            }
+            (
+                RgbImage {
+                    width: w,
+                    height: h,
+                    data: rgb,
+                },
+                DepthImage {
+                    width: w,
+                    height: h,
+                    data: z,
+                },
+            )
+        })
+    }
+
+    /// Renders depth alone from a camera whose body frame has pose `camera`.
+    pub fn render_depth(
+        &mut self,
+        intr: &Intrinsics,
+        camera: &Pose,
+    ) -> Result<DepthImage, RenderError> {
+        let mut data = Vec::new();
+        self.render_depth_batch(intr, std::slice::from_ref(camera), &mut data)?;
+        Ok(DepthImage {
+            width: intr.width,
+            height: intr.height,
+            data,
+        })
+    }
+
+    /// Renders one depth image per camera pose into `out` (replaced): `cameras.len()` images of
+    /// `width × height` in order, contiguous. The views are tiled into atlases as large as the
+    /// GPU allows and drawn in one submission.
+    pub fn render_depth_batch(
+        &mut self,
+        intr: &Intrinsics,
+        cameras: &[Pose],
+        out: &mut Vec<f32>,
+    ) -> Result<(), RenderError> {
+        intr.validate().map_err(RenderError::Config)?;
+        out.clear();
+        if cameras.is_empty() {
+            return Ok(());
+        }
+        let (w, h) = (intr.width, intr.height);
+        let max = self.gpu.limits.max_texture_dimension_2d.min(4096);
+        if w > max || h > max {
+            return Err(RenderError::Config(format!(
+                "image size {w}×{h} exceeds this GPU's {max}-pixel texture limit"
+            )));
+        }
+        self.write_cameras(intr, cameras);
+        let n = cameras.len() as u32;
+        let cols = (max / w).min(n).max(1);
+        let rows = n.div_ceil(cols).min(max / h).max(1);
+        let per_atlas = cols * rows;
+        let key = (false, cols * w, rows * h);
+        out.resize((n * w * h) as usize, 0.0);
+        let mut first = 0u32;
+        while first < n {
+            let count = per_atlas.min(n - first);
+            let views: Vec<((u32, u32), u32)> = (0..count)
+                .map(|i| (((i % cols) * w, (i / cols) * h), first + i))
+                .collect();
+            let dst = &mut out[(first * w * h) as usize..((first + count) * w * h) as usize];
+            self.run(key, (w, h), &views, |_, depth, row| {
+                for i in 0..count as usize {
+                    let (tx, ty) = (
+                        i % cols as usize * w as usize,
+                        i / cols as usize * h as usize,
+                    );
+                    for v in 0..h as usize {
+                        let src = &depth[(ty + v) * row as usize + tx * 4..][..w as usize * 4];
+                        let d = &mut dst[(i * h as usize + v) * w as usize..][..w as usize];
+                        for (o, b) in d.iter_mut().zip(src.chunks_exact(4)) {
+                            *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                        }
+                    }
+                }
+            })?;
+            first += count;
+        }
+        Ok(())
+    }
+}

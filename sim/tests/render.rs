@@ -1,0 +1,303 @@
+//! The camera renderer against parry ray casts, known planes and known colours.
+//!
+//! The backend comes from `FUTAGO_GPU_BACKEND` (auto, vulkan, gl); CI runs this file once per
+//! backend.
+
+mod common;
+
+use common::*;
+use futago_msgs::Pose2;
+use futago_sim::World;
+use futago_sim::create::CreateConfig;
+use futago_sim::render::{
+    DepthImage, Intrinsics, Renderer, Scene, linear_to_srgb, optical_rotation, srgb_to_linear,
+};
+use futago_sim::world::Material;
+use futago_sim::world::mesh::{TriMesh, UvMap};
+use glam::{Quat, Vec3};
+use rapier3d::math::Pose;
+use std::path::Path;
+
+fn load(name: &str) -> World {
+    World::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../worlds")
+            .join(name),
+    )
+    .unwrap()
+}
+
+fn kinect(w: u32, h: u32) -> Intrinsics {
+    Intrinsics::from_fov(w, h, 57f64.to_radians(), 43f64.to_radians()).unwrap()
+}
+
+/// A camera body pose from position, yaw and pitch (positive pitch looks down).
+fn cam(x: f32, y: f32, z: f32, yaw: f32, pitch: f32) -> Pose {
+    Pose::from_parts(
+        Vec3::new(x, y, z),
+        Quat::from_rotation_z(yaw) * Quat::from_rotation_y(pitch),
+    )
+}
+
+/// Ray-cast depth (optical z) of every pixel centre; 0 where nothing is hit.
+fn ray_cast_depth(sim: &futago_sim::Simulation, intr: &Intrinsics, pose: &Pose) -> DepthImage {
+    let rot = pose.rotation * optical_rotation();
+    let mut data = Vec::with_capacity((intr.width * intr.height) as usize);
+    for v in 0..intr.height {
+        for u in 0..intr.width {
+            let d = intr.ray(u as f64, v as f64);
+            let len = d.length();
+            let t = sim.cast_ray(pose.translation, rot * (d / len), 100.0);
+            data.push(t.map(|t| t / len).unwrap_or(0.0));
+        }
+    }
+    DepthImage {
+        width: intr.width,
+        height: intr.height,
+        data,
+    }
+}
+
+/// Fraction of pixels valid in either image that agree within 1 mm + 0.1 % of range.
+fn agreement(rendered: &DepthImage, cast: &DepthImage) -> (f64, usize) {
+    let mut valid = 0;
+    let mut good = 0;
+    for (&r, &c) in rendered.data.iter().zip(&cast.data) {
+        if r == 0.0 && c == 0.0 {
+            continue;
+        }
+        valid += 1;
+        if r > 0.0 && c > 0.0 && (r - c).abs() <= 0.001 + 0.001 * c {
+            good += 1;
+        }
+    }
+    (good as f64 / valid.max(1) as f64, valid)
+}
+
+fn stepped_sim(world: &World, start: Pose2) -> futago_sim::Simulation {
+    let mut s = sim(world, &CreateConfig::default(), &[], start, 1);
+    s.step(None);
+    s
+}
+
+fn check_world(file: &str, start: Pose2, poses: &[Pose]) {
+    let world = load(file);
+    let s = stepped_sim(&world, start);
+    let mut r = Renderer::new(&Scene::from_world(&world)).unwrap();
+    let intr = kinect(320, 240);
+    for p in poses {
+        let depth = r.render_depth(&intr, p).unwrap();
+        let cast = ray_cast_depth(&s, &intr, p);
+        let (frac, valid) = agreement(&depth, &cast);
+        assert!(
+            valid > 10_000,
+            "{file} {p:?}: only {valid} valid pixels, the view is too empty to test"
+        );
+        assert!(
+            frac >= 0.995,
+            "{file} at {p:?} on {}: {:.3} % of {valid} pixels agree with the ray cast",
+            r.adapter(),
+            frac * 100.0
+        );
+        // The colour pass's registered depth is the same image.
+        let (_, registered) = r.render(&intr, p).unwrap();
+        assert_eq!(registered, depth, "{file} {p:?}: registered depth differs");
+    }
+}
+
+#[test]
+fn office_depth_equals_a_ray_cast() {
+    check_world(
+        "office.toml",
+        Pose2::new(28.0, 2.0, 0.0),
+        &[
+            cam(1.5, 8.0, 0.5, 0.2, 0.0),
+            cam(15.0, 8.0, 1.2, 1.57, 0.3),
+            cam(19.0, 12.5, 0.4, -0.7, 0.1),
+            cam(5.0, 8.0, 1.6, 2.5, 0.5),
+        ],
+    );
+}
+
+#[test]
+fn lab_depth_equals_a_ray_cast() {
+    check_world(
+        "lab.toml",
+        Pose2::new(1.0, 0.8, 0.0),
+        &[
+            cam(6.5, 3.5, 0.45, 0.0, 0.0),
+            cam(2.0, 5.0, 1.0, -0.8, -0.2),
+            cam(11.0, 1.5, 0.3, 2.8, 0.05),
+        ],
+    );
+}
+
+#[test]
+fn back_projected_wall_fits_its_plane_and_material_renders_its_colour() {
+    // Room interior [0, 4] × [0, 4], walls 2 m high; the far wall's inner face is x = 4.
+    let world = box_room(4.0, 4.0, "");
+    let mut r = Renderer::new(&Scene::from_world(&world)).unwrap();
+    let intr = kinect(320, 240);
+    let pose = cam(1.0, 2.0, 1.0, 0.3, 0.1);
+    let (rgb, depth) = r.render(&intr, &pose).unwrap();
+    let rot = pose.rotation * optical_rotation();
+    // Points on the x = 4 wall, well inside it (away from the corners and the floor).
+    let mut pts = Vec::new();
+    for v in 0..intr.height {
+        for u in 0..intr.width {
+            let z = depth.at(u, v) as f64;
+            if z == 0.0 {
+                continue;
+            }
+            let p = intr.back_project(u as f64, v as f64, z);
+            let w = pose.translation + rot * Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32);
+            if w.x > 3.9 && w.y > 0.3 && w.y < 3.7 && w.z > 0.2 {
+                pts.push(w.as_dvec3());
+            }
+        }
+    }
+    assert!(pts.len() > 5000, "{} wall points", pts.len());
+    // Least-squares plane x = a + b y + c z.
+    let n = pts.len() as f64;
+    let (mut sy, mut sz, mut sx, mut syy, mut szz, mut syz, mut sxy, mut sxz) =
+        (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for p in &pts {
+        sy += p.y;
+        sz += p.z;
+        sx += p.x;
+        syy += p.y * p.y;
+        szz += p.z * p.z;
+        syz += p.y * p.z;
+        sxy += p.x * p.y;
+        sxz += p.x * p.z;
+    }
+    let m = glam::DMat3::from_cols(
+        glam::DVec3::new(n, sy, sz),
+        glam::DVec3::new(sy, syy, syz),
+        glam::DVec3::new(sz, syz, szz),
+    );
+    let abc = m.inverse() * glam::DVec3::new(sx, sxy, sxz);
+    assert!((abc.x - 4.0).abs() < 1e-3, "plane offset {abc:?}");
+    assert!(
+        abc.y.abs() < 1e-4 && abc.z.abs() < 1e-4,
+        "plane tilt {abc:?}"
+    );
+    let worst = pts
+        .iter()
+        .map(|p| (p.x - (abc.x + abc.y * p.y + abc.z * p.z)).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-3, "worst residual {worst} m");
+
+    // The wall's colour: sRGB 0.5 grey under the renderer's light on a normal of -x.
+    let shade = r.lighting().shade(Vec3::NEG_X);
+    let expect = (linear_to_srgb(srgb_to_linear(0.5) * shade) * 255.0).round() as i32;
+    // Find a pixel on the far wall (its centre column, above the floor line).
+    let c = rgb.at(intr.width / 2, intr.height / 3);
+    for ch in c {
+        assert!(
+            (ch as i32 - expect).abs() <= 2,
+            "wall colour {c:?}, expected {expect} in each channel"
+        );
+    }
+}
+
+#[test]
+fn batches_equal_single_renders_and_movable_bodies_follow_their_poses() {
+    let world = box_room(6.0, 4.0, "");
+    let mut scene = Scene::from_world(&world);
+    let red = Material {
+        name: "red".into(),
+        color: [0.8, 0.1, 0.1],
+        texture: None,
+    };
+    let cube = TriMesh::cuboid(Vec3::splat(0.25), UvMap::Fit);
+    let body = scene.add_body(
+        "cube",
+        Pose::from_translation(Vec3::new(3.0, 2.0, 0.25)),
+        vec![(red, cube)],
+    );
+    let mut r = Renderer::new(&scene).unwrap();
+    let intr = kinect(176, 144);
+    let eye = cam(0.5, 2.0, 0.25, 0.0, 0.0);
+    let centre = |d: &DepthImage| d.at(d.width / 2, d.height / 2);
+    // The cube's near face is at x = 2.75: 2.25 m in front of the camera.
+    let before = r.render_depth(&intr, &eye).unwrap();
+    assert!((centre(&before) - 2.25).abs() < 1e-3, "{}", centre(&before));
+    let mut poses: Vec<Pose> = scene.bodies.iter().map(|b| b.pose).collect();
+    poses[body] = Pose::from_translation(Vec3::new(4.0, 2.0, 0.25));
+    r.set_poses(&poses).unwrap();
+    let after = r.render_depth(&intr, &eye).unwrap();
+    assert!((centre(&after) - 3.25).abs() < 1e-3, "{}", centre(&after));
+    let (rgb, _) = r.render(&intr, &eye).unwrap();
+    let px = rgb.at(intr.width / 2, intr.height / 2);
+    assert!(
+        px[0] > 150 && px[1] < 80 && px[2] < 80,
+        "cube colour {px:?}"
+    );
+
+    let eyes: Vec<Pose> = (0..37)
+        .map(|i| {
+            cam(
+                0.5 + 0.1 * i as f32,
+                1.0 + 0.05 * i as f32,
+                0.3,
+                0.2 * i as f32,
+                0.05,
+            )
+        })
+        .collect();
+    let mut batch = Vec::new();
+    r.render_depth_batch(&intr, &eyes, &mut batch).unwrap();
+    let n = (intr.width * intr.height) as usize;
+    assert_eq!(batch.len(), eyes.len() * n);
+    for (i, e) in eyes.iter().enumerate() {
+        let single = r.render_depth(&intr, e).unwrap();
+        // The same triangles rasterised at another viewport offset: equal up to float
+        // rounding of the interpolation, and every pixel covered alike.
+        let mut worst = 0f32;
+        for (a, b) in single.data.iter().zip(&batch[i * n..(i + 1) * n]) {
+            assert_eq!(*a == 0.0, *b == 0.0, "view {i}: coverage differs");
+            worst = worst.max((a - b).abs() / a.max(1e-6));
+        }
+        assert!(
+            worst < 1e-5,
+            "view {i} of the batch differs from its single render by {worst}"
+        );
+    }
+}
+
+#[test]
+fn bad_sizes_fields_of_view_and_pose_counts_are_errors() {
+    let e = Intrinsics::from_fov(0, 480, 1.0, 0.8).unwrap_err();
+    assert!(e.contains("0×480"), "{e}");
+    let e = Intrinsics::from_fov(640, 480, 3.2, 0.8).unwrap_err();
+    assert!(e.contains("horizontal field of view"), "{e}");
+    let world = box_room(2.0, 2.0, "");
+    let mut r = Renderer::new(&Scene::from_world(&world)).unwrap();
+    let mut bad = kinect(64, 48);
+    bad.width = 0;
+    let e = r.render_depth(&bad, &Pose::IDENTITY).unwrap_err();
+    assert!(e.to_string().contains("image size"), "{e}");
+    let e = r.set_poses(&[]).unwrap_err();
+    assert!(e.to_string().contains("0 poses"), "{e}");
+    // A mesh whose triangle indexes a missing vertex is refused by name.
+    let mut scene = Scene::from_world(&world);
+    let mut mesh = TriMesh::cuboid(Vec3::ONE, UvMap::Fit);
+    mesh.indices.push([0, 1, 99]);
+    scene.add_body(
+        "broken",
+        Pose::IDENTITY,
+        vec![(
+            Material {
+                name: "m".into(),
+                color: [1.0; 3],
+                texture: None,
+            },
+            mesh,
+        )],
+    );
+    let e = Renderer::new(&scene)
+        .err()
+        .expect("a broken mesh is refused");
+    assert!(e.to_string().contains("body `broken`"), "{e}");
+}
