@@ -1,6 +1,7 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
 mod bench;
+mod rgbd;
 mod run;
 mod scenario;
 mod world_cmd;

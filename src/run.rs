@@ -4,12 +4,17 @@
 //! always give the same bytes. Outputs go to a temporary folder beside the destination and are
 //! renamed into place at the end: a failed or interrupted run leaves no half-written results.
 
+use crate::rgbd::TumRgbdWriter;
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, Pose2, Pose3, Time, carmen, tum};
 use futago_robot::odometry::OdometryIntegrator;
 use futago_robot::script::{ControlInput, ScriptedController};
 use futago_sim::Simulation;
+use futago_sim::kinect::Kinect;
+use futago_sim::noise::stream;
+use futago_sim::render::Renderer;
+use futago_sim::sim::scene;
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 use std::collections::VecDeque;
@@ -36,6 +41,8 @@ struct Sinks {
     groundtruth: BufWriter<File>,
     odometry: BufWriter<File>,
     carmen: Option<BufWriter<File>>,
+    /// One TUM RGB-D sequence per camera, when the scenario asks for the dataset.
+    cameras: Vec<TumRgbdWriter>,
 }
 
 /// What a run measured, for the summary and for callers (tests, benchmarks).
@@ -46,6 +53,10 @@ pub struct Outcome {
     pub wall_time: f64,
     pub steps: u64,
     pub scans: Vec<u64>,
+    /// Frames rendered per camera (0 where nothing consumed the camera).
+    pub camera_frames: Vec<u64>,
+    /// The adapter that rendered them, if any did.
+    pub renderer: Option<String>,
     pub laser_rays: u64,
     pub bump_events: u64,
     pub wheel_drop_steps: u64,
@@ -94,6 +105,22 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         s.start,
         seed,
     );
+    // Cameras render on demand: only when some consumer takes their frames.
+    let consumers = sinks.as_deref().map(|k| k.cameras.len()).unwrap_or(0);
+    let mut kinects: Vec<Kinect> = s
+        .cameras
+        .iter()
+        .map(|c| Kinect::new(c.clone(), stream(seed, &format!("camera.{}", c.name))))
+        .collect();
+    let mut renderer = if consumers > 0 {
+        Some(
+            Renderer::new(&scene(&s.world, &spec.robot, s.start))
+                .context("starting the camera renderer")?,
+        )
+    } else {
+        None
+    };
+    let mut camera_frames = vec![0u64; kinects.len()];
     let mut ctl = ScriptedController::new(s.controller.clone(), Time::ZERO, s.start);
     let mut odo = OdometryIntegrator::new(s.start);
     let mut history: VecDeque<(Time, Pose2)> = VecDeque::from([(Time::ZERO, s.start)]);
@@ -233,6 +260,24 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 }
             }
         }
+        if let (Some(r), Some(k)) = (renderer.as_mut(), sinks.as_deref_mut()) {
+            let mut posed = false;
+            for (i, cam) in kinects.iter_mut().enumerate() {
+                if !cam.due(now.nanos()) {
+                    continue;
+                }
+                cam.take();
+                let poses = sim.scene_poses();
+                if !posed {
+                    r.set_poses(&poses)?;
+                    posed = true;
+                }
+                let base = poses[poses.len() - 1];
+                let frame = cam.capture(r, &base, now, true)?;
+                k.cameras[i].write(&frame, &cam.optical_pose(&base))?;
+                camera_frames[i] += 1;
+            }
+        }
         for (i, scan) in out.scans {
             scans[i] += 1;
             if let Some(c) = sinks.as_deref_mut().and_then(|k| k.carmen.as_mut()) {
@@ -284,6 +329,8 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         wall_time: started.elapsed().as_secs_f64(),
         steps: c.steps,
         scans,
+        camera_frames,
+        renderer: renderer.map(|r| r.adapter()),
         laser_rays: c.laser_rays,
         bump_events: c.bump_events,
         wheel_drop_steps: c.wheel_drop_steps,
@@ -305,6 +352,33 @@ fn sha256_file(p: &Path) -> Result<String> {
         .iter()
         .map(|b| format!("{b:02x}"))
         .collect())
+}
+
+/// One digest of a folder: each file's relative path and bytes, in sorted order.
+fn sha256_tree(dir: &Path) -> Result<String> {
+    fn walk(dir: &Path, root: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+        for e in std::fs::read_dir(dir).with_context(|| format!("listing {}", dir.display()))? {
+            let p = e?.path();
+            if p.is_dir() {
+                walk(&p, root, out)?;
+            } else {
+                out.push(p.strip_prefix(root)?.to_path_buf());
+            }
+        }
+        Ok(())
+    }
+    let mut files = Vec::new();
+    walk(dir, dir, &mut files)?;
+    files.sort();
+    let mut h = Sha256::new();
+    for f in files {
+        h.update(f.to_string_lossy().as_bytes());
+        h.update([0]);
+        h.update(
+            std::fs::read(dir.join(&f)).with_context(|| format!("reading back {}", f.display()))?,
+        );
+    }
+    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
 }
 
 /// The deterministic part of a run's summary (everything but `performance`).
@@ -333,6 +407,13 @@ pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
             "final_heading_error_deg": herr,
         },
         "lidar": s.lidars.iter().zip(&o.scans).map(|((c, _), n)| json!({ "name": c.name, "preset": c.preset.name(), "scans": n })).collect::<Vec<_>>(),
+        "camera": s.cameras.iter().zip(&o.camera_frames).map(|(c, n)| json!({
+            "name": c.name,
+            "rgb": [c.rgb.width, c.rgb.height],
+            "depth": [c.depth.width, c.depth.height],
+            "rate_hz": c.rate,
+            "frames": n,
+        })).collect::<Vec<_>>(),
         "laser_rays": o.laser_rays,
         "files": files,
     })
@@ -367,12 +448,32 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             } else {
                 None
             },
+            cameras: if s.spec.output.rgbd_dataset {
+                s.cameras
+                    .iter()
+                    .map(|c| {
+                        TumRgbdWriter::create(
+                            &tmp.join(&c.name),
+                            &c.name,
+                            &s.spec.name,
+                            &c.rgb,
+                            &c.depth,
+                            (c.range_min, c.range_max),
+                        )
+                    })
+                    .collect::<Result<_>>()?
+            } else {
+                Vec::new()
+            },
         };
         let outcome = simulate(s, opts, Some(&mut sinks))?;
         sinks.groundtruth.flush()?;
         sinks.odometry.flush()?;
         if let Some(c) = sinks.carmen.as_mut() {
             c.flush()?;
+        }
+        for c in std::mem::take(&mut sinks.cameras) {
+            c.finish()?;
         }
         drop(sinks);
         let mut files = serde_json::Map::new();
@@ -382,8 +483,17 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
                 files.insert(f.to_string(), json!({ "sha256": sha256_file(&p)? }));
             }
         }
+        if s.spec.output.rgbd_dataset {
+            for c in &s.cameras {
+                files.insert(
+                    format!("{}/", c.name),
+                    json!({ "sha256": sha256_tree(&tmp.join(&c.name))? }),
+                );
+            }
+        }
         let mut sum = summary(s, &outcome, Value::Object(files));
         sum["performance"] = json!({
+            "renderer": outcome.renderer,
             "wall_time_s": outcome.wall_time,
             "real_time_factor": if outcome.wall_time > 0.0 { outcome.sim_time / outcome.wall_time } else { 0.0 },
         });

@@ -9,6 +9,7 @@ use futago_msgs::Pose2;
 use futago_robot::script::ControllerConfig;
 use futago_sim::config::{SpecError, check_name, check_positive, check_range, load_toml};
 use futago_sim::create::CreateConfig;
+use futago_sim::kinect::{KinectConfig, KinectSpec};
 use futago_sim::lidar::{LidarConfig, LidarSpec};
 use futago_sim::{PhysicsConfig, World};
 use serde::Deserialize;
@@ -35,6 +36,9 @@ pub struct ScenarioSpec {
     pub robot: CreateConfig,
     #[serde(default)]
     pub lidar: Vec<LidarConfig>,
+    /// RGB-D cameras (Kinect models); rendered only when something consumes their frames.
+    #[serde(default)]
+    pub camera: Vec<KinectConfig>,
     /// Read as a table and typed by [`controller_config`], so that errors inside it carry
     /// their full key path.
     pub controller: toml::Table,
@@ -63,6 +67,8 @@ pub struct OutputConfig {
     pub groundtruth_rate: f64,
     /// Write the CARMEN log of laser scans and odometry.
     pub carmen: bool,
+    /// Write each camera's stream as a TUM RGB-D sequence in a folder named after it.
+    pub rgbd_dataset: bool,
 }
 
 impl Default for OutputConfig {
@@ -70,6 +76,7 @@ impl Default for OutputConfig {
         OutputConfig {
             groundtruth_rate: 50.0,
             carmen: true,
+            rgbd_dataset: false,
         }
     }
 }
@@ -83,6 +90,8 @@ pub struct Scenario {
     pub start: Pose2,
     /// Resolved laser parameters, in `spec.lidar` order.
     pub lidars: Vec<(LidarConfig, LidarSpec)>,
+    /// Resolved camera models, in `spec.camera` order.
+    pub cameras: Vec<KinectSpec>,
 }
 
 /// Types the `[controller]` table by its `type` key, naming `controller.KEY` in errors.
@@ -188,6 +197,26 @@ impl Scenario {
             }
             lidars.push((l.clone(), s));
         }
+        let mut cameras: Vec<KinectSpec> = Vec::new();
+        for (i, c) in spec.camera.iter().enumerate() {
+            let s = c.resolve(path, &format!("camera[{i}]"))?;
+            if cameras.iter().any(|o| o.name == s.name) || lidars.iter().any(|l| l.0.name == s.name)
+            {
+                return Err(SpecError::new(
+                    path,
+                    format!("camera[{i}].name"),
+                    format!("sensor name `{}` is used twice", s.name),
+                ));
+            }
+            cameras.push(s);
+        }
+        if spec.output.rgbd_dataset && cameras.is_empty() {
+            return Err(SpecError::new(
+                path,
+                "output.rgbd_dataset",
+                "an RGB-D dataset needs a [[camera]]; the scenario has none",
+            ));
+        }
         let controller = controller_config(path, &spec.controller)?;
         controller
             .validate()
@@ -230,6 +259,7 @@ impl Scenario {
             world,
             start,
             lidars,
+            cameras,
         })
     }
 }

@@ -7,6 +7,7 @@
 //! Conventions (ROS REP 103): SI units, right-handed frames, x forward, y left, z up,
 //! angles in radians. Time is simulation (or log) time in integer nanoseconds.
 
+pub mod camera;
 pub mod carmen;
 pub mod grid;
 pub mod tum;

@@ -93,6 +93,33 @@ pub fn parse(text: &str) -> Result<Vec<Stamped>, ParseError> {
     Ok(out)
 }
 
+/// Parses a TUM RGB-D image list (`rgb.txt`, `depth.txt`): `timestamp filename` per line,
+/// `#` comments. Filenames are relative to the sequence folder.
+pub fn parse_image_list(text: &str) -> Result<Vec<(Time, String)>, ParseError> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let err = |message: String| ParseError {
+            line: i + 1,
+            message,
+        };
+        let mut words = line.split_whitespace();
+        let (Some(t), Some(name), None) = (words.next(), words.next(), words.next()) else {
+            return Err(err("expected `timestamp filename`".into()));
+        };
+        let t: f64 = t
+            .parse()
+            .ok()
+            .filter(|t: &f64| t.is_finite())
+            .ok_or_else(|| err(format!("`{t}` is not a timestamp")))?;
+        out.push((Time::from_secs(t), name.to_string()));
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -114,6 +141,17 @@ mod tests {
         let yaw = 2.0 * q[2].atan2(q[3]);
         assert!((yaw - 2.0).abs() < 1e-8);
         assert!((back[0].pose.translation[0] - 1.25).abs() < 1e-9);
+    }
+
+    #[test]
+    fn image_lists_parse_and_reject_junk() {
+        let l = parse_image_list("# color images\n1.500000 rgb/1.500000.png\n\n2.0 rgb/2.png\n")
+            .unwrap();
+        assert_eq!(l.len(), 2);
+        assert_eq!(l[0], (Time::from_secs(1.5), "rgb/1.500000.png".to_string()));
+        let e = parse_image_list("1.0 a.png\nx b.png\n").unwrap_err();
+        assert_eq!(e.line, 2);
+        assert!(parse_image_list("1.0 a.png extra\n").is_err());
     }
 
     #[test]

@@ -4,6 +4,7 @@
 //!   textures, glTF import/export and ground-truth exports;
 //! - [`sim`]: the running [`Simulation`] (rapier state, clock, sensors);
 //! - [`create`]: the iRobot Create's drive, wheel traction and odometry;
+//! - [`kinect`]: the Kinect v1 RGB-D camera model and its depth noise;
 //! - [`lidar`]: ray-cast laser range finders;
 //! - [`noise`]: seeded random streams per noise source;
 //! - [`render`]: wgpu camera rendering (RGB and metric depth, single views and batches);
@@ -14,6 +15,7 @@
 
 pub mod config;
 pub mod create;
+pub mod kinect;
 pub mod lidar;
 pub mod noise;
 pub mod render;

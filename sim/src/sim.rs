@@ -9,8 +9,9 @@ use crate::config::{SpecError, check_range};
 use crate::create::{CreateConfig, CreateDrive, GRAVITY, PlanarVelocity, wheel_traction};
 use crate::lidar::{Lidar, LidarConfig};
 use crate::noise::stream;
-use crate::world::mesh::TriMesh;
-use crate::world::{Motion, World};
+use crate::render::Scene;
+use crate::world::mesh::{TriMesh, UvMap};
+use crate::world::{Material, Motion, World};
 use futago_msgs::{BumpsAndDrops, DriveCommand, Duration, LaserScan, Odometry, Pose2, Time};
 use glam::{Quat, Vec3};
 use rapier3d::math::Pose;
@@ -263,6 +264,14 @@ impl Simulation {
             .collect()
     }
 
+    /// Current pose of every body a camera sees, in [`scene`] order: the world's objects,
+    /// then the robot.
+    pub fn scene_poses(&self) -> Vec<Pose> {
+        let mut poses = self.object_poses();
+        poses.push(*self.physics.bodies[self.robot].position());
+        poses
+    }
+
     /// Latest bumper and wheel-drop state.
     pub fn bumps(&self) -> BumpsAndDrops {
         self.bumps
@@ -434,4 +443,38 @@ impl Simulation {
         }
         out
     }
+}
+
+/// The robot's render meshes in its base frame: the body prism with the collider's vertices,
+/// dark grey like the Create's bumper.
+pub fn robot_parts(robot: &CreateConfig) -> Vec<(Material, TriMesh)> {
+    let hh = (robot.height / 2.0) as f32;
+    let body = TriMesh::prism(robot.radius as f32, hh, ROBOT_SEGMENTS, UvMap::Fit).transformed(
+        Quat::IDENTITY,
+        Vec3::new(0.0, 0.0, robot.clearance as f32 + hh),
+        1.0,
+    );
+    vec![(
+        Material {
+            name: "robot".into(),
+            color: [0.25, 0.25, 0.27],
+            texture: None,
+        },
+        body,
+    )]
+}
+
+/// What a camera sees: the world's objects in order, then the robot (posed by
+/// [`Simulation::scene_poses`]).
+pub fn scene(world: &World, robot: &CreateConfig, start: Pose2) -> Scene {
+    let mut scene = Scene::from_world(world);
+    scene.add_body(
+        "robot",
+        Pose::from_parts(
+            Vec3::new(start.x as f32, start.y as f32, 0.0),
+            Quat::from_rotation_z(start.theta as f32),
+        ),
+        robot_parts(robot),
+    );
+    scene
 }

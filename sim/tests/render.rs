@@ -45,7 +45,8 @@ fn ray_cast_depth(sim: &futago_sim::Simulation, intr: &Intrinsics, pose: &Pose) 
     let mut data = Vec::with_capacity((intr.width * intr.height) as usize);
     for v in 0..intr.height {
         for u in 0..intr.width {
-            let d = intr.ray(u as f64, v as f64);
+            let [x, y, z] = intr.ray(u as f64, v as f64);
+            let d = Vec3::new(x as f32, y as f32, z as f32);
             let len = d.length();
             let t = sim.cast_ray(pose.translation, rot * (d / len), 100.0);
             data.push(t.map(|t| t / len).unwrap_or(0.0));

@@ -18,6 +18,8 @@
 
 pub mod gpu;
 
+pub use futago_msgs::camera::{DepthImage, Intrinsics, RgbImage};
+
 use crate::world::mesh::TriMesh;
 use crate::world::{Material, MeshPart, Motion, Texture, World};
 use glam::{Mat3, Mat4, Quat, Vec3};
@@ -42,122 +44,32 @@ pub enum RenderError {
     Config(String),
 }
 
-/// Pinhole intrinsics of an image, in pixels; pixel (0, 0)'s centre is at (0, 0) (OpenCV and
-/// TUM convention: `cx = (width - 1) / 2` for a centred axis).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Intrinsics {
-    pub width: u32,
-    pub height: u32,
-    pub fx: f64,
-    pub fy: f64,
-    pub cx: f64,
-    pub cy: f64,
-}
-
-/// Largest image side the renderer accepts.
-pub const MAX_IMAGE_SIDE: u32 = 8192;
-
-impl Intrinsics {
-    /// A centred camera with the given horizontal and vertical fields of view, radians.
-    pub fn from_fov(width: u32, height: u32, fov_h: f64, fov_v: f64) -> Result<Self, String> {
-        check_size(width, height)?;
-        for (name, f) in [("horizontal", fov_h), ("vertical", fov_v)] {
-            if !(f > 1f64.to_radians() && f < 170f64.to_radians()) {
-                return Err(format!(
-                    "{name} field of view {:.3}° is out of range: expected 1° to 170°",
-                    f.to_degrees()
-                ));
-            }
-        }
-        Ok(Intrinsics {
-            width,
-            height,
-            fx: width as f64 / 2.0 / (fov_h / 2.0).tan(),
-            fy: height as f64 / 2.0 / (fov_v / 2.0).tan(),
-            cx: (width as f64 - 1.0) / 2.0,
-            cy: (height as f64 - 1.0) / 2.0,
-        })
-    }
-
-    /// The same camera at another resolution (same field of view).
-    pub fn scaled(&self, width: u32, height: u32) -> Intrinsics {
-        let sx = width as f64 / self.width as f64;
-        let sy = height as f64 / self.height as f64;
-        Intrinsics {
-            width,
-            height,
-            fx: self.fx * sx,
-            fy: self.fy * sy,
-            cx: (self.cx + 0.5) * sx - 0.5,
-            cy: (self.cy + 0.5) * sy - 0.5,
-        }
-    }
-
-    /// Checks size and focal lengths.
-    pub fn validate(&self) -> Result<(), String> {
-        check_size(self.width, self.height)?;
-        if !(self.fx.is_finite() && self.fy.is_finite() && self.fx > 0.0 && self.fy > 0.0) {
-            return Err(format!(
-                "focal lengths fx {} and fy {} must be positive pixels",
-                self.fx, self.fy
-            ));
-        }
-        if !(self.cx.is_finite() && self.cy.is_finite()) {
-            return Err("principal point must be finite".into());
-        }
-        Ok(())
-    }
-
-    /// Direction through pixel coordinates `(u, v)` in the optical frame, with z = 1.
-    pub fn ray(&self, u: f64, v: f64) -> Vec3 {
-        Vec3::new(
-            ((u - self.cx) / self.fx) as f32,
-            ((v - self.cy) / self.fy) as f32,
-            1.0,
-        )
-    }
-
-    /// Back-projects pixel `(u, v)` at depth `z` into the optical frame.
-    pub fn back_project(&self, u: f64, v: f64, z: f64) -> [f64; 3] {
-        [(u - self.cx) / self.fx * z, (v - self.cy) / self.fy * z, z]
-    }
-
-    /// Perspective projection from the optical frame to wgpu clip space (y up, depth 0..1).
-    fn projection(&self, near: f32, far: f32) -> Mat4 {
-        let (w, h) = (self.width as f32, self.height as f32);
-        let (fx, fy) = (self.fx as f32, self.fy as f32);
-        // The rasteriser samples pixel i at window coordinate i + 0.5.
-        let (cx, cy) = (self.cx as f32 + 0.5, self.cy as f32 + 0.5);
-        let a = far / (far - near);
-        Mat4::from_cols_array(&[
-            2.0 * fx / w,
-            0.0,
-            2.0 * cx / w - 1.0,
-            0.0,
-            0.0,
-            -2.0 * fy / h,
-            1.0 - 2.0 * cy / h,
-            0.0,
-            0.0,
-            0.0,
-            a,
-            -a * near,
-            0.0,
-            0.0,
-            1.0,
-            0.0,
-        ])
-        .transpose()
-    }
-}
-
-fn check_size(width: u32, height: u32) -> Result<(), String> {
-    if width == 0 || height == 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
-        return Err(format!(
-            "image size {width}×{height} is out of range: expected 1 to {MAX_IMAGE_SIDE} pixels a side"
-        ));
-    }
-    Ok(())
+/// Perspective projection from the optical frame to wgpu clip space (y up, depth 0..1).
+fn projection(intr: &Intrinsics, near: f32, far: f32) -> Mat4 {
+    let (w, h) = (intr.width as f32, intr.height as f32);
+    let (fx, fy) = (intr.fx as f32, intr.fy as f32);
+    // The rasteriser samples pixel i at window coordinate i + 0.5.
+    let (cx, cy) = (intr.cx as f32 + 0.5, intr.cy as f32 + 0.5);
+    let a = far / (far - near);
+    Mat4::from_cols_array(&[
+        2.0 * fx / w,
+        0.0,
+        2.0 * cx / w - 1.0,
+        0.0,
+        0.0,
+        -2.0 * fy / h,
+        1.0 - 2.0 * cy / h,
+        0.0,
+        0.0,
+        0.0,
+        a,
+        -a * near,
+        0.0,
+        0.0,
+        1.0,
+        0.0,
+    ])
+    .transpose()
 }
 
 /// Rotation from a body frame (x forward, y left, z up) to its optical frame (x right, y down,
@@ -173,35 +85,6 @@ pub fn optical_rotation() -> Quat {
 /// The optical frame of a camera whose body frame has pose `body` in the world.
 pub fn optical_from_body(body: &Pose) -> Pose {
     Pose::from_parts(body.translation, body.rotation * optical_rotation())
-}
-
-/// A depth image: optical-axis distance in metres, row-major from the top-left; 0 is invalid.
-#[derive(Debug, Clone, PartialEq)]
-pub struct DepthImage {
-    pub width: u32,
-    pub height: u32,
-    pub data: Vec<f32>,
-}
-
-impl DepthImage {
-    pub fn at(&self, u: u32, v: u32) -> f32 {
-        self.data[(v * self.width + u) as usize]
-    }
-}
-
-/// An 8-bit sRGB image, row-major RGB from the top-left.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RgbImage {
-    pub width: u32,
-    pub height: u32,
-    pub data: Vec<u8>,
-}
-
-impl RgbImage {
-    pub fn at(&self, u: u32, v: u32) -> [u8; 3] {
-        let i = 3 * (v * self.width + u) as usize;
-        [self.data[i], self.data[i + 1], self.data[i + 2]]
-    }
 }
 
 /// One body of a scene: render meshes in the body frame and a pose.
@@ -933,7 +816,7 @@ impl Renderer {
                 std::mem::size_of::<CameraUniform>() as u64,
             );
         }
-        let proj = intr.projection(NEAR_PLANE, FAR_PLANE);
+        let proj = projection(intr, NEAR_PLANE, FAR_PLANE);
         let stride = self.uniform_stride as usize;
         let mut data = vec![0u8; stride * cameras.len()];
         for (i, c) in cameras.iter().enumerate() {

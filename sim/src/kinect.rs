@@ -1,0 +1,614 @@
+//! The Kinect v1 RGB-D camera: presets, mounting, and its depth noise models.
+//!
+//! Specs from `shared/reference/sensors-robot-metrics.md` §3.1: 57° × 43° field of view, 30 Hz,
+//! colour 640×480, depth 640×480 as OpenNI delivers it (320×240 in seed 000, after the retail
+//! spec list), a valid range of 0.8–4.0 m by default and 1.2–3.5 m in the seed 000 preset.
+//!
+//! Noise models, applied on the CPU to the noise-free render with a seeded stream:
+//! - [`NoiseModel::Nguyen`]: Nguyen, Izadi & Lovell 2012 (§3.3): axial σ_z = 0.0012 +
+//!   0.0019 (z − 0.4)² m, plus 0.0001 θ² / (√z (π/2 − θ)²) above θ = π/3, and lateral
+//!   σ_L = 0.8 + 0.035 θ / (π/2 − θ) px, θ the incidence angle (here from the depth image's own
+//!   normals);
+//! - [`NoiseModel::IclNuim`]: the ICL-NUIM / simkinect pipeline (§3.4): 0.5 px Gaussian lateral
+//!   jitter with bilinear resampling, disparity f·b/z quantised to 1/8 px, a window consistency
+//!   filter that drops pixels near depth edges, and Gaussian disparity noise of 1/6 step.
+//!
+//! Pixels outside the valid range, or dropped by a model, are invalid (0).
+
+use crate::config::{SpecError, check_range};
+use crate::render::{RenderError, Renderer, optical_from_body};
+use futago_msgs::camera::{DepthImage, Intrinsics, RgbdFrame};
+use futago_msgs::{Pose3, Time};
+use glam::{Quat, Vec3};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use rapier3d::math::Pose;
+use serde::Deserialize;
+use std::path::Path;
+
+/// Named parameter sets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum KinectPreset {
+    /// Kinect v1 as OpenNI drivers deliver it: 640×480 depth, 0.8–4.0 m.
+    KinectV1,
+    /// Seed 000's use: 320×240 depth, the retail 1.2–3.5 m play space.
+    Seed000,
+}
+
+/// Depth noise model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoiseModel {
+    /// Exact depth (still cut to the valid range).
+    #[default]
+    None,
+    /// Nguyen, Izadi & Lovell 2012 axial and lateral noise.
+    Nguyen,
+    /// ICL-NUIM's disparity-quantised model (simkinect).
+    IclNuim,
+}
+
+/// Noise parameters (the ICL-NUIM ones; Nguyen's are fixed by the paper).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NoiseConfig {
+    pub model: NoiseModel,
+    /// Projector–camera baseline for disparity, m (simkinect: 0.075).
+    pub baseline: f64,
+    /// Disparity step, px (1/8 in the Kinect).
+    pub disparity_step: f64,
+    /// Lateral jitter of the ICL-NUIM model, px (0.5).
+    pub jitter: f64,
+    /// Drop pixels whose neighbourhood is inconsistent (ICL-NUIM's dot-pattern filter).
+    pub edge_filter: bool,
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        NoiseConfig {
+            model: NoiseModel::None,
+            baseline: 0.075,
+            disparity_step: 0.125,
+            jitter: 0.5,
+            edge_filter: true,
+        }
+    }
+}
+
+/// A Kinect as a scenario configures it: `[[camera]]` tables.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct KinectConfig {
+    #[serde(default = "default_name")]
+    pub name: String,
+    #[serde(default = "default_preset")]
+    pub preset: KinectPreset,
+    /// Mounting position of the camera body frame on the robot base frame, m.
+    #[serde(default = "default_mount")]
+    pub xyz: [f64; 3],
+    /// Mounting roll, pitch (positive looks down), yaw, degrees.
+    #[serde(default)]
+    pub rpy_deg: [f64; 3],
+    /// Colour image size [width, height].
+    pub rgb_size: Option<[u32; 2]>,
+    /// Depth image size [width, height].
+    pub depth_size: Option<[u32; 2]>,
+    /// Field of view [horizontal, vertical], degrees.
+    pub fov_deg: Option<[f64; 2]>,
+    pub range_min: Option<f64>,
+    pub range_max: Option<f64>,
+    /// Frame rate, Hz.
+    pub rate: Option<f64>,
+    #[serde(default)]
+    pub noise: NoiseConfig,
+}
+
+fn default_name() -> String {
+    "kinect".into()
+}
+fn default_preset() -> KinectPreset {
+    KinectPreset::KinectV1
+}
+/// On top of the Create's body (0.36 m), set back from its front edge so it sees none of it.
+fn default_mount() -> [f64; 3] {
+    [0.1, 0.0, 0.42]
+}
+
+/// A resolved, checked camera model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KinectSpec {
+    pub name: String,
+    pub rgb: Intrinsics,
+    pub depth: Intrinsics,
+    pub range_min: f64,
+    pub range_max: f64,
+    pub rate: f64,
+    pub noise: NoiseConfig,
+    /// Camera body frame (x forward, y left, z up) in the robot base frame.
+    pub mount: Pose,
+}
+
+impl KinectConfig {
+    /// A preset with default mounting.
+    pub fn preset(preset: KinectPreset) -> KinectConfig {
+        KinectConfig {
+            name: default_name(),
+            preset,
+            xyz: default_mount(),
+            rpy_deg: [0.0; 3],
+            rgb_size: None,
+            depth_size: None,
+            fov_deg: None,
+            range_min: None,
+            range_max: None,
+            rate: None,
+            noise: NoiseConfig::default(),
+        }
+    }
+
+    /// The preset with overrides applied, checked; `key` locates this table in `file`.
+    pub fn resolve(&self, file: &Path, key: &str) -> Result<KinectSpec, SpecError> {
+        let k = |s: &str| format!("{key}.{s}");
+        crate::config::check_name(file, &k("name"), &self.name)?;
+        let (depth_size, range) = match self.preset {
+            KinectPreset::KinectV1 => ([640, 480], (0.8, 4.0)),
+            KinectPreset::Seed000 => ([320, 240], (1.2, 3.5)),
+        };
+        let rgb_size = self.rgb_size.unwrap_or([640, 480]);
+        let depth_size = self.depth_size.unwrap_or(depth_size);
+        let [fh, fv] = self.fov_deg.unwrap_or([57.0, 43.0]);
+        check_range(file, &k("fov_deg[0]"), fh, 1.0, 170.0, "degrees")?;
+        check_range(file, &k("fov_deg[1]"), fv, 1.0, 170.0, "degrees")?;
+        let intr = |name: &str, [w, h]: [u32; 2]| {
+            Intrinsics::from_fov(w, h, fh.to_radians(), fv.to_radians())
+                .map_err(|e| SpecError::new(file, k(name), e))
+        };
+        let rgb = intr("rgb_size", rgb_size)?;
+        let depth = intr("depth_size", depth_size)?;
+        let range_min = self.range_min.unwrap_or(range.0);
+        let range_max = self.range_max.unwrap_or(range.1);
+        check_range(file, &k("range_min"), range_min, 0.02, 100.0, "m")?;
+        check_range(
+            file,
+            &k("range_max"),
+            range_max,
+            range_min + 1e-3,
+            100.0,
+            "m (above range_min)",
+        )?;
+        let rate = self.rate.unwrap_or(30.0);
+        check_range(file, &k("rate"), rate, 0.01, 1000.0, "Hz")?;
+        let n = &self.noise;
+        check_range(file, &k("noise.baseline"), n.baseline, 1e-3, 1.0, "m")?;
+        check_range(
+            file,
+            &k("noise.disparity_step"),
+            n.disparity_step,
+            1e-4,
+            4.0,
+            "px",
+        )?;
+        check_range(file, &k("noise.jitter"), n.jitter, 0.0, 10.0, "px")?;
+        for (i, v) in self.xyz.iter().chain(&self.rpy_deg).enumerate() {
+            if !v.is_finite() {
+                return Err(SpecError::new(
+                    file,
+                    k(if i < 3 { "xyz" } else { "rpy_deg" }),
+                    "expected finite numbers",
+                ));
+            }
+        }
+        let [r, p, y] = self.rpy_deg.map(|a| a.to_radians() as f32);
+        let mount = Pose::from_parts(
+            Vec3::new(self.xyz[0] as f32, self.xyz[1] as f32, self.xyz[2] as f32),
+            Quat::from_euler(glam::EulerRot::ZYX, y, p, r),
+        );
+        Ok(KinectSpec {
+            name: self.name.clone(),
+            rgb,
+            depth,
+            range_min,
+            range_max,
+            rate,
+            noise: *n,
+            mount,
+        })
+    }
+}
+
+/// simkinect's constant in its final noise step (disparity-like units of depth in cm).
+const ICL_DISPARITY_CM: f64 = 35130.0;
+
+impl KinectSpec {
+    /// Applies the noise model and the valid range to a noise-free depth image in place.
+    pub fn apply_noise(&self, depth: &mut DepthImage, rng: &mut ChaCha8Rng) {
+        match self.noise.model {
+            NoiseModel::None => {}
+            NoiseModel::Nguyen => nguyen(depth, &self.depth, rng),
+            NoiseModel::IclNuim => icl_nuim(depth, &self.depth, &self.noise, rng),
+        }
+        let (lo, hi) = (self.range_min as f32, self.range_max as f32);
+        for z in &mut depth.data {
+            if !(*z >= lo && *z <= hi) {
+                *z = 0.0;
+            }
+        }
+    }
+}
+
+fn normal(rng: &mut ChaCha8Rng) -> f64 {
+    StandardNormal.sample(rng)
+}
+
+/// Incidence angle (rad) at pixel (u, v) from the depth image's local surface normal.
+fn incidence(d: &DepthImage, intr: &Intrinsics, u: u32, v: u32) -> f64 {
+    let z = d.at(u, v) as f64;
+    let p = intr.back_project(u as f64, v as f64, z);
+    // Neighbours on the same surface: within 5 % in depth.
+    let near = |uu: i64, vv: i64| -> Option<[f64; 3]> {
+        if uu < 0 || vv < 0 || uu >= d.width as i64 || vv >= d.height as i64 {
+            return None;
+        }
+        let zz = d.at(uu as u32, vv as u32) as f64;
+        (zz > 0.0 && (zz - z).abs() < 0.05 * z).then(|| intr.back_project(uu as f64, vv as f64, zz))
+    };
+    let (u, v) = (u as i64, v as i64);
+    let du = near(u + 1, v)
+        .map(|q| sub(q, p))
+        .or_else(|| near(u - 1, v).map(|q| sub(p, q)));
+    let dv = near(u, v + 1)
+        .map(|q| sub(q, p))
+        .or_else(|| near(u, v - 1).map(|q| sub(p, q)));
+    let (Some(a), Some(b)) = (du, dv) else {
+        return 0.0;
+    };
+    let n = [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ];
+    let nn = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    let pp = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+    if nn == 0.0 || pp == 0.0 {
+        return 0.0;
+    }
+    let c = (n[0] * p[0] + n[1] * p[1] + n[2] * p[2]).abs() / (nn * pp);
+    c.clamp(0.0, 1.0).acos()
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// Nguyen et al. 2012 axial standard deviation, m, at depth `z` and incidence `theta`.
+pub fn nguyen_axial_sigma(z: f64, theta: f64) -> f64 {
+    let mut s = 0.0012 + 0.0019 * (z - 0.4) * (z - 0.4);
+    let half_pi = std::f64::consts::FRAC_PI_2;
+    if theta > std::f64::consts::FRAC_PI_3 {
+        s += 0.0001 * theta * theta / (z.sqrt() * (half_pi - theta).powi(2));
+    }
+    s
+}
+
+/// Nguyen et al. 2012 lateral standard deviation, pixels.
+pub fn nguyen_lateral_sigma(theta: f64) -> f64 {
+    0.8 + 0.035 * theta / (std::f64::consts::FRAC_PI_2 - theta)
+}
+
+/// Largest incidence angle the Nguyen model is evaluated at (its terms diverge at π/2).
+const MAX_INCIDENCE: f64 = 1.48;
+
+fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng) {
+    let src = depth.clone();
+    let (w, h) = (src.width as i64, src.height as i64);
+    for v in 0..src.height {
+        for u in 0..src.width {
+            let i = (v * src.width + u) as usize;
+            if src.data[i] <= 0.0 {
+                continue;
+            }
+            let theta = incidence(&src, intr, u, v).min(MAX_INCIDENCE);
+            let sl = nguyen_lateral_sigma(theta);
+            let su = (u as f64 + sl * normal(rng)).round() as i64;
+            let sv = (v as f64 + sl * normal(rng)).round() as i64;
+            let z = if su >= 0 && sv >= 0 && su < w && sv < h {
+                src.at(su as u32, sv as u32) as f64
+            } else {
+                0.0
+            };
+            depth.data[i] = if z > 0.0 {
+                (z + nguyen_axial_sigma(z, theta) * normal(rng)) as f32
+            } else {
+                0.0
+            };
+        }
+    }
+}
+
+/// Bilinear sample of valid depths; falls back to the nearest pixel next to invalid ones.
+fn bilinear(d: &DepthImage, x: f64, y: f64) -> f32 {
+    let (w, h) = (d.width as i64, d.height as i64);
+    let (x0, y0) = (x.floor() as i64, y.floor() as i64);
+    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+    let get = |xx: i64, yy: i64| -> f32 {
+        if xx < 0 || yy < 0 || xx >= w || yy >= h {
+            0.0
+        } else {
+            d.at(xx as u32, yy as u32)
+        }
+    };
+    let c = [
+        get(x0, y0),
+        get(x0 + 1, y0),
+        get(x0, y0 + 1),
+        get(x0 + 1, y0 + 1),
+    ];
+    if c.iter().all(|&z| z > 0.0) {
+        let top = c[0] as f64 * (1.0 - fx) + c[1] as f64 * fx;
+        let bottom = c[2] as f64 * (1.0 - fx) + c[3] as f64 * fx;
+        (top * (1.0 - fy) + bottom * fy) as f32
+    } else {
+        get(x.round() as i64, y.round() as i64)
+    }
+}
+
+fn icl_nuim(depth: &mut DepthImage, intr: &Intrinsics, n: &NoiseConfig, rng: &mut ChaCha8Rng) {
+    let (w, h) = (depth.width, depth.height);
+    let fb = intr.fx * n.baseline;
+    // 1. Lateral jitter with bilinear resampling.
+    let mut jittered = depth.clone();
+    for v in 0..h {
+        for u in 0..w {
+            let x = u as f64 + n.jitter * normal(rng);
+            let y = v as f64 + n.jitter * normal(rng);
+            jittered.data[(v * w + u) as usize] = bilinear(depth, x, y);
+        }
+    }
+    // 2. Disparity, quantised to the sub-pixel step.
+    let step = n.disparity_step;
+    let disp: Vec<f64> = jittered
+        .data
+        .iter()
+        .map(|&z| {
+            if z > 0.0 {
+                (fb / z as f64 / step).round() * step
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    // 3. Window consistency (after simkinect's dot-pattern filter): a 9×9 window sampled every
+    //    2 px must be mostly valid, and mostly within 0.1 px of its distance-weighted mean.
+    let keep = |u: i64, v: i64| -> bool {
+        let mut samples = 0usize;
+        let mut valid = Vec::with_capacity(25);
+        for dv in (-4..=4).step_by(2) {
+            for du in (-4..=4).step_by(2) {
+                samples += 1;
+                let (x, y) = (u + du, v + dv);
+                if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+                    continue;
+                }
+                let d = disp[(y * w as i64 + x) as usize];
+                if d > 0.0 {
+                    valid.push((d, 1.0 / (1.0 + 1.44 * (du * du + dv * dv) as f64)));
+                }
+            }
+        }
+        let need = samples as f64 / 1.2;
+        if (valid.len() as f64) <= need {
+            return false;
+        }
+        let wsum: f64 = valid.iter().map(|s| s.1).sum();
+        let mean = valid.iter().map(|s| s.0 * s.1).sum::<f64>() / wsum;
+        let inliers = valid.iter().filter(|s| (s.0 - mean).abs() < 0.1).count();
+        inliers as f64 > need
+    };
+    for v in 0..h {
+        for u in 0..w {
+            let i = (v * w + u) as usize;
+            let d = disp[i];
+            depth.data[i] = if d <= 0.0 || (n.edge_filter && !keep(u as i64, v as i64)) {
+                0.0
+            } else {
+                // 4–5. Back to depth, then simkinect's Gaussian disparity noise (depth in cm).
+                let z_cm = (fb / d * 100.0).round();
+                if z_cm <= 0.0 {
+                    0.0
+                } else {
+                    let noisy = (ICL_DISPARITY_CM / z_cm + normal(rng) / 6.0 + 0.5).round();
+                    if noisy <= 0.0 {
+                        0.0
+                    } else {
+                        (ICL_DISPARITY_CM / noisy / 100.0) as f32
+                    }
+                }
+            };
+        }
+    }
+}
+
+/// A mounted camera in a running simulation: its model, noise stream and frame clock.
+pub struct Kinect {
+    pub spec: KinectSpec,
+    rng: ChaCha8Rng,
+    frames: u64,
+}
+
+impl Kinect {
+    pub fn new(spec: KinectSpec, rng: ChaCha8Rng) -> Kinect {
+        Kinect {
+            spec,
+            rng,
+            frames: 0,
+        }
+    }
+
+    /// Whether a frame falls due at simulation time `t_ns` (the k-th frame at k / rate).
+    pub fn due(&self, t_ns: i64) -> bool {
+        t_ns as f64 >= self.frames as f64 * 1e9 / self.spec.rate - 0.5
+    }
+
+    /// Counts a frame as taken, and returns its index.
+    pub fn take(&mut self) -> u64 {
+        self.frames += 1;
+        self.frames - 1
+    }
+
+    /// Renders a frame from the camera on a robot whose base frame has pose `base`, with the
+    /// scene's bodies already posed in `renderer`; adds noise. `rgb`: also render colour.
+    pub fn capture(
+        &mut self,
+        renderer: &mut Renderer,
+        base: &Pose,
+        stamp: Time,
+        rgb: bool,
+    ) -> Result<RgbdFrame, RenderError> {
+        let camera = *base * self.spec.mount;
+        let (rgb, mut depth) = if rgb {
+            let (c, d) = renderer.render(&self.spec.rgb, &camera)?;
+            if self.spec.depth == self.spec.rgb {
+                (Some(c), d)
+            } else {
+                (Some(c), renderer.render_depth(&self.spec.depth, &camera)?)
+            }
+        } else {
+            (None, renderer.render_depth(&self.spec.depth, &camera)?)
+        };
+        self.spec.apply_noise(&mut depth, &mut self.rng);
+        Ok(RgbdFrame {
+            stamp,
+            rgb,
+            rgb_intrinsics: self.spec.rgb,
+            depth,
+            depth_intrinsics: self.spec.depth,
+        })
+    }
+
+    /// The optical frame's pose in the world for a robot base pose (TUM ground truth).
+    pub fn optical_pose(&self, base: &Pose) -> Pose3 {
+        let o = optical_from_body(&(*base * self.spec.mount));
+        let (t, q) = (o.translation, o.rotation);
+        Pose3 {
+            translation: [t.x as f64, t.y as f64, t.z as f64],
+            rotation: [q.x as f64, q.y as f64, q.z as f64, q.w as f64],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::noise::stream;
+
+    fn plane(z: f32, w: u32, h: u32) -> DepthImage {
+        DepthImage {
+            width: w,
+            height: h,
+            data: vec![z; (w * h) as usize],
+        }
+    }
+
+    fn spec(model: NoiseModel) -> KinectSpec {
+        let mut c = KinectConfig::preset(KinectPreset::KinectV1);
+        c.noise.model = model;
+        c.depth_size = Some([160, 120]);
+        c.resolve(Path::new("t.toml"), "camera[0]").unwrap()
+    }
+
+    fn stats(d: &DepthImage) -> (f64, f64, usize) {
+        let v: Vec<f64> = d
+            .data
+            .iter()
+            .filter(|&&z| z > 0.0)
+            .map(|&z| z as f64)
+            .collect();
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        let s = (v.iter().map(|z| (z - m) * (z - m)).sum::<f64>() / v.len() as f64).sqrt();
+        (m, s, v.len())
+    }
+
+    #[test]
+    fn nguyen_noise_on_a_frontal_plane_has_the_papers_sigma() {
+        let s = spec(NoiseModel::Nguyen);
+        for z in [1.0f32, 2.5] {
+            let mut d = plane(z, 160, 120);
+            s.apply_noise(&mut d, &mut stream(3, "kinect"));
+            let (m, sd, n) = stats(&d);
+            let want = nguyen_axial_sigma(z as f64, 0.0);
+            assert!(n > 18_000, "{n} valid");
+            assert!(
+                (m - z as f64).abs() < 3.0 * want / (n as f64).sqrt() + 1e-4,
+                "mean {m}"
+            );
+            assert!((sd / want - 1.0).abs() < 0.05, "σ {sd} vs {want} at {z} m");
+        }
+        // 9.6 mm at 2.5 m and 1.5 mm at 0.8 m, as the reference gives.
+        assert!((nguyen_axial_sigma(2.5, 0.0) - 0.00958).abs() < 1e-4);
+        assert!((nguyen_axial_sigma(0.8, 0.0) - 0.0015).abs() < 1e-4);
+    }
+
+    #[test]
+    fn icl_nuim_depths_are_quantised_disparities_and_range_cuts() {
+        let mut s = spec(NoiseModel::IclNuim);
+        s.noise.jitter = 0.0;
+        let mut d = plane(3.0, 160, 120);
+        s.apply_noise(&mut d, &mut stream(3, "kinect"));
+        let (m, sd, n) = stats(&d);
+        // Interior pixels survive the window filter; the border (4 px) may not.
+        assert!(n >= 152 * 112, "{n} valid");
+        // Biased by at most one disparity step (coarse here: 160 px wide) and the cm rounding.
+        let step_m = 9.0 * s.noise.disparity_step / (s.depth.fx * s.noise.baseline);
+        assert!(
+            (m - 3.0).abs() < step_m + 0.01,
+            "mean {m}, one step {step_m} m"
+        );
+        // Disparity noise of 1/6 step in simkinect's units: a few mm at 3 m.
+        assert!(sd > 0.001 && sd < 0.03, "σ {sd}");
+        // Every value is 35130 / k / 100 for an integer k.
+        for &z in d.data.iter().filter(|&&z| z > 0.0).take(500) {
+            let k = ICL_DISPARITY_CM / (z as f64 * 100.0);
+            assert!((k - k.round()).abs() < 1e-3, "{z} is not quantised ({k})");
+        }
+        // Out of the valid range: all invalid.
+        let mut far = plane(4.5, 160, 120);
+        s.apply_noise(&mut far, &mut stream(3, "kinect"));
+        assert!(far.data.iter().all(|&z| z == 0.0));
+    }
+
+    #[test]
+    fn icl_nuim_filter_drops_depth_edges() {
+        let s = spec(NoiseModel::IclNuim);
+        let mut d = plane(1.5, 160, 120);
+        for v in 0..120 {
+            for u in 80..160 {
+                d.data[v * 160 + u] = 3.0;
+            }
+        }
+        s.apply_noise(&mut d, &mut stream(3, "kinect"));
+        let row = 60 * 160;
+        assert!(d.data[row + 40] > 0.0 && d.data[row + 120] > 0.0);
+        assert!(
+            d.data[row + 79] == 0.0 && d.data[row + 80] == 0.0,
+            "edge kept"
+        );
+    }
+
+    #[test]
+    fn bad_camera_tables_name_the_key() {
+        let mut c = KinectConfig::preset(KinectPreset::Seed000);
+        c.depth_size = Some([0, 240]);
+        let e = c.resolve(Path::new("s.toml"), "camera[0]").unwrap_err();
+        assert!(e.to_string().contains("camera[0].depth_size"), "{e}");
+        let mut c = KinectConfig::preset(KinectPreset::Seed000);
+        c.fov_deg = Some([200.0, 43.0]);
+        let e = c.resolve(Path::new("s.toml"), "camera[0]").unwrap_err();
+        assert!(e.to_string().contains("camera[0].fov_deg[0]"), "{e}");
+        let s = KinectConfig::preset(KinectPreset::Seed000)
+            .resolve(Path::new("s.toml"), "camera[0]")
+            .unwrap();
+        assert_eq!((s.depth.width, s.depth.height), (320, 240));
+        assert_eq!((s.range_min, s.range_max), (1.2, 3.5));
+    }
+}
