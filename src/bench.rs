@@ -1,13 +1,19 @@
-//! `futago bench`: the simulator's speed, measured on a real scenario.
+//! `futago bench`: the simulator's speed on a real scenario (`sim`), and the sensors' speed in
+//! any world (`sensors`): camera images and laser rays per second.
 
 use crate::run::{RunOptions, run_in_memory};
 use crate::scenario::Scenario;
-use anyhow::Result;
-use futago_sim::Simulation;
+use anyhow::{Context, Result, bail};
+use futago_msgs::Pose2;
+use futago_sim::create::CreateConfig;
 use futago_sim::lidar::LidarPreset;
-use glam::Vec3;
+use futago_sim::render::{Intrinsics, Renderer, Scene};
+use futago_sim::{PhysicsConfig, Simulation, World};
+use glam::{Quat, Vec3};
 use rand::{Rng, SeedableRng};
+use rapier3d::math::Pose;
 use serde_json::{Value, json};
+use std::path::Path;
 use std::time::Instant;
 
 /// Measures (1) the real-time factor of the scenario with its lasers, (2) without them
@@ -26,21 +32,55 @@ pub fn bench(s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> 
 
     let mut sim = Simulation::new(&s.world, &s.spec.physics, &s.spec.robot, &[], s.start, 0);
     sim.step(None); // builds the query structure
-    let (lo, hi) = s.world.bounds();
+    let origins: Vec<Vec3> = free_poses(&sim, &s.world, 256, 0.2)
+        .iter()
+        .map(|p| p.translation)
+        .collect();
+    let rates = laser_rates(&sim, &origins, rays);
+    Ok(json!({
+        "scenario": s.spec.name,
+        "sim_time_s": full.sim_time,
+        "with_lasers": { "wall_time_s": full.wall_time, "real_time_factor": full.sim_time / full.wall_time, "laser_rays": full.laser_rays, "steps": full.steps },
+        "physics_only": { "wall_time_s": physics.wall_time, "real_time_factor": physics.sim_time / physics.wall_time },
+        "ray_casting_one_core": rates,
+    }))
+}
+
+/// `n` random camera poses in the world's bounds at height `z`, each with free space around
+/// it (no surface within 5 cm along x), any yaw. Deterministic.
+fn free_poses(sim: &Simulation, world: &World, n: usize, z: f32) -> Vec<Pose> {
+    let (lo, hi) = world.bounds();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let mut origins = Vec::new();
-    while origins.len() < 256 {
+    let mut out = Vec::new();
+    let mut tries = 0;
+    while out.len() < n && tries < 100 * n {
+        tries += 1;
         let p = Vec3::new(
-            rng.random_range(lo.x..hi.x),
-            rng.random_range(lo.y..hi.y),
-            0.2,
+            rng.random_range(lo.x..=hi.x),
+            rng.random_range(lo.y..=hi.y),
+            z,
         );
-        // Keep origins that are not inside geometry: a ray straight up must reach the ceiling
-        // region from outside any box (cheap proxy: the point must see some free space).
-        if sim.cast_ray(p, Vec3::X, 0.05).is_none() {
-            origins.push(p);
+        let yaw: f32 = rng.random_range(-std::f32::consts::PI..std::f32::consts::PI);
+        if [
+            Vec3::X,
+            Vec3::NEG_X,
+            Vec3::Y,
+            Vec3::NEG_Y,
+            Vec3::Z,
+            Vec3::NEG_Z,
+        ]
+        .iter()
+        .all(|d| sim.cast_ray(p, *d, 0.05).is_none())
+        {
+            out.push(Pose::from_parts(p, Quat::from_rotation_z(yaw)));
         }
     }
+    out
+}
+
+/// Single-thread ray casts per second with 682-beam fans (the URG-04LX's) from `origins`, at
+/// the URG's 5.6 m and at 30 m.
+fn laser_rates(sim: &Simulation, origins: &[Vec3], rays: usize) -> Value {
     let mut rates = serde_json::Map::new();
     for (label, max) in [
         ("urg04lx_5.6m", LidarPreset::Urg04lx.spec().range_max as f32),
@@ -56,7 +96,7 @@ pub fn bench(s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> 
         let t = Instant::now();
         let mut hits = 0usize;
         let mut n = 0usize;
-        while n < rays {
+        while n < rays && !origins.is_empty() {
             let o = origins[(n / beams) % origins.len()];
             for d in &dirs {
                 if sim.cast_ray(o, *d, max).is_some() {
@@ -68,14 +108,149 @@ pub fn bench(s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> 
         let secs = t.elapsed().as_secs_f64();
         rates.insert(
             label.into(),
-            json!({ "rays": n, "hits": hits, "seconds": secs, "rays_per_second": n as f64 / secs }),
+            json!({ "rays": n, "hits": hits, "seconds": secs, "rays_per_second": n as f64 / secs.max(1e-9) }),
         );
     }
-    Ok(json!({
-        "scenario": s.spec.name,
-        "sim_time_s": full.sim_time,
-        "with_lasers": { "wall_time_s": full.wall_time, "real_time_factor": full.sim_time / full.wall_time, "laser_rays": full.laser_rays, "steps": full.steps },
-        "physics_only": { "wall_time_s": physics.wall_time, "real_time_factor": physics.sim_time / physics.wall_time },
-        "ray_casting_one_core": rates,
-    }))
+    Value::Object(rates)
+}
+
+/// Reads camera poses: one `x,y,z,yaw` per line (metres, radians), `#` comments.
+pub fn read_poses(path: &Path) -> Result<Vec<Pose>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading poses from {}", path.display()))?;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let v: Vec<f32> = line
+            .split(',')
+            .map(|w| w.trim().parse::<f32>().ok().filter(|x| x.is_finite()))
+            .collect::<Option<_>>()
+            .filter(|v: &Vec<f32>| v.len() == 4)
+            .with_context(|| {
+                format!(
+                    "{} line {}: expected `x,y,z,yaw` (four finite numbers: metres and radians), found `{line}`",
+                    path.display(),
+                    i + 1
+                )
+            })?;
+        out.push(Pose::from_parts(
+            Vec3::new(v[0], v[1], v[2]),
+            Quat::from_rotation_z(v[3]),
+        ));
+    }
+    if out.is_empty() {
+        bail!("{}: no poses (expected `x,y,z,yaw` lines)", path.display());
+    }
+    Ok(out)
+}
+
+/// What `futago bench sensors` measures.
+#[derive(Debug, Clone)]
+pub struct SensorBench {
+    /// Frames per single-view workload.
+    pub frames: usize,
+    /// Views per batch and batches to render.
+    pub batch: usize,
+    pub batches: usize,
+    pub batch_size: (u32, u32),
+    /// Rays per laser measurement.
+    pub rays: usize,
+}
+
+/// Camera and laser throughput in `world` from `poses` (or random free poses at 0.42 m, the
+/// default Kinect mount height): 640×480 RGB + depth frames per second, depth alone at
+/// 640×480 and 320×240, batched small depth images per second, and laser rays per second.
+pub fn bench_sensors(world: &World, poses: Option<Vec<Pose>>, b: &SensorBench) -> Result<Value> {
+    let mut sim = Simulation::new(
+        world,
+        &PhysicsConfig::default(),
+        &CreateConfig::default(),
+        &[],
+        Pose2::new(1e4, 1e4, 0.0),
+        0,
+    );
+    sim.step(None);
+    let poses = match poses {
+        Some(p) => p,
+        None => free_poses(&sim, world, 64, 0.42),
+    };
+    if poses.is_empty() {
+        bail!("found no free camera pose in world `{}`", world.name);
+    }
+    let started = Instant::now();
+    let mut r = Renderer::new(&Scene::from_world(world)).context("starting the renderer")?;
+    let startup = started.elapsed().as_secs_f64();
+    let fov = (57f64.to_radians(), 43f64.to_radians());
+    let intr = |w, h| Intrinsics::from_fov(w, h, fov.0, fov.1).map_err(anyhow::Error::msg);
+    let vga = intr(640, 480)?;
+    let qvga = intr(320, 240)?;
+    let small = intr(b.batch_size.0, b.batch_size.1)?;
+    let mut out = serde_json::Map::new();
+    out.insert("world".into(), json!(world.name));
+    out.insert("triangles".into(), json!(world.triangle_count()));
+    out.insert("adapter".into(), json!(r.adapter()));
+    out.insert("startup_s".into(), json!(startup));
+    out.insert("poses".into(), json!(poses.len()));
+    let frames = b.frames.max(1);
+    let mut valid = 0usize;
+    let time = |label: &str,
+                out: &mut serde_json::Map<String, Value>,
+                f: &mut dyn FnMut(&Pose) -> Result<usize>|
+     -> Result<()> {
+        // Warm-up: pipelines, targets and driver caches.
+        for p in poses.iter().take(3) {
+            f(p)?;
+        }
+        let t = Instant::now();
+        let mut n = 0;
+        for i in 0..frames {
+            n += f(&poses[i % poses.len()])?;
+        }
+        let secs = t.elapsed().as_secs_f64();
+        out.insert(
+            label.into(),
+            json!({ "frames": frames, "seconds": secs, "frames_per_second": frames as f64 / secs, "valid_pixels": n }),
+        );
+        Ok(())
+    };
+    time("rgb_depth_640x480", &mut out, &mut |p| {
+        let (_, d) = r.render(&vga, p)?;
+        Ok(d.data.iter().filter(|&&z| z > 0.0).count())
+    })?;
+    time("depth_640x480", &mut out, &mut |p| {
+        Ok(r.render_depth(&vga, p)?
+            .data
+            .iter()
+            .filter(|&&z| z > 0.0)
+            .count())
+    })?;
+    time("depth_320x240", &mut out, &mut |p| {
+        Ok(r.render_depth(&qvga, p)?
+            .data
+            .iter()
+            .filter(|&&z| z > 0.0)
+            .count())
+    })?;
+    let views: Vec<Pose> = (0..b.batch.max(1))
+        .map(|i| poses[i % poses.len()])
+        .collect();
+    let mut buf = Vec::new();
+    r.render_depth_batch(&small, &views, &mut buf)?;
+    let t = Instant::now();
+    for _ in 0..b.batches.max(1) {
+        r.render_depth_batch(&small, &views, &mut buf)?;
+        valid += buf.iter().filter(|&&z| z > 0.0).count();
+    }
+    let secs = t.elapsed().as_secs_f64();
+    let images = views.len() * b.batches.max(1);
+    out.insert(
+        format!("depth_batch_{}x{}", small.width, small.height),
+        json!({ "batch": views.len(), "batches": b.batches.max(1), "seconds": secs, "images_per_second": images as f64 / secs, "ms_per_batch": secs * 1e3 / b.batches.max(1) as f64, "valid_pixels": valid }),
+    );
+    let origins: Vec<Vec3> = poses.iter().map(|p| p.translation).collect();
+    out.insert("laser_one_core".into(), laser_rates(&sim, &origins, b.rays));
+    Ok(Value::Object(out))
 }

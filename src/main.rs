@@ -47,8 +47,17 @@ enum Command {
         #[command(subcommand)]
         command: WorldCommand,
     },
-    /// Measure the simulator's speed: real-time factor of a scenario and laser rays per second.
+    /// Measure speed: the simulator's real-time factor, camera images and laser rays per second.
     Bench {
+        #[command(subcommand)]
+        command: BenchCommand,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// Real-time factor of a scenario with and without its lasers, and laser rays per second.
+    Sim {
         /// Scenario to measure.
         #[arg(default_value = "scenarios/bench-office.toml")]
         scenario: PathBuf,
@@ -59,6 +68,47 @@ enum Command {
         #[arg(long, default_value_t = 2_000_000)]
         rays: usize,
     },
+    /// Camera images per second (640×480 RGB + depth, depth alone, batches of small depth
+    /// images) and laser rays per second, in any world.
+    Sensors {
+        /// World file (TOML, or a bare .glb/.gltf mesh).
+        #[arg(long, default_value = "worlds/office.toml")]
+        world: PathBuf,
+        /// Camera poses, one `x,y,z,yaw` per line (m, rad) [default: 64 random free poses at
+        /// the Kinect's 0.42 m].
+        #[arg(long)]
+        poses: Option<PathBuf>,
+        /// Frames per single-image workload.
+        #[arg(long, default_value_t = 300)]
+        frames: usize,
+        /// Views per batch (seed 002's particle count).
+        #[arg(long, default_value_t = 200)]
+        batch: usize,
+        /// Batches to render.
+        #[arg(long, default_value_t = 20)]
+        batches: usize,
+        /// Batch image size WIDTHxHEIGHT (seed 002's SR4000: 176x144).
+        #[arg(long, default_value = "176x144")]
+        batch_size: String,
+        /// Rays per laser measurement.
+        #[arg(long, default_value_t = 1_000_000)]
+        rays: usize,
+    },
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("--batch-size: expected WIDTHxHEIGHT, found `{s}`"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .with_context(|| format!("--batch-size: `{w}` is not a pixel count"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .with_context(|| format!("--batch-size: `{h}` is not a pixel count"))?;
+    Ok((w, h))
 }
 
 #[derive(Subcommand)]
@@ -196,12 +246,42 @@ fn real_main() -> Result<()> {
             }
         },
         Command::Bench {
-            scenario,
-            duration,
-            rays,
+            command:
+                BenchCommand::Sim {
+                    scenario,
+                    duration,
+                    rays,
+                },
         } => {
             let s = scenario::Scenario::load(&scenario)?;
             let r = bench::bench(&s, duration, rays.max(682))?;
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+        Command::Bench {
+            command:
+                BenchCommand::Sensors {
+                    world,
+                    poses,
+                    frames,
+                    batch,
+                    batches,
+                    batch_size,
+                    rays,
+                },
+        } => {
+            let w = world_cmd::load(&world)?;
+            let poses = poses.map(|p| bench::read_poses(&p)).transpose()?;
+            let r = bench::bench_sensors(
+                &w,
+                poses,
+                &bench::SensorBench {
+                    frames,
+                    batch,
+                    batches,
+                    batch_size: parse_size(&batch_size)?,
+                    rays: rays.max(682),
+                },
+            )?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
     }

@@ -229,23 +229,11 @@ impl Lighting {
     pub fn shade(&self, n: Vec3) -> f32 {
         self.ambient + (1.0 - self.ambient) * n.dot(self.towards_light).abs()
     }
-}
 
-/// sRGB transfer function, encoded [0, 1] to linear.
-pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// sRGB transfer function, linear [0, 1] to encoded.
-pub fn linear_to_srgb(c: f32) -> f32 {
-    if c <= 0.0031308 {
-        c * 12.92
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
+    /// The factor applied to sRGB-encoded colours: `shade^(1/2.2)`, which under the 2.2 power
+    /// law equals encoding the linearly shaded albedo.
+    pub fn encoded_shade(&self, n: Vec3) -> f32 {
+        self.shade(n).powf(1.0 / 2.2)
     }
 }
 
@@ -256,7 +244,7 @@ pub const FAR_PLANE: f32 = 100.0;
 /// How long a frame may take before the device is declared hung.
 const FRAME_TIMEOUT: StdDuration = StdDuration::from_secs(60);
 
-const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_BITS_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 const ZBUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
@@ -273,13 +261,13 @@ struct Vertex {
 struct CameraUniform {
     view_proj: [f32; 16],
     view: [f32; 16],
+    light: [f32; 4],
 }
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct MaterialUniform {
     color: [f32; 4],
-    light: [f32; 4],
 }
 
 /// A run of indices drawn with one material and one transform slot.
@@ -336,6 +324,8 @@ pub struct Renderer {
     gpu: Gpu,
     lighting: Lighting,
     color_pipeline: wgpu::RenderPipeline,
+    /// Depth-only pass before the colour pass, so that fragments are shaded once.
+    z_pipeline: wgpu::RenderPipeline,
     depth_pipeline: wgpu::RenderPipeline,
     frame_layout: wgpu::BindGroupLayout,
     frame_group: wgpu::BindGroup,
@@ -469,7 +459,8 @@ impl Renderer {
         let pipeline = |label: &str,
                         layouts: &[Option<&wgpu::BindGroupLayout>],
                         fs: &str,
-                        targets: &[Option<wgpu::ColorTargetState>]| {
+                        targets: &[Option<wgpu::ColorTargetState>],
+                        depth_stencil: wgpu::DepthStencilState| {
             let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some(label),
                 bind_group_layouts: layouts,
@@ -485,7 +476,7 @@ impl Renderer {
                     buffers: &[Some(vertex_layout.clone())],
                 },
                 primitive,
-                depth_stencil: Some(depth_stencil.clone()),
+                depth_stencil: Some(depth_stencil),
                 multisample: Default::default(),
                 fragment: Some(wgpu::FragmentState {
                     module: &shader,
@@ -502,12 +493,33 @@ impl Renderer {
             &[Some(&frame_layout), Some(&material_layout)],
             "fs_color",
             &[Some(COLOR_FORMAT.into()), Some(DEPTH_BITS_FORMAT.into())],
+            // After the z pre-pass: shade only the visible surface of each pixel.
+            wgpu::DepthStencilState {
+                depth_write_enabled: Some(false),
+                depth_compare: Some(wgpu::CompareFunction::LessEqual),
+                ..depth_stencil.clone()
+            },
+        );
+        let masked = |format: wgpu::TextureFormat| {
+            Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::empty(),
+            })
+        };
+        let z_pipeline = pipeline(
+            "z pre-pass",
+            &[Some(&frame_layout)],
+            "fs_none",
+            &[masked(COLOR_FORMAT), masked(DEPTH_BITS_FORMAT)],
+            depth_stencil.clone(),
         );
         let depth_pipeline = pipeline(
             "depth",
             &[Some(&frame_layout)],
             "fs_depth",
             &[Some(DEPTH_BITS_FORMAT.into())],
+            depth_stencil.clone(),
         );
 
         // Geometry: static bodies baked into world coordinates and grouped by material, then
@@ -631,7 +643,7 @@ impl Renderer {
                     mip_level_count: 1,
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                    format: wgpu::TextureFormat::Rgba8Unorm,
                     usage: wgpu::TextureUsages::TEXTURE_BINDING,
                     view_formats: &[],
                 },
@@ -655,15 +667,9 @@ impl Renderer {
             .materials
             .iter()
             .map(|m| {
-                let c = m.color.map(|c| srgb_to_linear(c as f32));
+                let c = m.color.map(|c| c as f32);
                 let u = MaterialUniform {
                     color: [c[0], c[1], c[2], 1.0],
-                    light: [
-                        lighting.towards_light.x,
-                        lighting.towards_light.y,
-                        lighting.towards_light.z,
-                        lighting.ambient,
-                    ],
                 };
                 let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some(&m.name),
@@ -711,6 +717,7 @@ impl Renderer {
             gpu,
             lighting,
             color_pipeline,
+            z_pipeline,
             depth_pipeline,
             frame_layout,
             frame_group,
@@ -821,9 +828,16 @@ impl Renderer {
         let mut data = vec![0u8; stride * cameras.len()];
         for (i, c) in cameras.iter().enumerate() {
             let view = optical_from_body(c).inverse().to_mat4();
+            let l = self.lighting;
             let u = CameraUniform {
                 view_proj: (proj * view).to_cols_array(),
                 view: view.to_cols_array(),
+                light: [
+                    l.towards_light.x,
+                    l.towards_light.y,
+                    l.towards_light.z,
+                    l.ambient,
+                ],
             };
             data[i * stride..i * stride + std::mem::size_of::<CameraUniform>()]
                 .copy_from_slice(bytemuck::bytes_of(&u));
@@ -926,33 +940,35 @@ impl Renderer {
             multiview_mask: None,
         });
         let color = t.color.is_some();
-        pass.set_pipeline(if color {
-            &self.color_pipeline
-        } else {
-            &self.depth_pipeline
-        });
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
         let stride = self.uniform_stride;
-        let draws = if color {
-            &self.draws
-        } else {
-            &self.depth_draws
-        };
         for &((x, y), cam) in views {
             pass.set_viewport(x as f32, y as f32, tile.0 as f32, tile.1 as f32, 0.0, 1.0);
             pass.set_scissor_rect(x, y, tile.0, tile.1);
-            let mut bound = (u32::MAX, usize::MAX);
-            for d in draws {
-                if bound.0 != d.slot {
-                    pass.set_bind_group(0, &self.frame_group, &[cam * stride, d.slot * stride]);
-                    bound.0 = d.slot;
+            let phases: &[(&wgpu::RenderPipeline, &[Draw])] = if color {
+                &[
+                    (&self.z_pipeline, &self.depth_draws),
+                    (&self.color_pipeline, &self.draws),
+                ]
+            } else {
+                &[(&self.depth_pipeline, &self.depth_draws)]
+            };
+            for (k, &(pipeline, draws)) in phases.iter().enumerate() {
+                let shaded = color && k == 1;
+                pass.set_pipeline(pipeline);
+                let mut bound = (u32::MAX, usize::MAX);
+                for d in draws {
+                    if bound.0 != d.slot {
+                        pass.set_bind_group(0, &self.frame_group, &[cam * stride, d.slot * stride]);
+                        bound.0 = d.slot;
+                    }
+                    if shaded && bound.1 != d.material {
+                        pass.set_bind_group(1, &self.material_groups[d.material], &[]);
+                        bound.1 = d.material;
+                    }
+                    pass.draw_indexed(d.indices.clone(), 0, 0..1);
                 }
-                if color && bound.1 != d.material {
-                    pass.set_bind_group(1, &self.material_groups[d.material], &[]);
-                    bound.1 = d.material;
-                }
-                pass.draw_indexed(d.indices.clone(), 0, 0..1);
             }
         }
     }

@@ -8,6 +8,8 @@
 struct Camera {
     view_proj: mat4x4<f32>,
     view: mat4x4<f32>,
+    // Unit vector towards the light (xyz, world frame) and the ambient share (w).
+    light: vec4<f32>,
 };
 
 struct Model {
@@ -15,10 +17,8 @@ struct Model {
 };
 
 struct Material {
-    // Linear RGB base colour, alpha unused.
+    // sRGB-encoded base colour, alpha unused.
     color: vec4<f32>,
-    // Unit vector towards the light (xyz) and the ambient share (w).
-    light: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> camera: Camera;
@@ -30,7 +30,7 @@ struct Material {
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) z: f32,
-    @location(1) normal: vec3<f32>,
+    @location(1) shade: f32,
     @location(2) uv: vec2<f32>,
 };
 
@@ -44,7 +44,12 @@ fn vs_main(
     var out: VertexOut;
     out.clip = camera.view_proj * world;
     out.z = (camera.view * world).z;
-    out.normal = (model.model * vec4<f32>(normal, 0.0)).xyz;
+    // Two-sided Lambert under one fixed light plus ambient, per vertex (exact on flat faces):
+    // view-independent shading. Colours and textures stay sRGB-encoded; with the 2.2 power
+    // law, encode(albedo * shade) equals encoded albedo * shade^(1/2.2).
+    let n = normalize((model.model * vec4<f32>(normal, 0.0)).xyz);
+    let ambient = camera.light.w;
+    out.shade = pow(ambient + (1.0 - ambient) * abs(dot(n, camera.light.xyz)), 1.0 / 2.2);
     out.uv = uv;
     return out;
 }
@@ -57,12 +62,8 @@ struct ColorOut {
 @fragment
 fn fs_color(in: VertexOut) -> ColorOut {
     let texel = textureSample(base_color, base_sampler, in.uv);
-    let n = normalize(in.normal);
-    // Two-sided Lambert under one fixed light plus ambient: view-independent shading.
-    let ambient = material.light.w;
-    let shade = ambient + (1.0 - ambient) * abs(dot(n, material.light.xyz));
     var out: ColorOut;
-    out.color = vec4<f32>(material.color.rgb * texel.rgb * shade, 1.0);
+    out.color = vec4<f32>(material.color.rgb * texel.rgb * in.shade, 1.0);
     out.depth = bitcast<u32>(in.z);
     return out;
 }
@@ -71,3 +72,7 @@ fn fs_color(in: VertexOut) -> ColorOut {
 fn fs_depth(in: VertexOut) -> @location(0) u32 {
     return bitcast<u32>(in.z);
 }
+
+// The z pre-pass: writes the z-buffer only.
+@fragment
+fn fs_none() {}

@@ -84,8 +84,41 @@ pub struct World {
 pub type Bounds = (Vec3, Vec3);
 
 impl World {
-    /// Loads and compiles a world file, with its meshes and textures.
+    /// Loads and compiles a world file, with its meshes and textures. A bare glTF file
+    /// (`.glb`, `.gltf`) is a world of that one static mesh, its triangles the collider.
     pub fn load(path: &Path) -> Result<World, SpecError> {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        if matches!(ext.as_deref(), Some("glb" | "gltf")) {
+            let file = path
+                .file_name()
+                .map(|f| f.to_string_lossy().to_string())
+                .unwrap_or_default();
+            let name: String = path
+                .file_stem()
+                .map(|f| f.to_string_lossy().to_string())
+                .unwrap_or_default()
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '-' {
+                        c
+                    } else {
+                        '_'
+                    }
+                })
+                .collect();
+            let mut t = toml::Table::new();
+            t.insert("name".into(), toml::Value::String(name));
+            let mut mesh = toml::Table::new();
+            mesh.insert("file".into(), toml::Value::String(file));
+            t.insert(
+                "meshes".into(),
+                toml::Value::Array(vec![toml::Value::Table(mesh)]),
+            );
+            let spec: WorldSpec = crate::config::parse_toml(path, &t.to_string())?;
+            return compile(&spec, path);
+        }
         let spec: WorldSpec = load_toml(path)?;
         compile(&spec, path)
     }
