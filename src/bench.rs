@@ -178,7 +178,10 @@ pub fn bench_sensors(world: &World, poses: Option<Vec<Pose>>, b: &SensorBench) -
         None => free_poses(&sim, world, 64, 0.42),
     };
     if poses.is_empty() {
-        bail!("found no free camera pose in world `{}`", world.name);
+        bail!(
+            "found no free camera pose at 0.42 m inside the bounds of world `{}`; give camera poses with --poses FILE (`x,y,z,yaw` per line)",
+            world.name
+        );
     }
     let started = Instant::now();
     let mut r = Renderer::new(&Scene::from_world(world)).context("starting the renderer")?;

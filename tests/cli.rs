@@ -436,3 +436,222 @@ fn every_shipped_scenario_loads_and_runs() {
     }
     assert!(n >= 5, "scenarios found: {n}");
 }
+
+/// Points of a depth PNG's row `v`, in the world, from `camera.yaml` and the frame's pose.
+fn world_points(
+    seq: &Path,
+    depth_file: &str,
+    pose: &futago_msgs::Pose3,
+    v: u32,
+) -> Vec<glam::DVec3> {
+    let yaml = std::fs::read_to_string(seq.join("camera.yaml")).unwrap();
+    let depth_part = &yaml[yaml.find("depth:").unwrap()..];
+    let get = |k: &str| -> f64 {
+        let line = depth_part
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("{k}:")))
+            .unwrap();
+        line.split(':').nth(1).unwrap().trim().parse().unwrap()
+    };
+    let (fx, fy, cx, cy) = (get("fx"), get("fy"), get("cx"), get("cy"));
+    let img = image::open(seq.join(depth_file)).unwrap().into_luma16();
+    let q = glam::DQuat::from_xyzw(
+        pose.rotation[0],
+        pose.rotation[1],
+        pose.rotation[2],
+        pose.rotation[3],
+    );
+    let t = glam::DVec3::from_array(pose.translation);
+    (0..img.width())
+        .filter_map(|u| {
+            let d = img.get_pixel(u, v)[0];
+            (d > 0).then(|| {
+                let z = d as f64 / 5000.0;
+                t + q * glam::DVec3::new((u as f64 - cx) / fx * z, (v as f64 - cy) / fy * z, z)
+            })
+        })
+        .collect()
+}
+
+#[test]
+fn rgbd_dataset_is_a_tum_sequence_that_lands_on_the_floor_and_repeats() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("scenarios/lab-kinect.toml"))
+        .unwrap()
+        .replace(
+            "../worlds/lab.toml",
+            root().join("worlds/lab.toml").to_str().unwrap(),
+        )
+        .replace(
+            "noise = { model = \"nguyen\" }",
+            "noise = { model = \"none\" }",
+        );
+    let scenario = write(tmp.path(), "k.toml", &text);
+    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    for d in [&a, &b] {
+        ok(&futago(&[
+            "run",
+            scenario.to_str().unwrap(),
+            "--out",
+            d.to_str().unwrap(),
+            "--duration",
+            "1",
+            "-q",
+        ]));
+    }
+    let (sa, sb) = (summary(&a), summary(&b));
+    assert_eq!(sa["files"], sb["files"], "the dataset differs between runs");
+    assert!(sa["files"]["kinect/"]["sha256"].is_string());
+    assert!(sa["performance"]["renderer"].is_string());
+    let seq = a.join("kinect");
+    let rgb =
+        futago_msgs::tum::parse_image_list(&std::fs::read_to_string(seq.join("rgb.txt")).unwrap())
+            .unwrap();
+    let depth = futago_msgs::tum::parse_image_list(
+        &std::fs::read_to_string(seq.join("depth.txt")).unwrap(),
+    )
+    .unwrap();
+    let gt =
+        futago_msgs::tum::parse(&std::fs::read_to_string(seq.join("groundtruth.txt")).unwrap())
+            .unwrap();
+    // 30 Hz for 1 s.
+    assert!((30..=31).contains(&rgb.len()), "{} frames", rgb.len());
+    assert_eq!(
+        sa["camera"][0]["frames"].as_u64().unwrap() as usize,
+        rgb.len()
+    );
+    assert_eq!(rgb.len(), depth.len());
+    assert_eq!(gt.len(), rgb.len());
+    for ((r, d), g) in rgb.iter().zip(&depth).zip(&gt) {
+        assert_eq!(r.0, d.0);
+        assert_eq!(r.0, g.stamp);
+        let c = image::open(seq.join(&r.1)).unwrap();
+        assert_eq!(
+            (c.width(), c.height(), c.color()),
+            (640, 480, image::ColorType::Rgb8)
+        );
+        let z = image::open(seq.join(&d.1)).unwrap();
+        assert_eq!(
+            (z.width(), z.height(), z.color()),
+            (640, 480, image::ColorType::L16)
+        );
+    }
+    // The bottom row sees the floor 1.07 m ahead: intrinsics, depth factor and the optical
+    // frame's pose must all be right for its points to land on z = 0.
+    for (i, d) in depth.iter().enumerate().step_by(10) {
+        let pts = world_points(&seq, &d.1, &gt[i].pose, 479);
+        let on_floor = pts.iter().filter(|p| p.z.abs() < 0.002).count();
+        assert!(
+            on_floor * 2 > 640,
+            "frame {i}: {on_floor} of {} bottom-row points on the floor",
+            pts.len()
+        );
+    }
+
+    // Without a consumer the camera is never rendered.
+    let quiet = write(
+        tmp.path(),
+        "q.toml",
+        &text.replace("rgbd_dataset = true", "rgbd_dataset = false"),
+    );
+    let c = tmp.path().join("c");
+    ok(&futago(&[
+        "run",
+        quiet.to_str().unwrap(),
+        "--out",
+        c.to_str().unwrap(),
+        "--duration",
+        "1",
+        "-q",
+    ]));
+    let sc = summary(&c);
+    assert_eq!(sc["camera"][0]["frames"], 0);
+    assert!(sc["performance"]["renderer"].is_null());
+    assert!(!c.join("kinect").exists());
+}
+
+#[test]
+fn a_missing_gpu_driver_is_a_clear_error() {
+    let o = Command::new(env!("CARGO_BIN_EXE_futago"))
+        .args([
+            "bench",
+            "sensors",
+            "--frames",
+            "1",
+            "--batches",
+            "1",
+            "--rays",
+            "1",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("FUTAGO_GPU_BACKEND", "vulkan")
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("no GPU adapter") && err.contains("mesa-vulkan-drivers"),
+        "{err}"
+    );
+    let o = Command::new(env!("CARGO_BIN_EXE_futago"))
+        .args(["bench", "sensors", "--frames", "1"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("FUTAGO_GPU_BACKEND", "directx")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("FUTAGO_GPU_BACKEND"));
+}
+
+#[test]
+fn sensor_bench_reads_poses_and_rejects_bad_ones() {
+    let tmp = tempfile::tempdir().unwrap();
+    let poses = write(
+        tmp.path(),
+        "p.csv",
+        "# x,y,z,yaw\n6.5,3.5,0.42,0\n2.0,5.0,1.0,-0.8\n",
+    );
+    let o = futago(&[
+        "bench",
+        "sensors",
+        "--world",
+        "worlds/lab.toml",
+        "--poses",
+        poses.to_str().unwrap(),
+        "--frames",
+        "2",
+        "--batch",
+        "5",
+        "--batches",
+        "1",
+        "--rays",
+        "682",
+    ]);
+    ok(&o);
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["poses"], 2);
+    assert!(
+        r["depth_batch_176x144"]["images_per_second"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    assert!(r["rgb_depth_640x480"]["valid_pixels"].as_u64().unwrap() > 0);
+    let bad = write(tmp.path(), "bad.csv", "1,2,3\n");
+    let o = futago(&[
+        "bench",
+        "sensors",
+        "--world",
+        "worlds/lab.toml",
+        "--poses",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("bad.csv line 1") && err.contains("x,y,z,yaw"),
+        "{err}"
+    );
+}
