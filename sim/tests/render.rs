@@ -306,3 +306,30 @@ fn bad_sizes_fields_of_view_and_pose_counts_are_errors() {
         .expect("a broken mesh is refused");
     assert!(e.to_string().contains("body `broken`"), "{e}");
 }
+
+#[test]
+fn missing_textures_and_empty_meshes_name_their_file_and_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let w = dir.path().join("w.toml");
+    std::fs::write(
+        &w,
+        "name = \"w\"\n[materials.m]\ncolor = [0.5, 0.5, 0.5]\ntexture = { image = \"gone.png\" }\n[floor]\nmaterial = \"m\"\n",
+    )
+    .unwrap();
+    let e = World::load(&w).unwrap_err().to_string();
+    assert!(e.contains("w.toml") && e.contains("materials.m") && e.contains("gone.png"), "{e}");
+    // A glTF file whose only triangle has zero area.
+    let mut flat = box_room(1.0, 1.0, "");
+    for o in &mut flat.objects {
+        for p in &mut o.parts {
+            for v in &mut p.mesh.positions {
+                *v = Vec3::ZERO;
+            }
+        }
+    }
+    let glb = dir.path().join("flat.glb");
+    let poses: Vec<Pose> = flat.objects.iter().map(|o| o.pose).collect();
+    std::fs::write(&glb, futago_sim::world::gltf_io::export_glb(&flat, &poses)).unwrap();
+    let e = World::load(&glb).unwrap_err().to_string();
+    assert!(e.contains("flat.glb") && e.contains("degenerate"), "{e}");
+}

@@ -1158,3 +1158,37 @@ impl Renderer {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::mesh::UvMap;
+
+    #[test]
+    fn a_lost_device_is_reported_not_hung_on() {
+        let mut scene = Scene::default();
+        scene.add_body(
+            "cube",
+            Pose::from_translation(Vec3::new(2.0, 0.0, 0.0)),
+            vec![(
+                Material {
+                    name: "m".into(),
+                    color: [0.5; 3],
+                    texture: None,
+                },
+                TriMesh::cuboid(Vec3::splat(0.5), UvMap::Fit),
+            )],
+        );
+        let mut r = Renderer::new(&scene).unwrap();
+        let intr = Intrinsics::from_fov(64, 48, 1.0, 0.8).unwrap();
+        let d = r.render_depth(&intr, &Pose::IDENTITY).unwrap();
+        // The cube's near face is 1.5 m ahead.
+        assert!((d.at(32, 24) - 1.5).abs() < 1e-4, "{}", d.at(32, 24));
+        r.gpu.device.destroy();
+        let e = r.render_depth(&intr, &Pose::IDENTITY).unwrap_err();
+        assert!(
+            matches!(e, RenderError::DeviceLost(_) | RenderError::Device(_)),
+            "{e}"
+        );
+    }
+}
