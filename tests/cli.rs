@@ -24,6 +24,22 @@ fn ok(o: &Output) {
     );
 }
 
+/// Runs `scenario` quietly into `out` (for `duration` simulated seconds if given); must
+/// succeed.
+fn run_for(scenario: &Path, out: &Path, duration: Option<&str>) {
+    let mut args = vec![
+        "run",
+        scenario.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ];
+    if let Some(d) = duration {
+        args.extend(["--duration", d]);
+    }
+    ok(&futago(&args));
+}
+
 fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
 }
@@ -186,13 +202,7 @@ fn umbmark_square_shows_the_configured_odometry_errors_and_none_without_them() {
         for ccw in [false, true] {
             let scenario = umbmark_scenario(tmp.path(), ccw, ed, eb);
             let out = tmp.path().join(format!("out-{ccw}-{ed}-{eb}"));
-            ok(&futago(&[
-                "run",
-                scenario.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-                "-q",
-            ]));
+            run_for(&scenario, &out, None);
             let s = summary(&out);
             assert!(
                 s["controller_finished"].as_bool().unwrap(),
@@ -413,15 +423,7 @@ fn every_shipped_scenario_loads_and_runs() {
         }
         n += 1;
         let out = tmp.path().join(p.file_stem().unwrap());
-        ok(&futago(&[
-            "run",
-            p.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--duration",
-            "2",
-            "-q",
-        ]));
+        run_for(&p, &out, Some("2"));
         let s = summary(&out);
         assert!(
             (s["sim_time_s"].as_f64().unwrap() - 2.0).abs() < 1e-9
@@ -489,15 +491,7 @@ fn rgbd_dataset_is_a_tum_sequence_that_lands_on_the_floor_and_repeats() {
     let scenario = write(tmp.path(), "k.toml", &text);
     let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
     for d in [&a, &b] {
-        ok(&futago(&[
-            "run",
-            scenario.to_str().unwrap(),
-            "--out",
-            d.to_str().unwrap(),
-            "--duration",
-            "1",
-            "-q",
-        ]));
+        run_for(&scenario, d, Some("1"));
     }
     let (sa, sb) = (summary(&a), summary(&b));
     assert_eq!(sa["files"], sb["files"], "the dataset differs between runs");
@@ -555,15 +549,7 @@ fn rgbd_dataset_is_a_tum_sequence_that_lands_on_the_floor_and_repeats() {
         &text.replace("rgbd_dataset = true", "rgbd_dataset = false"),
     );
     let c = tmp.path().join("c");
-    ok(&futago(&[
-        "run",
-        quiet.to_str().unwrap(),
-        "--out",
-        c.to_str().unwrap(),
-        "--duration",
-        "1",
-        "-q",
-    ]));
+    run_for(&quiet, &c, Some("1"));
     let sc = summary(&c);
     assert_eq!(sc["camera"][0]["frames"], 0);
     assert!(sc["performance"]["renderer"].is_null());
@@ -613,22 +599,25 @@ fn sensor_bench_reads_poses_and_rejects_bad_ones() {
         "p.csv",
         "# x,y,z,yaw\n6.5,3.5,0.42,0\n2.0,5.0,1.0,-0.8\n",
     );
-    let o = futago(&[
-        "bench",
-        "sensors",
-        "--world",
-        "worlds/lab.toml",
-        "--poses",
-        poses.to_str().unwrap(),
-        "--frames",
-        "2",
-        "--batch",
-        "5",
-        "--batches",
-        "1",
-        "--rays",
-        "682",
-    ]);
+    let bench = |poses: &Path, more: &[&str]| {
+        let mut args = vec!["bench", "sensors", "--world", "worlds/lab.toml", "--poses"];
+        args.push(poses.to_str().unwrap());
+        args.extend(more);
+        futago(&args)
+    };
+    let o = bench(
+        &poses,
+        &[
+            "--frames",
+            "2",
+            "--batch",
+            "5",
+            "--batches",
+            "1",
+            "--rays",
+            "682",
+        ],
+    );
     ok(&o);
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(r["poses"], 2);
@@ -640,14 +629,7 @@ fn sensor_bench_reads_poses_and_rejects_bad_ones() {
     );
     assert!(r["rgb_depth_640x480"]["valid_pixels"].as_u64().unwrap() > 0);
     let bad = write(tmp.path(), "bad.csv", "1,2,3\n");
-    let o = futago(&[
-        "bench",
-        "sensors",
-        "--world",
-        "worlds/lab.toml",
-        "--poses",
-        bad.to_str().unwrap(),
-    ]);
+    let o = bench(&bad, &[]);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(

@@ -49,17 +49,22 @@ impl std::fmt::Display for ParseError {
 
 impl std::error::Error for ParseError {}
 
+/// The lines of a TUM text file that hold data (1-based number, trimmed text): blank lines
+/// and `#` comments are skipped.
+fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+}
+
 /// Parses a TUM trajectory. Blank lines and `#` comments are skipped; anything else must be
 /// eight finite numbers with a unit-norm (±1e-3) quaternion.
 pub fn parse(text: &str) -> Result<Vec<Stamped>, ParseError> {
     let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
+    for (line_no, line) in data_lines(text) {
         let err = |message: String| ParseError {
-            line: i + 1,
+            line: line_no,
             message,
         };
         let v: Vec<f64> = line
@@ -97,13 +102,9 @@ pub fn parse(text: &str) -> Result<Vec<Stamped>, ParseError> {
 /// `#` comments. Filenames are relative to the sequence folder.
 pub fn parse_image_list(text: &str) -> Result<Vec<(Time, String)>, ParseError> {
     let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
+    for (line_no, line) in data_lines(text) {
         let err = |message: String| ParseError {
-            line: i + 1,
+            line: line_no,
             message,
         };
         let mut words = line.split_whitespace();

@@ -118,6 +118,35 @@ pub fn check_positive(file: &Path, key: &str, value: f64, unit: &str) -> Result<
 }
 
 /// Checks a name used in file names and frames: non-empty ASCII letters, digits, `-`, `_`.
+/// Checks a sensor's mounting table (`key.xyz`, `key.rpy_deg`): finite numbers.
+pub fn check_mount(
+    file: &Path,
+    key: &str,
+    xyz: [f64; 3],
+    rpy_deg: [f64; 3],
+) -> Result<(), SpecError> {
+    for (i, v) in xyz.iter().chain(&rpy_deg).enumerate() {
+        if !v.is_finite() {
+            return Err(SpecError::new(
+                file,
+                format!("{key}.{}", if i < 3 { "xyz" } else { "rpy_deg" }),
+                "expected finite numbers",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A sensor's mounting pose on the robot base frame from `xyz` (m) and `rpy_deg` (roll, pitch,
+/// yaw in degrees; rotation = yaw · pitch · roll).
+pub fn mount_pose(xyz: [f64; 3], rpy_deg: [f64; 3]) -> rapier3d::math::Pose {
+    let [r, p, y] = rpy_deg.map(|a| a.to_radians() as f32);
+    rapier3d::math::Pose::from_parts(
+        glam::Vec3::new(xyz[0] as f32, xyz[1] as f32, xyz[2] as f32),
+        glam::Quat::from_euler(glam::EulerRot::ZYX, y, p, r),
+    )
+}
+
 pub fn check_name(file: &Path, key: &str, name: &str) -> Result<(), SpecError> {
     if !name.is_empty()
         && name

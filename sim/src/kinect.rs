@@ -15,11 +15,10 @@
 //!
 //! Pixels outside the valid range, or dropped by a model, are invalid (0).
 
-use crate::config::{SpecError, check_range};
+use crate::config::{SpecError, check_mount, check_range, mount_pose};
 use crate::render::{RenderError, Renderer, optical_from_body};
 use futago_msgs::camera::{DepthImage, Intrinsics, RgbdFrame};
 use futago_msgs::{Pose3, Time};
-use glam::{Quat, Vec3};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rapier3d::math::Pose;
@@ -190,20 +189,8 @@ impl KinectConfig {
             "px",
         )?;
         check_range(file, &k("noise.jitter"), n.jitter, 0.0, 10.0, "px")?;
-        for (i, v) in self.xyz.iter().chain(&self.rpy_deg).enumerate() {
-            if !v.is_finite() {
-                return Err(SpecError::new(
-                    file,
-                    k(if i < 3 { "xyz" } else { "rpy_deg" }),
-                    "expected finite numbers",
-                ));
-            }
-        }
-        let [r, p, y] = self.rpy_deg.map(|a| a.to_radians() as f32);
-        let mount = Pose::from_parts(
-            Vec3::new(self.xyz[0] as f32, self.xyz[1] as f32, self.xyz[2] as f32),
-            Quat::from_euler(glam::EulerRot::ZYX, y, p, r),
-        );
+        check_mount(file, key, self.xyz, self.rpy_deg)?;
+        let mount = mount_pose(self.xyz, self.rpy_deg);
         Ok(KinectSpec {
             name: self.name.clone(),
             rgb,

@@ -7,9 +7,9 @@
 //! a beam returns nothing beyond `range_max`, below `range_min` (reported −∞), or with
 //! probability `dropout`.
 
-use crate::config::{SpecError, check_name, check_range};
+use crate::config::{SpecError, check_mount, check_name, check_range, mount_pose};
 use futago_msgs::{LaserScan, Time};
-use glam::{Quat, Vec3};
+use glam::Vec3;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -238,26 +238,14 @@ impl LidarConfig {
             1.0,
             "(a probability)",
         )?;
-        for (i, v) in self.xyz.iter().chain(&self.rpy_deg).enumerate() {
-            if !v.is_finite() {
-                return Err(SpecError::new(
-                    file,
-                    k(if i < 3 { "xyz" } else { "rpy_deg" }),
-                    "expected finite numbers",
-                ));
-            }
-        }
+        check_mount(file, key, self.xyz, self.rpy_deg)?;
         check_name(file, &k("name"), &self.name)?;
         Ok(s)
     }
 
     /// Mounting pose in the robot base frame.
     pub fn mount(&self) -> Pose {
-        let [r, p, y] = self.rpy_deg.map(|a| a.to_radians() as f32);
-        Pose::from_parts(
-            Vec3::new(self.xyz[0] as f32, self.xyz[1] as f32, self.xyz[2] as f32),
-            Quat::from_euler(glam::EulerRot::ZYX, y, p, r),
-        )
+        mount_pose(self.xyz, self.rpy_deg)
     }
 }
 

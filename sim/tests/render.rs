@@ -317,7 +317,10 @@ fn missing_textures_and_empty_meshes_name_their_file_and_key() {
     )
     .unwrap();
     let e = World::load(&w).unwrap_err().to_string();
-    assert!(e.contains("w.toml") && e.contains("materials.m") && e.contains("gone.png"), "{e}");
+    assert!(
+        e.contains("w.toml") && e.contains("materials.m") && e.contains("gone.png"),
+        "{e}"
+    );
     // A glTF file whose only triangle has zero area.
     let mut flat = box_room(1.0, 1.0, "");
     for o in &mut flat.objects {
