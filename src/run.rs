@@ -260,22 +260,20 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 }
             }
         }
-        if let (Some(r), Some(k)) = (renderer.as_mut(), sinks.as_deref_mut()) {
-            let mut posed = false;
+        if let (Some(r), Some(k)) = (renderer.as_mut(), sinks.as_deref_mut())
+            && kinects.iter().any(|c| c.due(now.nanos()))
+        {
+            // Pose the scene once for every camera due at this step.
+            let poses = sim.scene_poses();
+            r.set_poses(&poses)?;
+            let base = poses[poses.len() - 1];
             for (i, cam) in kinects.iter_mut().enumerate() {
-                if !cam.due(now.nanos()) {
-                    continue;
+                if cam.due(now.nanos()) {
+                    cam.take();
+                    let frame = cam.capture(r, &base, now, true)?;
+                    k.cameras[i].write(&frame, &cam.optical_pose(&base))?;
+                    camera_frames[i] += 1;
                 }
-                cam.take();
-                let poses = sim.scene_poses();
-                if !posed {
-                    r.set_poses(&poses)?;
-                    posed = true;
-                }
-                let base = poses[poses.len() - 1];
-                let frame = cam.capture(r, &base, now, true)?;
-                k.cameras[i].write(&frame, &cam.optical_pose(&base))?;
-                camera_frames[i] += 1;
             }
         }
         for (i, scan) in out.scans {
