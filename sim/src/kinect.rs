@@ -442,10 +442,9 @@ impl Kinect {
         t_ns as f64 >= self.frames as f64 * 1e9 / self.spec.rate - 0.5
     }
 
-    /// Counts a frame as taken, and returns its index.
-    pub fn take(&mut self) -> u64 {
+    /// Counts the frame that fell due as taken.
+    pub fn take(&mut self) {
         self.frames += 1;
-        self.frames - 1
     }
 
     /// Renders a frame from the camera on a robot whose base frame has pose `base`, with the

@@ -343,7 +343,6 @@ pub struct Renderer {
     /// Transform slot of each body (0 for static bodies).
     body_slots: Vec<u32>,
     targets: HashMap<(bool, u32, u32), Targets>,
-    frames: u64,
 }
 
 impl Renderer {
@@ -369,11 +368,6 @@ impl Renderer {
     /// The wgpu backend in use.
     pub fn backend(&self) -> wgpu::Backend {
         self.gpu.info.backend
-    }
-
-    /// Frames (or batches) rendered so far.
-    pub fn frames(&self) -> u64 {
-        self.frames
     }
 
     /// The lighting of RGB images.
@@ -732,7 +726,6 @@ impl Renderer {
             depth_draws,
             body_slots,
             targets: HashMap::new(),
-            frames: 0,
         };
         let poses: Vec<Pose> = scene.bodies.iter().map(|b| b.pose).collect();
         r.write_models(&poses);
@@ -1045,7 +1038,6 @@ impl Renderer {
         if let Some((_, b)) = &t.color {
             b.unmap();
         }
-        self.frames += 1;
         Ok(out)
     }
 
