@@ -336,3 +336,56 @@ fn missing_textures_and_empty_meshes_name_their_file_and_key() {
     let e = World::load(&glb).unwrap_err().to_string();
     assert!(e.contains("flat.glb") && e.contains("degenerate"), "{e}");
 }
+
+#[test]
+fn seed000_kinect_gives_qvga_depth_registered_to_vga_colour_within_its_range() {
+    use futago_sim::kinect::{Kinect, KinectConfig, KinectPreset};
+    // Room interior [0, 6] × [0, 4]; the robot at (1, 2) facing +x, the camera 0.42 m up and
+    // 0.1 m ahead of the base, so the far wall is 4.9 m away: beyond seed 000's 3.5 m.
+    let world = box_room(6.0, 4.0, "");
+    let robot = CreateConfig::default();
+    let spec = KinectConfig::preset(KinectPreset::Seed000)
+        .resolve(Path::new("t.toml"), "camera[0]")
+        .unwrap();
+    let mut r = Renderer::new(&futago_sim::sim::scene(
+        &world,
+        &robot,
+        Pose2::new(1.0, 2.0, 0.0),
+    ))
+    .unwrap();
+    let mut cam = Kinect::new(spec.clone(), futago_sim::noise::stream(1, "camera.kinect"));
+    let base = Pose::from_translation(Vec3::new(1.0, 2.0, 0.0));
+    let f = cam
+        .capture(&mut r, &base, futago_msgs::Time::ZERO, true)
+        .unwrap();
+    let rgb = f.rgb.as_ref().unwrap();
+    assert_eq!((rgb.width, rgb.height), (640, 480));
+    assert_eq!((f.depth.width, f.depth.height), (320, 240));
+    // Centre row: the far wall, out of range.
+    assert_eq!(f.depth.at(160, 119), 0.0);
+    // The floor: z = 0.42 fy / (v − cy) in the depth image; valid only in 1.2–3.5 m.
+    let fy = f.depth_intrinsics.fy;
+    let cy = f.depth_intrinsics.cy;
+    let mut seen = 0;
+    for v in 125..240 {
+        let expect = 0.42 * fy / (v as f64 - cy);
+        let z = f.depth.at(160, v) as f64;
+        if (1.2..=3.5).contains(&expect) {
+            assert!(
+                (z - expect).abs() < 1e-3 + 1e-3 * expect,
+                "row {v}: {z} vs {expect}"
+            );
+            seen += 1;
+        } else if !(1.19..=3.51).contains(&expect) {
+            assert_eq!(z, 0.0, "row {v}: {expect} m is out of range");
+        }
+    }
+    assert!(seen > 30, "{seen} floor rows in range");
+    // The robot's own body stays out of view of the default mount.
+    let body = Pose::from_translation(Vec3::new(1.0, 2.0, 0.0));
+    let view = r.render_depth(&spec.depth, &(body * spec.mount)).unwrap();
+    assert!(
+        view.data.iter().all(|&z| z == 0.0 || z > 0.3),
+        "the camera sees the robot"
+    );
+}
