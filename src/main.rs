@@ -1,6 +1,8 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
 mod bench;
+mod relations;
+mod replay;
 mod rgbd;
 mod run;
 mod scenario;
@@ -41,6 +43,23 @@ enum Command {
         /// No progress bar.
         #[arg(long, short)]
         quiet: bool,
+    },
+    /// Run the robot stack's SLAM on a real robot's log (CARMEN) and score it against
+    /// ground-truth relations (Kümmerle et al. 2009): writes trajectory.txt, odometry.txt (TUM),
+    /// map.pgm/map.yaml and summary.json.
+    Replay {
+        /// The log (CARMEN: .clf, .log).
+        log: std::path::PathBuf,
+        /// Ground-truth relations (`t1 t2 x y z roll pitch yaw` per line).
+        #[arg(long)]
+        relations: Option<std::path::PathBuf>,
+        /// Output folder, created or replaced whole [default: out/replay/<log name>].
+        #[arg(long)]
+        out: Option<std::path::PathBuf>,
+        /// SLAM parameters: a TOML file of the `[slam]` table's keys (keyframe_distance,
+        /// icp.max_distance_start, grid.resolution, …).
+        #[arg(long)]
+        config: Option<std::path::PathBuf>,
     },
     /// Inspect worlds and export their ground truth.
     World {
@@ -203,6 +222,53 @@ fn real_main() -> Result<()> {
                 o.final_truth.distance(&o.final_odometry),
                 out.display()
             );
+        }
+        Command::Replay {
+            log,
+            relations,
+            out,
+            config,
+        } => {
+            let config: futago_robot::slam::IcpSlamConfig = match config {
+                Some(p) => futago_sim::config::load_toml(&p)?,
+                None => Default::default(),
+            };
+            let out = out.unwrap_or_else(|| {
+                std::path::Path::new("out/replay").join(
+                    log.file_stem()
+                        .map(|s| s.to_string_lossy().to_string())
+                        .unwrap_or_else(|| "log".into()),
+                )
+            });
+            let s = replay::replay(&log, relations.as_deref(), config, &out)?;
+            let line = |k: &str| -> String {
+                let m = &s["relations"][k];
+                format!(
+                    "{k:>9}: abs trans {:.4} ± {:.4} m, abs rot {:.3} ± {:.3}° over {} relations",
+                    m["abs_trans_m"]["mean"].as_f64().unwrap_or(f64::NAN),
+                    m["abs_trans_m"]["std"].as_f64().unwrap_or(f64::NAN),
+                    m["abs_rot_deg"]["mean"].as_f64().unwrap_or(f64::NAN),
+                    m["abs_rot_deg"]["std"].as_f64().unwrap_or(f64::NAN),
+                    m["relations"]
+                )
+            };
+            println!(
+                "{}: {} scans over {:.0} s in {:.2} s ({:.0}× real time); results in {}",
+                log.display(),
+                s["scans"],
+                s["log_duration_s"].as_f64().unwrap_or(0.0),
+                s["performance"]["wall_time_s"].as_f64().unwrap_or(0.0),
+                s["performance"]["real_time_factor"].as_f64().unwrap_or(0.0),
+                out.display()
+            );
+            if s.get("relations").is_some() {
+                println!(
+                    "{}
+{}",
+                    line("slam"),
+                    line("odometry")
+                );
+            }
         }
         Command::World { command } => match command {
             WorldCommand::Info { world } => {

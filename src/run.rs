@@ -417,8 +417,9 @@ pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
     })
 }
 
-/// Runs a scenario and writes its results into `out` (created or replaced whole).
-pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcome)> {
+/// Creates `out` whole or not at all: `fill` writes into a temporary folder beside it, which
+/// replaces `out` when `fill` succeeds and is removed when it fails.
+pub fn write_atomically<T>(out: &Path, fill: impl FnOnce(&Path) -> Result<T>) -> Result<T> {
     let parent = match out.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
@@ -432,7 +433,26 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
     let tmp = parent.join(format!(".{name}.partial-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
     std::fs::create_dir(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-    let result = (|| -> Result<(Value, Outcome)> {
+    match fill(&tmp) {
+        Ok(r) => {
+            if out.exists() {
+                std::fs::remove_dir_all(out)
+                    .with_context(|| format!("replacing {}", out.display()))?;
+            }
+            std::fs::rename(&tmp, out)
+                .with_context(|| format!("moving results into {}", out.display()))?;
+            Ok(r)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&tmp);
+            Err(e)
+        }
+    }
+}
+
+/// Runs a scenario and writes its results into `out` (created or replaced whole).
+pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcome)> {
+    write_atomically(out, |tmp| {
         let open = |n: &str| -> Result<BufWriter<File>> {
             Ok(BufWriter::new(
                 File::create(tmp.join(n)).with_context(|| format!("creating {n}"))?,
@@ -498,20 +518,5 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
         let text = serde_json::to_string_pretty(&sum)? + "\n";
         std::fs::write(tmp.join("summary.json"), text).context("writing summary.json")?;
         Ok((sum, outcome))
-    })();
-    match result {
-        Ok(r) => {
-            if out.exists() {
-                std::fs::remove_dir_all(out)
-                    .with_context(|| format!("replacing {}", out.display()))?;
-            }
-            std::fs::rename(&tmp, out)
-                .with_context(|| format!("moving results into {}", out.display()))?;
-            Ok(r)
-        }
-        Err(e) => {
-            let _ = std::fs::remove_dir_all(&tmp);
-            Err(e)
-        }
-    }
+    })
 }

@@ -637,3 +637,121 @@ fn sensor_bench_reads_poses_and_rejects_bad_ones() {
         "{err}"
     );
 }
+
+/// Yaw of a TUM z-axis quaternion.
+fn yaw(q: [f64; 4]) -> f64 {
+    2.0 * q[2].atan2(q[3])
+}
+
+#[test]
+fn replay_of_a_simulated_log_beats_its_odometry_on_ground_truth_relations() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = root().join("worlds/lab.toml");
+    // A lap of the lab with a URG-04LX, the robot driven on the true pose while its odometry
+    // carries a 2 % wheel-base error.
+    let scenario = write(
+        tmp.path(),
+        "lap.toml",
+        &format!(
+            "name = \"lap\"\nworld = {world:?}\nduration = 40.0\nseed = 2\nstart = \"centre\"\n\
+             [robot.odometry]\nwheel_base_ratio = 1.02\nnoise = 0.002\n\
+             [[lidar]]\nname = \"front\"\npreset = \"urg-04lx\"\nxyz = [0.08, 0.0, 0.2]\n\
+             [controller]\ntype = \"waypoints\"\nspeed = 0.35\npose_source = \"ground_truth\"\n\
+             waypoints = [[10.0, 3.5], [10.0, 5.5], [3.0, 5.5], [3.0, 2.0], [9.0, 1.8]]\n"
+        ),
+    );
+    let sim = tmp.path().join("sim");
+    run_for(&scenario, &sim, None);
+    // Relations between scans 200 apart (20 s), from the simulator's ground truth.
+    let truth =
+        futago_msgs::tum::parse(&std::fs::read_to_string(sim.join("groundtruth.txt")).unwrap())
+            .unwrap();
+    let log = futago_msgs::carmen::read(&std::fs::read_to_string(sim.join("scans.clf")).unwrap())
+        .unwrap();
+    assert!(log.scans.len() > 300, "{} scans", log.scans.len());
+    let at = |t: futago_msgs::Time| -> futago_msgs::Pose2 {
+        let k = truth
+            .partition_point(|s| s.stamp < t)
+            .clamp(1, truth.len() - 1);
+        let (a, b) = (&truth[k - 1], &truth[k]);
+        let f = ((t - a.stamp).secs() / (b.stamp - a.stamp).secs()).clamp(0.0, 1.0);
+        let (ya, yb) = (yaw(a.pose.rotation), yaw(b.pose.rotation));
+        futago_msgs::Pose2::new(
+            a.pose.translation[0] + f * (b.pose.translation[0] - a.pose.translation[0]),
+            a.pose.translation[1] + f * (b.pose.translation[1] - a.pose.translation[1]),
+            ya + f * futago_msgs::wrap_angle(yb - ya),
+        )
+    };
+    let mut rel = String::new();
+    for k in (0..log.scans.len() - 200).step_by(5) {
+        let (t1, t2) = (log.scans[k].scan.stamp, log.scans[k + 200].scan.stamp);
+        let d = at(t1).between(&at(t2));
+        rel += &format!(
+            "{:.6} {:.6} {:.6} {:.6} 0 0 0 {:.6}\n",
+            t1.secs(),
+            t2.secs(),
+            d.x,
+            d.y,
+            d.theta
+        );
+    }
+    let rel_file = write(tmp.path(), "lap.relations", &rel);
+    let out = tmp.path().join("replay");
+    let o = futago(&[
+        "replay",
+        sim.join("scans.clf").to_str().unwrap(),
+        "--relations",
+        rel_file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    ok(&o);
+    let s = summary(&out);
+    let m = |who: &str, q: &str| s["relations"][who][q]["mean"].as_f64().unwrap();
+    assert!(s["relations"]["slam"]["relations"].as_u64().unwrap() >= 40);
+    // Over 20 s the odometry's heading error has grown; matching the scans holds it.
+    let all = &s["relations"];
+    assert!(m("slam", "abs_trans_m") < 0.05, "{all}");
+    assert!(
+        m("slam", "abs_trans_m") < m("odometry", "abs_trans_m"),
+        "{all}"
+    );
+    assert!(
+        m("slam", "abs_rot_deg") < 0.5 * m("odometry", "abs_rot_deg"),
+        "{all}"
+    );
+    // The CARMEN log's TRUEPOS and PARAM records are counted as skipped, and a map is written.
+    assert!(
+        s["skipped"]["unknown record type TRUEPOS"]
+            .as_u64()
+            .unwrap()
+            > 0
+    );
+    assert!(out.join("map.pgm").exists() && out.join("trajectory.txt").exists());
+}
+
+#[test]
+fn replay_refuses_bad_logs_with_their_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bad = write(
+        tmp.path(),
+        "bad.clf",
+        "ODOM 1 2 3 0 0 0 1.0 h 1.0\nFLASER 3 1.0 oops 2.0 0 0 0 0 0 0 2.0 h 2.0\nODOM 1 2 3 0 0 0 3.0 h 3.0\n",
+    );
+    let o = futago(&[
+        "replay",
+        bad.to_str().unwrap(),
+        "--out",
+        tmp.path().join("o").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("bad.clf: line 2") && err.contains("oops"),
+        "{err}"
+    );
+    assert!(!tmp.path().join("o").exists());
+    let other = write(tmp.path(), "x.txt", "hello\n");
+    let o = futago(&["replay", other.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown log format"));
+}

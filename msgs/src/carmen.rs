@@ -5,7 +5,7 @@
 //! field order of CARMEN's logger. Every line ends with `timestamp hostname logger_timestamp`;
 //! futago writes the simulation time for both timestamps and `futago` as the host name.
 
-use crate::{LaserScan, Pose2};
+use crate::{LaserScan, Pose2, Time};
 use std::fmt::Write as _;
 
 const HOST: &str = "futago";
@@ -81,10 +81,311 @@ pub fn robotlaser(
     );
 }
 
+/// One laser scan of a log with the robot's odometry pose at that time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogScan {
+    pub scan: LaserScan,
+    /// Odometry pose of the robot base when the scan was taken.
+    pub odometry: Pose2,
+    /// Pose of the laser on the robot base (ROBOTLASER gives it; FLASER means the origin).
+    pub mount: Pose2,
+}
+
+/// What a CARMEN log holds, in file order, with what was skipped.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Log {
+    pub scans: Vec<LogScan>,
+    /// `ODOM` records: time and odometry pose.
+    pub odometry: Vec<(Time, Pose2)>,
+    /// Records not used, by reason (`unknown type PARAM`, `time went backwards`, …) and count.
+    pub skipped: std::collections::BTreeMap<String, usize>,
+}
+
+/// An error reading a log: the 1-based line and what was wrong.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReadError {
+    pub line: usize,
+    pub message: String,
+}
+
+impl std::fmt::Display for ReadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "line {}: {}", self.line, self.message)
+    }
+}
+
+impl std::error::Error for ReadError {}
+
+/// Readings at or beyond this are "no return" in FLASER records (the SICK's 81.91 m code).
+pub const FLASER_NO_RETURN: f32 = 81.9;
+
+/// Fields of one record, parsed on demand with errors that name the field.
+struct Fields<'a> {
+    words: Vec<&'a str>,
+    at: usize,
+    line: usize,
+}
+
+impl<'a> Fields<'a> {
+    fn err(&self, message: String) -> ReadError {
+        ReadError {
+            line: self.line,
+            message,
+        }
+    }
+
+    fn word(&mut self, what: &str) -> Result<&'a str, ReadError> {
+        let w = self.words.get(self.at).copied().ok_or_else(|| {
+            self.err(format!(
+                "{} record ends before its {what} (field {})",
+                self.words[0], self.at
+            ))
+        })?;
+        self.at += 1;
+        Ok(w)
+    }
+
+    fn num(&mut self, what: &str) -> Result<f64, ReadError> {
+        let w = self.word(what)?;
+        w.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| self.err(format!("{what} `{w}` is not a finite number")))
+    }
+
+    fn count(&mut self, what: &str) -> Result<usize, ReadError> {
+        let w = self.word(what)?;
+        w.parse::<usize>()
+            .ok()
+            .filter(|&n| n <= 100_000)
+            .ok_or_else(|| self.err(format!("{what} `{w}` is not a count (0 to 100000)")))
+    }
+
+    fn pose(&mut self, what: &str) -> Result<Pose2, ReadError> {
+        Ok(Pose2::new(
+            self.num(&format!("{what} x"))?,
+            self.num(&format!("{what} y"))?,
+            self.num(&format!("{what} theta"))?,
+        ))
+    }
+
+    fn ranges(&mut self, n: usize, no_return: f32) -> Result<Vec<f32>, ReadError> {
+        (0..n)
+            .map(|_| {
+                let r = self.num("range reading")? as f32;
+                Ok(if r >= no_return || r < 0.0 {
+                    f32::INFINITY
+                } else {
+                    r
+                })
+            })
+            .collect()
+    }
+}
+
+enum Record {
+    Scan(f64, LogScan),
+    Odom(f64, Pose2),
+}
+
+/// Reads a CARMEN log: `FLASER` (180° scans with odometry), `ROBOTLASER1`/`ROBOTLASER2` (scans
+/// with their geometry, laser mount and odometry) and `ODOM`. Stamps are the `ipc_timestamp`
+/// field, which relation files refer to.
+///
+/// Comments and other record types (`PARAM`, `SYNC`, `TRUEPOS`, …) are skipped and counted;
+/// so are records whose time goes backwards against the previous record of their type, and a
+/// last line cut short (a truncated file). A malformed record anywhere else is an error that
+/// names its line.
+pub fn read(text: &str) -> Result<Log, ReadError> {
+    let mut log = Log::default();
+    let lines: Vec<&str> = text.lines().collect();
+    let truncated_last = !text.ends_with('\n');
+    let mut last_scan: std::collections::HashMap<String, f64> = Default::default();
+    let mut last_odom = f64::NEG_INFINITY;
+    let skip = |log: &mut Log, why: String| *log.skipped.entry(why).or_insert(0) += 1;
+    for (i, line) in lines.iter().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut f = Fields {
+            words: line.split_whitespace().collect(),
+            at: 1,
+            line: i + 1,
+        };
+        let kind = f.words[0];
+        let parsed = match kind {
+            "FLASER" => (|| {
+                let n = f.count("number of readings")?;
+                let ranges = f.ranges(n, FLASER_NO_RETURN)?;
+                let _corrected = f.pose("pose")?;
+                let odometry = f.pose("odometry pose")?;
+                let t = f.num("ipc_timestamp")?;
+                let inc = if n > 1 {
+                    std::f64::consts::PI / (n - 1) as f64
+                } else {
+                    0.0
+                };
+                Ok(Record::Scan(
+                    t,
+                    LogScan {
+                        scan: LaserScan {
+                            frame: "front".into(),
+                            stamp: Time::from_secs(t),
+                            angle_min: -std::f64::consts::FRAC_PI_2,
+                            angle_increment: inc,
+                            time_increment: 0.0,
+                            range_min: 0.0,
+                            range_max: FLASER_NO_RETURN as f64,
+                            ranges,
+                        },
+                        odometry,
+                        mount: Pose2::IDENTITY,
+                    },
+                ))
+            })(),
+            "ROBOTLASER1" | "ROBOTLASER2" => (|| {
+                let _laser_type = f.num("laser type")?;
+                let start = f.num("start angle")?;
+                let _fov = f.num("field of view")?;
+                let inc = f.num("angular resolution")?;
+                let max = f.num("maximum range")?;
+                let _accuracy = f.num("accuracy")?;
+                let _remission_mode = f.num("remission mode")?;
+                let n = f.count("number of readings")?;
+                let ranges = f.ranges(n, max as f32)?;
+                let m = f.count("number of remissions")?;
+                for _ in 0..m {
+                    f.num("remission")?;
+                }
+                let laser = f.pose("laser pose")?;
+                let robot = f.pose("robot pose")?;
+                for what in [
+                    "tv",
+                    "rv",
+                    "forward safety distance",
+                    "side safety distance",
+                    "turn axis",
+                ] {
+                    f.num(what)?;
+                }
+                let t = f.num("ipc_timestamp")?;
+                Ok(Record::Scan(
+                    t,
+                    LogScan {
+                        scan: LaserScan {
+                            frame: if kind == "ROBOTLASER1" {
+                                "front"
+                            } else {
+                                "rear"
+                            }
+                            .into(),
+                            stamp: Time::from_secs(t),
+                            angle_min: start,
+                            angle_increment: inc,
+                            time_increment: 0.0,
+                            range_min: 0.0,
+                            range_max: max,
+                            ranges,
+                        },
+                        odometry: robot,
+                        mount: robot.between(&laser),
+                    },
+                ))
+            })(),
+            "ODOM" => (|| {
+                let pose = f.pose("odometry pose")?;
+                for what in ["tv", "rv", "accel"] {
+                    f.num(what)?;
+                }
+                Ok(Record::Odom(f.num("ipc_timestamp")?, pose))
+            })(),
+            other => {
+                skip(&mut log, format!("unknown record type {other}"));
+                continue;
+            }
+        };
+        match parsed {
+            Ok(Record::Scan(t, scan)) => {
+                let prev = last_scan
+                    .entry(scan.scan.frame.clone())
+                    .or_insert(f64::NEG_INFINITY);
+                if t < *prev {
+                    skip(&mut log, format!("{kind}: time went backwards"));
+                } else {
+                    *prev = t;
+                    log.scans.push(scan);
+                }
+            }
+            Ok(Record::Odom(t, pose)) => {
+                if t < last_odom {
+                    skip(&mut log, "ODOM: time went backwards".into());
+                } else {
+                    last_odom = t;
+                    log.odometry.push((Time::from_secs(t), pose));
+                }
+            }
+            Err(_) if truncated_last && i + 1 == lines.len() => {
+                skip(&mut log, "last line cut short (truncated file)".into());
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(log)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Time;
+
+    #[test]
+    fn logs_read_back_what_the_writers_wrote_and_count_what_they_skip() {
+        let scan = LaserScan {
+            frame: "front".into(),
+            stamp: Time::from_secs(2.0),
+            angle_min: -1.0,
+            angle_increment: 0.5,
+            time_increment: 0.0,
+            range_min: 0.0,
+            range_max: 5.0,
+            ranges: vec![1.0, f32::INFINITY, 2.5, 3.0, 4.0],
+        };
+        let robot = Pose2::new(1.0, 2.0, 0.5);
+        let laser = robot.compose(&Pose2::new(0.1, 0.0, 0.0));
+        let mut s = String::from("# a comment\n");
+        param(&mut s, "robot_name", "create");
+        odom(&mut s, 1.0, &robot, 0.2, 0.0);
+        robotlaser(&mut s, 1, &scan, 0.01, &laser, &robot, 0.2, 0.0);
+        odom(&mut s, 0.5, &robot, 0.2, 0.0);
+        s.push_str("FLASER 3 1.0 81.91 2.0 0 0 0 0.5 0.25 0.1 3.0 host 3.0\n");
+        let log = read(&s).unwrap();
+        assert_eq!(log.odometry.len(), 1);
+        assert_eq!(log.scans.len(), 2);
+        let r = &log.scans[0];
+        assert_eq!(r.scan.ranges[1], f32::INFINITY);
+        assert_eq!(r.scan.ranges[2], 2.5);
+        assert!((r.mount.x - 0.1).abs() < 1e-6 && r.mount.y.abs() < 1e-6);
+        assert_eq!(r.scan.stamp, Time::from_secs(2.0));
+        let f = &log.scans[1];
+        assert_eq!(f.scan.ranges, vec![1.0, f32::INFINITY, 2.0]);
+        assert!((f.scan.angle_increment - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert_eq!(f.odometry, Pose2::new(0.5, 0.25, 0.1));
+        assert_eq!(log.skipped["unknown record type PARAM"], 1);
+        assert_eq!(log.skipped["ODOM: time went backwards"], 1);
+    }
+
+    #[test]
+    fn corrupt_records_name_their_line_and_a_cut_last_line_is_skipped() {
+        let e = read("ODOM 1 2 3 0 0 0 1.0 h 1.0\nFLASER 3 1.0 x 2.0 0 0 0 0 0 0 2.0 h 2.0\nODOM 1 2 3 0 0 0 3.0 h 3.0\n")
+            .unwrap_err();
+        assert_eq!(e.line, 2);
+        assert!(e.message.contains("range reading `x`"), "{e}");
+        let e = read("FLASER 5 1.0 2.0\nODOM 1 2 3 0 0 0 3.0 h 3.0\n").unwrap_err();
+        assert!(e.message.contains("ends before"), "{e}");
+        let log = read("ODOM 1 2 3 0 0 0 1.0 h 1.0\nFLASER 361 1.0 1.0").unwrap();
+        assert_eq!(log.odometry.len(), 1);
+        assert_eq!(log.skipped["last line cut short (truncated file)"], 1);
+    }
 
     #[test]
     fn robotlaser_line_has_the_logger_field_layout() {

@@ -5,5 +5,8 @@
 //! So far: odometry integration ([`odometry`]) and scripted drive plans ([`script`]); the
 //! mapping, localisation and navigation stack plugs in beside them.
 
+pub mod icp;
+pub mod occupancy;
 pub mod odometry;
 pub mod script;
+pub mod slam;

@@ -1,0 +1,493 @@
+//! 2D scan-to-map ICP (written for futago): point-to-line Gauss–Newton on SE(2) against a map
+//! of points with normals, as seed 000 matches each scan to its map from the odometry guess.
+//!
+//! The map keeps at most one point per `voxel` cell in a hash grid, each with the normal of the
+//! surface it was seen on (fitted to its neighbours in its own scan). Matching pairs each scan
+//! point with the nearest map point within a correspondence distance that shrinks over the
+//! iterations, and minimises the Huber-weighted point-to-line distances.
+
+use futago_msgs::{LaserScan, Pose2, wrap_angle};
+use serde::Deserialize;
+use std::collections::HashMap;
+
+/// Matcher parameters (`slam.icp.*`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IcpConfig {
+    pub max_iterations: usize,
+    /// Correspondence distance of the first and the last iterations, m.
+    pub max_distance_start: f64,
+    pub max_distance_end: f64,
+    /// Huber threshold of the point-to-line residual, m.
+    pub huber: f64,
+    /// At least this share of the scan's points must find a partner.
+    pub min_overlap: f64,
+    /// Map point spacing, m.
+    pub voxel: f64,
+    /// Radius of the scan neighbourhood a point's normal is fitted to, m: several times the
+    /// range noise, so that the fitted line is not noise.
+    pub normal_radius: f64,
+    /// Largest ratio of the fit's small to large spread for a point to count as on a line.
+    pub planarity: f64,
+    /// Weight of the odometry guess against the mean squared point-to-line residual, for
+    /// translation (per m²) and rotation (per rad²), as Cartographer's scan matcher weighs
+    /// its prior: it holds the pose where the scan alone does not (a corridor's length). The
+    /// defaults were chosen on a simulated lab log and the MIT CSAIL log (see the closing note
+    /// of issue 4's first part).
+    pub translation_weight: f64,
+    pub rotation_weight: f64,
+}
+
+impl Default for IcpConfig {
+    fn default() -> Self {
+        IcpConfig {
+            max_iterations: 30,
+            max_distance_start: 0.5,
+            max_distance_end: 0.1,
+            huber: 0.03,
+            min_overlap: 0.3,
+            voxel: 0.03,
+            normal_radius: 0.3,
+            planarity: 0.1,
+            translation_weight: 0.05,
+            rotation_weight: 0.02,
+        }
+    }
+}
+
+/// A point and the unit normal of its surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Oriented {
+    pub p: [f64; 2],
+    pub n: [f64; 2],
+}
+
+/// Most neighbours taken on each side of a beam.
+const MAX_NEIGHBOURS: usize = 40;
+
+/// Points of `scan` in the frame of the robot whose laser sits at `mount`, with normals;
+/// readings outside `[range_min, max_range]` and points without close neighbours are dropped.
+pub fn scan_points(
+    scan: &LaserScan,
+    mount: &Pose2,
+    max_range: f64,
+    config: &IcpConfig,
+) -> Vec<Oriented> {
+    let raw: Vec<Option<[f64; 2]>> = scan
+        .ranges
+        .iter()
+        .enumerate()
+        .map(|(k, &r)| {
+            let r = r as f64;
+            (r.is_finite() && r >= scan.range_min.max(0.01) && r <= max_range).then(|| {
+                let a = scan.angle(k);
+                mount.transform_point([r * a.cos(), r * a.sin()])
+            })
+        })
+        .collect();
+    let mut out = Vec::with_capacity(raw.len());
+    for k in 0..raw.len() {
+        let Some(p) = raw[k] else { continue };
+        // Neighbours along the scan within `normal_radius`: fit a line through them (2×2 PCA).
+        // A radius, not a beam count, so that range noise stays small against the extent.
+        let close =
+            |j: usize| raw[j].filter(|q| (q[0] - p[0]).hypot(q[1] - p[1]) < config.normal_radius);
+        let mut near = vec![p];
+        for j in (k.saturating_sub(MAX_NEIGHBOURS)..k).rev() {
+            match close(j) {
+                Some(q) => near.push(q),
+                None => break,
+            }
+        }
+        for j in k + 1..(k + 1 + MAX_NEIGHBOURS).min(raw.len()) {
+            match close(j) {
+                Some(q) => near.push(q),
+                None => break,
+            }
+        }
+        if near.len() < 5 {
+            continue;
+        }
+        let m = near.len() as f64;
+        let c = near
+            .iter()
+            .fold([0.0, 0.0], |a, q| [a[0] + q[0] / m, a[1] + q[1] / m]);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        for q in &near {
+            let (dx, dy) = (q[0] - c[0], q[1] - c[1]);
+            sxx += dx * dx;
+            sxy += dx * dy;
+            syy += dy * dy;
+        }
+        // Keep points on straight surfaces only: at corners and edges the fitted normal is a
+        // blend of two surfaces and would bias the match.
+        let tr = sxx + syy;
+        let disc = ((sxx - syy).powi(2) + 4.0 * sxy * sxy).sqrt();
+        let (small, large) = ((tr - disc) / 2.0, (tr + disc) / 2.0);
+        if large <= 0.0 || small > config.planarity * large {
+            continue;
+        }
+        // Direction of least spread: the normal.
+        let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy) + std::f64::consts::FRAC_PI_2;
+        let mut n = [theta.cos(), theta.sin()];
+        // Face the sensor.
+        let to_sensor = [mount.x - p[0], mount.y - p[1]];
+        if n[0] * to_sensor[0] + n[1] * to_sensor[1] < 0.0 {
+            n = [-n[0], -n[1]];
+        }
+        out.push(Oriented { p, n });
+    }
+    out
+}
+
+/// Map points with normals in a hash grid, one per voxel.
+#[derive(Debug, Clone, Default)]
+pub struct PointMap {
+    voxel: f64,
+    /// Cell side of the lookup grid (the largest correspondence distance).
+    bucket: f64,
+    voxels: HashMap<(i64, i64), ()>,
+    buckets: HashMap<(i64, i64), Vec<Oriented>>,
+    len: usize,
+}
+
+impl PointMap {
+    pub fn new(voxel: f64, bucket: f64) -> PointMap {
+        PointMap {
+            voxel,
+            bucket,
+            ..Default::default()
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    fn key(x: f64, y: f64, s: f64) -> (i64, i64) {
+        ((x / s).floor() as i64, (y / s).floor() as i64)
+    }
+
+    /// Adds points (robot frame) seen from `pose`; voxels already filled keep their point.
+    pub fn insert(&mut self, pose: &Pose2, points: &[Oriented]) {
+        let (s, c) = pose.theta.sin_cos();
+        for o in points {
+            let p = pose.transform_point(o.p);
+            let v = Self::key(p[0], p[1], self.voxel);
+            if self.voxels.insert(v, ()).is_some() {
+                continue;
+            }
+            let n = [c * o.n[0] - s * o.n[1], s * o.n[0] + c * o.n[1]];
+            self.buckets
+                .entry(Self::key(p[0], p[1], self.bucket))
+                .or_default()
+                .push(Oriented { p, n });
+            self.len += 1;
+        }
+    }
+
+    /// The nearest map point to `q` within `max` (≤ the bucket size).
+    pub fn nearest(&self, q: [f64; 2], max: f64) -> Option<&Oriented> {
+        let (bi, bj) = Self::key(q[0], q[1], self.bucket);
+        let mut best: Option<(&Oriented, f64)> = None;
+        for i in bi - 1..=bi + 1 {
+            for j in bj - 1..=bj + 1 {
+                let Some(b) = self.buckets.get(&(i, j)) else {
+                    continue;
+                };
+                for o in b {
+                    let d = (o.p[0] - q[0]).powi(2) + (o.p[1] - q[1]).powi(2);
+                    if d <= max * max && best.is_none_or(|(_, bd)| d < bd) {
+                        best = Some((o, d));
+                    }
+                }
+            }
+        }
+        best.map(|b| b.0)
+    }
+
+    /// Every point (for export and tests).
+    pub fn points(&self) -> impl Iterator<Item = &Oriented> {
+        self.buckets.values().flatten()
+    }
+}
+
+/// Iterations over which the correspondence distance shrinks to its final value.
+const RAMP_ITERATIONS: f64 = 5.0;
+
+/// Outcome of one alignment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Alignment {
+    pub pose: Pose2,
+    /// Share of scan points with a partner in the last iteration.
+    pub overlap: f64,
+    /// RMS point-to-line residual of the partners, m.
+    pub rms: f64,
+    pub iterations: usize,
+}
+
+/// Aligns `scan` (robot frame) to `map` starting from `guess`; `None` when too few points
+/// find partners.
+pub fn align(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> Option<Alignment> {
+    if scan.is_empty() || map.is_empty() {
+        return None;
+    }
+    let mut pose = guess;
+    let mut result = None;
+    for it in 0..c.max_iterations {
+        // The correspondence distance shrinks over the first iterations, then holds.
+        let f = (it as f64 / RAMP_ITERATIONS).min(1.0);
+        let dmax = c.max_distance_start + f * (c.max_distance_end - c.max_distance_start);
+        let (s, co) = pose.theta.sin_cos();
+        let mut h = [[0.0f64; 3]; 3];
+        let mut g = [0.0f64; 3];
+        let (mut pairs, mut sq) = (0usize, 0.0);
+        for o in scan {
+            let q = [
+                pose.x + co * o.p[0] - s * o.p[1],
+                pose.y + s * o.p[0] + co * o.p[1],
+            ];
+            let Some(m) = map.nearest(q, dmax) else {
+                continue;
+            };
+            // Surfaces seen from opposite sides do not match.
+            let n_scan = [co * o.n[0] - s * o.n[1], s * o.n[0] + co * o.n[1]];
+            if n_scan[0] * m.n[0] + n_scan[1] * m.n[1] < 0.5 {
+                continue;
+            }
+            let r = m.n[0] * (q[0] - m.p[0]) + m.n[1] * (q[1] - m.p[1]);
+            let j = [
+                m.n[0],
+                m.n[1],
+                m.n[0] * -(q[1] - pose.y) + m.n[1] * (q[0] - pose.x),
+            ];
+            let w = if r.abs() <= c.huber {
+                1.0
+            } else {
+                c.huber / r.abs()
+            };
+            for a in 0..3 {
+                g[a] += w * j[a] * r;
+                for b in 0..3 {
+                    h[a][b] += w * j[a] * j[b];
+                }
+            }
+            pairs += 1;
+            sq += r * r;
+        }
+        let overlap = pairs as f64 / scan.len() as f64;
+        if overlap < c.min_overlap || pairs < 10 {
+            return None;
+        }
+        // Mean point term plus the prior towards the guess.
+        let inv = 1.0 / pairs as f64;
+        for (ga, ha) in g.iter_mut().zip(h.iter_mut()) {
+            *ga *= inv;
+            ha.iter_mut().for_each(|x| *x *= inv);
+        }
+        let prior = [
+            (c.translation_weight, pose.x - guess.x),
+            (c.translation_weight, pose.y - guess.y),
+            (c.rotation_weight, wrap_angle(pose.theta - guess.theta)),
+        ];
+        for (a, (w, d)) in prior.into_iter().enumerate() {
+            h[a][a] += w;
+            g[a] += w * d;
+        }
+        let d = solve3(h, [-g[0], -g[1], -g[2]])?;
+        pose = Pose2::new(pose.x + d[0], pose.y + d[1], wrap_angle(pose.theta + d[2]));
+        result = Some(Alignment {
+            pose,
+            overlap,
+            rms: (sq / pairs as f64).sqrt(),
+            iterations: it + 1,
+        });
+        if f >= 1.0 && d[0].hypot(d[1]) < 1e-5 && d[2].abs() < 1e-5 {
+            break;
+        }
+    }
+    result
+}
+
+/// Solves the 3×3 system `h x = g` (Cramer's rule); `None` if singular.
+fn solve3(h: [[f64; 3]; 3], g: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(h);
+    if d.abs() < 1e-12 {
+        return None;
+    }
+    let mut x = [0.0; 3];
+    for (k, xk) in x.iter_mut().enumerate() {
+        let mut m = h;
+        for r in 0..3 {
+            m[r][k] = g[r];
+        }
+        *xk = det(m) / d;
+    }
+    Some(x)
+}
+
+/// Synthetic scans for the stack's tests.
+#[cfg(test)]
+pub(crate) mod tests_support {
+    use futago_msgs::{LaserScan, Pose2, Time};
+
+    /// A scan of an L-shaped room corner plus a pillar, from `pose`, ranges by ray casting
+    /// against the walls x = 4, y = 3, y = −2 and a box around (2, 1).
+    pub fn room_scan(pose: &Pose2) -> LaserScan {
+        scan_of(&ROOM, pose)
+    }
+
+    /// Walls x = 4, y = 3, y = −2 and a 0.4 m box around (2, 1).
+    pub const ROOM: [([f64; 2], [f64; 2]); 7] = [
+        ([4.0, -2.0], [4.0, 3.0]),
+        ([-1.0, 3.0], [4.0, 3.0]),
+        ([-1.0, -2.0], [4.0, -2.0]),
+        ([1.8, 0.8], [2.2, 0.8]),
+        ([2.2, 0.8], [2.2, 1.2]),
+        ([2.2, 1.2], [1.8, 1.2]),
+        ([1.8, 1.2], [1.8, 0.8]),
+    ];
+
+    /// A 270°, 361-beam noise-free scan of wall segments from `pose`.
+    pub fn scan_of(segs: &[([f64; 2], [f64; 2])], pose: &Pose2) -> LaserScan {
+        let n = 361;
+        let inc = std::f64::consts::PI * 1.5 / (n - 1) as f64;
+        let ranges = (0..n)
+            .map(|k| {
+                let a = pose.theta - 0.75 * std::f64::consts::PI + k as f64 * inc;
+                let (dx, dy) = (a.cos(), a.sin());
+                let mut best = f64::INFINITY;
+                for &(p, q) in segs {
+                    let (ex, ey) = (q[0] - p[0], q[1] - p[1]);
+                    let den = dx * ey - dy * ex;
+                    if den.abs() < 1e-12 {
+                        continue;
+                    }
+                    let (wx, wy) = (p[0] - pose.x, p[1] - pose.y);
+                    let t = (wx * ey - wy * ex) / den;
+                    let u = (wx * dy - wy * dx) / den;
+                    if t > 0.0 && (0.0..=1.0).contains(&u) {
+                        best = best.min(t);
+                    }
+                }
+                best as f32
+            })
+            .collect();
+        LaserScan {
+            frame: "front".into(),
+            stamp: Time::ZERO,
+            angle_min: -0.75 * std::f64::consts::PI,
+            angle_increment: inc,
+            time_increment: 0.0,
+            range_min: 0.02,
+            range_max: 30.0,
+            ranges,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tests_support::{room_scan, scan_of};
+    use super::*;
+
+    #[test]
+    fn icp_recovers_an_offset_pose_in_a_room() {
+        // Pure ICP: no pull towards the guess.
+        let c = IcpConfig {
+            translation_weight: 0.0,
+            rotation_weight: 0.0,
+            ..IcpConfig::default()
+        };
+        let origin = Pose2::new(0.0, 0.0, 0.0);
+        let mut map = PointMap::new(c.voxel, c.max_distance_start);
+        map.insert(
+            &origin,
+            &scan_points(&room_scan(&origin), &Pose2::IDENTITY, 30.0, &c),
+        );
+        let truth = Pose2::new(0.3, -0.2, 0.1);
+        let pts = scan_points(&room_scan(&truth), &Pose2::IDENTITY, 30.0, &c);
+        // Start 0.15 m and 3° off, as wheel odometry might be after a few scans.
+        let guess = Pose2::new(0.42, -0.11, 0.15);
+        let a = align(&map, &pts, guess, &c).expect("aligns");
+        assert!(a.pose.distance(&truth) < 0.01, "{:?} vs {truth:?}", a.pose);
+        assert!(wrap_angle(a.pose.theta - truth.theta).abs() < 0.2f64.to_radians());
+        assert!(a.overlap > 0.8, "{a:?}");
+    }
+
+    #[test]
+    fn the_odometry_prior_holds_the_pose_along_a_featureless_corridor() {
+        // Two long parallel walls: the scan fixes y and heading, not x.
+        let corridor = [([-20.0, 1.0], [20.0, 1.0]), ([-20.0, -1.0], [20.0, -1.0])];
+        let c = IcpConfig::default();
+        let mut map = PointMap::new(c.voxel, c.max_distance_start);
+        let at = |x: f64, y: f64, th: f64| Pose2::new(x, y, th);
+        map.insert(
+            &at(0.0, 0.0, 0.0),
+            &scan_points(
+                &scan_of(&corridor, &at(0.0, 0.0, 0.0)),
+                &Pose2::IDENTITY,
+                30.0,
+                &c,
+            ),
+        );
+        let truth = at(0.5, 0.1, 0.02);
+        let pts = scan_points(&scan_of(&corridor, &truth), &Pose2::IDENTITY, 30.0, &c);
+        let guess = at(0.45, 0.18, 0.05);
+        let a = align(&map, &pts, guess, &c).unwrap();
+        assert!((a.pose.y - truth.y).abs() < 0.005, "{a:?}");
+        assert!((a.pose.theta - truth.theta).abs() < 0.002, "{a:?}");
+        assert!(
+            (a.pose.x - guess.x).abs() < 0.005,
+            "x stays at the guess: {a:?}"
+        );
+    }
+
+    #[test]
+    fn normals_face_the_sensor_and_the_map_keeps_one_point_per_voxel() {
+        let pts = scan_points(
+            &room_scan(&Pose2::IDENTITY),
+            &Pose2::IDENTITY,
+            30.0,
+            &IcpConfig::default(),
+        );
+        // Points on the x = 4 wall have normals pointing back along −x.
+        let wall: Vec<_> = pts
+            .iter()
+            .filter(|o| (o.p[0] - 4.0).abs() < 1e-6 && o.p[1].abs() < 1.0)
+            .collect();
+        assert!(wall.len() > 20);
+        for o in wall {
+            assert!(o.n[0] < -0.99, "{o:?}");
+        }
+        let mut map = PointMap::new(0.05, 0.5);
+        map.insert(&Pose2::IDENTITY, &pts);
+        let n = map.len();
+        map.insert(&Pose2::IDENTITY, &pts);
+        assert_eq!(map.len(), n, "the same points twice add nothing");
+        assert!(map.nearest([4.0, 0.0], 0.05).is_some());
+        assert!(map.nearest([3.0, 0.0], 0.2).is_none());
+    }
+
+    #[test]
+    fn a_scan_with_nothing_in_common_is_refused() {
+        let c = IcpConfig::default();
+        let mut map = PointMap::new(c.voxel, c.max_distance_start);
+        map.insert(
+            &Pose2::IDENTITY,
+            &scan_points(&room_scan(&Pose2::IDENTITY), &Pose2::IDENTITY, 30.0, &c),
+        );
+        let far = Pose2::new(50.0, 50.0, 0.0);
+        let pts = scan_points(&room_scan(&Pose2::IDENTITY), &Pose2::IDENTITY, 30.0, &c);
+        assert!(align(&map, &pts, far, &c).is_none());
+    }
+}

@@ -1,0 +1,209 @@
+//! The relations metric of Kümmerle et al. 2009 ("On measuring the accuracy of SLAM
+//! algorithms", Autonomous Robots 27(4)), computed as Cartographer's
+//! `compute_relations_metrics` does (`shared/reference/sensors-robot-metrics.md` §1.2).
+//!
+//! A relation is the true relative pose R from the robot at `t1` to the robot at `t2`. The
+//! estimated poses P1, P2 at those times are interpolated in the estimated trajectory; the error
+//! transform is E = (P1⁻¹ P2) R⁻¹, and each relation contributes ‖t(E)‖ and |angle(E)|. The
+//! report is the mean and sample standard deviation (n − 1) of the absolute and squared
+//! translational (m, m²) and rotational (deg, deg²) errors.
+//!
+//! This is scoring, not robot code: it lives beside the ground truth, apart from the stack.
+
+use anyhow::{Result, bail};
+use futago_msgs::{Pose2, Time, wrap_angle};
+use serde::Serialize;
+
+/// One ground-truth relation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Relation {
+    pub t1: Time,
+    pub t2: Time,
+    /// Pose of the robot at `t2` in its frame at `t1`.
+    pub delta: Pose2,
+}
+
+/// Parses a relations file: `t1 t2 x y z roll pitch yaw` per line, `#` comments.
+pub fn parse(text: &str, file: &str) -> Result<Vec<Relation>> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let v: Vec<f64> = line
+            .split_whitespace()
+            .map(|w| w.parse::<f64>().ok().filter(|x| x.is_finite()))
+            .collect::<Option<_>>()
+            .unwrap_or_default();
+        if v.len() != 8 {
+            bail!(
+                "{file} line {}: expected `t1 t2 x y z roll pitch yaw` (8 numbers), found `{line}`",
+                i + 1
+            );
+        }
+        out.push(Relation {
+            t1: Time::from_secs(v[0]),
+            t2: Time::from_secs(v[1]),
+            delta: Pose2::new(v[2], v[3], v[7]),
+        });
+    }
+    if out.is_empty() {
+        bail!("{file}: no relations");
+    }
+    Ok(out)
+}
+
+/// Mean and sample standard deviation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MeanStd {
+    pub mean: f64,
+    pub std: f64,
+}
+
+fn mean_std(v: &[f64]) -> MeanStd {
+    let n = v.len() as f64;
+    if v.is_empty() {
+        return MeanStd {
+            mean: f64::NAN,
+            std: f64::NAN,
+        };
+    }
+    let mean = v.iter().sum::<f64>() / n;
+    let var = if v.len() > 1 {
+        v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
+    MeanStd {
+        mean,
+        std: var.sqrt(),
+    }
+}
+
+/// The four reported quantities, and how many relations were scored.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Metrics {
+    pub relations: usize,
+    /// Relations whose times fall outside the estimated trajectory.
+    pub unmatched: usize,
+    pub abs_trans_m: MeanStd,
+    pub sqr_trans_m2: MeanStd,
+    pub abs_rot_deg: MeanStd,
+    pub sqr_rot_deg2: MeanStd,
+}
+
+/// The estimated pose at `t`, linearly interpolated (yaw along the shorter arc) between the
+/// samples around it; `None` outside the trajectory. `traj` is sorted by time.
+pub fn interpolate(traj: &[(Time, Pose2)], t: Time) -> Option<Pose2> {
+    let k = traj.partition_point(|s| s.0 < t);
+    if k < traj.len() && traj[k].0 == t {
+        return Some(traj[k].1);
+    }
+    if k == 0 || k == traj.len() {
+        return None;
+    }
+    let ((t0, a), (t1, b)) = (traj[k - 1], traj[k]);
+    let f = (t - t0).secs() / (t1 - t0).secs();
+    Some(Pose2::new(
+        a.x + f * (b.x - a.x),
+        a.y + f * (b.y - a.y),
+        wrap_angle(a.theta + f * wrap_angle(b.theta - a.theta)),
+    ))
+}
+
+/// Scores an estimated trajectory (sorted by time) against relations.
+pub fn evaluate(traj: &[(Time, Pose2)], relations: &[Relation]) -> Metrics {
+    let (mut trans, mut rot) = (Vec::new(), Vec::new());
+    let mut unmatched = 0;
+    for r in relations {
+        let (Some(p1), Some(p2)) = (interpolate(traj, r.t1), interpolate(traj, r.t2)) else {
+            unmatched += 1;
+            continue;
+        };
+        let e = p1.between(&p2).compose(&r.delta.inverse());
+        trans.push(e.x.hypot(e.y));
+        rot.push(wrap_angle(e.theta).abs().to_degrees());
+    }
+    let sq = |v: &[f64]| v.iter().map(|x| x * x).collect::<Vec<_>>();
+    Metrics {
+        relations: trans.len(),
+        unmatched,
+        abs_trans_m: mean_std(&trans),
+        sqr_trans_m2: mean_std(&sq(&trans)),
+        abs_rot_deg: mean_std(&rot),
+        sqr_rot_deg2: mean_std(&sq(&rot)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_perfect_trajectory_scores_zero_and_a_known_error_scores_by_hand() {
+        // The robot drives 1 m along x per second, turning 0.1 rad per second.
+        let truth: Vec<(Time, Pose2)> = (0..=10)
+            .map(|i| {
+                let t = i as f64;
+                (Time::from_secs(t), Pose2::new(t, 0.0, 0.1 * t))
+            })
+            .collect();
+        let rel = |a: usize, b: usize| Relation {
+            t1: truth[a].0,
+            t2: truth[b].0,
+            delta: truth[a].1.between(&truth[b].1),
+        };
+        let rels = vec![rel(0, 1), rel(2, 5), rel(3, 4)];
+        let m = evaluate(&truth, &rels);
+        assert_eq!(m.relations, 3);
+        assert!(m.abs_trans_m.mean < 1e-12 && m.abs_rot_deg.mean < 1e-9);
+
+        // Shift one estimated pose 0.1 m along the world's y: relation (3, 4) then errs by
+        // exactly that shift seen from pose 3, the others not at all.
+        let mut est = truth.clone();
+        est[4].1.y += 0.1;
+        let m = evaluate(&est, &rels);
+        let errs = [0.0, 0.0, 0.1];
+        let mean = 0.1 / 3.0;
+        let std = (errs.iter().map(|e| (e - mean) * (e - mean)).sum::<f64>() / 2.0).sqrt();
+        assert!((m.abs_trans_m.mean - mean).abs() < 1e-9, "{m:?}");
+        assert!((m.abs_trans_m.std - std).abs() < 1e-9);
+        assert!((m.sqr_trans_m2.mean - 0.01 / 3.0).abs() < 1e-9);
+        assert!(m.abs_rot_deg.mean < 1e-9);
+
+        // A relation between times outside the trajectory is counted, not scored.
+        let outside = Relation {
+            t1: Time::from_secs(20.0),
+            t2: Time::from_secs(21.0),
+            delta: Pose2::IDENTITY,
+        };
+        assert_eq!(evaluate(&truth, &[outside]).unmatched, 1);
+    }
+
+    #[test]
+    fn interpolation_is_linear_and_takes_the_short_way_round() {
+        let traj = vec![
+            (Time::from_secs(0.0), Pose2::new(0.0, 0.0, 3.0)),
+            (Time::from_secs(1.0), Pose2::new(2.0, 4.0, -3.0)),
+        ];
+        let p = interpolate(&traj, Time::from_secs(0.5)).unwrap();
+        assert!((p.x - 1.0).abs() < 1e-12 && (p.y - 2.0).abs() < 1e-12);
+        // From 3.0 to −3.0 through π, not through 0.
+        assert!(p.theta.abs() > 3.0, "{}", p.theta);
+        assert!(interpolate(&traj, Time::from_secs(1.5)).is_none());
+    }
+
+    #[test]
+    fn relation_files_parse_and_bad_lines_are_named() {
+        let r = parse(
+            "1134864645.90321 1134864646.32420 0.31293 0.02935 0.00000  0.00000 0.00000 0.24198\n",
+            "x.relations",
+        )
+        .unwrap();
+        assert_eq!(r.len(), 1);
+        assert!((r[0].delta.theta - 0.24198).abs() < 1e-12);
+        let e = parse("1 2 3\n", "x.relations").unwrap_err().to_string();
+        assert!(e.contains("x.relations line 1"), "{e}");
+    }
+}

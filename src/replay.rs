@@ -1,0 +1,135 @@
+//! `futago replay`: the robot stack's SLAM on a real robot's log, scored against ground-truth
+//! relations when given.
+
+use crate::relations::{self, Metrics};
+use crate::run::write_atomically;
+use anyhow::{Context, Result, bail};
+use futago_msgs::{Pose2, Pose3, Time, carmen, tum};
+use futago_robot::slam::{IcpSlam, IcpSlamConfig};
+use serde_json::{Value, json};
+use std::path::Path;
+use std::time::Instant;
+
+/// Reads a log by its extension: CARMEN (`.clf`, `.log`, `.carmen`).
+pub fn read_log(path: &Path) -> Result<carmen::Log> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "clf" | "log" | "carmen" => {
+            let bytes =
+                std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+            let text = String::from_utf8(bytes).map_err(|e| {
+                anyhow::anyhow!(
+                    "{}: not a text CARMEN log (invalid UTF-8 at byte {})",
+                    path.display(),
+                    e.utf8_error().valid_up_to()
+                )
+            })?;
+            carmen::read(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+        }
+        "bag" => bail!(
+            "{}: ROS 1 bags are not read yet; convert to a CARMEN log (FLASER/ROBOTLASER1/ODOM) or use the .clf of the same data",
+            path.display()
+        ),
+        _ => bail!(
+            "{}: unknown log format `.{ext}`; expected a CARMEN log (.clf, .log, .carmen)",
+            path.display()
+        ),
+    }
+}
+
+fn write_tum(path: &Path, header: &str, traj: &[(Time, Pose2)]) -> Result<()> {
+    let mut text = format!("{header}\n# timestamp tx ty tz qx qy qz qw\n");
+    for (t, p) in traj {
+        tum::format_line(
+            &mut text,
+            &tum::Stamped {
+                stamp: *t,
+                pose: Pose3::from_pose2(p, 0.0),
+            },
+        );
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+fn metrics_json(m: &Metrics) -> Value {
+    serde_json::to_value(m).unwrap_or(Value::Null)
+}
+
+/// Runs seed 000's ICP SLAM over `log`, writes `trajectory.txt`, `odometry.txt` (TUM),
+/// `map.pgm`/`map.yaml` and `summary.json` into `out`, and scores SLAM and raw odometry
+/// against `relations` when given.
+pub fn replay(
+    log_path: &Path,
+    relations: Option<&Path>,
+    config: IcpSlamConfig,
+    out: &Path,
+) -> Result<Value> {
+    let log = read_log(log_path)?;
+    if log.scans.is_empty() {
+        bail!("{}: the log holds no laser scans", log_path.display());
+    }
+    let rels = match relations {
+        Some(p) => Some(relations::parse(
+            &std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?,
+            &p.display().to_string(),
+        )?),
+        None => None,
+    };
+    let started = Instant::now();
+    let mut slam = IcpSlam::new(config, Pose2::IDENTITY);
+    let first_odometry = log.scans[0].odometry;
+    let mut odometry = Vec::with_capacity(log.scans.len());
+    for s in &log.scans {
+        slam.update(&s.scan, &s.odometry, &s.mount);
+        odometry.push((s.scan.stamp, first_odometry.between(&s.odometry)));
+    }
+    let wall = started.elapsed().as_secs_f64();
+    let span = (log.scans[log.scans.len() - 1].scan.stamp - log.scans[0].scan.stamp).secs();
+    write_atomically(out, |tmp| {
+        write_tum(
+            &tmp.join("trajectory.txt"),
+            &format!("# futago ICP SLAM on {}", log_path.display()),
+            slam.trajectory(),
+        )?;
+        write_tum(
+            &tmp.join("odometry.txt"),
+            &format!("# odometry of {}, from its first scan", log_path.display()),
+            &odometry,
+        )?;
+        slam.grid()
+            .to_grid()
+            .write_map_server(tmp, "map")
+            .context("writing map.pgm and map.yaml")?;
+        let mut summary = json!({
+            "log": log_path.display().to_string(),
+            "slam": "icp (seed 000: scan-to-map ICP, keyframes every 0.3 m, no loop closure)",
+            "scans": log.scans.len(),
+            "odometry_records": log.odometry.len(),
+            "skipped": log.skipped,
+            "log_duration_s": span,
+            "keyframes": slam.keyframes(),
+            "unmatched_scans": slam.unmatched(),
+            "config": format!("{config:?}"),
+        });
+        if let Some(rels) = &rels {
+            summary["relations"] = json!({
+                "file": relations.map(|p| p.display().to_string()),
+                "slam": metrics_json(&relations::evaluate(slam.trajectory(), rels)),
+                "odometry": metrics_json(&relations::evaluate(&odometry, rels)),
+            });
+        }
+        summary["performance"] = json!({
+            "wall_time_s": wall,
+            "real_time_factor": if wall > 0.0 { span / wall } else { 0.0 },
+        });
+        std::fs::write(
+            tmp.join("summary.json"),
+            serde_json::to_string_pretty(&summary)? + "\n",
+        )
+        .context("writing summary.json")?;
+        Ok(summary)
+    })
+}
