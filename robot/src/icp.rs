@@ -36,6 +36,12 @@ pub struct IcpConfig {
     /// of issue 4's first part).
     pub translation_weight: f64,
     pub rotation_weight: f64,
+    /// Half-width of the heading search before ICP, rad (0: none). Odometry headings can be
+    /// off by more than ICP's basin of convergence after a fast turn; the search tries
+    /// headings around the guess in `rotation_search_step` steps and starts ICP from the one
+    /// whose points land closest to the map.
+    pub rotation_search: f64,
+    pub rotation_search_step: f64,
 }
 
 impl Default for IcpConfig {
@@ -51,6 +57,8 @@ impl Default for IcpConfig {
             planarity: 0.1,
             translation_weight: 0.05,
             rotation_weight: 0.02,
+            rotation_search: 0.35,
+            rotation_search_step: 0.025,
         }
     }
 }
@@ -236,7 +244,7 @@ pub fn align(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> 
     if scan.is_empty() || map.is_empty() {
         return None;
     }
-    let mut pose = guess;
+    let mut pose = best_heading(map, scan, guess, c);
     let mut result = None;
     for it in 0..c.max_iterations {
         // The correspondence distance shrinks over the first iterations, then holds.
@@ -311,6 +319,46 @@ pub fn align(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> 
         }
     }
     result
+}
+
+/// The heading within `rotation_search` of the guess whose points (every 4th) land closest to
+/// map points (Gaussian score, σ = the final correspondence distance).
+fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> Pose2 {
+    if c.rotation_search <= 0.0 || c.rotation_search_step <= 0.0 {
+        return guess;
+    }
+    let sigma = c.max_distance_end.max(1e-3);
+    let reach = 2.0 * sigma;
+    let score = |pose: &Pose2| -> f64 {
+        scan.iter()
+            .step_by(4)
+            .filter_map(|o| {
+                let q = pose.transform_point(o.p);
+                map.nearest(q, reach).map(|m| {
+                    let d2 = (m.p[0] - q[0]).powi(2) + (m.p[1] - q[1]).powi(2);
+                    (-d2 / (2.0 * sigma * sigma)).exp()
+                })
+            })
+            .sum()
+    };
+    let steps = (c.rotation_search / c.rotation_search_step).round() as i64;
+    let mut best = (score(&guess), guess);
+    for k in -steps..=steps {
+        if k == 0 {
+            continue;
+        }
+        let p = Pose2::new(
+            guess.x,
+            guess.y,
+            wrap_angle(guess.theta + k as f64 * c.rotation_search_step),
+        );
+        let sc = score(&p);
+        // Prefer the guess on ties: a heading must score clearly better to replace it.
+        if sc > best.0 * 1.05 {
+            best = (sc, p);
+        }
+    }
+    best.1
 }
 
 /// Solves the 3×3 system `h x = g` (Cramer's rule); `None` if singular.
@@ -422,6 +470,39 @@ mod tests {
         assert!(a.pose.distance(&truth) < 0.01, "{:?} vs {truth:?}", a.pose);
         assert!(wrap_angle(a.pose.theta - truth.theta).abs() < 0.2f64.to_radians());
         assert!(a.overlap > 0.8, "{a:?}");
+    }
+
+    #[test]
+    fn the_heading_search_recovers_a_turn_that_odometry_misjudged() {
+        let c = IcpConfig {
+            translation_weight: 0.0,
+            rotation_weight: 0.0,
+            rotation_search: 40f64.to_radians(),
+            ..IcpConfig::default()
+        };
+        let origin = Pose2::IDENTITY;
+        let mut map = PointMap::new(c.voxel, c.max_distance_start);
+        map.insert(
+            &origin,
+            &scan_points(&room_scan(&origin), &Pose2::IDENTITY, 30.0, &c),
+        );
+        let truth = Pose2::new(0.2, 0.1, 0.3);
+        let pts = scan_points(&room_scan(&truth), &Pose2::IDENTITY, 30.0, &c);
+        // Odometry thinks the robot turned 35° less than it did.
+        let guess = Pose2::new(0.2, 0.1, 0.3 - 35f64.to_radians());
+        let with = align(&map, &pts, guess, &c).unwrap();
+        assert!(with.pose.distance(&truth) < 0.01, "{with:?}");
+        assert!(wrap_angle(with.pose.theta - truth.theta).abs() < 0.2f64.to_radians());
+        let without = IcpConfig {
+            rotation_search: 0.0,
+            ..c
+        };
+        let plain = align(&map, &pts, guess, &without);
+        assert!(
+            plain.is_none_or(|a| a.pose.distance(&truth) > 0.05
+                || wrap_angle(a.pose.theta - truth.theta).abs() > 1f64.to_radians()),
+            "ICP alone should not reach the truth from 35° off: {plain:?}"
+        );
     }
 
     #[test]
