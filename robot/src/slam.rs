@@ -19,6 +19,10 @@ pub struct IcpSlamConfig {
     pub keyframe_angle: f64,
     /// Readings beyond this are not used for matching, m.
     pub max_range: f64,
+    /// A match that moves the pose further than this from the odometry guess (m, rad) is
+    /// refused, and the scan dead-reckoned.
+    pub max_correction: f64,
+    pub max_correction_angle: f64,
     pub icp: IcpConfig,
     pub grid: OccupancyConfig,
 }
@@ -29,6 +33,8 @@ impl Default for IcpSlamConfig {
             keyframe_distance: 0.3,
             keyframe_angle: 0.35,
             max_range: 30.0,
+            max_correction: 0.5,
+            max_correction_angle: 0.6,
             icp: IcpConfig::default(),
             grid: OccupancyConfig::default(),
         }
@@ -82,7 +88,10 @@ impl IcpSlam {
         };
         self.last_odometry = Some(*odometry);
         let points = scan_points(scan, mount, self.config.max_range, &self.config.icp);
-        let aligned = align(&self.map, &points, guess, &self.config.icp);
+        let aligned = align(&self.map, &points, guess, &self.config.icp).filter(|a| {
+            a.pose.distance(&guess) <= self.config.max_correction
+                && wrap_angle(a.pose.theta - guess.theta).abs() <= self.config.max_correction_angle
+        });
         let matched = aligned.is_some();
         if !matched && !self.map.is_empty() {
             self.unmatched += 1;
