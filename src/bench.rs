@@ -257,3 +257,61 @@ pub fn bench_sensors(world: &World, poses: Option<Vec<Pose>>, b: &SensorBench) -
     out.insert("laser_one_core".into(), laser_rates(&sim, &origins, b.rays));
     Ok(Value::Object(out))
 }
+
+/// MCL update time on a world's own map: the filter tracks the robot at `start` with
+/// `particles` particles, one beam every 15°, for each measurement model. The scan is seed
+/// 000's laser (240°, 961 beams) cast in the simulator.
+pub fn bench_mcl(world: &World, start: Pose2, particles: usize, updates: usize) -> Result<Value> {
+    use futago_robot::mcl::{Mcl, MclConfig, MclMap, SensorModel};
+    use futago_sim::lidar::{LidarConfig, LidarPreset};
+    let grid = futago_sim::world::export::occupancy_grid(world, 0.05, 0.15, 0.25, 0.5);
+    let lidar = LidarConfig::preset(LidarPreset::Seed000);
+    let spec = lidar
+        .resolve(Path::new("bench"), "lidar")
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut sim = Simulation::new(
+        world,
+        &PhysicsConfig::default(),
+        &CreateConfig::default(),
+        &[(lidar.clone(), spec)],
+        start,
+        0,
+    );
+    let scan = loop {
+        if let Some((_, s)) = sim.step(None).scans.into_iter().next() {
+            break s;
+        }
+    };
+    let mount = Pose2::new(lidar.xyz[0], lidar.xyz[1], lidar.rpy_deg[2].to_radians());
+    let mut out = serde_json::Map::new();
+    out.insert("world".into(), json!(world.name));
+    out.insert("map_cells".into(), json!(grid.width * grid.height));
+    for model in [SensorModel::Beam, SensorModel::LikelihoodField] {
+        let config = MclConfig {
+            particles,
+            model,
+            kld: false,
+            ..MclConfig::default()
+        };
+        let mut mcl = Mcl::new(config, MclMap::new(grid.clone()), 1);
+        mcl.set_pose(start, [0.2, 0.2, 0.1]);
+        let odometry = Pose2::IDENTITY;
+        mcl.update(&odometry, &scan, &mount);
+        let t = Instant::now();
+        let mut est = mcl.estimate();
+        for _ in 0..updates.max(1) {
+            est = mcl.update(&odometry, &scan, &mount);
+        }
+        let secs = t.elapsed().as_secs_f64() / updates.max(1) as f64;
+        out.insert(
+            format!("{model:?}"),
+            json!({
+                "particles": particles,
+                "beams_used": (240.0f64 / 15.0).floor() as usize + 1,
+                "ms_per_update": secs * 1e3,
+                "error_m": est.pose.distance(&start),
+            }),
+        );
+    }
+    Ok(Value::Object(out))
+}

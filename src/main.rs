@@ -87,6 +87,19 @@ enum BenchCommand {
         #[arg(long, default_value_t = 2_000_000)]
         rays: usize,
     },
+    /// Monte Carlo localisation update time on a world's own map (seed 000: 500 particles,
+    /// one beam every 15°), for the beam and likelihood-field models.
+    Mcl {
+        #[arg(long, default_value = "worlds/office.toml")]
+        world: PathBuf,
+        /// Spawn to localise at.
+        #[arg(long, default_value = "dock")]
+        spawn: String,
+        #[arg(long, default_value_t = 500)]
+        particles: usize,
+        #[arg(long, default_value_t = 200)]
+        updates: usize,
+    },
     /// Camera images per second (640×480 RGB + depth, depth alone, batches of small depth
     /// images) and laser rays per second, in any world.
     Sensors {
@@ -321,6 +334,22 @@ fn real_main() -> Result<()> {
         } => {
             let s = scenario::Scenario::load(&scenario)?;
             let r = bench::bench(&s, duration, rays.max(682))?;
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+        Command::Bench {
+            command:
+                BenchCommand::Mcl {
+                    world,
+                    spawn,
+                    particles,
+                    updates,
+                },
+        } => {
+            let w = world_cmd::load(&world)?;
+            let start = w
+                .spawn(&spawn)
+                .with_context(|| format!("world `{}` has no spawn `{spawn}`", w.name))?;
+            let r = bench::bench_mcl(&w, start, particles.max(1), updates)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
         Command::Bench {

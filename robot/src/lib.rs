@@ -6,6 +6,7 @@
 //! mapping, localisation and navigation stack plugs in beside them.
 
 pub mod icp;
+pub mod mcl;
 pub mod occupancy;
 pub mod odometry;
 pub mod script;

@@ -1,0 +1,686 @@
+//! Monte Carlo localisation on a known occupancy grid (written for futago; Thrun, Burgard & Fox,
+//! *Probabilistic Robotics*, ch. 5–8): the odometry motion model with Gaussian noise
+//! (`alpha1..4`, as ROS amcl's `diff` model), two measurement models (the beam model with hit,
+//! short, max and random terms, and the likelihood field), low-variance resampling, KLD-sampling
+//! of the particle count (Fox 2003) and augmented MCL's random particles for recovery from
+//! kidnapping (`alpha_slow`, `alpha_fast`).
+//!
+//! Seed 000's configuration is the default: 500 particles, the beam model, one beam every 15°.
+
+use futago_msgs::grid::OccupancyGrid;
+use futago_msgs::{LaserScan, Pose2, wrap_angle};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::Deserialize;
+
+/// Measurement model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SensorModel {
+    Beam,
+    LikelihoodField,
+}
+
+/// MCL parameters (`mcl.*`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MclConfig {
+    /// Particle count (the starting count, and the fixed count without KLD-sampling).
+    pub particles: usize,
+    pub model: SensorModel,
+    /// Angle between the beams used, rad (seed 000: 15°).
+    pub beam_step: f64,
+    /// Readings beyond this are treated as max-range, m.
+    pub max_range: f64,
+    pub z_hit: f64,
+    pub z_short: f64,
+    pub z_max: f64,
+    pub z_rand: f64,
+    pub sigma_hit: f64,
+    pub lambda_short: f64,
+    /// Odometry noise (amcl's alpha1–4): rotation from rotation, rotation from translation,
+    /// translation from translation, translation from rotation.
+    pub alpha: [f64; 4],
+    /// KLD-sampling: bound the particle count by the KL error `kld_err` at quantile `kld_z`
+    /// over bins of `kld_bin` m and `kld_bin_angle` rad, between the two limits.
+    pub kld: bool,
+    pub kld_err: f64,
+    pub kld_z: f64,
+    pub kld_bin: f64,
+    pub kld_bin_angle: f64,
+    pub min_particles: usize,
+    pub max_particles: usize,
+    /// Augmented MCL: averages of the measurement likelihood; random particles are injected
+    /// with probability max(0, 1 − w_fast / w_slow).
+    pub alpha_slow: f64,
+    pub alpha_fast: f64,
+}
+
+impl Default for MclConfig {
+    fn default() -> Self {
+        MclConfig {
+            particles: 500,
+            model: SensorModel::Beam,
+            beam_step: 15f64.to_radians(),
+            max_range: 30.0,
+            z_hit: 0.8,
+            z_short: 0.1,
+            z_max: 0.05,
+            z_rand: 0.05,
+            sigma_hit: 0.2,
+            lambda_short: 0.1,
+            alpha: [0.2, 0.2, 0.2, 0.2],
+            kld: true,
+            kld_err: 0.01,
+            kld_z: 0.99,
+            kld_bin: 0.5,
+            kld_bin_angle: 10f64.to_radians(),
+            min_particles: 100,
+            max_particles: 5000,
+            alpha_slow: 0.001,
+            alpha_fast: 0.1,
+        }
+    }
+}
+
+/// The map as MCL reads it: occupancy for ray casting, distance to the nearest obstacle for
+/// the likelihood field, and the free cells for drawing random particles.
+pub struct MclMap {
+    grid: OccupancyGrid,
+    /// Distance to the nearest occupied cell, m (capped).
+    distance: Vec<f32>,
+    free: Vec<(usize, usize)>,
+}
+
+impl MclMap {
+    pub fn new(grid: OccupancyGrid) -> MclMap {
+        let (w, h) = (grid.width, grid.height);
+        // Two-pass chamfer distance transform (3-4 weights), in cells.
+        let big = 1e9f32;
+        let mut d: Vec<f32> = grid
+            .cells
+            .iter()
+            .map(|&c| if c >= 50 { 0.0 } else { big })
+            .collect();
+        let (a, b) = (1.0f32, std::f32::consts::SQRT_2);
+        for j in 0..h {
+            for i in 0..w {
+                let k = j * w + i;
+                let mut v = d[k];
+                if i > 0 {
+                    v = v.min(d[k - 1] + a);
+                }
+                if j > 0 {
+                    v = v.min(d[k - w] + a);
+                    if i > 0 {
+                        v = v.min(d[k - w - 1] + b);
+                    }
+                    if i + 1 < w {
+                        v = v.min(d[k - w + 1] + b);
+                    }
+                }
+                d[k] = v;
+            }
+        }
+        for j in (0..h).rev() {
+            for i in (0..w).rev() {
+                let k = j * w + i;
+                let mut v = d[k];
+                if i + 1 < w {
+                    v = v.min(d[k + 1] + a);
+                }
+                if j + 1 < h {
+                    v = v.min(d[k + w] + a);
+                    if i + 1 < w {
+                        v = v.min(d[k + w + 1] + b);
+                    }
+                    if i > 0 {
+                        v = v.min(d[k + w - 1] + b);
+                    }
+                }
+                d[k] = v;
+            }
+        }
+        let r = grid.resolution as f32;
+        let distance = d.into_iter().map(|c| (c * r).min(5.0)).collect();
+        let free = (0..h)
+            .flat_map(|j| (0..w).map(move |i| (i, j)))
+            .filter(|&(i, j)| grid.get(i, j) == 0)
+            .collect();
+        MclMap {
+            grid,
+            distance,
+            free,
+        }
+    }
+
+    fn distance_at(&self, x: f64, y: f64) -> f64 {
+        match self.grid.cell_of(x, y) {
+            Some((i, j)) => self.distance[j * self.grid.width + i] as f64,
+            None => 5.0,
+        }
+    }
+
+    fn occupied_or_outside(&self, x: f64, y: f64) -> bool {
+        match self.grid.cell_of(x, y) {
+            Some((i, j)) => self.grid.get(i, j) >= 50,
+            None => true,
+        }
+    }
+
+    /// Range to the first occupied cell along a ray (cell steps), up to `max`.
+    fn cast(&self, x: f64, y: f64, a: f64, max: f64) -> f64 {
+        let step = self.grid.resolution;
+        let (dx, dy) = (a.cos() * step, a.sin() * step);
+        let n = (max / step) as usize;
+        let (mut px, mut py) = (x, y);
+        for k in 1..=n {
+            px += dx;
+            py += dy;
+            if self.occupied_or_outside(px, py) {
+                return k as f64 * step;
+            }
+        }
+        max
+    }
+}
+
+/// A pose estimate: the weighted mean and the covariance of (x, y, θ).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    pub pose: Pose2,
+    pub covariance: [[f64; 3]; 3],
+    pub particles: usize,
+}
+
+/// The particle filter.
+pub struct Mcl {
+    config: MclConfig,
+    map: MclMap,
+    rng: ChaCha8Rng,
+    particles: Vec<Pose2>,
+    weights: Vec<f64>,
+    last_odometry: Option<Pose2>,
+    w_slow: f64,
+    w_fast: f64,
+}
+
+fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+    StandardNormal.sample(rng)
+}
+
+impl Mcl {
+    /// A filter on `map`, its particles spread over the free cells (global localisation).
+    pub fn new(config: MclConfig, map: MclMap, seed: u64) -> Mcl {
+        let mut m = Mcl {
+            config,
+            map,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            particles: Vec::new(),
+            weights: Vec::new(),
+            last_odometry: None,
+            w_slow: 0.0,
+            w_fast: 0.0,
+        };
+        m.particles = (0..config.particles).map(|_| m.random_pose()).collect();
+        m.weights = vec![1.0 / config.particles as f64; config.particles];
+        m
+    }
+
+    /// Spreads the particles around `pose` with standard deviations (m, m, rad).
+    pub fn set_pose(&mut self, pose: Pose2, sigma: [f64; 3]) {
+        let n = self.config.particles;
+        self.particles = (0..n)
+            .map(|_| {
+                Pose2::new(
+                    pose.x + sigma[0] * gauss(&mut self.rng),
+                    pose.y + sigma[1] * gauss(&mut self.rng),
+                    wrap_angle(pose.theta + sigma[2] * gauss(&mut self.rng)),
+                )
+            })
+            .collect();
+        self.weights = vec![1.0 / n as f64; n];
+    }
+
+    fn random_pose(&mut self) -> Pose2 {
+        let free = &self.map.free;
+        if free.is_empty() {
+            return Pose2::IDENTITY;
+        }
+        let (i, j) = free[self.rng.random_range(0..free.len())];
+        let c = self.map.grid.cell_center(i, j);
+        let r = self.map.grid.resolution;
+        Pose2::new(
+            c[0] + self.rng.random_range(-0.5..0.5) * r,
+            c[1] + self.rng.random_range(-0.5..0.5) * r,
+            self.rng
+                .random_range(-std::f64::consts::PI..std::f64::consts::PI),
+        )
+    }
+
+    /// Moves every particle by the odometry increment, with noise.
+    fn predict(&mut self, odometry: &Pose2) {
+        let Some(prev) = self.last_odometry.replace(*odometry) else {
+            return;
+        };
+        let (dx, dy) = (odometry.x - prev.x, odometry.y - prev.y);
+        let trans = dx.hypot(dy);
+        let rot1 = if trans < 0.01 {
+            0.0
+        } else {
+            wrap_angle(dy.atan2(dx) - prev.theta)
+        };
+        let rot2 = wrap_angle(odometry.theta - prev.theta - rot1);
+        let [a1, a2, a3, a4] = self.config.alpha;
+        for p in &mut self.particles {
+            let r1 = rot1 + (a1 * rot1 * rot1 + a2 * trans * trans).sqrt() * gauss(&mut self.rng);
+            let t = trans
+                + (a3 * trans * trans + a4 * (rot1 * rot1 + rot2 * rot2)).sqrt()
+                    * gauss(&mut self.rng);
+            let r2 = rot2 + (a1 * rot2 * rot2 + a2 * trans * trans).sqrt() * gauss(&mut self.rng);
+            let th = p.theta + r1;
+            *p = Pose2::new(p.x + t * th.cos(), p.y + t * th.sin(), wrap_angle(th + r2));
+        }
+    }
+
+    /// Likelihood of the scan (its used beams) from the laser pose `laser`.
+    fn likelihood(&self, laser: &Pose2, beams: &[(f64, f64)]) -> f64 {
+        let c = &self.config;
+        let mut log = 0.0;
+        for &(a, z) in beams {
+            let p = match c.model {
+                SensorModel::LikelihoodField => {
+                    if z >= c.max_range {
+                        1.0
+                    } else {
+                        let th = laser.theta + a;
+                        let (x, y) = (laser.x + z * th.cos(), laser.y + z * th.sin());
+                        let d = self.map.distance_at(x, y);
+                        c.z_hit * (-d * d / (2.0 * c.sigma_hit * c.sigma_hit)).exp()
+                            + c.z_rand / c.max_range
+                    }
+                }
+                SensorModel::Beam => {
+                    let expected = self
+                        .map
+                        .cast(laser.x, laser.y, laser.theta + a, c.max_range);
+                    let hit = if z < c.max_range {
+                        (-(z - expected).powi(2) / (2.0 * c.sigma_hit * c.sigma_hit)).exp()
+                            / (c.sigma_hit * (2.0 * std::f64::consts::PI).sqrt())
+                    } else {
+                        0.0
+                    };
+                    let short = if z < expected {
+                        let eta = 1.0 / (1.0 - (-c.lambda_short * expected).exp());
+                        eta * c.lambda_short * (-c.lambda_short * z).exp()
+                    } else {
+                        0.0
+                    };
+                    let max = if z >= c.max_range { 1.0 } else { 0.0 };
+                    let rand = if z < c.max_range {
+                        1.0 / c.max_range
+                    } else {
+                        0.0
+                    };
+                    c.z_hit * hit + c.z_short * short + c.z_max * max + c.z_rand * rand
+                }
+            };
+            log += p.max(1e-12).ln();
+        }
+        log
+    }
+
+    /// One filter step: motion from `odometry` (the robot's odometry pose), then the scan
+    /// (taken by the laser at `mount` on the robot), resampling, and the estimate.
+    pub fn update(&mut self, odometry: &Pose2, scan: &LaserScan, mount: &Pose2) -> Estimate {
+        self.predict(odometry);
+        let c = self.config;
+        // The beams used: one every `beam_step`.
+        let every = ((c.beam_step / scan.angle_increment.abs().max(1e-9)).round() as usize).max(1);
+        let beams: Vec<(f64, f64)> = scan
+            .ranges
+            .iter()
+            .enumerate()
+            .step_by(every)
+            .filter(|(_, r)| !r.is_nan() && **r as f64 >= scan.range_min)
+            .map(|(k, &r)| {
+                let z = if r.is_finite() {
+                    (r as f64).min(c.max_range)
+                } else {
+                    c.max_range
+                };
+                (mount.theta + scan.angle(k), z)
+            })
+            .collect();
+        let logs: Vec<f64> = self
+            .particles
+            .iter()
+            .map(|p| {
+                let laser = p.compose(&Pose2::new(mount.x, mount.y, 0.0));
+                let laser = Pose2::new(laser.x, laser.y, p.theta);
+                if self.map.occupied_or_outside(p.x, p.y) {
+                    f64::NEG_INFINITY
+                } else {
+                    self.likelihood(&laser, &beams)
+                }
+            })
+            .collect();
+        let top = logs.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        if top == f64::NEG_INFINITY {
+            // Every particle is inside a wall or off the map: start over.
+            let n = self.particles.len();
+            self.particles = (0..n).map(|_| self.random_pose()).collect();
+            self.weights = vec![1.0 / n as f64; n];
+            return self.estimate();
+        }
+        let mut sum = 0.0;
+        for (w, l) in self.weights.iter_mut().zip(&logs) {
+            *w *= (l - top).exp();
+            sum += *w;
+        }
+        for w in &mut self.weights {
+            *w /= sum;
+        }
+        // Average likelihood per beam, for augmented MCL's recovery.
+        let avg = (top / beams.len().max(1) as f64).exp()
+            * (sum / self.particles.len() as f64)
+                .max(1e-300)
+                .powf(1.0 / beams.len().max(1) as f64);
+        if self.w_slow == 0.0 {
+            self.w_slow = avg;
+            self.w_fast = avg;
+        } else {
+            self.w_slow += c.alpha_slow * (avg - self.w_slow);
+            self.w_fast += c.alpha_fast * (avg - self.w_fast);
+        }
+        self.resample();
+        self.estimate()
+    }
+
+    /// Low-variance resampling to the KLD bound, with random particles at augmented MCL's rate.
+    fn resample(&mut self) {
+        let c = self.config;
+        let p_random = if self.w_slow > 0.0 {
+            (1.0 - self.w_fast / self.w_slow).max(0.0)
+        } else {
+            0.0
+        };
+        let mut out = Vec::with_capacity(self.particles.len());
+        let mut bins = std::collections::HashSet::new();
+        let z = normal_quantile(c.kld_z);
+        let target = |k: usize| -> usize {
+            if !c.kld || k <= 1 {
+                return c.particles;
+            }
+            kld_bound(k, c.kld_err, z).clamp(c.min_particles, c.max_particles)
+        };
+        let n0 = self.particles.len();
+        let step = 1.0 / n0 as f64;
+        let mut r = self.rng.random_range(0.0..step);
+        let mut cum = self.weights[0];
+        let mut i = 0;
+        loop {
+            let limit = if c.kld {
+                target(bins.len())
+            } else {
+                c.particles
+            };
+            if out.len() >= limit || out.len() >= c.max_particles {
+                break;
+            }
+            let p = if self.rng.random::<f64>() < p_random {
+                self.random_pose()
+            } else {
+                while r > cum && i + 1 < n0 {
+                    i += 1;
+                    cum += self.weights[i];
+                }
+                r += step;
+                if r > 1.0 {
+                    r -= 1.0;
+                    i = 0;
+                    cum = self.weights[0];
+                }
+                self.particles[i]
+            };
+            bins.insert((
+                (p.x / c.kld_bin).floor() as i64,
+                (p.y / c.kld_bin).floor() as i64,
+                (p.theta / c.kld_bin_angle).floor() as i64,
+            ));
+            out.push(p);
+        }
+        let n = out.len();
+        self.particles = out;
+        self.weights = vec![1.0 / n as f64; n];
+    }
+
+    /// Weighted mean pose (circular mean for θ) and covariance.
+    pub fn estimate(&self) -> Estimate {
+        let (mut x, mut y, mut s, mut co) = (0.0, 0.0, 0.0, 0.0);
+        for (p, w) in self.particles.iter().zip(&self.weights) {
+            x += w * p.x;
+            y += w * p.y;
+            s += w * p.theta.sin();
+            co += w * p.theta.cos();
+        }
+        let th = s.atan2(co);
+        let mut cov = [[0.0; 3]; 3];
+        for (p, w) in self.particles.iter().zip(&self.weights) {
+            let d = [p.x - x, p.y - y, wrap_angle(p.theta - th)];
+            for a in 0..3 {
+                for b in 0..3 {
+                    cov[a][b] += w * d[a] * d[b];
+                }
+            }
+        }
+        Estimate {
+            pose: Pose2::new(x, y, th),
+            covariance: cov,
+            particles: self.particles.len(),
+        }
+    }
+
+    /// The particles (for display and tests).
+    pub fn particles(&self) -> &[Pose2] {
+        &self.particles
+    }
+}
+
+/// Fox's KLD-sampling bound: particles needed so that, with the normal quantile `z`, the KL
+/// divergence between the sample and the true posterior over `k` occupied bins stays below
+/// `err` (Wilson–Hilferty approximation of the χ² quantile).
+pub fn kld_bound(k: usize, err: f64, z: f64) -> usize {
+    if k <= 1 {
+        return 1;
+    }
+    let k1 = (k - 1) as f64;
+    let a = 2.0 / (9.0 * k1);
+    (k1 / (2.0 * err) * (1.0 - a + a.sqrt() * z).powi(3)).ceil() as usize
+}
+
+/// Quantile of the standard normal distribution (Acklam's rational approximation, |error| <
+/// 1.2e-9), for KLD-sampling's bound.
+fn normal_quantile(p: f64) -> f64 {
+    let a = [
+        -3.969683028665376e1,
+        2.209460984245205e2,
+        -2.759285104469687e2,
+        1.38357751867269e2,
+        -3.066479806614716e1,
+        2.506628277459239,
+    ];
+    let b = [
+        -5.447609879822406e1,
+        1.615858368580409e2,
+        -1.556989798598866e2,
+        6.680131188771972e1,
+        -1.328068155288572e1,
+    ];
+    let c = [
+        -7.784894002430293e-3,
+        -3.223964580411365e-1,
+        -2.400758277161838,
+        -2.549732539343734,
+        4.374664141464968,
+        2.938163982698783,
+    ];
+    let d = [
+        7.784695709041462e-3,
+        3.224671290700398e-1,
+        2.445134137142996,
+        3.754408661907416,
+    ];
+    let p = p.clamp(1e-12, 1.0 - 1e-12);
+    if p < 0.02425 {
+        let q = (-2.0 * p.ln()).sqrt();
+        (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5])
+            / ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1.0)
+    } else if p <= 1.0 - 0.02425 {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((a[0] * r + a[1]) * r + a[2]) * r + a[3]) * r + a[4]) * r + a[5]) * q
+            / (((((b[0] * r + b[1]) * r + b[2]) * r + b[3]) * r + b[4]) * r + 1.0)
+    } else {
+        -normal_quantile(1.0 - p)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use futago_msgs::Time;
+
+    /// A 10 m × 6 m room with an inner wall stub and a pillar, so no pose is symmetric.
+    fn room() -> OccupancyGrid {
+        let r = 0.05;
+        let (w, h) = (220, 140);
+        let mut g = OccupancyGrid::new(r, [-0.5, -0.5], w, h);
+        for j in 0..h {
+            for i in 0..w {
+                let [x, y] = g.cell_center(i, j);
+                let wall = !(0.0..=10.0).contains(&x) || !(0.0..=6.0).contains(&y);
+                let stub = (6.0..6.2).contains(&x) && y < 2.5;
+                let pillar = (2.0..2.4).contains(&x) && (4.0..4.4).contains(&y);
+                let outside = !(-0.3..=10.3).contains(&x) || !(-0.3..=6.3).contains(&y);
+                g.set(
+                    i,
+                    j,
+                    if outside {
+                        -1
+                    } else if wall || stub || pillar {
+                        100
+                    } else {
+                        0
+                    },
+                );
+            }
+        }
+        g
+    }
+
+    /// A 240°, 0.5° scan of `grid` from `pose` (cast on the grid itself).
+    fn scan(map: &MclMap, pose: &Pose2) -> LaserScan {
+        let n = 481;
+        let inc = 0.5f64.to_radians();
+        let amin = -120f64.to_radians();
+        LaserScan {
+            frame: "front".into(),
+            stamp: Time::ZERO,
+            angle_min: amin,
+            angle_increment: inc,
+            time_increment: 0.0,
+            range_min: 0.02,
+            range_max: 30.0,
+            ranges: (0..n)
+                .map(|k| map.cast(pose.x, pose.y, pose.theta + amin + k as f64 * inc, 30.0) as f32)
+                .collect(),
+        }
+    }
+
+    fn drive(model: SensorModel, global: bool) {
+        let config = MclConfig {
+            model,
+            ..MclConfig::default()
+        };
+        let reference = MclMap::new(room());
+        let mut mcl = Mcl::new(config, MclMap::new(room()), 7);
+        // Drive a loop; odometry is exact here, the filter starts knowing nothing.
+        let mut truth = Pose2::new(1.5, 1.5, 0.3);
+        let mut odo = Pose2::new(0.0, 0.0, 0.0);
+        if !global {
+            mcl.set_pose(Pose2::new(1.8, 1.3, 0.5), [0.3, 0.3, 0.2]);
+        }
+        let mut est = mcl.estimate();
+        let mut first = 0;
+        for k in 0..60 {
+            let step = if k % 15 < 12 {
+                Pose2::new(0.15, 0.0, 0.0)
+            } else {
+                Pose2::new(0.0, 0.0, 0.5)
+            };
+            let next = truth.compose(&step);
+            if reference.occupied_or_outside(
+                next.x + 0.3 * next.theta.cos(),
+                next.y + 0.3 * next.theta.sin(),
+            ) {
+                truth = truth.compose(&Pose2::new(0.0, 0.0, 0.6));
+                odo = odo.compose(&Pose2::new(0.0, 0.0, 0.6));
+            } else {
+                truth = next;
+                odo = odo.compose(&step);
+            }
+            est = mcl.update(&odo, &scan(&reference, &truth), &Pose2::IDENTITY);
+            if k == 0 {
+                first = est.particles;
+            }
+        }
+        assert!(
+            est.pose.distance(&truth) < 0.1,
+            "{model:?}: {est:?} vs {truth:?}"
+        );
+        assert!(wrap_angle(est.pose.theta - truth.theta).abs() < 0.05);
+        assert!(first >= 100 && est.particles <= 5000);
+        // The covariance includes the random particles augmented MCL keeps injecting.
+        assert!(est.covariance[0][0].sqrt() < 0.5, "{est:?}");
+
+        // Kidnap: carry the robot elsewhere without telling odometry.
+        truth = Pose2::new(8.0, 4.5, -2.0);
+        for _ in 0..80 {
+            let step = Pose2::new(0.0, 0.0, 0.3);
+            truth = truth.compose(&step);
+            odo = odo.compose(&step);
+            est = mcl.update(&odo, &scan(&reference, &truth), &Pose2::IDENTITY);
+        }
+        assert!(
+            est.pose.distance(&truth) < 0.15,
+            "{model:?} after kidnapping: {est:?} vs {truth:?}"
+        );
+    }
+
+    #[test]
+    fn likelihood_field_mcl_localises_globally_and_recovers_from_kidnapping() {
+        drive(SensorModel::LikelihoodField, true);
+    }
+
+    #[test]
+    fn beam_model_mcl_tracks_from_a_rough_start_and_recovers_from_kidnapping() {
+        drive(SensorModel::Beam, false);
+    }
+
+    #[test]
+    fn kld_bound_matches_a_hand_computation() {
+        // k = 10 bins, ε = 0.01, z = 2.326: 9/0.02 · (1 − 2/81 + √(2/81)·2.326)³ = 1084.7.
+        assert_eq!(kld_bound(10, 0.01, 2.326), 1085);
+        assert!(kld_bound(100, 0.01, 2.326) > kld_bound(10, 0.01, 2.326));
+        assert_eq!(kld_bound(1, 0.01, 2.326), 1);
+    }
+
+    #[test]
+    fn normal_quantiles_match_tables() {
+        assert!((normal_quantile(0.99) - 2.326348).abs() < 1e-5);
+        assert!((normal_quantile(0.5)).abs() < 1e-9);
+        assert!((normal_quantile(0.01) + 2.326348).abs() < 1e-5);
+    }
+}
