@@ -101,20 +101,8 @@ pub struct Log {
     pub skipped: std::collections::BTreeMap<String, usize>,
 }
 
-/// An error reading a log: the 1-based line and what was wrong.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ReadError {
-    pub line: usize,
-    pub message: String,
-}
-
-impl std::fmt::Display for ReadError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "line {}: {}", self.line, self.message)
-    }
-}
-
-impl std::error::Error for ReadError {}
+/// An error reading a log: the 1-based line and what was wrong (the same as a TUM file's).
+pub use crate::tum::ParseError as ReadError;
 
 /// Readings at or beyond this are "no return" in FLASER records (the SICK's 81.91 m code).
 pub const FLASER_NO_RETURN: f32 = 81.9;
