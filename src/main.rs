@@ -44,11 +44,11 @@ enum Command {
         #[arg(long, short)]
         quiet: bool,
     },
-    /// Run the robot stack's SLAM on a real robot's log (CARMEN) and score it against
+    /// Run the robot stack's SLAM on a real robot's log (CARMEN or ROS 1 bag) and score it against
     /// ground-truth relations (Kümmerle et al. 2009): writes trajectory.txt, odometry.txt (TUM),
     /// map.pgm/map.yaml and summary.json.
     Replay {
-        /// The log (CARMEN: .clf, .log).
+        /// The log (CARMEN: .clf, .log; ROS 1 bag: .bag).
         log: std::path::PathBuf,
         /// Ground-truth relations (`t1 t2 x y z roll pitch yaw` per line).
         #[arg(long)]

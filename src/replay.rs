@@ -10,7 +10,7 @@ use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Instant;
 
-/// Reads a log by its extension: CARMEN (`.clf`, `.log`, `.carmen`).
+/// Reads a log by its extension: CARMEN (`.clf`, `.log`, `.carmen`) or ROS 1 bag (`.bag`).
 pub fn read_log(path: &Path) -> Result<carmen::Log> {
     let ext = path
         .extension()
@@ -29,12 +29,14 @@ pub fn read_log(path: &Path) -> Result<carmen::Log> {
             })?;
             carmen::read(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
         }
-        "bag" => bail!(
-            "{}: ROS 1 bags are not read yet; convert to a CARMEN log (FLASER/ROBOTLASER1/ODOM) or use the .clf of the same data",
-            path.display()
-        ),
+        "bag" => {
+            let bytes =
+                std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+            futago_msgs::rosbag::read(&bytes)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+        }
         _ => bail!(
-            "{}: unknown log format `.{ext}`; expected a CARMEN log (.clf, .log, .carmen)",
+            "{}: unknown log format `.{ext}`; expected a CARMEN log (.clf, .log, .carmen) or a ROS 1 bag (.bag)",
             path.display()
         ),
     }

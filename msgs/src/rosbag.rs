@@ -1,0 +1,448 @@
+//! ROS 1 bags (format 2.0; written for futago from the ROS wiki's "Bags/Format/2.0"): the
+//! `sensor_msgs/LaserScan` and `nav_msgs/Odometry` messages of a bag, uncompressed or in bz2
+//! chunks, read into the same [`Log`] a CARMEN log gives.
+//!
+//! A bag is the magic line `#ROSBAG V2.0\n` and records of `header_len, header, data_len, data`;
+//! a header is `field_len, name=value` fields, with `op` giving the record type: 0x03 bag
+//! header, 0x05 chunk (holding connection and message records, compressed), 0x07 connection,
+//! 0x02 message data, 0x04 index data, 0x06 chunk info. Messages are read in file order; each
+//! scan takes the odometry pose interpolated at its stamp (header stamps, not bag times).
+//! The laser's mount on the robot is taken as the base frame (tf is not read yet).
+
+use crate::carmen::{Log, LogScan};
+use crate::{LaserScan, Pose2, Time, wrap_angle};
+use std::collections::HashMap;
+use std::io::Read;
+
+/// An error reading a bag: the byte offset of the record and what was wrong.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BagError {
+    pub offset: usize,
+    pub message: String,
+}
+
+impl std::fmt::Display for BagError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "byte {}: {}", self.offset, self.message)
+    }
+}
+
+impl std::error::Error for BagError {}
+
+/// Little-endian reads over a byte slice that fail with a message instead of panicking.
+struct Cursor<'a> {
+    data: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Cursor<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
+        if self.at + n > self.data.len() {
+            return Err(format!(
+                "{what}: needs {n} bytes, {} left (truncated or corrupt)",
+                self.data.len() - self.at
+            ));
+        }
+        let s = &self.data[self.at..self.at + n];
+        self.at += n;
+        Ok(s)
+    }
+    fn u32(&mut self, what: &str) -> Result<u32, String> {
+        let b = self.take(4, what)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+    fn f32(&mut self, what: &str) -> Result<f32, String> {
+        Ok(f32::from_bits(self.u32(what)?))
+    }
+    fn f64(&mut self, what: &str) -> Result<f64, String> {
+        let b = self.take(8, what)?;
+        Ok(f64::from_le_bytes(b.try_into().expect("8 bytes")))
+    }
+    fn string(&mut self, what: &str) -> Result<String, String> {
+        let n = self.u32(what)? as usize;
+        Ok(String::from_utf8_lossy(self.take(n, what)?).into_owned())
+    }
+    fn time(&mut self, what: &str) -> Result<Time, String> {
+        let s = self.u32(what)? as i64;
+        let ns = self.u32(what)? as i64;
+        Ok(Time(s * 1_000_000_000 + ns))
+    }
+}
+
+/// Parses a record header's `name=value` fields.
+fn fields(h: &[u8]) -> Result<HashMap<String, Vec<u8>>, String> {
+    let mut c = Cursor { data: h, at: 0 };
+    let mut out = HashMap::new();
+    while c.at < h.len() {
+        let n = c.u32("header field length")? as usize;
+        let f = c.take(n, "header field")?;
+        let eq = f
+            .iter()
+            .position(|&b| b == b'=')
+            .ok_or("header field without `=`")?;
+        out.insert(
+            String::from_utf8_lossy(&f[..eq]).into_owned(),
+            f[eq + 1..].to_vec(),
+        );
+    }
+    Ok(out)
+}
+
+fn field_u32(f: &HashMap<String, Vec<u8>>, name: &str) -> Result<u32, String> {
+    let v = f
+        .get(name)
+        .ok_or_else(|| format!("record header lacks `{name}`"))?;
+    let b: [u8; 4] = v
+        .get(..4)
+        .and_then(|b| b.try_into().ok())
+        .ok_or_else(|| format!("`{name}` is not 4 bytes"))?;
+    Ok(u32::from_le_bytes(b))
+}
+
+/// What a bag holds of interest, before pairing scans with odometry.
+#[derive(Default)]
+struct Raw {
+    /// Connection id → message type.
+    types: HashMap<u32, String>,
+    scans: Vec<LaserScan>,
+    odometry: Vec<(Time, Pose2)>,
+    skipped: std::collections::BTreeMap<String, usize>,
+}
+
+fn laser_scan(data: &[u8]) -> Result<LaserScan, String> {
+    let mut c = Cursor { data, at: 0 };
+    c.u32("header seq")?;
+    let stamp = c.time("header stamp")?;
+    let frame = c.string("header frame_id")?;
+    let angle_min = c.f32("angle_min")? as f64;
+    let _angle_max = c.f32("angle_max")?;
+    let angle_increment = c.f32("angle_increment")? as f64;
+    let time_increment = c.f32("time_increment")? as f64;
+    let _scan_time = c.f32("scan_time")?;
+    let range_min = c.f32("range_min")? as f64;
+    let range_max = c.f32("range_max")? as f64;
+    let n = c.u32("ranges length")? as usize;
+    if n > 1_000_000 {
+        return Err(format!("{n} ranges in one scan"));
+    }
+    let mut ranges = Vec::with_capacity(n);
+    for _ in 0..n {
+        let r = c.f32("range")?;
+        ranges.push(if r.is_finite() && (r as f64) < range_max {
+            r
+        } else if r.is_nan() {
+            f32::NAN
+        } else {
+            f32::INFINITY
+        });
+    }
+    Ok(LaserScan {
+        frame,
+        stamp,
+        angle_min,
+        angle_increment,
+        time_increment,
+        range_min,
+        range_max,
+        ranges,
+    })
+}
+
+fn odometry(data: &[u8]) -> Result<(Time, Pose2), String> {
+    let mut c = Cursor { data, at: 0 };
+    c.u32("header seq")?;
+    let stamp = c.time("header stamp")?;
+    c.string("header frame_id")?;
+    c.string("child_frame_id")?;
+    let (x, y) = (c.f64("position x")?, c.f64("position y")?);
+    c.f64("position z")?;
+    let q = [
+        c.f64("orientation x")?,
+        c.f64("orientation y")?,
+        c.f64("orientation z")?,
+        c.f64("orientation w")?,
+    ];
+    // Yaw of a general quaternion (z-axis rotation of the body's x axis).
+    let yaw = (2.0 * (q[3] * q[2] + q[0] * q[1])).atan2(1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]));
+    Ok((stamp, Pose2::new(x, y, yaw)))
+}
+
+/// Walks the records of `data` (the file after its magic line, or a chunk's contents).
+fn records(data: &[u8], base: usize, raw: &mut Raw) -> Result<(), BagError> {
+    let mut c = Cursor { data, at: 0 };
+    while c.at < data.len() {
+        let offset = base + c.at;
+        let err = |message: String| BagError { offset, message };
+        let hlen = c.u32("record header length").map_err(err)? as usize;
+        let header = c.take(hlen, "record header").map_err(err)?;
+        let dlen = c.u32("record data length").map_err(err)? as usize;
+        let body = c.take(dlen, "record data").map_err(err)?;
+        let f = fields(header).map_err(err)?;
+        let op = f
+            .get("op")
+            .and_then(|v| v.first().copied())
+            .ok_or_else(|| err("record without `op`".into()))?;
+        match op {
+            0x05 => {
+                let compression = f
+                    .get("compression")
+                    .map(|v| String::from_utf8_lossy(v).into_owned())
+                    .unwrap_or_default();
+                let size = field_u32(&f, "size").map_err(err)? as usize;
+                let inner = match compression.as_str() {
+                    "none" => body.to_vec(),
+                    "bz2" => {
+                        let mut out = Vec::with_capacity(size);
+                        bzip2::read::BzDecoder::new(body)
+                            .read_to_end(&mut out)
+                            .map_err(|e| err(format!("bz2 chunk: {e}")))?;
+                        out
+                    }
+                    other => {
+                        return Err(err(format!(
+                            "chunk compression `{other}` is not supported (expected none or bz2)"
+                        )));
+                    }
+                };
+                records(&inner, offset, raw)?;
+            }
+            0x07 => {
+                let conn = field_u32(&f, "conn").map_err(err)?;
+                let conn_header = fields(body).map_err(err)?;
+                let ty = conn_header
+                    .get("type")
+                    .map(|v| String::from_utf8_lossy(v).into_owned())
+                    .unwrap_or_default();
+                raw.types.insert(conn, ty);
+            }
+            0x02 => {
+                let conn = field_u32(&f, "conn").map_err(err)?;
+                match raw.types.get(&conn).map(String::as_str) {
+                    Some("sensor_msgs/LaserScan") => raw
+                        .scans
+                        .push(laser_scan(body).map_err(|m| err(format!("LaserScan: {m}")))?),
+                    Some("nav_msgs/Odometry") => raw
+                        .odometry
+                        .push(odometry(body).map_err(|m| err(format!("Odometry: {m}")))?),
+                    Some(other) => {
+                        *raw.skipped
+                            .entry(format!("message type {other}"))
+                            .or_insert(0) += 1
+                    }
+                    None => {
+                        return Err(err(format!(
+                            "message on connection {conn}, which no record defined"
+                        )));
+                    }
+                }
+            }
+            0x03 | 0x04 | 0x06 => {}
+            other => {
+                *raw.skipped
+                    .entry(format!("record op 0x{other:02x}"))
+                    .or_insert(0) += 1
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Odometry pose at `t`, interpolated; the nearest end outside the stream.
+fn odometry_at(odo: &[(Time, Pose2)], t: Time) -> Option<Pose2> {
+    let k = odo.partition_point(|s| s.0 < t);
+    if odo.is_empty() {
+        return None;
+    }
+    if k == 0 {
+        return Some(odo[0].1);
+    }
+    if k == odo.len() {
+        return Some(odo[k - 1].1);
+    }
+    let ((t0, a), (t1, b)) = (odo[k - 1], odo[k]);
+    let f = if t1 > t0 {
+        (t - t0).secs() / (t1 - t0).secs()
+    } else {
+        0.0
+    };
+    Some(Pose2::new(
+        a.x + f * (b.x - a.x),
+        a.y + f * (b.y - a.y),
+        wrap_angle(a.theta + f * wrap_angle(b.theta - a.theta)),
+    ))
+}
+
+/// Reads a ROS 1 bag's laser scans and odometry. Scans without any odometry in the bag are
+/// an error; other message types are counted as skipped.
+pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
+    const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
+    if !bytes.starts_with(MAGIC) {
+        return Err(BagError {
+            offset: 0,
+            message: "not a ROS bag of format 2.0 (no `#ROSBAG V2.0` line)".into(),
+        });
+    }
+    let mut raw = Raw::default();
+    records(&bytes[MAGIC.len()..], MAGIC.len(), &mut raw)?;
+    raw.odometry.sort_by_key(|o| o.0);
+    raw.scans.sort_by_key(|s| s.stamp);
+    if !raw.scans.is_empty() && raw.odometry.is_empty() {
+        return Err(BagError {
+            offset: 0,
+            message: "the bag has laser scans but no nav_msgs/Odometry".into(),
+        });
+    }
+    let mut log = Log {
+        skipped: raw.skipped,
+        ..Default::default()
+    };
+    for scan in raw.scans {
+        let odometry = odometry_at(&raw.odometry, scan.stamp).unwrap_or(Pose2::IDENTITY);
+        log.scans.push(LogScan {
+            scan,
+            odometry,
+            mount: Pose2::IDENTITY,
+        });
+    }
+    log.odometry = raw.odometry;
+    Ok(log)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn field(name: &str, value: &[u8]) -> Vec<u8> {
+        let mut f = name.as_bytes().to_vec();
+        f.push(b'=');
+        f.extend_from_slice(value);
+        let mut out = (f.len() as u32).to_le_bytes().to_vec();
+        out.extend(f);
+        out
+    }
+
+    fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
+        let h: Vec<u8> = header.concat();
+        let mut out = (h.len() as u32).to_le_bytes().to_vec();
+        out.extend(&h);
+        out.extend((data.len() as u32).to_le_bytes());
+        out.extend(data);
+        out
+    }
+
+    fn header_msg(stamp: u32) -> Vec<u8> {
+        let mut m = 7u32.to_le_bytes().to_vec();
+        m.extend(stamp.to_le_bytes());
+        m.extend(0u32.to_le_bytes());
+        m.extend(4u32.to_le_bytes());
+        m.extend(b"base");
+        m
+    }
+
+    /// A bag with one connection per type, a scan at t = 2 s and odometry at 1 s and 3 s,
+    /// the messages inside a bz2 chunk.
+    fn bag() -> Vec<u8> {
+        let conn = |id: u32, topic: &str, ty: &str| {
+            record(
+                &[
+                    field("op", &[0x07]),
+                    field("conn", &id.to_le_bytes()),
+                    field("topic", topic.as_bytes()),
+                ],
+                &[
+                    field("topic", topic.as_bytes()),
+                    field("type", ty.as_bytes()),
+                ]
+                .concat(),
+            )
+        };
+        let mut scan = header_msg(2);
+        for v in [-1.0f32, 1.0, 0.5, 0.0, 0.1, 0.02, 10.0] {
+            scan.extend(v.to_bits().to_le_bytes());
+        }
+        scan.extend(5u32.to_le_bytes());
+        for r in [1.0f32, 2.0, f32::INFINITY, 12.0, 3.0] {
+            scan.extend(r.to_bits().to_le_bytes());
+        }
+        scan.extend(0u32.to_le_bytes());
+        let odo = |t: u32, x: f64| {
+            let mut m = header_msg(t);
+            m.extend(0u32.to_le_bytes());
+            for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
+                m.extend(v.to_le_bytes());
+            }
+            m.extend(vec![0u8; 36 * 8 + 6 * 8 + 36 * 8]);
+            m
+        };
+        let msg = |id: u32, body: &[u8]| {
+            record(
+                &[
+                    field("op", &[0x02]),
+                    field("conn", &id.to_le_bytes()),
+                    field("time", &[0; 8]),
+                ],
+                body,
+            )
+        };
+        let inner = [
+            conn(0, "/scan", "sensor_msgs/LaserScan"),
+            conn(1, "/odom", "nav_msgs/Odometry"),
+            conn(2, "/tf", "tf2_msgs/TFMessage"),
+            msg(1, &odo(1, 0.0)),
+            msg(0, &scan),
+            msg(1, &odo(3, 1.0)),
+            msg(2, b"xx"),
+        ]
+        .concat();
+        let mut z = Vec::new();
+        bzip2::read::BzEncoder::new(&inner[..], bzip2::Compression::default())
+            .read_to_end(&mut z)
+            .unwrap();
+        let mut out = b"#ROSBAG V2.0\n".to_vec();
+        out.extend(record(&[field("op", &[0x03])], &[]));
+        out.extend(record(
+            &[
+                field("op", &[0x05]),
+                field("compression", b"bz2"),
+                field("size", &(inner.len() as u32).to_le_bytes()),
+            ],
+            &z,
+        ));
+        out
+    }
+
+    #[test]
+    fn scans_and_odometry_come_out_of_a_bz2_chunk() {
+        let log = read(&bag()).unwrap();
+        assert_eq!(log.scans.len(), 1);
+        let s = &log.scans[0];
+        assert_eq!(s.scan.stamp, Time::from_secs(2.0));
+        assert_eq!(
+            s.scan.ranges,
+            vec![1.0, 2.0, f32::INFINITY, f32::INFINITY, 3.0]
+        );
+        assert_eq!(s.scan.frame, "base");
+        // Odometry interpolated half way between x = 0 at 1 s and x = 1 at 3 s.
+        assert!((s.odometry.x - 0.5).abs() < 1e-12);
+        assert_eq!(log.odometry.len(), 2);
+        assert_eq!(log.skipped["message type tf2_msgs/TFMessage"], 1);
+    }
+
+    #[test]
+    fn truncated_and_foreign_files_are_errors_not_panics() {
+        let b = bag();
+        for cut in [20, b.len() / 2, b.len() - 3] {
+            let e = read(&b[..cut]).unwrap_err();
+            assert!(
+                e.message.contains("truncated") || e.message.contains("bz2"),
+                "{e}"
+            );
+        }
+        assert!(
+            read(b"hello")
+                .unwrap_err()
+                .message
+                .contains("not a ROS bag")
+        );
+    }
+}
