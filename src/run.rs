@@ -8,6 +8,7 @@ use crate::rgbd::TumRgbdWriter;
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, Pose2, Pose3, Time, carmen, tum};
+use futago_robot::mcl::{Mcl, MclMap};
 use futago_robot::odometry::OdometryIntegrator;
 use futago_robot::script::{ControlInput, ScriptedController};
 use futago_sim::Simulation;
@@ -24,6 +25,9 @@ use std::path::{Path, PathBuf};
 
 /// The files a run writes, in the order they are listed in the summary.
 pub const OUTPUT_FILES: [&str; 3] = ["groundtruth.txt", "odometry.txt", "scans.clf"];
+
+/// The localiser's estimates (TUM), written when the scenario runs one.
+pub const LOCALIZATION_FILE: &str = "localization.txt";
 
 /// Options of one run.
 #[derive(Debug, Clone)]
@@ -43,6 +47,8 @@ struct Sinks {
     carmen: Option<BufWriter<File>>,
     /// One TUM RGB-D sequence per camera, when the scenario asks for the dataset.
     cameras: Vec<TumRgbdWriter>,
+    /// The localiser's estimates, when one runs.
+    localization: Option<BufWriter<File>>,
 }
 
 /// What a run measured, for the summary and for callers (tests, benchmarks).
@@ -64,6 +70,61 @@ pub struct Outcome {
     pub final_truth: Pose2,
     pub final_odometry: Pose2,
     pub controller_finished: bool,
+    /// The localiser's accuracy against the ground truth, when one ran.
+    pub localization: Option<Value>,
+}
+
+/// Monte Carlo localisation in the loop: updates at its rate from the first laser's scans, and
+/// the estimate carried forward by odometry in between.
+struct Localizer {
+    mcl: Mcl,
+    period: Duration,
+    next: Time,
+    mount: Pose2,
+    /// Latest estimate and the odometry pose it was made at.
+    estimate: Option<(Pose2, Pose2)>,
+    updates: u64,
+    errors: Vec<(f64, f64)>,
+}
+
+impl Localizer {
+    fn new(s: &Scenario, spec: &crate::scenario::LocalizationSpec, seed: u64) -> Localizer {
+        use rand::Rng;
+        let (cfg, _) = &s.lidars[0];
+        let z = cfg.xyz[2];
+        let grid = futago_sim::world::export::occupancy_grid(
+            &s.world,
+            spec.map_resolution,
+            z - 0.05,
+            z + 0.05,
+            0.5,
+        );
+        let mut mcl = Mcl::new(
+            spec.mcl,
+            MclMap::new(grid),
+            stream(seed, "localization.mcl").random(),
+        );
+        if !spec.global {
+            mcl.set_pose(s.start, spec.initial_sigma);
+        }
+        Localizer {
+            mcl,
+            period: Duration::from_secs(1.0 / spec.rate),
+            next: Time::ZERO,
+            mount: Pose2::new(cfg.xyz[0], cfg.xyz[1], cfg.rpy_deg[2].to_radians()),
+            estimate: None,
+            updates: 0,
+            errors: Vec::new(),
+        }
+    }
+
+    /// The estimate now, given the odometry pose now.
+    fn current(&self, odometry: &Pose2) -> Pose2 {
+        match self.estimate {
+            Some((est, at)) => est.compose(&at.between(odometry)),
+            None => *odometry,
+        }
+    }
 }
 
 /// The odometry pose at `t`, interpolated in the recent history.
@@ -121,6 +182,10 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         None
     };
     let mut camera_frames = vec![0u64; kinects.len()];
+    let mut localizer = spec
+        .localization
+        .as_ref()
+        .map(|l| Localizer::new(s, l, seed));
     let mut ctl = ScriptedController::new(s.controller.clone(), Time::ZERO, s.start);
     let mut odo = OdometryIntegrator::new(s.start);
     let mut history: VecDeque<(Time, Pose2)> = VecDeque::from([(Time::ZERO, s.start)]);
@@ -214,6 +279,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         odometry: &[],
         bumps: sim.bumps(),
         ground_truth: Some(s.start),
+        localization: None,
     });
     loop {
         let now = sim.time();
@@ -278,6 +344,26 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         }
         for (i, scan) in out.scans {
             scans[i] += 1;
+            if i == 0
+                && let Some(l) = localizer.as_mut()
+                && scan.stamp >= l.next
+            {
+                l.next = scan.stamp + l.period;
+                let at = pose_at(&history, scan.stamp);
+                let est = l.mcl.update(&at, &scan, &l.mount);
+                l.estimate = Some((est.pose, at));
+                l.updates += 1;
+                let now_est = l.current(&odo.pose);
+                l.errors.push((
+                    now_est.distance(&truth),
+                    futago_msgs::wrap_angle(now_est.theta - truth.theta).abs(),
+                ));
+                if let Some(k) = sinks.as_deref_mut()
+                    && let Some(w) = k.localization.as_mut()
+                {
+                    write_pose(w, now, &now_est, &mut line)?;
+                }
+            }
             if let Some(c) = sinks.as_deref_mut().and_then(|k| k.carmen.as_mut()) {
                 let robot = pose_at(&history, scan.stamp);
                 let cfg = &s.lidars[i].0;
@@ -308,6 +394,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 odometry: &pending,
                 bumps: out.bumps.unwrap_or_default(),
                 ground_truth: Some(truth),
+                localization: localizer.as_ref().map(|l| l.current(&odo.pose)),
             });
             pending.clear();
         }
@@ -336,6 +423,16 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         final_truth: sim.robot_pose(),
         final_odometry: odo.pose,
         controller_finished: ctl.finished(),
+        localization: localizer.map(|l| {
+            let n = l.errors.len().max(1) as f64;
+            json!({
+                "updates": l.updates,
+                "mean_position_error_m": l.errors.iter().map(|e| e.0).sum::<f64>() / n,
+                "max_position_error_m": l.errors.iter().map(|e| e.0).fold(0.0, f64::max),
+                "final_position_error_m": l.errors.last().map(|e| e.0),
+                "mean_heading_error_deg": l.errors.iter().map(|e| e.1).sum::<f64>() / n * 180.0 / std::f64::consts::PI,
+            })
+        }),
     })
 }
 
@@ -413,6 +510,7 @@ pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
             "frames": n,
         })).collect::<Vec<_>>(),
         "laser_rays": o.laser_rays,
+        "localization": o.localization,
         "files": files,
     })
 }
@@ -466,6 +564,11 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             } else {
                 None
             },
+            localization: if s.spec.localization.is_some() {
+                Some(open(LOCALIZATION_FILE)?)
+            } else {
+                None
+            },
             cameras: if s.spec.output.rgbd_dataset {
                 s.cameras
                     .iter()
@@ -490,12 +593,15 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
         if let Some(c) = sinks.carmen.as_mut() {
             c.flush()?;
         }
+        if let Some(c) = sinks.localization.as_mut() {
+            c.flush()?;
+        }
         for c in std::mem::take(&mut sinks.cameras) {
             c.finish()?;
         }
         drop(sinks);
         let mut files = serde_json::Map::new();
-        for f in OUTPUT_FILES {
+        for f in OUTPUT_FILES.iter().chain([&LOCALIZATION_FILE]) {
             let p = tmp.join(f);
             if p.exists() {
                 files.insert(f.to_string(), json!({ "sha256": sha256_file(&p)? }));

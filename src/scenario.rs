@@ -6,6 +6,7 @@
 //! [`ControllerConfig`]), so any parameter is reachable by its dotted path.
 
 use futago_msgs::Pose2;
+use futago_robot::mcl::MclConfig;
 use futago_robot::script::ControllerConfig;
 use futago_sim::config::{SpecError, check_name, check_positive, check_range, load_toml};
 use futago_sim::create::CreateConfig;
@@ -39,6 +40,8 @@ pub struct ScenarioSpec {
     /// RGB-D cameras (Kinect models); rendered only when something consumes their frames.
     #[serde(default)]
     pub camera: Vec<KinectConfig>,
+    /// Monte Carlo localisation on the world's map, from the first laser.
+    pub localization: Option<LocalizationSpec>,
     /// Read as a table and typed by [`controller_config`], so that errors inside it carry
     /// their full key path.
     pub controller: toml::Table,
@@ -47,6 +50,37 @@ pub struct ScenarioSpec {
 }
 
 /// A start pose.
+/// The localiser of a run: MCL on the world's ground-truth occupancy grid at the first laser's
+/// height (the map a perfect SLAM run would give).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LocalizationSpec {
+    /// Map cell size, m (seed 000: 50 mm).
+    #[serde(default = "default_map_resolution")]
+    pub map_resolution: f64,
+    /// Filter updates per second (seed 000: 4).
+    #[serde(default = "default_localization_rate")]
+    pub rate: f64,
+    /// Start knowing nothing (particles over the whole map) instead of near the start pose.
+    #[serde(default)]
+    pub global: bool,
+    /// Spread of the initial particles around the start pose (m, m, rad).
+    #[serde(default = "default_initial_sigma")]
+    pub initial_sigma: [f64; 3],
+    #[serde(default)]
+    pub mcl: MclConfig,
+}
+
+fn default_map_resolution() -> f64 {
+    0.05
+}
+fn default_localization_rate() -> f64 {
+    4.0
+}
+fn default_initial_sigma() -> [f64; 3] {
+    [0.2, 0.2, 0.1]
+}
+
 #[derive(Debug, Clone, Deserialize)]
 #[serde(untagged)]
 pub enum StartSpec {
@@ -216,6 +250,41 @@ impl Scenario {
                 "output.rgbd_dataset",
                 "an RGB-D dataset needs a [[camera]]; the scenario has none",
             ));
+        }
+        if let Some(l) = &spec.localization {
+            if lidars.is_empty() {
+                return Err(SpecError::new(
+                    path,
+                    "localization",
+                    "Monte Carlo localisation needs a [[lidar]]; the scenario has none",
+                ));
+            }
+            check_range(
+                path,
+                "localization.map_resolution",
+                l.map_resolution,
+                0.01,
+                0.5,
+                "m",
+            )?;
+            check_range(path, "localization.rate", l.rate, 0.1, 100.0, "Hz")?;
+            for (k, v) in l.initial_sigma.iter().enumerate() {
+                check_range(
+                    path,
+                    &format!("localization.initial_sigma[{k}]"),
+                    *v,
+                    0.0,
+                    100.0,
+                    "m or rad",
+                )?;
+            }
+            if !(1..=100_000).contains(&l.mcl.particles) {
+                return Err(SpecError::new(
+                    path,
+                    "localization.mcl.particles",
+                    format!("expected 1 to 100000 particles, found {}", l.mcl.particles),
+                ));
+            }
         }
         let controller = controller_config(path, &spec.controller)?;
         controller

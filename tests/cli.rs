@@ -290,6 +290,17 @@ fn bad_input_names_the_file_and_key_and_writes_nothing() {
             "urg-04lx",
         ),
         (
+            good.clone() + "[localization]\nrate = 4.0\n",
+            "localization",
+            "needs a [[lidar]]",
+        ),
+        (
+            good.clone()
+                + "[[lidar]]\npreset = \"urg-04lx\"\n[localization.mcl]\nmodel = \"kalman\"\n",
+            "localization.mcl.model",
+            "beam",
+        ),
+        (
             good.replace("start = \"centre\"", "start = \"nowhere\""),
             "start",
             "spawn",
@@ -754,4 +765,32 @@ fn replay_refuses_bad_logs_with_their_line() {
     let other = write(tmp.path(), "x.txt", "hello\n");
     let o = futago(&["replay", other.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown log format"));
+}
+
+#[test]
+fn the_robot_drives_on_mcl_and_stays_localised_while_odometry_drifts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("scenarios/office-mcl.toml"))
+        .unwrap()
+        .replace(
+            "../worlds/office.toml",
+            root().join("worlds/office.toml").to_str().unwrap(),
+        );
+    let scenario = write(tmp.path(), "mcl.toml", &text);
+    let out = tmp.path().join("mcl");
+    run_for(&scenario, &out, Some("60"));
+    let s = summary(&out);
+    let l = &s["localization"];
+    assert!(l["updates"].as_u64().unwrap() >= 200, "{l}");
+    assert!(l["mean_position_error_m"].as_f64().unwrap() < 0.1, "{l}");
+    assert!(l["max_position_error_m"].as_f64().unwrap() < 0.3, "{l}");
+    assert_eq!(
+        s["robot"]["bump_events"], 0,
+        "driving on the estimate hit something"
+    );
+    assert!(s["files"]["localization.txt"]["sha256"].is_string());
+    let est =
+        futago_msgs::tum::parse(&std::fs::read_to_string(out.join("localization.txt")).unwrap())
+            .unwrap();
+    assert!(est.len() >= 200);
 }

@@ -104,6 +104,9 @@ pub enum PoseSource {
     Odometry,
     /// The simulator's true pose (an oracle for tests and for driving exact routes).
     GroundTruth,
+    /// The localiser's estimate (Monte Carlo localisation on the map), carried forward by
+    /// odometry between its updates.
+    Localization,
 }
 
 /// Follower settings.
@@ -259,6 +262,8 @@ pub struct ControlInput<'a> {
     pub bumps: BumpsAndDrops,
     /// The true pose, when the scenario grants an oracle.
     pub ground_truth: Option<Pose2>,
+    /// The localiser's current pose, when a localiser runs.
+    pub localization: Option<Pose2>,
 }
 
 /// A running scripted controller.
@@ -353,6 +358,7 @@ impl ScriptedController {
                 let pose = match w.pose_source {
                     PoseSource::Odometry => self.odometry.pose,
                     PoseSource::GroundTruth => input.ground_truth.unwrap_or(self.odometry.pose),
+                    PoseSource::Localization => input.localization.unwrap_or(self.odometry.pose),
                 };
                 self.follow(w.clone(), pose)
             }
@@ -454,6 +460,7 @@ mod tests {
             odometry: &[],
             bumps: BumpsAndDrops::default(),
             ground_truth: Some(truth),
+            localization: None,
         })
     }
 
