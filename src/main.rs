@@ -56,10 +56,14 @@ enum Command {
         /// Output folder, created or replaced whole [default: out/replay/<log name>].
         #[arg(long)]
         out: Option<std::path::PathBuf>,
-        /// SLAM parameters: a TOML file of the `[slam]` table's keys (keyframe_distance,
-        /// icp.max_distance_start, grid.resolution, …).
+        /// SLAM parameters: a TOML file of the `[slam]` table's keys (method,
+        /// keyframe_distance, icp.max_distance_start, graph.loop_min_score, …).
         #[arg(long)]
         config: Option<std::path::PathBuf>,
+        /// SLAM method, over the config file's: `graph` (loop closure; the default) or `icp`
+        /// (seed 000's baseline).
+        #[arg(long)]
+        method: Option<String>,
     },
     /// Inspect worlds and export their ground truth.
     World {
@@ -241,11 +245,26 @@ fn real_main() -> Result<()> {
             relations,
             out,
             config,
+            method,
         } => {
-            let config: futago_robot::slam::IcpSlamConfig = match config {
-                Some(p) => futago_sim::config::load_toml(&p)?,
+            let mut slam_config: futago_robot::slam::SlamConfig = match &config {
+                Some(p) => futago_sim::config::load_toml(p)?,
                 None => Default::default(),
             };
+            if let Some(m) = method {
+                slam_config.method = match m.as_str() {
+                    "graph" => futago_robot::slam::SlamMethod::Graph,
+                    "icp" => futago_robot::slam::SlamMethod::Icp,
+                    other => anyhow::bail!("--method {other}: expected `graph` or `icp`"),
+                };
+            }
+            if let Err((key, expected)) = slam_config.validate() {
+                let file = config
+                    .as_ref()
+                    .map(|p| p.display().to_string())
+                    .unwrap_or_else(|| "default SLAM configuration".into());
+                anyhow::bail!("{file}: `{key}`: {expected}");
+            }
             let out = out.unwrap_or_else(|| {
                 std::path::Path::new("out/replay").join(
                     log.file_stem()
@@ -253,7 +272,7 @@ fn real_main() -> Result<()> {
                         .unwrap_or_else(|| "log".into()),
                 )
             });
-            let s = replay::replay(&log, relations.as_deref(), config, &out)?;
+            let s = replay::replay(&log, relations.as_deref(), slam_config, &out)?;
             let line = |k: &str| -> String {
                 let m = &s["relations"][k];
                 format!(

@@ -5,7 +5,7 @@ use crate::relations::{self, Metrics};
 use crate::run::write_atomically;
 use anyhow::{Context, Result, bail};
 use futago_msgs::{Pose2, Pose3, Time, carmen, tum};
-use futago_robot::slam::{IcpSlam, IcpSlamConfig};
+use futago_robot::slam::{Slam, SlamConfig, SlamMethod};
 use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Instant;
@@ -60,13 +60,20 @@ fn metrics_json(m: &Metrics) -> Value {
     serde_json::to_value(m).unwrap_or(Value::Null)
 }
 
-/// Runs seed 000's ICP SLAM over `log`, writes `trajectory.txt`, `odometry.txt` (TUM),
+fn method_name(m: SlamMethod) -> &'static str {
+    match m {
+        SlamMethod::Icp => "icp",
+        SlamMethod::Graph => "graph",
+    }
+}
+
+/// Runs the laser SLAM over `log`, writes `trajectory.txt`, `odometry.txt` (TUM),
 /// `map.pgm`/`map.yaml` and `summary.json` into `out`, and scores SLAM and raw odometry
 /// against `relations` when given.
 pub fn replay(
     log_path: &Path,
     relations: Option<&Path>,
-    config: IcpSlamConfig,
+    config: SlamConfig,
     out: &Path,
 ) -> Result<Value> {
     let log = read_log(log_path)?;
@@ -81,20 +88,26 @@ pub fn replay(
         None => None,
     };
     let started = Instant::now();
-    let mut slam = IcpSlam::new(config, Pose2::IDENTITY);
+    let mut slam = Slam::new(config, Pose2::IDENTITY);
     let first_odometry = log.scans[0].odometry;
     let mut odometry = Vec::with_capacity(log.scans.len());
     for s in &log.scans {
         slam.update(&s.scan, &s.odometry, &s.mount);
         odometry.push((s.scan.stamp, first_odometry.between(&s.odometry)));
     }
+    slam.finish();
+    let trajectory = slam.trajectory();
     let wall = started.elapsed().as_secs_f64();
     let span = (log.scans[log.scans.len() - 1].scan.stamp - log.scans[0].scan.stamp).secs();
     write_atomically(out, |tmp| {
         write_tum(
             &tmp.join("trajectory.txt"),
-            &format!("# futago ICP SLAM on {}", log_path.display()),
-            slam.trajectory(),
+            &format!(
+                "# futago {} SLAM on {}",
+                method_name(config.method),
+                log_path.display()
+            ),
+            &trajectory,
         )?;
         write_tum(
             &tmp.join("odometry.txt"),
@@ -107,7 +120,9 @@ pub fn replay(
             .context("writing map.pgm and map.yaml")?;
         let mut summary = json!({
             "log": log_path.display().to_string(),
-            "slam": "icp (seed 000: scan-to-map ICP, keyframes every 0.3 m, no loop closure)",
+            "slam": method_name(config.method),
+            "loop_closures": slam.loop_closures(),
+            "optimizations": slam.optimizations(),
             "scans": log.scans.len(),
             "odometry_records": log.odometry.len(),
             "skipped": log.skipped,
@@ -119,7 +134,7 @@ pub fn replay(
         if let Some(rels) = &rels {
             summary["relations"] = json!({
                 "file": relations.map(|p| p.display().to_string()),
-                "slam": metrics_json(&relations::evaluate(slam.trajectory(), rels)),
+                "slam": metrics_json(&relations::evaluate(&trajectory, rels)),
                 "odometry": metrics_json(&relations::evaluate(&odometry, rels)),
             });
         }

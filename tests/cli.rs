@@ -741,6 +741,40 @@ fn replay_of_a_simulated_log_beats_its_odometry_on_ground_truth_relations() {
     assert!(out.join("map.pgm").exists() && out.join("trajectory.txt").exists());
 }
 
+/// The published benchmark: both SLAM methods on the MIT CSAIL log, scored with its
+/// ground-truth relations. Graph SLAM must beat Cartographer's 0.0319 m (Hess et al. 2016,
+/// Table II); the ICP baseline must beat pure scan matching's 0.106 m (Kümmerle et al. 2009).
+#[test]
+fn replay_of_mit_csail_beats_the_published_figures() {
+    let data = root().join("../shared/datasets/slam-benchmark");
+    let tmp = tempfile::tempdir().unwrap();
+    for (method, limit, loops) in [("graph", 0.0319, true), ("icp", 0.106, false)] {
+        let out = tmp.path().join(method);
+        let o = futago(&[
+            "replay",
+            data.join("mit-csail.clf").to_str().unwrap(),
+            "--relations",
+            data.join("mit-csail.relations").to_str().unwrap(),
+            "--method",
+            method,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        ok(&o);
+        let s = summary(&out);
+        let trans = s["relations"]["slam"]["abs_trans_m"]["mean"]
+            .as_f64()
+            .unwrap();
+        let rot = s["relations"]["slam"]["abs_rot_deg"]["mean"]
+            .as_f64()
+            .unwrap();
+        assert_eq!(s["relations"]["slam"]["relations"], 1172);
+        assert!(trans < limit, "{method}: {trans} m");
+        assert!(rot < 0.5, "{method}: {rot}°");
+        assert_eq!(s["loop_closures"].as_u64().unwrap() > 0, loops, "{method}");
+    }
+}
+
 #[test]
 fn replay_refuses_bad_logs_with_their_line() {
     let tmp = tempfile::tempdir().unwrap();

@@ -7,8 +7,8 @@
 //! iterations, and minimises the Huber-weighted point-to-line distances.
 
 use futago_msgs::{LaserScan, Pose2, wrap_angle};
+use rustc_hash::FxHashMap;
 use serde::Deserialize;
-use std::collections::HashMap;
 
 /// Matcher parameters (`slam.icp.*`).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -154,8 +154,8 @@ pub struct PointMap {
     voxel: f64,
     /// Cell side of the lookup grid (the largest correspondence distance).
     bucket: f64,
-    voxels: HashMap<(i64, i64), ()>,
-    buckets: HashMap<(i64, i64), Vec<Oriented>>,
+    voxels: FxHashMap<(i64, i64), ()>,
+    buckets: FxHashMap<(i64, i64), Vec<Oriented>>,
     len: usize,
 }
 
@@ -319,6 +319,27 @@ pub fn align(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> 
         }
     }
     result
+}
+
+/// How well `scan` (robot frame) at `pose` fits `map`: the mean over the scan's points of a
+/// Gaussian (standard deviation `sigma`) of the distance to the nearest map point, in [0, 1].
+/// Used to choose between alignments started from different guesses.
+pub fn fit_score(map: &PointMap, scan: &[Oriented], pose: &Pose2, sigma: f64) -> f64 {
+    if scan.is_empty() {
+        return 0.0;
+    }
+    let reach = 2.0 * sigma;
+    let sum: f64 = scan
+        .iter()
+        .filter_map(|o| {
+            let q = pose.transform_point(o.p);
+            map.nearest(q, reach).map(|m| {
+                let d2 = (m.p[0] - q[0]).powi(2) + (m.p[1] - q[1]).powi(2);
+                (-d2 / (2.0 * sigma * sigma)).exp()
+            })
+        })
+        .sum();
+    sum / scan.len() as f64
 }
 
 /// The heading within `rotation_search` of the guess whose points (every 4th) land closest to

@@ -5,9 +5,11 @@
 //! So far: odometry integration ([`odometry`]) and scripted drive plans ([`script`]); the
 //! mapping, localisation and navigation stack plugs in beside them.
 
+pub mod correlative;
 pub mod icp;
 pub mod mcl;
 pub mod occupancy;
 pub mod odometry;
+pub mod pose_graph;
 pub mod script;
 pub mod slam;

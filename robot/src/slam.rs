@@ -1,18 +1,46 @@
-//! Laser SLAM. [`IcpSlam`] is seed 000's method (written for futago): each scan is matched by
-//! ICP to the map built so far, starting from the odometry guess; a scan becomes a keyframe,
-//! and enters the map, every `keyframe_distance` of travel (300 mm in seed 000) or
-//! `keyframe_angle` of turn. There is no loop closure: this is the baseline that graph SLAM is
-//! measured against.
+//! Laser SLAM, two methods (written for futago) that share a front end.
+//!
+//! The front end is seed 000's: each scan is matched by ICP to a map of points, starting from
+//! the odometry guess, and a scan becomes a keyframe (a node) every `keyframe_distance` of
+//! travel (300 mm in seed 000) or `keyframe_angle` of turn.
+//!
+//! - `method = "icp"` is seed 000's SLAM: the map is every keyframe so far, and there is no
+//!   loop closure. It is the baseline.
+//! - `method = "graph"` matches each scan against a local map of the last `graph.local_nodes`
+//!   keyframes only, and keeps the keyframes in a pose graph ([`crate::pose_graph`]) whose
+//!   edges are the front end's relative poses. Every `graph.submap_nodes` keyframes form a
+//!   submap, frozen in the frame of its first keyframe. Each new keyframe is searched for in
+//!   the finished submaps near its estimate by branch and bound ([`crate::correlative`]) and
+//!   the match refined by ICP; a match is a loop-closure edge with a Huber kernel, and the
+//!   graph is re-optimised (Hess et al., ICRA 2016, with node-to-submap constraints expressed
+//!   between keyframes).
+//!
+//! Both report every scan's pose relative to its keyframe, so the trajectory follows the
+//! keyframes when the graph moves them.
 
-use crate::icp::{IcpConfig, PointMap, align, scan_points};
+use crate::correlative::{LikelihoodGrid, SearchWindow, search};
+use crate::icp::{IcpConfig, Oriented, PointMap, align, fit_score, scan_points};
 use crate::occupancy::{OccupancyConfig, OccupancyMap};
+use crate::pose_graph::{Edge, OptimizeOptions, PoseGraph};
 use futago_msgs::{LaserScan, Pose2, Time, wrap_angle};
 use serde::Deserialize;
 
-/// Parameters of the ICP SLAM (`slam.*`).
+/// Which SLAM runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SlamMethod {
+    /// Seed 000: ICP to the map of all keyframes, no loop closure.
+    Icp,
+    /// Local ICP front end, submaps, branch-and-bound loop closure and a pose graph.
+    #[default]
+    Graph,
+}
+
+/// Parameters of the laser SLAM (`slam.*`).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct IcpSlamConfig {
+pub struct SlamConfig {
+    pub method: SlamMethod,
     /// Travel between keyframes, m.
     pub keyframe_distance: f64,
     /// Turn between keyframes, rad.
@@ -25,11 +53,13 @@ pub struct IcpSlamConfig {
     pub max_correction_angle: f64,
     pub icp: IcpConfig,
     pub grid: OccupancyConfig,
+    pub graph: GraphConfig,
 }
 
-impl Default for IcpSlamConfig {
+impl Default for SlamConfig {
     fn default() -> Self {
-        IcpSlamConfig {
+        SlamConfig {
+            method: SlamMethod::default(),
             keyframe_distance: 0.3,
             keyframe_angle: 0.35,
             max_range: 30.0,
@@ -37,7 +67,107 @@ impl Default for IcpSlamConfig {
             max_correction_angle: 0.6,
             icp: IcpConfig::default(),
             grid: OccupancyConfig::default(),
+            graph: GraphConfig::default(),
         }
+    }
+}
+
+/// Parameters of the graph back end (`slam.graph.*`). The local map size and the Huber
+/// threshold were chosen on the MIT CSAIL log (issue 4's closing note has the sweep); the rest
+/// follow from the laser (cells of 5 cm) and the front end's drift between revisits.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GraphConfig {
+    /// Keyframes in the front end's local map.
+    pub local_nodes: usize,
+    /// Keyframes per submap.
+    pub submap_nodes: usize,
+    /// A finished submap is searched when one of its keyframes lies within this of the new
+    /// keyframe's estimate, m.
+    pub loop_search_radius: f64,
+    /// Keyframes this recent are the front end's business, not loop closure's.
+    pub loop_min_age: usize,
+    /// Half-widths of the branch-and-bound window, m and rad.
+    pub loop_linear_window: f64,
+    pub loop_angular_window: f64,
+    /// Lowest mean likelihood of a loop-closure match.
+    pub loop_min_score: f64,
+    /// Lowest share of the scan's points that ICP pairs in the refinement.
+    pub loop_min_overlap: f64,
+    /// Readings used for loop closure reach at most this far, m.
+    pub loop_max_range: f64,
+    /// Cell of the submaps' likelihood grids and the Gaussian's standard deviation, m.
+    pub loop_resolution: f64,
+    pub loop_sigma: f64,
+    /// Standard deviations of the front end's relative poses (m, rad).
+    pub sequential_sigma: f64,
+    pub sequential_sigma_angle: f64,
+    /// Standard deviations of loop closures (m, rad), and their Huber threshold (in standard
+    /// deviations).
+    pub loop_sigma_xy: f64,
+    pub loop_sigma_angle: f64,
+    pub loop_huber: f64,
+    /// Re-optimise after this many new loop closures.
+    pub optimize_every: usize,
+}
+
+impl Default for GraphConfig {
+    fn default() -> Self {
+        GraphConfig {
+            local_nodes: 15,
+            submap_nodes: 20,
+            loop_search_radius: 3.0,
+            loop_min_age: 40,
+            loop_linear_window: 1.0,
+            loop_angular_window: 0.35,
+            loop_min_score: 0.55,
+            loop_min_overlap: 0.5,
+            loop_max_range: 8.0,
+            loop_resolution: 0.05,
+            loop_sigma: 0.05,
+            sequential_sigma: 0.02,
+            sequential_sigma_angle: 0.01,
+            loop_sigma_xy: 0.05,
+            loop_sigma_angle: 0.02,
+            loop_huber: 1.0,
+            optimize_every: 5,
+        }
+    }
+}
+
+impl SlamConfig {
+    /// Checks values SLAM cannot run with; returns `(key, expectation)` on error.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let bad = |k: &str, m: &str| Err((format!("slam.{k}"), m.to_string()));
+        let positive = [
+            ("keyframe_distance", self.keyframe_distance),
+            ("keyframe_angle", self.keyframe_angle),
+            ("max_range", self.max_range),
+            ("icp.voxel", self.icp.voxel),
+            ("graph.loop_resolution", self.graph.loop_resolution),
+            ("graph.loop_sigma", self.graph.loop_sigma),
+            ("graph.loop_max_range", self.graph.loop_max_range),
+            ("graph.sequential_sigma", self.graph.sequential_sigma),
+            (
+                "graph.sequential_sigma_angle",
+                self.graph.sequential_sigma_angle,
+            ),
+            ("graph.loop_sigma_xy", self.graph.loop_sigma_xy),
+            ("graph.loop_sigma_angle", self.graph.loop_sigma_angle),
+            ("graph.loop_huber", self.graph.loop_huber),
+        ];
+        for (k, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(k, "expected a positive number");
+            }
+        }
+        if self.graph.local_nodes == 0 || self.graph.submap_nodes == 0 {
+            return bad(
+                "graph.submap_nodes",
+                "expected local_nodes and submap_nodes ≥ 1",
+            );
+        }
+        self.grid.validate("slam.grid")
     }
 }
 
@@ -48,35 +178,71 @@ pub struct SlamUpdate {
     /// Whether ICP accepted a match (else the pose is the odometry guess).
     pub matched: bool,
     pub keyframe: bool,
+    /// Whether the pose graph was re-optimised after this scan (the map moved).
+    pub optimized: bool,
 }
 
-/// Seed 000's ICP scan-to-map SLAM.
-pub struct IcpSlam {
-    config: IcpSlamConfig,
+/// Guesses closer than this (m, and rad) are one guess.
+const GUESS_DISAGREEMENT: f64 = 0.05;
+
+/// A keyframe.
+struct Node {
+    stamp: Time,
+    points: Vec<Oriented>,
+    scan: LaserScan,
+    mount: Pose2,
+}
+
+/// A finished submap in the frame of its first keyframe.
+struct Submap {
+    first: usize,
+    last: usize,
+    grid: LikelihoodGrid,
+    points: PointMap,
+}
+
+/// Laser SLAM (see the module documentation).
+pub struct Slam {
+    config: SlamConfig,
+    /// The front end's map: all keyframes (ICP) or the last few (graph).
     map: PointMap,
-    grid: OccupancyMap,
+    graph: PoseGraph,
+    nodes: Vec<Node>,
+    submaps: Vec<Submap>,
     pose: Pose2,
     last_odometry: Option<Pose2>,
-    last_keyframe: Option<Pose2>,
-    trajectory: Vec<(Time, Pose2)>,
-    keyframes: usize,
+    /// The motion estimated between the last two scans.
+    last_motion: Pose2,
+    /// Every scan: its stamp, its keyframe and its pose in that keyframe's frame.
+    scans: Vec<(Time, usize, Pose2)>,
     unmatched: usize,
+    loop_closures: usize,
+    pending_loops: usize,
+    optimizations: usize,
 }
 
-impl IcpSlam {
+impl Slam {
     /// Starts at `start` (the map frame's origin is where the robot starts when identity).
-    pub fn new(config: IcpSlamConfig, start: Pose2) -> IcpSlam {
-        IcpSlam {
-            map: PointMap::new(config.icp.voxel, config.icp.max_distance_start.max(0.05)),
-            grid: OccupancyMap::new(config.grid),
+    pub fn new(config: SlamConfig, start: Pose2) -> Slam {
+        Slam {
+            map: Self::empty_map(&config),
+            graph: PoseGraph::default(),
+            nodes: Vec::new(),
+            submaps: Vec::new(),
             config,
             pose: start,
             last_odometry: None,
-            last_keyframe: None,
-            trajectory: Vec::new(),
-            keyframes: 0,
+            last_motion: Pose2::IDENTITY,
+            scans: Vec::new(),
             unmatched: 0,
+            loop_closures: 0,
+            pending_loops: 0,
+            optimizations: 0,
         }
+    }
+
+    fn empty_map(config: &SlamConfig) -> PointMap {
+        PointMap::new(config.icp.voxel, config.icp.max_distance_start.max(0.05))
     }
 
     /// Processes one scan with the odometry pose of the robot at its time and the laser's
@@ -88,64 +254,297 @@ impl IcpSlam {
         };
         self.last_odometry = Some(*odometry);
         let points = scan_points(scan, mount, self.config.max_range, &self.config.icp);
-        let aligned = align(&self.map, &points, guess, &self.config.icp).filter(|a| {
-            a.pose.distance(&guess) <= self.config.max_correction
-                && wrap_angle(a.pose.theta - guess.theta).abs() <= self.config.max_correction_angle
-        });
+        // Wheel odometry stalls and then catches up in one jump on real robots (the MIT CSAIL
+        // log holds 1 s stalls in turns). Where the odometry guess and a constant-velocity
+        // guess disagree, ICP starts from both and the better fit wins.
+        let velocity_guess = self.pose.compose(&self.last_motion);
+        let mut guesses = vec![guess];
+        if velocity_guess.distance(&guess) > GUESS_DISAGREEMENT
+            || wrap_angle(velocity_guess.theta - guess.theta).abs() > GUESS_DISAGREEMENT
+        {
+            guesses.push(velocity_guess);
+        }
+        let sigma = self.config.icp.max_distance_end;
+        let aligned = guesses
+            .iter()
+            .filter_map(|g| {
+                align(&self.map, &points, *g, &self.config.icp).filter(|a| {
+                    a.pose.distance(g) <= self.config.max_correction
+                        && wrap_angle(a.pose.theta - g.theta).abs()
+                            <= self.config.max_correction_angle
+                })
+            })
+            .map(|a| (fit_score(&self.map, &points, &a.pose, sigma), a))
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, a)| a);
         let matched = aligned.is_some();
         if !matched && !self.map.is_empty() {
             self.unmatched += 1;
         }
+        let previous = self.pose;
         self.pose = aligned.map(|a| a.pose).unwrap_or(guess);
-        let keyframe = match self.last_keyframe {
+        self.last_motion = previous.between(&self.pose);
+        let keyframe = match self.graph.nodes.last() {
             None => true,
             Some(k) => {
                 k.distance(&self.pose) >= self.config.keyframe_distance
                     || wrap_angle(k.theta - self.pose.theta).abs() >= self.config.keyframe_angle
             }
         };
+        let mut optimized = false;
         if keyframe {
-            self.map.insert(&self.pose, &points);
-            self.grid.insert(&self.pose.compose(mount), scan);
-            self.last_keyframe = Some(self.pose);
-            self.keyframes += 1;
+            optimized = self.add_keyframe(scan, mount, points);
         }
-        self.trajectory.push((scan.stamp, self.pose));
+        let node = self.graph.nodes.len() - 1;
+        self.scans
+            .push((scan.stamp, node, self.graph.nodes[node].between(&self.pose)));
         SlamUpdate {
             pose: self.pose,
             matched,
             keyframe,
+            optimized,
         }
     }
 
-    /// Estimated pose after every scan.
-    pub fn trajectory(&self) -> &[(Time, Pose2)] {
-        &self.trajectory
+    /// Adds a keyframe at the current pose; returns whether the graph was optimised.
+    fn add_keyframe(&mut self, scan: &LaserScan, mount: &Pose2, points: Vec<Oriented>) -> bool {
+        let id = self.graph.nodes.len();
+        if let Some(prev) = self.graph.nodes.last() {
+            let g = &self.config.graph;
+            self.graph.edges.push(Edge::with_sigmas(
+                id - 1,
+                id,
+                prev.between(&self.pose),
+                [
+                    g.sequential_sigma,
+                    g.sequential_sigma,
+                    g.sequential_sigma_angle,
+                ],
+            ));
+        }
+        self.graph.nodes.push(self.pose);
+        self.nodes.push(Node {
+            stamp: scan.stamp,
+            points,
+            scan: scan.clone(),
+            mount: *mount,
+        });
+        match self.config.method {
+            SlamMethod::Icp => {
+                self.map.insert(&self.pose, &self.nodes[id].points);
+                false
+            }
+            SlamMethod::Graph => {
+                if (id + 1).is_multiple_of(self.config.graph.submap_nodes) {
+                    self.finish_submap(id + 1 - self.config.graph.submap_nodes, id);
+                }
+                self.close_loops(id);
+                let optimized = self.pending_loops >= self.config.graph.optimize_every;
+                if optimized {
+                    self.optimize();
+                }
+                self.rebuild_local_map();
+                optimized
+            }
+        }
     }
 
-    /// The occupancy grid of the keyframes.
-    pub fn grid(&self) -> &OccupancyMap {
-        &self.grid
+    fn rebuild_local_map(&mut self) {
+        let n = self.graph.nodes.len();
+        let mut map = Self::empty_map(&self.config);
+        // Newest first, so that a voxel keeps the most recent view of it.
+        for k in (n.saturating_sub(self.config.graph.local_nodes)..n).rev() {
+            map.insert(&self.graph.nodes[k], &self.nodes[k].points);
+        }
+        self.map = map;
+    }
+
+    /// Freezes keyframes `first..=last` into a submap in the frame of `first`.
+    fn finish_submap(&mut self, first: usize, last: usize) {
+        let g = &self.config.graph;
+        let anchor = self.graph.nodes[first].inverse();
+        let mut points = Self::empty_map(&self.config);
+        let mut cloud = Vec::new();
+        for k in first..=last {
+            let rel = anchor.compose(&self.graph.nodes[k]);
+            points.insert(&rel, &self.nodes[k].points);
+            for o in &self.nodes[k].points {
+                if o.p[0].hypot(o.p[1]) <= g.loop_max_range {
+                    cloud.push(rel.transform_point(o.p));
+                }
+            }
+        }
+        let window = (g.loop_linear_window / g.loop_resolution).ceil().max(1.0);
+        let depth = (window.log2().ceil() as usize).clamp(1, 8);
+        self.submaps.push(Submap {
+            first,
+            last,
+            grid: LikelihoodGrid::new(&cloud, g.loop_resolution, g.loop_sigma, depth),
+            points,
+        });
+    }
+
+    /// Searches the finished submaps near keyframe `id` and adds an edge for each match.
+    fn close_loops(&mut self, id: usize) {
+        let g = self.config.graph;
+        let pose = self.graph.nodes[id];
+        // The scan for branch and bound: points within range, thinned to one per cell.
+        let mut seen = std::collections::HashSet::new();
+        let cloud: Vec<[f64; 2]> = self.nodes[id]
+            .points
+            .iter()
+            .filter(|o| o.p[0].hypot(o.p[1]) <= g.loop_max_range)
+            .filter(|o| {
+                seen.insert((
+                    (o.p[0] / (2.0 * g.loop_resolution)).floor() as i64,
+                    (o.p[1] / (2.0 * g.loop_resolution)).floor() as i64,
+                ))
+            })
+            .map(|o| o.p)
+            .collect();
+        if cloud.len() < 20 {
+            return;
+        }
+        let window = SearchWindow {
+            linear: g.loop_linear_window,
+            angular: g.loop_angular_window,
+            min_score: g.loop_min_score,
+        };
+        let refine = IcpConfig {
+            translation_weight: 0.0,
+            rotation_weight: 0.0,
+            rotation_search: 0.0,
+            max_distance_start: 2.0 * g.loop_resolution,
+            max_distance_end: g.loop_resolution,
+            min_overlap: g.loop_min_overlap,
+            ..self.config.icp
+        };
+        let mut new_edges = Vec::new();
+        for s in &self.submaps {
+            if s.last + g.loop_min_age > id {
+                continue;
+            }
+            let near = (s.first..=s.last)
+                .any(|k| self.graph.nodes[k].distance(&pose) <= g.loop_search_radius);
+            if !near {
+                continue;
+            }
+            let anchor = self.graph.nodes[s.first];
+            let guess = anchor.between(&pose);
+            let Some(m) = search(&s.grid, &cloud, guess, &window) else {
+                continue;
+            };
+            let Some(refined) = align(&s.points, &self.nodes[id].points, m.pose, &refine) else {
+                continue;
+            };
+            // The refinement must stay in the cell the search found.
+            if refined.pose.distance(&m.pose) > 2.0 * g.loop_resolution
+                || wrap_angle(refined.pose.theta - m.pose.theta).abs() > 0.05
+            {
+                continue;
+            }
+            let mut edge = Edge::with_sigmas(
+                s.first,
+                id,
+                refined.pose,
+                [g.loop_sigma_xy, g.loop_sigma_xy, g.loop_sigma_angle],
+            );
+            edge.huber = Some(g.loop_huber);
+            new_edges.push(edge);
+        }
+        self.loop_closures += new_edges.len();
+        self.pending_loops += new_edges.len();
+        self.graph.edges.extend(new_edges);
+    }
+
+    /// Optimises the graph and carries the current pose along with the newest keyframe.
+    fn optimize(&mut self) {
+        let last = self.graph.nodes.len() - 1;
+        let rel = self.graph.nodes[last].between(&self.pose);
+        // The graph was checked as it was built, so optimisation cannot fail on its edges.
+        if self.graph.optimize(&OptimizeOptions::default()).is_ok() {
+            self.optimizations += 1;
+        }
+        self.pose = self.graph.nodes[last].compose(&rel);
+        self.pending_loops = 0;
+    }
+
+    /// Optimises once more if loop closures arrived since the last optimisation; call at the
+    /// end of a log.
+    pub fn finish(&mut self) {
+        if self.pending_loops > 0 {
+            self.optimize();
+        }
+    }
+
+    /// The current pose estimate.
+    pub fn pose(&self) -> Pose2 {
+        self.pose
+    }
+
+    /// Estimated pose at every scan, following the keyframes as they are now.
+    pub fn trajectory(&self) -> Vec<(Time, Pose2)> {
+        self.scans
+            .iter()
+            .map(|(t, k, rel)| (*t, self.graph.nodes[*k].compose(rel)))
+            .collect()
+    }
+
+    /// The keyframes: stamp and pose.
+    pub fn keyframe_poses(&self) -> Vec<(Time, Pose2)> {
+        self.nodes
+            .iter()
+            .zip(&self.graph.nodes)
+            .map(|(n, p)| (n.stamp, *p))
+            .collect()
+    }
+
+    /// The occupancy grid of the keyframes at their current poses.
+    pub fn grid(&self) -> OccupancyMap {
+        let mut grid = OccupancyMap::new(self.config.grid);
+        for (n, p) in self.nodes.iter().zip(&self.graph.nodes) {
+            grid.insert(&p.compose(&n.mount), &n.scan);
+        }
+        grid
     }
 
     pub fn keyframes(&self) -> usize {
-        self.keyframes
+        self.nodes.len()
     }
 
     /// Scans ICP could not match (their pose is dead-reckoned).
     pub fn unmatched(&self) -> usize {
         self.unmatched
     }
+
+    /// Loop-closure edges added.
+    pub fn loop_closures(&self) -> usize {
+        self.loop_closures
+    }
+
+    pub fn optimizations(&self) -> usize {
+        self.optimizations
+    }
+
+    pub fn config(&self) -> &SlamConfig {
+        &self.config
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::icp::tests_support::room_scan;
+    use crate::icp::tests_support::{room_scan, scan_of};
 
     #[test]
     fn icp_slam_follows_a_drive_that_odometry_gets_wrong() {
-        let mut slam = IcpSlam::new(IcpSlamConfig::default(), Pose2::IDENTITY);
+        let mut slam = Slam::new(
+            SlamConfig {
+                method: SlamMethod::Icp,
+                ..SlamConfig::default()
+            },
+            Pose2::IDENTITY,
+        );
         // The robot drives 1.5 m along x and turns 0.5 rad; odometry overestimates distance by
         // 5 % and turns by 10 %.
         let mut odo = Pose2::IDENTITY;
@@ -160,6 +559,11 @@ mod tests {
             slam.update(&scan, &odo, &Pose2::IDENTITY);
         }
         let est = slam.trajectory().last().unwrap().1;
+        assert_eq!(
+            slam.loop_closures(),
+            0,
+            "the ICP method has no loop closure"
+        );
         assert!(
             odo.distance(&truth) > 0.07,
             "odometry error {}",
@@ -169,5 +573,126 @@ mod tests {
         assert!(wrap_angle(est.theta - truth.theta).abs() < 0.5f64.to_radians());
         assert!(slam.keyframes() >= 5 && slam.keyframes() < 60);
         assert_eq!(slam.unmatched(), 0);
+    }
+
+    /// Odometry that stalls for half a second in a turn and then catches up in one jump (as
+    /// in the MIT CSAIL log): the constant-velocity guess keeps the heading.
+    #[test]
+    fn a_stall_and_jump_of_odometry_does_not_double_count_the_turn() {
+        let config = SlamConfig {
+            method: SlamMethod::Icp,
+            ..SlamConfig::default()
+        };
+        let mut slam = Slam::new(config, Pose2::IDENTITY);
+        let (mut truth, mut odo) = (Pose2::IDENTITY, Pose2::IDENTITY);
+        for k in 0..=20 {
+            if k > 0 {
+                truth = truth.compose(&Pose2::new(0.01, 0.0, 0.15));
+            }
+            // Odometry holds still at scans 5–9 and reports the whole motion at scan 10.
+            if !(5..10).contains(&k) {
+                odo = truth;
+            }
+            let mut scan = room_scan(&truth);
+            scan.stamp = Time::from_secs(k as f64 * 0.1);
+            slam.update(&scan, &odo, &Pose2::IDENTITY);
+        }
+        let est = slam.pose();
+        assert!(
+            wrap_angle(est.theta - truth.theta).abs() < 0.01,
+            "{est:?} vs {truth:?}"
+        );
+        assert!(est.distance(&truth) < 0.02, "{est:?} vs {truth:?}");
+    }
+
+    /// A corridor ring: outer walls 10 × 6 m, an inner block, and a few boxes on the walls so
+    /// that places differ.
+    fn ring() -> Vec<([f64; 2], [f64; 2])> {
+        let mut segs = vec![
+            ([-1.0, -1.0], [9.0, -1.0]),
+            ([9.0, -1.0], [9.0, 5.0]),
+            ([9.0, 5.0], [-1.0, 5.0]),
+            ([-1.0, 5.0], [-1.0, -1.0]),
+            ([1.0, 1.0], [7.0, 1.0]),
+            ([7.0, 1.0], [7.0, 3.0]),
+            ([7.0, 3.0], [1.0, 3.0]),
+            ([1.0, 3.0], [1.0, 1.0]),
+        ];
+        for (cx, cy, w) in [
+            (2.0, -0.9, 0.3),
+            (5.5, -0.85, 0.5),
+            (8.85, 2.5, 0.4),
+            (4.0, 4.9, 0.2),
+            (-0.9, 1.5, 0.6),
+            (3.0, 1.1, 0.3),
+        ] {
+            let h = w / 2.0;
+            let c = [
+                [cx - h, cy - h],
+                [cx + h, cy - h],
+                [cx + h, cy + h],
+                [cx - h, cy + h],
+            ];
+            for k in 0..4 {
+                segs.push((c[k], c[(k + 1) % 4]));
+            }
+        }
+        segs
+    }
+
+    /// Graph SLAM on dead reckoning alone (the front end's matches refused): odometry that
+    /// over-turns by 4 % drifts round the ring, and loop closures pull the trajectory back.
+    #[test]
+    fn graph_slam_closes_a_loop_that_odometry_drifts_around() {
+        let config = SlamConfig {
+            method: SlamMethod::Graph,
+            max_correction: 0.0,
+            max_correction_angle: 0.0,
+            ..SlamConfig::default()
+        };
+        let mut slam = Slam::new(config, Pose2::IDENTITY);
+        let segs = ring();
+        // The drive: the corridor's centre line, once round and 4 m on, turning in place.
+        let mut steps = Vec::new();
+        for len in [8.0, 4.0, 8.0, 4.0] {
+            steps.extend(std::iter::repeat_n(
+                Pose2::new(0.1, 0.0, 0.0),
+                (len / 0.1) as usize,
+            ));
+            steps.extend(std::iter::repeat_n(
+                Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2 / 16.0),
+                16,
+            ));
+        }
+        steps.extend(std::iter::repeat_n(Pose2::new(0.1, 0.0, 0.0), 40));
+        let (mut truth, mut odo) = (Pose2::IDENTITY, Pose2::IDENTITY);
+        let (mut truths, mut odo_worst) = (Vec::new(), 0.0f64);
+        for (k, step) in std::iter::once(Pose2::IDENTITY).chain(steps).enumerate() {
+            truth = truth.compose(&step);
+            odo = odo.compose(&Pose2::new(step.x, step.y, step.theta * 1.04));
+            let mut scan = scan_of(&segs, &truth);
+            scan.stamp = Time::from_secs(k as f64 * 0.1);
+            slam.update(&scan, &odo, &Pose2::IDENTITY);
+            truths.push(truth);
+            odo_worst = odo_worst.max(odo.distance(&truth));
+        }
+        slam.finish();
+        let traj = slam.trajectory();
+        let worst = traj
+            .iter()
+            .zip(&truths)
+            .map(|((_, e), t)| e.distance(t))
+            .fold(0.0, f64::max);
+        assert!(odo_worst > 0.5, "odometry off by at most {odo_worst} m");
+        assert!(slam.loop_closures() > 0);
+        assert!(slam.optimizations() > 0);
+        // One loop spreads the heading error round the ring; what is left mid-ring is a tenth
+        // of dead reckoning's.
+        assert!(
+            worst < 0.15 && worst < 0.15 * odo_worst,
+            "worst trajectory error {worst} m (odometry {odo_worst} m)"
+        );
+        let end = traj.last().unwrap().1;
+        assert!(wrap_angle(end.theta - truth.theta).abs() < 0.02);
     }
 }
