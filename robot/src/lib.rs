@@ -10,6 +10,8 @@ pub mod icp;
 pub mod mcl;
 pub mod occupancy;
 pub mod odometry;
+pub mod planner;
 pub mod pose_graph;
+pub mod pursuit;
 pub mod script;
 pub mod slam;

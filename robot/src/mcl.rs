@@ -7,6 +7,7 @@
 //!
 //! Seed 000's configuration is the default: 500 particles, the beam model, one beam every 15°.
 
+use crate::planner::{OCCUPIED, obstacle_distance};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2, wrap_angle};
 use rand::{Rng, SeedableRng};
@@ -96,54 +97,7 @@ pub struct MclMap {
 impl MclMap {
     pub fn new(grid: OccupancyGrid) -> MclMap {
         let (w, h) = (grid.width, grid.height);
-        // Two-pass chamfer distance transform (3-4 weights), in cells.
-        let big = 1e9f32;
-        let mut d: Vec<f32> = grid
-            .cells
-            .iter()
-            .map(|&c| if c >= 50 { 0.0 } else { big })
-            .collect();
-        let (a, b) = (1.0f32, std::f32::consts::SQRT_2);
-        for j in 0..h {
-            for i in 0..w {
-                let k = j * w + i;
-                let mut v = d[k];
-                if i > 0 {
-                    v = v.min(d[k - 1] + a);
-                }
-                if j > 0 {
-                    v = v.min(d[k - w] + a);
-                    if i > 0 {
-                        v = v.min(d[k - w - 1] + b);
-                    }
-                    if i + 1 < w {
-                        v = v.min(d[k - w + 1] + b);
-                    }
-                }
-                d[k] = v;
-            }
-        }
-        for j in (0..h).rev() {
-            for i in (0..w).rev() {
-                let k = j * w + i;
-                let mut v = d[k];
-                if i + 1 < w {
-                    v = v.min(d[k + 1] + a);
-                }
-                if j + 1 < h {
-                    v = v.min(d[k + w] + a);
-                    if i + 1 < w {
-                        v = v.min(d[k + w + 1] + b);
-                    }
-                    if i > 0 {
-                        v = v.min(d[k + w - 1] + b);
-                    }
-                }
-                d[k] = v;
-            }
-        }
-        let r = grid.resolution as f32;
-        let distance = d.into_iter().map(|c| (c * r).min(5.0)).collect();
+        let distance = obstacle_distance(&grid, |c| c >= OCCUPIED, 5.0);
         let free = (0..h)
             .flat_map(|j| (0..w).map(move |i| (i, j)))
             .filter(|&(i, j)| grid.get(i, j) == 0)

@@ -5,7 +5,8 @@
 //! a scenario asks for an oracle) and answers with Create drive commands.
 
 use crate::odometry::OdometryIntegrator;
-use futago_msgs::{BumpsAndDrops, DriveCommand, Odometry, Pose2, Radius, Time, wrap_angle};
+use crate::pursuit::{FollowParams, PathFollower};
+use futago_msgs::{BumpsAndDrops, DriveCommand, Odometry, Pose2, Radius, Time};
 use serde::Deserialize;
 
 /// A turning radius as written in a scenario: metres, or `"straight"`, `"ccw"`, `"cw"`.
@@ -162,6 +163,20 @@ fn one() -> u32 {
     1
 }
 
+impl WaypointConfig {
+    /// The follower's parameters.
+    pub fn follow_params(&self) -> FollowParams {
+        FollowParams {
+            speed: self.speed,
+            lookahead: self.lookahead,
+            tolerance: self.tolerance,
+            turn_in_place: self.turn_in_place_deg.to_radians(),
+            turn_tolerance: self.turn_tolerance_deg.to_radians(),
+            turn_speed: self.turn_speed,
+        }
+    }
+}
+
 /// Timed commands, in order, `repeat` times.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -272,10 +287,10 @@ pub struct ScriptedController {
     config: ControllerConfig,
     start: Time,
     odometry: OdometryIntegrator,
-    /// Waypoint follower: index into the expanded route, and whether turning in place.
-    target: usize,
-    route: Vec<[f64; 2]>,
-    turning: bool,
+    /// Waypoint follower over the expanded route.
+    follower: Option<PathFollower>,
+    /// Route points per lap (waypoint follower).
+    lap_len: usize,
     last: Option<DriveCommand>,
     done: bool,
 }
@@ -283,7 +298,7 @@ pub struct ScriptedController {
 impl ScriptedController {
     /// A controller starting at time `start` from `initial` (the pose dead reckoning starts from).
     pub fn new(config: ControllerConfig, start: Time, initial: Pose2) -> ScriptedController {
-        let route = match &config {
+        let follower = match &config {
             ControllerConfig::Waypoints(w) => {
                 // The start is the first point of the route, so that the follower tracks the
                 // line to the first waypoint as it does the later ones.
@@ -294,17 +309,20 @@ impl ScriptedController {
                 if w.laps > 1 {
                     r.push(w.waypoints[0]);
                 }
-                r
+                Some(PathFollower::new(w.follow_params(), r))
             }
-            _ => Vec::new(),
+            _ => None,
+        };
+        let lap_len = match &config {
+            ControllerConfig::Waypoints(w) => w.waypoints.len(),
+            _ => 0,
         };
         ScriptedController {
             config,
             start,
             odometry: OdometryIntegrator::new(initial),
-            target: 1,
-            route,
-            turning: false,
+            follower,
+            lap_len,
             last: None,
             done: false,
         }
@@ -322,7 +340,21 @@ impl ScriptedController {
 
     /// Index of the waypoint being approached (waypoint follower).
     pub fn progress(&self) -> usize {
-        self.target.saturating_sub(1)
+        self.follower
+            .as_ref()
+            .map(|f| f.target().saturating_sub(1))
+            .unwrap_or(0)
+    }
+
+    /// Laps of the waypoint list completed: the robot has come back to the first waypoint
+    /// this many times after leaving it.
+    pub fn laps_completed(&self) -> usize {
+        match &self.follower {
+            // Route index 1 + k·n is the first waypoint of lap k + 1 (the last lap's end is
+            // the first waypoint again).
+            Some(f) if self.lap_len > 0 => f.target().saturating_sub(2) / self.lap_len,
+            _ => 0,
+        }
     }
 
     /// One control tick: returns a command when it differs from the last one sent.
@@ -360,7 +392,14 @@ impl ScriptedController {
                     PoseSource::GroundTruth => input.ground_truth.unwrap_or(self.odometry.pose),
                     PoseSource::Localization => input.localization.unwrap_or(self.odometry.pose),
                 };
-                self.follow(w.clone(), pose)
+                match self.follower.as_mut() {
+                    Some(f) => {
+                        let cmd = f.command(&pose);
+                        self.done = f.done();
+                        cmd
+                    }
+                    None => DriveCommand::STOP,
+                }
             }
         };
         if self.last != Some(cmd) {
@@ -370,85 +409,7 @@ impl ScriptedController {
             None
         }
     }
-
-    fn follow(&mut self, w: WaypointConfig, pose: Pose2) -> DriveCommand {
-        // Advance past reached waypoints.
-        while self.target < self.route.len() {
-            let t = self.route[self.target];
-            if (t[0] - pose.x).hypot(t[1] - pose.y) > w.tolerance {
-                break;
-            }
-            self.target += 1;
-            self.turning = true;
-        }
-        if self.target >= self.route.len() {
-            self.done = true;
-            return DriveCommand::STOP;
-        }
-        let goal = self.route[self.target];
-        let dist = (goal[0] - pose.x).hypot(goal[1] - pose.y);
-        // Aim point: the goal, or a point `lookahead` along the segment from the previous one.
-        let aim = if dist <= w.lookahead {
-            goal
-        } else {
-            let prev = self.route[self.target - 1];
-            let (dx, dy) = (goal[0] - prev[0], goal[1] - prev[1]);
-            let len = dx.hypot(dy).max(1e-9);
-            let s = (((pose.x - prev[0]) * dx + (pose.y - prev[1]) * dy) / len).clamp(0.0, len);
-            let s = (s + w.lookahead).min(len);
-            [prev[0] + dx / len * s, prev[1] + dy / len * s]
-        };
-        let local = pose.inverse().transform_point(aim);
-        let bearing = local[1].atan2(local[0]);
-        let err = wrap_angle(bearing);
-        if self.turning || err.abs() > w.turn_in_place_deg.to_radians() {
-            self.turning = err.abs() > w.turn_tolerance_deg.to_radians();
-            if self.turning {
-                // Slow down near the end of the turn so as not to overshoot.
-                let v = w.turn_speed.min(0.02 + err.abs() * 0.2);
-                let radius = if err > 0.0 {
-                    Radius::InPlaceCcw
-                } else {
-                    Radius::InPlaceCw
-                };
-                return DriveCommand::Drive {
-                    velocity: (v * 1000.0).round() / 1000.0,
-                    radius,
-                };
-            }
-        }
-        // Pure pursuit: the circle through the robot and the aim point, tangent to the heading.
-        let l2 = local[0] * local[0] + local[1] * local[1];
-        let speed = w.speed.min(0.05 + dist); // ease in to the last point
-        let speed = (speed * 1000.0).round() / 1000.0;
-        let curvature = 2.0 * local[1] / l2;
-        if curvature.abs() < 1e-4 {
-            return DriveCommand::Drive {
-                velocity: speed,
-                radius: Radius::Straight,
-            };
-        }
-        // The OI's Drive takes radii up to 2 m; gentler arcs go out as Drive Direct wheel
-        // speeds. Both are quantised to whole millimetres, as the OI's integer fields are.
-        let r = 1.0 / curvature;
-        if r.abs() <= 2.0 {
-            DriveCommand::Drive {
-                velocity: speed,
-                radius: Radius::Arc((r * 1000.0).round() / 1000.0),
-            }
-        } else {
-            let half = curvature * CREATE_WHEEL_BASE / 2.0;
-            let q = |v: f64| (v * 1000.0).round() / 1000.0;
-            DriveCommand::DriveDirect {
-                left: q(speed * (1.0 - half)),
-                right: q(speed * (1.0 + half)),
-            }
-        }
-    }
 }
-
-/// The Create's nominal wheel base, m (libcreate), for turning arcs into wheel speeds.
-pub const CREATE_WHEEL_BASE: f64 = 0.258;
 
 #[cfg(test)]
 mod tests {

@@ -1,0 +1,586 @@
+//! Path planning on occupancy grids (written for futago).
+//!
+//! - [`obstacle_distance`]: each cell's distance to the nearest obstacle (chamfer transform),
+//!   which both planning and Monte Carlo localisation's likelihood field use.
+//! - [`RoadMap`]: seed 000's node graph (Ozaki 2012, §2.5): nodes at fixed intervals along the
+//!   boundary of the region within `wall_distance` of obstacles and along the boundary of the
+//!   region beyond `open_distance`, every node joined to the nodes within `connect_radius`
+//!   that it sees through a corridor as wide as the robot plus a margin (seed 000's "thick
+//!   line" of about 40 cm), and A* with the Euclidean heuristic between the nodes nearest the
+//!   start and the goal.
+//! - [`grid_path`]: Dijkstra over free cells with enough clearance to the nearest cell that a
+//!   predicate accepts, for goals that are regions (frontiers) rather than points.
+
+use futago_msgs::grid::OccupancyGrid;
+use serde::Deserialize;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+/// Distance from each cell's centre to the nearest cell for which `obstacle` holds, m
+/// (two-pass chamfer transform with weights 1 and √2, within 8 % of Euclidean), capped at
+/// `cap`. Row-major like the grid.
+pub fn obstacle_distance(
+    grid: &OccupancyGrid,
+    obstacle: impl Fn(i8) -> bool,
+    cap: f64,
+) -> Vec<f32> {
+    let (w, h) = (grid.width, grid.height);
+    let big = 1e9f32;
+    let mut d: Vec<f32> = grid
+        .cells
+        .iter()
+        .map(|&c| if obstacle(c) { 0.0 } else { big })
+        .collect();
+    let (a, b) = (1.0f32, std::f32::consts::SQRT_2);
+    for j in 0..h {
+        for i in 0..w {
+            let k = j * w + i;
+            let mut v = d[k];
+            if i > 0 {
+                v = v.min(d[k - 1] + a);
+            }
+            if j > 0 {
+                v = v.min(d[k - w] + a);
+                if i > 0 {
+                    v = v.min(d[k - w - 1] + b);
+                }
+                if i + 1 < w {
+                    v = v.min(d[k - w + 1] + b);
+                }
+            }
+            d[k] = v;
+        }
+    }
+    for j in (0..h).rev() {
+        for i in (0..w).rev() {
+            let k = j * w + i;
+            let mut v = d[k];
+            if i + 1 < w {
+                v = v.min(d[k + 1] + a);
+            }
+            if j + 1 < h {
+                v = v.min(d[k + w] + a);
+                if i + 1 < w {
+                    v = v.min(d[k + w + 1] + b);
+                }
+                if i > 0 {
+                    v = v.min(d[k + w - 1] + b);
+                }
+            }
+            d[k] = v;
+        }
+    }
+    let r = grid.resolution as f32;
+    d.into_iter().map(|c| (c * r).min(cap as f32)).collect()
+}
+
+/// Occupancy at or above which a cell is an obstacle.
+pub const OCCUPIED: i8 = 50;
+
+/// Road-map parameters (`navigation.planner.*`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlannerConfig {
+    /// Nodes line the boundary of the region this close to obstacles, m.
+    pub wall_distance: f64,
+    /// …and the boundary of the region this far from them, m.
+    pub open_distance: f64,
+    /// Spacing of nodes along a boundary, m.
+    pub node_spacing: f64,
+    /// Nodes closer than this are joined when the line between them is clear, m.
+    pub connect_radius: f64,
+    /// Half-width of the corridor a joining line must keep free, m: the Create's radius
+    /// (0.17 m) plus a margin for localisation error (seed 000: a 40 cm thick line).
+    pub clearance: f64,
+}
+
+impl Default for PlannerConfig {
+    fn default() -> Self {
+        PlannerConfig {
+            wall_distance: 0.4,
+            open_distance: 0.8,
+            node_spacing: 0.3,
+            connect_radius: 1.0,
+            clearance: 0.2,
+        }
+    }
+}
+
+impl PlannerConfig {
+    /// Checks values the planner cannot work with; `(key, expectation)` on error.
+    pub fn validate(&self, key: &str) -> Result<(), (String, String)> {
+        for (k, v) in [
+            ("wall_distance", self.wall_distance),
+            ("open_distance", self.open_distance),
+            ("node_spacing", self.node_spacing),
+            ("connect_radius", self.connect_radius),
+            ("clearance", self.clearance),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err((
+                    format!("{key}.{k}"),
+                    "expected a positive distance in m".into(),
+                ));
+            }
+        }
+        if self.clearance > self.wall_distance || self.wall_distance >= self.open_distance {
+            return Err((
+                format!("{key}.wall_distance"),
+                "expected clearance ≤ wall_distance < open_distance".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Seed 000's node graph over a known map.
+#[derive(Debug, Clone)]
+pub struct RoadMap {
+    config: PlannerConfig,
+    grid: OccupancyGrid,
+    /// Distance to the nearest obstacle (unknown cells count as obstacles), m.
+    distance: Vec<f32>,
+    nodes: Vec<[f64; 2]>,
+    /// Adjacency: neighbour index and edge length.
+    edges: Vec<Vec<(usize, f64)>>,
+}
+
+impl RoadMap {
+    /// Builds the graph over `grid`.
+    pub fn new(grid: OccupancyGrid, config: PlannerConfig) -> RoadMap {
+        let distance = obstacle_distance(&grid, |c| c < 0 || c >= OCCUPIED, 10.0);
+        let mut map = RoadMap {
+            config,
+            grid,
+            distance,
+            nodes: Vec::new(),
+            edges: Vec::new(),
+        };
+        for band in [config.wall_distance, config.open_distance] {
+            map.add_boundary_nodes(band);
+        }
+        map.connect();
+        map
+    }
+
+    fn dist(&self, i: usize, j: usize) -> f64 {
+        self.distance[j * self.grid.width + i] as f64
+    }
+
+    /// Nodes every `node_spacing` along the boundary of {distance ≥ band}: cells inside it
+    /// with a 4-neighbour outside, thinned greedily in scan order.
+    fn add_boundary_nodes(&mut self, band: f64) {
+        let (w, h) = (self.grid.width, self.grid.height);
+        let inside = |i: usize, j: usize| self.dist(i, j) >= band;
+        let mut candidates = Vec::new();
+        for j in 1..h.saturating_sub(1) {
+            for i in 1..w.saturating_sub(1) {
+                if inside(i, j)
+                    && (!inside(i - 1, j)
+                        || !inside(i + 1, j)
+                        || !inside(i, j - 1)
+                        || !inside(i, j + 1))
+                {
+                    candidates.push(self.grid.cell_center(i, j));
+                }
+            }
+        }
+        let spacing = self.config.node_spacing;
+        let mut bins: std::collections::HashMap<(i64, i64), Vec<usize>> =
+            std::collections::HashMap::new();
+        let key = |p: &[f64; 2]| {
+            (
+                (p[0] / spacing).floor() as i64,
+                (p[1] / spacing).floor() as i64,
+            )
+        };
+        for p in candidates {
+            let (bx, by) = key(&p);
+            let close = (bx - 1..=bx + 1).any(|x| {
+                (by - 1..=by + 1).any(|y| {
+                    bins.get(&(x, y)).is_some_and(|v| {
+                        v.iter().any(|&n| {
+                            let q = self.nodes[n];
+                            (q[0] - p[0]).hypot(q[1] - p[1]) < spacing
+                        })
+                    })
+                })
+            });
+            if !close {
+                bins.entry((bx, by)).or_default().push(self.nodes.len());
+                self.nodes.push(p);
+            }
+        }
+    }
+
+    fn connect(&mut self) {
+        let n = self.nodes.len();
+        self.edges = vec![Vec::new(); n];
+        let r = self.config.connect_radius;
+        // Sort by x to limit the pairs tried.
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by(|&a, &b| self.nodes[a][0].total_cmp(&self.nodes[b][0]));
+        for (ka, &a) in order.iter().enumerate() {
+            for &b in &order[ka + 1..] {
+                let (p, q) = (self.nodes[a], self.nodes[b]);
+                if q[0] - p[0] > r {
+                    break;
+                }
+                let d = (q[0] - p[0]).hypot(q[1] - p[1]);
+                if d <= r && self.line_clear(p, q) {
+                    self.edges[a].push((b, d));
+                    self.edges[b].push((a, d));
+                }
+            }
+        }
+    }
+
+    /// Whether every point of the segment keeps `clearance` from obstacles.
+    pub fn line_clear(&self, p: [f64; 2], q: [f64; 2]) -> bool {
+        line_clear(&self.grid, &self.distance, p, q, self.config.clearance)
+    }
+
+    /// As [`RoadMap::line_clear`], with the clearance lowered to what the robot has at `p`
+    /// (down to [`START_CLEARANCE`]), so that a robot or goal close to a wall joins the graph.
+    fn line_clear_from(&self, p: [f64; 2], q: [f64; 2]) -> bool {
+        let at = distance_at(&self.grid, &self.distance, p);
+        let c = self.config.clearance.min(at.max(START_CLEARANCE));
+        line_clear(&self.grid, &self.distance, p, q, c)
+    }
+
+    pub fn nodes(&self) -> &[[f64; 2]] {
+        &self.nodes
+    }
+
+    pub fn edge_count(&self) -> usize {
+        self.edges.iter().map(Vec::len).sum::<usize>() / 2
+    }
+
+    /// The node nearest `p` that `p` sees through a clear corridor.
+    fn nearest_visible(&self, p: [f64; 2]) -> Option<usize> {
+        let mut order: Vec<(f64, usize)> = self
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(k, q)| ((q[0] - p[0]).hypot(q[1] - p[1]), k))
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        order
+            .into_iter()
+            .take(50)
+            .find(|&(_, k)| self.line_clear_from(p, self.nodes[k]))
+            .map(|(_, k)| k)
+    }
+
+    /// The shortest path from `start` to `goal` through the graph: `[start, nodes…, goal]`,
+    /// or `None` when either end sees no node or the graph does not join them.
+    pub fn plan(&self, start: [f64; 2], goal: [f64; 2]) -> Option<Vec<[f64; 2]>> {
+        if self.line_clear_from(start, goal)
+            && (goal[0] - start[0]).hypot(goal[1] - start[1]) <= self.config.connect_radius
+        {
+            return Some(vec![start, goal]);
+        }
+        let s = self.nearest_visible(start)?;
+        let g = self.nearest_visible(goal)?;
+        let nodes = astar(&self.nodes, &self.edges, s, g)?;
+        let mut path = vec![start];
+        path.extend(nodes.into_iter().map(|k| self.nodes[k]));
+        path.push(goal);
+        Some(self.shortcut(path))
+    }
+
+    /// Drops the points a clear straight line can skip (from each kept point, the farthest
+    /// later point it sees), which removes the zig-zags between boundary nodes.
+    fn shortcut(&self, path: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+        let mut out = vec![path[0]];
+        let mut k = 0;
+        while k + 1 < path.len() {
+            let next = (k + 1..path.len())
+                .rev()
+                .find(|&m| m == k + 1 || self.line_clear_from(path[k], path[m]))
+                .unwrap_or(k + 1);
+            out.push(path[next]);
+            k = next;
+        }
+        out
+    }
+}
+
+/// Whether the segment `p`–`q` keeps `clearance` from obstacles in `distance`.
+fn line_clear(
+    grid: &OccupancyGrid,
+    distance: &[f32],
+    p: [f64; 2],
+    q: [f64; 2],
+    clearance: f64,
+) -> bool {
+    let len = (q[0] - p[0]).hypot(q[1] - p[1]);
+    let steps = (len / (grid.resolution * 0.5)).ceil().max(1.0) as usize;
+    (0..=steps).all(|k| {
+        let t = k as f64 / steps as f64;
+        let x = p[0] + t * (q[0] - p[0]);
+        let y = p[1] + t * (q[1] - p[1]);
+        grid.cell_of(x, y)
+            .is_some_and(|(i, j)| distance[j * grid.width + i] as f64 >= clearance)
+    })
+}
+
+#[derive(PartialEq)]
+struct Open(f64, usize);
+
+impl Eq for Open {}
+
+impl PartialOrd for Open {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Open {
+    /// Smallest cost first, ties by index (deterministic).
+    fn cmp(&self, other: &Self) -> Ordering {
+        other
+            .0
+            .total_cmp(&self.0)
+            .then_with(|| other.1.cmp(&self.1))
+    }
+}
+
+/// A* over a graph with the Euclidean heuristic (admissible: edges are straight lines).
+pub fn astar(
+    nodes: &[[f64; 2]],
+    edges: &[Vec<(usize, f64)>],
+    start: usize,
+    goal: usize,
+) -> Option<Vec<usize>> {
+    let h = |k: usize| (nodes[k][0] - nodes[goal][0]).hypot(nodes[k][1] - nodes[goal][1]);
+    let mut cost = vec![f64::INFINITY; nodes.len()];
+    let mut parent = vec![usize::MAX; nodes.len()];
+    let mut open = BinaryHeap::new();
+    cost[start] = 0.0;
+    open.push(Open(h(start), start));
+    while let Some(Open(_, k)) = open.pop() {
+        if k == goal {
+            let mut path = vec![goal];
+            let mut c = goal;
+            while c != start {
+                c = parent[c];
+                path.push(c);
+            }
+            path.reverse();
+            return Some(path);
+        }
+        for &(m, d) in &edges[k] {
+            let c = cost[k] + d;
+            if c < cost[m] {
+                cost[m] = c;
+                parent[m] = k;
+                open.push(Open(c + h(m), m));
+            }
+        }
+    }
+    None
+}
+
+/// Dijkstra over 8-connected cells of `grid` that are known free and at least `clearance`
+/// from obstacles (`distance`, m), from the cell of `start` to the nearest cell for which
+/// `is_goal` holds (goal cells must be passable too). Within `START_ESCAPE` of the start the
+/// rules relax to any cell not occupied and `START_CLEARANCE` from obstacles, so that a
+/// robot standing close to a wall, or on cells its laser has not seen, can leave. Returns the path as cell centres, thinned to the corners a straight line cannot
+/// skip; `None` when no goal cell is reachable.
+pub fn grid_path(
+    grid: &OccupancyGrid,
+    distance: &[f32],
+    clearance: f64,
+    start: [f64; 2],
+    is_goal: impl Fn(usize, usize) -> bool,
+) -> Option<Vec<[f64; 2]>> {
+    let (w, h) = (grid.width, grid.height);
+    let (si, sj) = grid.cell_of(start[0], start[1])?;
+    let passable = |i: usize, j: usize| {
+        let k = j * w + i;
+        let c = grid.cells[k];
+        let d = distance[k] as f64;
+        if c >= 0 && c < OCCUPIED && d >= clearance {
+            return true;
+        }
+        let p = grid.cell_center(i, j);
+        c < OCCUPIED
+            && d >= START_CLEARANCE
+            && (p[0] - start[0]).hypot(p[1] - start[1]) <= START_ESCAPE
+    };
+    let mut cost = vec![f64::INFINITY; w * h];
+    let mut parent = vec![usize::MAX; w * h];
+    let mut open = BinaryHeap::new();
+    let s = sj * w + si;
+    cost[s] = 0.0;
+    open.push(Open(0.0, s));
+    let mut found = None;
+    while let Some(Open(c, k)) = open.pop() {
+        if c > cost[k] {
+            continue;
+        }
+        let (i, j) = (k % w, k / w);
+        if k != s && is_goal(i, j) {
+            found = Some(k);
+            break;
+        }
+        for (di, dj, step) in [
+            (-1i64, 0i64, 1.0),
+            (1, 0, 1.0),
+            (0, -1, 1.0),
+            (0, 1, 1.0),
+            (-1, -1, std::f64::consts::SQRT_2),
+            (1, -1, std::f64::consts::SQRT_2),
+            (-1, 1, std::f64::consts::SQRT_2),
+            (1, 1, std::f64::consts::SQRT_2),
+        ] {
+            let (ni, nj) = (i as i64 + di, j as i64 + dj);
+            if ni < 0 || nj < 0 || ni >= w as i64 || nj >= h as i64 {
+                continue;
+            }
+            let (ni, nj) = (ni as usize, nj as usize);
+            let m = nj * w + ni;
+            if !passable(ni, nj) {
+                continue;
+            }
+            let nc = c + step;
+            if nc < cost[m] {
+                cost[m] = nc;
+                parent[m] = k;
+                open.push(Open(nc, m));
+            }
+        }
+    }
+    let goal = found?;
+    let mut cells = vec![goal];
+    let mut k = goal;
+    while k != s {
+        k = parent[k];
+        cells.push(k);
+    }
+    cells.reverse();
+    let mut points: Vec<[f64; 2]> = cells
+        .iter()
+        .map(|&k| grid.cell_center(k % w, k / w))
+        .collect();
+    points[0] = start;
+    // Thin: keep a point only where the line from the last kept one to the next is blocked.
+    let mut out = vec![points[0]];
+    let mut anchor = 0;
+    for k in 1..points.len() {
+        if k + 1 < points.len()
+            && line_clear(
+                grid,
+                distance,
+                points[anchor],
+                points[k + 1],
+                clearance.min(distance_at(grid, distance, points[anchor])),
+            )
+        {
+            continue;
+        }
+        out.push(points[k]);
+        anchor = k;
+    }
+    Some(out)
+}
+
+/// Radius around the start where [`grid_path`] relaxes its rules, m.
+pub const START_ESCAPE: f64 = 0.5;
+/// Least clearance there, m (below the Create's 0.17 m radius, for localisation error).
+pub const START_CLEARANCE: f64 = 0.12;
+
+fn distance_at(grid: &OccupancyGrid, distance: &[f32], p: [f64; 2]) -> f64 {
+    grid.cell_of(p[0], p[1])
+        .map(|(i, j)| distance[j * grid.width + i] as f64)
+        .unwrap_or(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 10 × 6 m room (5 cm cells) with a wall across the middle from y = 0 to 4.5, so that
+    /// the way from the left half to the right half goes round its end.
+    fn room() -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 200, 120);
+        for j in 0..120 {
+            for i in 0..200 {
+                let border = i == 0 || j == 0 || i == 199 || j == 119;
+                let wall = (99..=101).contains(&i) && j < 90;
+                g.set(i, j, if border || wall { 100 } else { 0 });
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn distance_transform_is_close_to_euclidean() {
+        let g = room();
+        let d = obstacle_distance(&g, |c| c >= OCCUPIED, 10.0);
+        // Cell (50, 60): centre (2.525, 3.025); nearest obstacle cell edge… the left wall's
+        // cell 0 centre is at 0.025: 2.5 m, the middle wall's cell 99 at 4.975: 2.45 m.
+        let v = d[60 * 200 + 50] as f64;
+        assert!((v - 2.45).abs() < 0.01, "{v}");
+        // Diagonal case: within the chamfer's 8 % of the Euclidean distance.
+        let v = d[20 * 200 + 20] as f64; // 1 m from both the left and the bottom border
+        assert!((v - 1.0).abs() < 0.08, "{v}");
+    }
+
+    #[test]
+    fn roadmap_path_goes_round_the_wall_and_keeps_clear() {
+        let map = RoadMap::new(room(), PlannerConfig::default());
+        assert!(map.nodes().len() > 50 && map.edge_count() > map.nodes().len());
+        let path = map.plan([2.0, 1.0], [8.0, 1.0]).expect("a path");
+        // It must pass the wall's free end (y > 4.5) and every leg must keep clear.
+        assert!(path.iter().any(|p| p[1] > 4.5), "{path:?}");
+        for w in path.windows(2) {
+            assert!(map.line_clear(w[0], w[1]), "{w:?}");
+        }
+        let len: f64 = path
+            .windows(2)
+            .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+            .sum();
+        // The shortest way round (through the gap's corner at (5, 4.5) plus clearance) is
+        // about 2·√(3² + 3.7²) ≈ 9.5 m; the graph's shortcut path is a little longer.
+        assert!(len > 9.4 && len < 10.5, "length {len}");
+    }
+
+    #[test]
+    fn roadmap_refuses_a_goal_inside_a_wall() {
+        let map = RoadMap::new(room(), PlannerConfig::default());
+        assert!(map.plan([2.0, 1.0], [5.0, 2.0]).is_none());
+    }
+
+    #[test]
+    fn astar_finds_the_shortest_of_two_routes() {
+        let nodes = [[0.0, 0.0], [1.0, 1.0], [1.0, -0.2], [2.0, 0.0]];
+        let d = |a: usize, b: usize| {
+            let (p, q): ([f64; 2], [f64; 2]) = (nodes[a], nodes[b]);
+            (q[0] - p[0]).hypot(q[1] - p[1])
+        };
+        let mut edges = vec![Vec::new(); 4];
+        for (a, b) in [(0, 1), (1, 3), (0, 2), (2, 3)] {
+            edges[a].push((b, d(a, b)));
+            edges[b].push((a, d(a, b)));
+        }
+        assert_eq!(astar(&nodes, &edges, 0, 3), Some(vec![0, 2, 3]));
+    }
+
+    #[test]
+    fn grid_path_reaches_the_nearest_goal_cell_round_the_wall() {
+        let g = room();
+        let d = obstacle_distance(&g, |c| c >= OCCUPIED, 10.0);
+        // Goal: any cell right of the wall with x > 8 m.
+        let path = grid_path(&g, &d, 0.2, [2.0, 1.0], |i, _| i >= 160).expect("a path");
+        let end = path.last().unwrap();
+        assert!(end[0] >= 8.0 && end[0] < 8.1, "{end:?}");
+        assert!(path.iter().any(|p| p[1] > 4.5));
+        for w in path.windows(2) {
+            assert!(line_clear(&g, &d, w[0], w[1], 0.19), "{w:?}");
+        }
+        // Nothing reachable: a goal inside the wall.
+        assert!(grid_path(&g, &d, 0.2, [2.0, 1.0], |i, j| i == 100 && j == 10).is_none());
+    }
+}

@@ -1,0 +1,142 @@
+//! Seed 000's look-ahead arc controller (written for futago): follows a polyline by aiming at
+//! the point a look-ahead distance further along it and commanding the Create the circle
+//! through the robot and that point tangent to its heading (pure pursuit, R = L² / 2y), and
+//! turns in place where the aim lies too far off the heading (sharp corners, U-turns).
+
+use futago_msgs::{DriveCommand, Pose2, Radius, wrap_angle};
+
+/// The Create's nominal wheel base, m (libcreate), for turning arcs into wheel speeds.
+pub const CREATE_WHEEL_BASE: f64 = 0.258;
+
+/// Follower parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowParams {
+    /// Cruise speed, m/s.
+    pub speed: f64,
+    /// Look-ahead distance along the path, m.
+    pub lookahead: f64,
+    /// A path point counts as reached within this distance, m.
+    pub tolerance: f64,
+    /// Turn in place when the aim's bearing exceeds this, rad.
+    pub turn_in_place: f64,
+    /// In-place turns stop within this bearing, rad.
+    pub turn_tolerance: f64,
+    /// Speed of each wheel in in-place turns, m/s.
+    pub turn_speed: f64,
+}
+
+/// Follows one polyline.
+#[derive(Debug, Clone)]
+pub struct PathFollower {
+    params: FollowParams,
+    path: Vec<[f64; 2]>,
+    /// Index of the path point being approached.
+    target: usize,
+    turning: bool,
+}
+
+impl PathFollower {
+    /// Follows `path` from its first point (normally where the robot is).
+    pub fn new(params: FollowParams, path: Vec<[f64; 2]>) -> PathFollower {
+        PathFollower {
+            params,
+            path,
+            target: 1,
+            turning: false,
+        }
+    }
+
+    /// Index of the path point being approached (0 before the first, `len` when done).
+    pub fn target(&self) -> usize {
+        self.target
+    }
+
+    pub fn path(&self) -> &[[f64; 2]] {
+        &self.path
+    }
+
+    /// True once the last point is reached.
+    pub fn done(&self) -> bool {
+        self.target >= self.path.len()
+    }
+
+    /// The command for the robot at `pose`; `STOP` once the path is done.
+    pub fn command(&mut self, pose: &Pose2) -> DriveCommand {
+        let w = self.params;
+        // Advance past reached points.
+        while self.target < self.path.len() {
+            let t = self.path[self.target];
+            if (t[0] - pose.x).hypot(t[1] - pose.y) > w.tolerance {
+                break;
+            }
+            self.target += 1;
+            self.turning = true;
+        }
+        if self.done() {
+            return DriveCommand::STOP;
+        }
+        let goal = self.path[self.target];
+        let dist = (goal[0] - pose.x).hypot(goal[1] - pose.y);
+        // Aim point: the goal, or a point `lookahead` along the segment from the previous one.
+        let aim = if dist <= w.lookahead {
+            goal
+        } else {
+            let prev = self.path[self.target - 1];
+            let (dx, dy) = (goal[0] - prev[0], goal[1] - prev[1]);
+            let len = dx.hypot(dy).max(1e-9);
+            let s = (((pose.x - prev[0]) * dx + (pose.y - prev[1]) * dy) / len).clamp(0.0, len);
+            let s = (s + w.lookahead).min(len);
+            [prev[0] + dx / len * s, prev[1] + dy / len * s]
+        };
+        let local = pose.inverse().transform_point(aim);
+        let err = wrap_angle(local[1].atan2(local[0]));
+        if self.turning || err.abs() > w.turn_in_place {
+            self.turning = err.abs() > w.turn_tolerance;
+            if self.turning {
+                // Slow down near the end of the turn so as not to overshoot.
+                let v = w.turn_speed.min(0.02 + err.abs() * 0.2);
+                let radius = if err > 0.0 {
+                    Radius::InPlaceCcw
+                } else {
+                    Radius::InPlaceCw
+                };
+                return DriveCommand::Drive {
+                    velocity: (v * 1000.0).round() / 1000.0,
+                    radius,
+                };
+            }
+        }
+        let speed = w.speed.min(0.05 + dist); // ease in to the last point
+        arc_command(speed, local)
+    }
+}
+
+/// Pure pursuit: the Create command for the circle through the robot and `aim` (robot
+/// frame), tangent to its heading, at `speed`.
+pub fn arc_command(speed: f64, aim: [f64; 2]) -> DriveCommand {
+    let l2 = aim[0] * aim[0] + aim[1] * aim[1];
+    let speed = (speed * 1000.0).round() / 1000.0;
+    let curvature = 2.0 * aim[1] / l2.max(1e-12);
+    if curvature.abs() < 1e-4 {
+        return DriveCommand::Drive {
+            velocity: speed,
+            radius: Radius::Straight,
+        };
+    }
+    // The OI's Drive takes radii up to 2 m; gentler arcs go out as Drive Direct wheel speeds.
+    // Both are quantised to whole millimetres, as the OI's integer fields are.
+    let r = 1.0 / curvature;
+    if r.abs() <= 2.0 {
+        DriveCommand::Drive {
+            velocity: speed,
+            radius: Radius::Arc((r * 1000.0).round() / 1000.0),
+        }
+    } else {
+        let half = curvature * CREATE_WHEEL_BASE / 2.0;
+        let q = |v: f64| (v * 1000.0).round() / 1000.0;
+        DriveCommand::DriveDirect {
+            left: q(speed * (1.0 - half)),
+            right: q(speed * (1.0 + half)),
+        }
+    }
+}
