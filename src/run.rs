@@ -7,10 +7,13 @@
 use crate::rgbd::TumRgbdWriter;
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
-use futago_msgs::{Duration, Pose2, Pose3, Time, carmen, tum};
+use futago_msgs::grid::OccupancyGrid;
+use futago_msgs::{DriveCommand, Duration, LaserScan, Pose2, Pose3, Time, carmen, tum};
 use futago_robot::mcl::{Mcl, MclMap};
+use futago_robot::navigation::{NavInput, Navigator, Task};
 use futago_robot::odometry::OdometryIntegrator;
-use futago_robot::script::{ControlInput, ScriptedController};
+use futago_robot::script::{ControlInput, ControllerConfig, PoseSource, ScriptedController};
+use futago_robot::slam::Slam;
 use futago_sim::Simulation;
 use futago_sim::kinect::Kinect;
 use futago_sim::noise::stream;
@@ -28,6 +31,11 @@ pub const OUTPUT_FILES: [&str; 3] = ["groundtruth.txt", "odometry.txt", "scans.c
 
 /// The localiser's estimates (TUM), written when the scenario runs one.
 pub const LOCALIZATION_FILE: &str = "localization.txt";
+
+/// SLAM's trajectory (TUM, every scan of the first laser, as optimised at the end) and map
+/// (`slam_map.pgm`/`.yaml`), written when the scenario runs SLAM.
+pub const SLAM_TRAJECTORY_FILE: &str = "slam_trajectory.txt";
+pub const SLAM_MAP_STEM: &str = "slam_map";
 
 /// Options of one run.
 #[derive(Debug, Clone)]
@@ -72,6 +80,16 @@ pub struct Outcome {
     pub controller_finished: bool,
     /// The localiser's accuracy against the ground truth, when one ran.
     pub localization: Option<Value>,
+    /// SLAM's accuracy and counts, when it ran.
+    pub slam: Option<Value>,
+    /// The navigator's counts, when one drove.
+    pub navigation: Option<Value>,
+    /// Per lap of a waypoint list driven several times: the return-to-start error of odometry
+    /// and of the localiser (their distance from the true pose as the robot reaches the first
+    /// waypoint again; seed 000, Fig. 2.8).
+    pub laps: Vec<Value>,
+    /// SLAM's final trajectory and map, for the files.
+    pub slam_result: Option<(Vec<(Time, Pose2)>, OccupancyGrid)>,
 }
 
 /// Monte Carlo localisation in the loop: updates at its rate from the first laser's scans, and
@@ -84,21 +102,66 @@ struct Localizer {
     /// Latest estimate and the odometry pose it was made at.
     estimate: Option<(Pose2, Pose2)>,
     updates: u64,
+    /// (time s, position error m, heading error rad) at each update.
+    errors: Vec<(f64, f64, f64)>,
+}
+
+/// A localiser has recovered from a kidnapping when its error is below this, m…
+const RECOVERED_M: f64 = 0.3;
+/// …and stays so for this long, s.
+const RECOVERED_HOLD_S: f64 = 5.0;
+
+/// The world's ground-truth occupancy grid at the first laser's height (the map a perfect
+/// mapping run would give).
+fn world_map(s: &Scenario, resolution: f64) -> OccupancyGrid {
+    let z = s.lidars.first().map(|(c, _)| c.xyz[2]).unwrap_or(0.2);
+    futago_sim::world::export::occupancy_grid(&s.world, resolution, z - 0.05, z + 0.05, 0.5)
+}
+
+/// Laser SLAM in the loop on the first laser.
+struct SlamRunner {
+    slam: Slam,
+    mount: Pose2,
+    /// Odometry pose at the last scan SLAM processed.
+    at: Pose2,
+    /// (estimate, truth) at each scan, for the accuracy summary.
     errors: Vec<(f64, f64)>,
+    /// When the navigator last got a map.
+    last_map: Option<Time>,
+}
+
+impl SlamRunner {
+    /// SLAM's estimate now, carried from its last scan by odometry.
+    fn current(&self, odometry: &Pose2) -> Pose2 {
+        self.slam.pose().compose(&self.at.between(odometry))
+    }
+}
+
+/// What drives the robot: a script or the navigator.
+enum Driver {
+    Scripted(ScriptedController),
+    Navigator {
+        nav: Box<Navigator>,
+        pose_source: Option<PoseSource>,
+        odometry: OdometryIntegrator,
+        last: Option<DriveCommand>,
+    },
+}
+
+impl Driver {
+    fn finished(&self) -> bool {
+        match self {
+            Driver::Scripted(c) => c.finished(),
+            Driver::Navigator { nav, .. } => nav.finished(),
+        }
+    }
 }
 
 impl Localizer {
     fn new(s: &Scenario, spec: &crate::scenario::LocalizationSpec, seed: u64) -> Localizer {
         use rand::Rng;
         let (cfg, _) = &s.lidars[0];
-        let z = cfg.xyz[2];
-        let grid = futago_sim::world::export::occupancy_grid(
-            &s.world,
-            spec.map_resolution,
-            z - 0.05,
-            z + 0.05,
-            0.5,
-        );
+        let grid = world_map(s, spec.map_resolution);
         let mut mcl = Mcl::new(
             spec.mcl,
             MclMap::new(grid),
@@ -116,6 +179,30 @@ impl Localizer {
             updates: 0,
             errors: Vec::new(),
         }
+    }
+
+    /// Seconds from each event time until the error fell below `RECOVERED_M` and stayed there
+    /// for `RECOVERED_HOLD_S` (`None`: never).
+    fn recovery(&self, events: &[f64]) -> Vec<Option<f64>> {
+        events
+            .iter()
+            .map(|&t0| {
+                let after: Vec<&(f64, f64, f64)> =
+                    self.errors.iter().filter(|e| e.0 >= t0).collect();
+                (0..after.len())
+                    .find(|&k| {
+                        after[k].1 < RECOVERED_M
+                            && after[k..]
+                                .iter()
+                                .take_while(|e| e.0 <= after[k].0 + RECOVERED_HOLD_S)
+                                .all(|e| e.1 < RECOVERED_M)
+                            && after
+                                .last()
+                                .is_some_and(|e| e.0 >= after[k].0 + RECOVERED_HOLD_S)
+                    })
+                    .map(|k| after[k].0 - t0)
+            })
+            .collect()
     }
 
     /// The estimate now, given the odometry pose now.
@@ -186,7 +273,39 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         .localization
         .as_ref()
         .map(|l| Localizer::new(s, l, seed));
-    let mut ctl = ScriptedController::new(s.controller.clone(), Time::ZERO, s.start);
+    let mut driver = match &s.controller {
+        ControllerConfig::Navigate(n) => Driver::Navigator {
+            nav: Box::new(Navigator::new(
+                spec.navigation,
+                n.task(),
+                Some(world_map(s, spec.navigation.map_resolution)),
+            )),
+            pose_source: Some(n.pose_source),
+            odometry: OdometryIntegrator::new(s.start),
+            last: None,
+        },
+        ControllerConfig::Explore(_) => Driver::Navigator {
+            nav: Box::new(Navigator::new(spec.navigation, Task::Explore, None)),
+            pose_source: None,
+            odometry: OdometryIntegrator::new(s.start),
+            last: None,
+        },
+        other => Driver::Scripted(ScriptedController::new(other.clone(), Time::ZERO, s.start)),
+    };
+    let mut slam = spec.slam.map(|c| {
+        let (cfg, _) = &s.lidars[0];
+        SlamRunner {
+            slam: Slam::new(c, s.start),
+            mount: Pose2::new(cfg.xyz[0], cfg.xyz[1], cfg.rpy_deg[2].to_radians()),
+            at: s.start,
+            errors: Vec::new(),
+            last_map: None,
+        }
+    });
+    let mut last_scan: Option<(LaserScan, Pose2)> = None;
+    let mut fresh_map: Option<OccupancyGrid> = None;
+    let mut next_event = 0usize;
+    let mut laps: Vec<Value> = Vec::new();
     let mut odo = OdometryIntegrator::new(s.start);
     let mut history: VecDeque<(Time, Pose2)> = VecDeque::from([(Time::ZERO, s.start)]);
     let gt_period = Duration::from_secs(1.0 / spec.output.groundtruth_rate);
@@ -274,13 +393,19 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         write_pose(&mut k.odometry, Time::ZERO, &s.start, &mut line)?;
     }
     let mut pending = Vec::new();
-    let mut cmd = ctl.update(&ControlInput {
-        now: Time::ZERO,
-        odometry: &[],
-        bumps: sim.bumps(),
-        ground_truth: Some(s.start),
-        localization: None,
-    });
+    let mut cmd = drive(
+        &mut driver,
+        &ControlInput {
+            now: Time::ZERO,
+            odometry: &[],
+            bumps: sim.bumps(),
+            ground_truth: Some(s.start),
+            localization: None,
+        },
+        None,
+        None,
+        None,
+    );
     loop {
         let now = sim.time();
         if now.nanos() >= next_gt * gt_period.0 {
@@ -295,8 +420,14 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 }
             }
         }
-        if now >= end || (ctl.finished() && sim.wheel_speeds() == (0.0, 0.0) && cmd.is_none()) {
+        if now >= end || (driver.finished() && sim.wheel_speeds() == (0.0, 0.0) && cmd.is_none()) {
             break;
+        }
+        while let Some(e) = spec.event.get(next_event)
+            && now.secs() >= e.time
+        {
+            sim.teleport(e.teleport.pose());
+            next_event += 1;
         }
         let out = sim.step(cmd.take().as_ref());
         let now = sim.time();
@@ -345,6 +476,27 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         for (i, scan) in out.scans {
             scans[i] += 1;
             if i == 0
+                && let Some(r) = slam.as_mut()
+            {
+                let at = pose_at(&history, scan.stamp);
+                let u = r.slam.update(&scan, &at, &r.mount);
+                r.at = at;
+                r.errors.push((
+                    u.pose.distance(&truth),
+                    futago_msgs::wrap_angle(u.pose.theta - truth.theta).abs(),
+                ));
+                let period = Duration::from_secs(spec.navigation.replan_period / 2.0);
+                if r.last_map.is_none_or(|t| now - t >= period) {
+                    r.last_map = Some(now);
+                    fresh_map = Some(r.slam.grid().to_grid());
+                }
+            }
+            if i == 0 && matches!(driver, Driver::Navigator { .. }) {
+                let (cfg, _) = &s.lidars[0];
+                let mount = Pose2::new(cfg.xyz[0], cfg.xyz[1], cfg.rpy_deg[2].to_radians());
+                last_scan = Some((scan.clone(), mount));
+            }
+            if i == 0
                 && let Some(l) = localizer.as_mut()
                 && scan.stamp >= l.next
             {
@@ -355,6 +507,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 l.updates += 1;
                 let now_est = l.current(&odo.pose);
                 l.errors.push((
+                    now.secs(),
                     now_est.distance(&truth),
                     futago_msgs::wrap_angle(now_est.theta - truth.theta).abs(),
                 ));
@@ -389,14 +542,31 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         }
         // Control at the rate of the Create's sensor stream.
         if out.odometry.is_some() {
-            cmd = ctl.update(&ControlInput {
-                now,
-                odometry: &pending,
-                bumps: out.bumps.unwrap_or_default(),
-                ground_truth: Some(truth),
-                localization: localizer.as_ref().map(|l| l.current(&odo.pose)),
-            });
+            let localization = localizer.as_ref().map(|l| l.current(&odo.pose));
+            cmd = drive(
+                &mut driver,
+                &ControlInput {
+                    now,
+                    odometry: &pending,
+                    bumps: out.bumps.unwrap_or_default(),
+                    ground_truth: Some(truth),
+                    localization,
+                },
+                slam.as_ref().map(|r| r.current(&odo.pose)),
+                last_scan.as_ref().map(|(scan, mount)| (scan, *mount)),
+                fresh_map.take().as_ref(),
+            );
             pending.clear();
+            if let Driver::Scripted(c) = &driver
+                && c.laps_completed() > laps.len()
+            {
+                laps.push(json!({
+                    "lap": laps.len() + 1,
+                    "time_s": now.secs(),
+                    "odometry_error_m": odo.pose.distance(&truth),
+                    "localization_error_m": localization.map(|l| l.distance(&truth)),
+                }));
+            }
         }
         if let Some(b) = &bar
             && sim.counters().steps.is_multiple_of(200)
@@ -408,7 +578,40 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         b.finish_and_clear();
     }
     let c = sim.counters();
+    let navigation = match &driver {
+        Driver::Navigator { nav, .. } => Some(json!({
+            "stats": nav.stats(),
+            "roadmap_nodes": nav.roadmap_nodes(),
+        })),
+        Driver::Scripted(_) => None,
+    };
+    let (slam_summary, slam_result) = match slam {
+        Some(mut r) => {
+            r.slam.finish();
+            let n = r.errors.len().max(1) as f64;
+            let summary = json!({
+                "method": format!("{:?}", r.slam.config().method).to_lowercase(),
+                "keyframes": r.slam.keyframes(),
+                "loop_closures": r.slam.loop_closures(),
+                "optimizations": r.slam.optimizations(),
+                "unmatched_scans": r.slam.unmatched(),
+                "online_mean_position_error_m": r.errors.iter().map(|e| e.0).sum::<f64>() / n,
+                "online_max_position_error_m": r.errors.iter().map(|e| e.0).fold(0.0, f64::max),
+                "online_mean_heading_error_deg": r.errors.iter().map(|e| e.1).sum::<f64>() / n * 180.0 / std::f64::consts::PI,
+                "map_known_area_m2": known_area(&r.slam.grid().to_grid()),
+            });
+            (
+                Some(summary),
+                Some((r.slam.trajectory(), r.slam.grid().to_grid())),
+            )
+        }
+        None => (None, None),
+    };
     Ok(Outcome {
+        slam: slam_summary,
+        slam_result,
+        navigation,
+        laps,
         seed,
         sim_time: sim.time().secs(),
         wall_time: started.elapsed().as_secs_f64(),
@@ -422,18 +625,73 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         distance_travelled: distance,
         final_truth: sim.robot_pose(),
         final_odometry: odo.pose,
-        controller_finished: ctl.finished(),
+        controller_finished: driver.finished(),
         localization: localizer.map(|l| {
             let n = l.errors.len().max(1) as f64;
-            json!({
+            let events: Vec<f64> = spec.event.iter().map(|e| e.time).collect();
+            let mut v = json!({
                 "updates": l.updates,
-                "mean_position_error_m": l.errors.iter().map(|e| e.0).sum::<f64>() / n,
-                "max_position_error_m": l.errors.iter().map(|e| e.0).fold(0.0, f64::max),
-                "final_position_error_m": l.errors.last().map(|e| e.0),
-                "mean_heading_error_deg": l.errors.iter().map(|e| e.1).sum::<f64>() / n * 180.0 / std::f64::consts::PI,
-            })
+                "mean_position_error_m": l.errors.iter().map(|e| e.1).sum::<f64>() / n,
+                "max_position_error_m": l.errors.iter().map(|e| e.1).fold(0.0, f64::max),
+                "final_position_error_m": l.errors.last().map(|e| e.1),
+                "mean_heading_error_deg": l.errors.iter().map(|e| e.2).sum::<f64>() / n * 180.0 / std::f64::consts::PI,
+            });
+            if !events.is_empty() {
+                v["kidnappings"] = json!(events.iter().zip(l.recovery(&events)).map(|(t, r)| json!({
+                    "time_s": t,
+                    "recovered_after_s": r,
+                    "recovered_when": format!("error < {RECOVERED_M} m for {RECOVERED_HOLD_S} s"),
+                })).collect::<Vec<_>>());
+            }
+            v
         }),
     })
+}
+
+/// Area of a grid's known cells, m².
+fn known_area(g: &OccupancyGrid) -> f64 {
+    g.cells.iter().filter(|&&c| c >= 0).count() as f64 * g.resolution * g.resolution
+}
+
+/// One control tick of whichever drives the robot; returns a command when it changed.
+fn drive(
+    driver: &mut Driver,
+    input: &ControlInput,
+    slam_pose: Option<Pose2>,
+    scan: Option<(&LaserScan, Pose2)>,
+    map: Option<&OccupancyGrid>,
+) -> Option<DriveCommand> {
+    match driver {
+        Driver::Scripted(c) => c.update(input),
+        Driver::Navigator {
+            nav,
+            pose_source,
+            odometry,
+            last,
+        } => {
+            for o in input.odometry {
+                odometry.integrate(o);
+            }
+            let pose = match pose_source {
+                Some(PoseSource::GroundTruth) => input.ground_truth,
+                Some(PoseSource::Localization) => input.localization,
+                Some(PoseSource::Odometry) => Some(odometry.pose),
+                None => slam_pose,
+            }
+            .unwrap_or(odometry.pose);
+            let cmd = nav.update(&NavInput {
+                now: input.now,
+                pose,
+                bumps: input.bumps,
+                scan,
+                map,
+            });
+            (*last != Some(cmd)).then(|| {
+                *last = Some(cmd);
+                cmd
+            })
+        }
+    }
 }
 
 /// Runs without writing anything (for benchmarks).
@@ -511,6 +769,9 @@ pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
         })).collect::<Vec<_>>(),
         "laser_rays": o.laser_rays,
         "localization": o.localization,
+        "laps": o.laps,
+        "slam": o.slam,
+        "navigation": o.navigation,
         "files": files,
     })
 }
@@ -600,8 +861,32 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             c.finish()?;
         }
         drop(sinks);
+        if let Some((trajectory, map)) = &outcome.slam_result {
+            let mut text = format!(
+                "# futago SLAM of {} (first laser), optimised at the end\n# timestamp tx ty tz qx qy qz qw\n",
+                s.spec.name
+            );
+            for (t, p) in trajectory {
+                tum::format_line(
+                    &mut text,
+                    &tum::Stamped {
+                        stamp: *t,
+                        pose: Pose3::from_pose2(p, 0.0),
+                    },
+                );
+            }
+            std::fs::write(tmp.join(SLAM_TRAJECTORY_FILE), text)
+                .with_context(|| format!("writing {SLAM_TRAJECTORY_FILE}"))?;
+            map.write_map_server(tmp, SLAM_MAP_STEM)
+                .with_context(|| format!("writing {SLAM_MAP_STEM}.pgm and .yaml"))?;
+        }
         let mut files = serde_json::Map::new();
-        for f in OUTPUT_FILES.iter().chain([&LOCALIZATION_FILE]) {
+        let slam_map = format!("{SLAM_MAP_STEM}.pgm");
+        for f in OUTPUT_FILES.iter().chain([
+            &LOCALIZATION_FILE,
+            &SLAM_TRAJECTORY_FILE,
+            &slam_map.as_str(),
+        ]) {
             let p = tmp.join(f);
             if p.exists() {
                 files.insert(f.to_string(), json!({ "sha256": sha256_file(&p)? }));

@@ -7,7 +7,9 @@
 
 use futago_msgs::Pose2;
 use futago_robot::mcl::MclConfig;
-use futago_robot::script::ControllerConfig;
+use futago_robot::navigation::NavigationConfig;
+use futago_robot::script::{ControllerConfig, PoseSource};
+use futago_robot::slam::SlamConfig;
 use futago_sim::config::{SpecError, check_name, check_positive, check_range, load_toml};
 use futago_sim::create::CreateConfig;
 use futago_sim::kinect::{KinectConfig, KinectSpec};
@@ -42,6 +44,14 @@ pub struct ScenarioSpec {
     pub camera: Vec<KinectConfig>,
     /// Monte Carlo localisation on the world's map, from the first laser.
     pub localization: Option<LocalizationSpec>,
+    /// Laser SLAM in the loop, from the first laser.
+    pub slam: Option<SlamConfig>,
+    /// Navigation parameters, for the `navigate` and `explore` controllers.
+    #[serde(default)]
+    pub navigation: NavigationConfig,
+    /// Things that happen to the robot at set times.
+    #[serde(default)]
+    pub event: Vec<EventSpec>,
     /// Read as a table and typed by [`controller_config`], so that errors inside it carry
     /// their full key path.
     pub controller: toml::Table,
@@ -49,7 +59,32 @@ pub struct ScenarioSpec {
     pub output: OutputConfig,
 }
 
-/// A start pose.
+/// An event: at `time`, the robot is picked up and put down at `teleport` (a kidnapping;
+/// its odometry does not notice).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EventSpec {
+    /// Simulated time, s.
+    pub time: f64,
+    pub teleport: PoseSpec,
+}
+
+/// A pose as written: metres and degrees.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSpec {
+    pub x: f64,
+    pub y: f64,
+    #[serde(default)]
+    pub yaw_deg: f64,
+}
+
+impl PoseSpec {
+    pub fn pose(&self) -> Pose2 {
+        Pose2::new(self.x, self.y, self.yaw_deg.to_radians())
+    }
+}
+
 /// The localiser of a run: MCL on the world's ground-truth occupancy grid at the first laser's
 /// height (the map a perfect SLAM run would give).
 #[derive(Debug, Clone, Deserialize)]
@@ -176,6 +211,8 @@ pub fn controller_config(path: &Path, table: &toml::Table) -> Result<ControllerC
         },
         "segments" => Ok(ControllerConfig::Segments(typed(path, rest)?)),
         "waypoints" => Ok(ControllerConfig::Waypoints(typed(path, rest)?)),
+        "navigate" => Ok(ControllerConfig::Navigate(typed(path, rest)?)),
+        "explore" => Ok(ControllerConfig::Explore(typed(path, rest)?)),
         other => Err(SpecError::new(
             path,
             "controller.type",
@@ -286,10 +323,61 @@ impl Scenario {
                 ));
             }
         }
+        if let Some(slam) = &spec.slam {
+            if lidars.is_empty() {
+                return Err(SpecError::new(
+                    path,
+                    "slam",
+                    "laser SLAM needs a [[lidar]]; the scenario has none",
+                ));
+            }
+            slam.validate()
+                .map_err(|(k, m)| SpecError::new(path, k, m))?;
+        }
+        spec.navigation
+            .validate()
+            .map_err(|(k, m)| SpecError::new(path, k, m))?;
+        for (i, e) in spec.event.iter().enumerate() {
+            check_range(
+                path,
+                &format!("event[{i}].time"),
+                e.time,
+                0.0,
+                spec.duration,
+                "s",
+            )?;
+            let t = e.teleport;
+            if ![t.x, t.y, t.yaw_deg].iter().all(|v| v.is_finite()) {
+                return Err(SpecError::new(
+                    path,
+                    format!("event[{i}].teleport"),
+                    "expected finite x, y (m) and yaw_deg",
+                ));
+            }
+        }
         let controller = controller_config(path, &spec.controller)?;
         controller
             .validate()
             .map_err(|(k, m)| SpecError::new(path, format!("controller.{k}"), m))?;
+        let pose_source = match &controller {
+            ControllerConfig::Waypoints(w) => Some(w.pose_source),
+            ControllerConfig::Navigate(n) => Some(n.pose_source),
+            _ => None,
+        };
+        if pose_source == Some(PoseSource::Localization) && spec.localization.is_none() {
+            return Err(SpecError::new(
+                path,
+                "controller.pose_source",
+                "driving on the localiser's pose needs a [localization] table",
+            ));
+        }
+        if matches!(controller, ControllerConfig::Explore(_)) && spec.slam.is_none() {
+            return Err(SpecError::new(
+                path,
+                "controller.type",
+                "exploration drives on SLAM's map and pose: it needs a [slam] table",
+            ));
+        }
         let world_path = path.parent().unwrap_or(Path::new(".")).join(&spec.world);
         if !world_path.is_file() {
             return Err(SpecError::new(

@@ -42,6 +42,9 @@ pub struct IcpConfig {
     /// whose points land closest to the map.
     pub rotation_search: f64,
     pub rotation_search_step: f64,
+    /// Scan points are thinned to one per cell of this size, m (0: all kept), as
+    /// Cartographer's voxel filter: dense near returns add time, not information.
+    pub scan_voxel: f64,
 }
 
 impl Default for IcpConfig {
@@ -59,6 +62,7 @@ impl Default for IcpConfig {
             rotation_weight: 0.02,
             rotation_search: 0.35,
             rotation_search_step: 0.025,
+            scan_voxel: 0.0,
         }
     }
 }
@@ -144,6 +148,15 @@ pub fn scan_points(
             n = [-n[0], -n[1]];
         }
         out.push(Oriented { p, n });
+    }
+    if config.scan_voxel > 0.0 {
+        let mut seen = rustc_hash::FxHashSet::default();
+        out.retain(|o| {
+            seen.insert((
+                (o.p[0] / config.scan_voxel).floor() as i64,
+                (o.p[1] / config.scan_voxel).floor() as i64,
+            ))
+        });
     }
     out
 }

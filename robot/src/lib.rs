@@ -6,8 +6,10 @@
 //! mapping, localisation and navigation stack plugs in beside them.
 
 pub mod correlative;
+pub mod exploration;
 pub mod icp;
 pub mod mcl;
+pub mod navigation;
 pub mod occupancy;
 pub mod odometry;
 pub mod planner;

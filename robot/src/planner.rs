@@ -90,7 +90,8 @@ pub struct PlannerConfig {
     /// Nodes closer than this are joined when the line between them is clear, m.
     pub connect_radius: f64,
     /// Half-width of the corridor a joining line must keep free, m: the Create's radius
-    /// (0.17 m) plus a margin for localisation error (seed 000: a 40 cm thick line).
+    /// (0.17 m) plus a margin for localisation and tracking error (seed 000 drew a line about
+    /// 40 cm thick; 50 cm here, as the arc controller cuts corners by a few centimetres).
     pub clearance: f64,
 }
 
@@ -101,7 +102,7 @@ impl Default for PlannerConfig {
             open_distance: 0.8,
             node_spacing: 0.3,
             connect_radius: 1.0,
-            clearance: 0.2,
+            clearance: 0.25,
         }
     }
 }
@@ -246,6 +247,11 @@ impl RoadMap {
         let at = distance_at(&self.grid, &self.distance, p);
         let c = self.config.clearance.min(at.max(START_CLEARANCE));
         line_clear(&self.grid, &self.distance, p, q, c)
+    }
+
+    /// The map the graph was built on.
+    pub fn grid(&self) -> &OccupancyGrid {
+        &self.grid
     }
 
     pub fn nodes(&self) -> &[[f64; 2]] {
@@ -444,7 +450,13 @@ pub fn grid_path(
             if !passable(ni, nj) {
                 continue;
             }
-            let nc = c + step;
+            // Cells closer to obstacles than `PREFERRED_CLEARANCE` cost more (a costmap's
+            // inflation): paths keep to the middle of corridors and doorways, which leaves room
+            // for localisation and tracking errors.
+            let d = distance[m] as f64;
+            let penalty =
+                CLEARANCE_PENALTY * ((PREFERRED_CLEARANCE - d) / PREFERRED_CLEARANCE).max(0.0);
+            let nc = c + step * (1.0 + penalty);
             if nc < cost[m] {
                 cost[m] = nc;
                 parent[m] = k;
@@ -465,26 +477,32 @@ pub fn grid_path(
         .map(|&k| grid.cell_center(k % w, k / w))
         .collect();
     points[0] = start;
-    // Thin: keep a point only where the line from the last kept one to the next is blocked.
+    // Thin: keep a point only where the straight line from the last kept one to the next
+    // would come closer to obstacles than the cells it replaces do.
     let mut out = vec![points[0]];
     let mut anchor = 0;
+    let mut least = f64::INFINITY;
     for k in 1..points.len() {
-        if k + 1 < points.len()
-            && line_clear(
-                grid,
-                distance,
-                points[anchor],
-                points[k + 1],
-                clearance.min(distance_at(grid, distance, points[anchor])),
-            )
-        {
+        if k + 1 < points.len() {
+            least = least.min(distance_at(grid, distance, points[k + 1]));
+        }
+        let keep = (clearance.max(least - grid.resolution))
+            .min(PREFERRED_CLEARANCE)
+            .min(distance_at(grid, distance, points[anchor]));
+        if k + 1 < points.len() && line_clear(grid, distance, points[anchor], points[k + 1], keep) {
             continue;
         }
+        least = f64::INFINITY;
         out.push(points[k]);
         anchor = k;
     }
     Some(out)
 }
+
+/// Clearance below which [`grid_path`] charges extra for a cell, m, and how much at most
+/// (a cell touching an obstacle costs 1 + `CLEARANCE_PENALTY` times its length).
+pub const PREFERRED_CLEARANCE: f64 = 0.6;
+pub const CLEARANCE_PENALTY: f64 = 3.0;
 
 /// Radius around the start where [`grid_path`] relaxes its rules, m.
 pub const START_ESCAPE: f64 = 0.5;

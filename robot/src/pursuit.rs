@@ -55,6 +55,18 @@ impl PathFollower {
         &self.path
     }
 
+    /// Distance from `pose` to the segment being followed, m.
+    pub fn distance_from_path(&self, pose: &Pose2) -> f64 {
+        if self.done() {
+            return 0.0;
+        }
+        let (a, b) = (self.path[self.target - 1], self.path[self.target]);
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len2 = (dx * dx + dy * dy).max(1e-12);
+        let t = (((pose.x - a[0]) * dx + (pose.y - a[1]) * dy) / len2).clamp(0.0, 1.0);
+        (pose.x - a[0] - t * dx).hypot(pose.y - a[1] - t * dy)
+    }
+
     /// True once the last point is reached.
     pub fn done(&self) -> bool {
         self.target >= self.path.len()

@@ -4,6 +4,7 @@
 //! controller is updated with what the robot knows (its odometry, and the true pose only when
 //! a scenario asks for an oracle) and answers with Create drive commands.
 
+use crate::navigation::{ExploreConfig, NavigateConfig};
 use crate::odometry::OdometryIntegrator;
 use crate::pursuit::{FollowParams, PathFollower};
 use futago_msgs::{BumpsAndDrops, DriveCommand, Odometry, Pose2, Radius, Time};
@@ -196,11 +197,15 @@ pub enum ControllerConfig {
     Segments(SegmentsConfig),
     /// Follow waypoints.
     Waypoints(WaypointConfig),
+    /// Navigate to goals on the known map ([`crate::navigation`]).
+    Navigate(NavigateConfig),
+    /// Explore an unknown world with SLAM ([`crate::navigation`]).
+    Explore(ExploreConfig),
 }
 
 impl ControllerConfig {
     /// The `type` names, in declaration order.
-    pub const TYPES: [&'static str; 3] = ["idle", "segments", "waypoints"];
+    pub const TYPES: [&'static str; 5] = ["idle", "segments", "waypoints", "navigate", "explore"];
 }
 
 impl ControllerConfig {
@@ -237,6 +242,16 @@ impl ControllerConfig {
                                 .into(),
                         ));
                     }
+                }
+                Ok(())
+            }
+            ControllerConfig::Explore(_) => Ok(()),
+            ControllerConfig::Navigate(n) => {
+                if n.goals.is_empty() || n.goals.iter().flatten().any(|v| !v.is_finite()) {
+                    return bad("goals", "expected at least one finite [x, y] point");
+                }
+                if n.laps == 0 {
+                    return bad("laps", "expected at least one lap");
                 }
                 Ok(())
             }
@@ -363,7 +378,10 @@ impl ScriptedController {
             self.odometry.integrate(o);
         }
         let cmd = match &self.config {
-            ControllerConfig::Idle => {
+            // The navigator drives these; as a script they stand still.
+            ControllerConfig::Idle
+            | ControllerConfig::Navigate(_)
+            | ControllerConfig::Explore(_) => {
                 self.done = true;
                 DriveCommand::STOP
             }

@@ -51,6 +51,13 @@ pub struct SlamConfig {
     /// refused, and the scan dead-reckoned.
     pub max_correction: f64,
     pub max_correction_angle: f64,
+    /// Motion filter: a scan is matched only when odometry has moved `min_travel` (m) or
+    /// turned `min_turn` (rad) since the last matched scan, or `max_interval` (s) has passed.
+    /// Off by default (every scan is matched: best on logs whose odometry stalls, as MIT
+    /// CSAIL's); fast lasers in simulation turn it on.
+    pub min_travel: f64,
+    pub min_turn: f64,
+    pub max_interval: f64,
     pub icp: IcpConfig,
     pub grid: OccupancyConfig,
     pub graph: GraphConfig,
@@ -65,6 +72,9 @@ impl Default for SlamConfig {
             max_range: 30.0,
             max_correction: 0.5,
             max_correction_angle: 0.6,
+            min_travel: 0.0,
+            min_turn: 0.0,
+            max_interval: 0.0,
             icp: IcpConfig::default(),
             grid: OccupancyConfig::default(),
             graph: GraphConfig::default(),
@@ -209,6 +219,13 @@ pub struct Slam {
     graph: PoseGraph,
     nodes: Vec<Node>,
     submaps: Vec<Submap>,
+    /// The occupancy grid of the keyframes, kept up to date; rebuilt on demand after the
+    /// graph moved (`grid_stale`).
+    grid: OccupancyMap,
+    grid_stale: bool,
+    /// Odometry and stamp of the last scan that was matched (the motion filter's reference).
+    last_matched: Option<(Time, Pose2)>,
+    skipped: usize,
     pose: Pose2,
     last_odometry: Option<Pose2>,
     /// The motion estimated between the last two scans.
@@ -229,6 +246,10 @@ impl Slam {
             graph: PoseGraph::default(),
             nodes: Vec::new(),
             submaps: Vec::new(),
+            grid: OccupancyMap::new(config.grid),
+            grid_stale: false,
+            last_matched: None,
+            skipped: 0,
             config,
             pose: start,
             last_odometry: None,
@@ -253,6 +274,27 @@ impl Slam {
             None => self.pose,
         };
         self.last_odometry = Some(*odometry);
+        // Motion filter: a scan taken where the last matched one was, and soon after it, adds
+        // nothing but time (a 40 Hz laser on a robot at rest); it is dead-reckoned.
+        if let Some((t, o)) = self.last_matched
+            && !self.graph.nodes.is_empty()
+            && o.distance(odometry) < self.config.min_travel
+            && wrap_angle(o.theta - odometry.theta).abs() < self.config.min_turn
+            && (scan.stamp - t).secs() < self.config.max_interval
+        {
+            self.skipped += 1;
+            self.pose = guess;
+            let node = self.graph.nodes.len() - 1;
+            self.scans
+                .push((scan.stamp, node, self.graph.nodes[node].between(&self.pose)));
+            return SlamUpdate {
+                pose: self.pose,
+                matched: false,
+                keyframe: false,
+                optimized: false,
+            };
+        }
+        self.last_matched = Some((scan.stamp, *odometry));
         let points = scan_points(scan, mount, self.config.max_range, &self.config.icp);
         // Wheel odometry stalls and then catches up in one jump on real robots (the MIT CSAIL
         // log holds 1 s stalls in turns). Where the odometry guess and a constant-velocity
@@ -323,6 +365,9 @@ impl Slam {
             ));
         }
         self.graph.nodes.push(self.pose);
+        if !self.grid_stale {
+            self.grid.insert(&self.pose.compose(mount), scan);
+        }
         self.nodes.push(Node {
             stamp: scan.stamp,
             points,
@@ -467,6 +512,7 @@ impl Slam {
         }
         self.pose = self.graph.nodes[last].compose(&rel);
         self.pending_loops = 0;
+        self.grid_stale = true;
     }
 
     /// Optimises once more if loop closures arrived since the last optimisation; call at the
@@ -500,12 +546,21 @@ impl Slam {
     }
 
     /// The occupancy grid of the keyframes at their current poses.
-    pub fn grid(&self) -> OccupancyMap {
-        let mut grid = OccupancyMap::new(self.config.grid);
-        for (n, p) in self.nodes.iter().zip(&self.graph.nodes) {
-            grid.insert(&p.compose(&n.mount), &n.scan);
+    pub fn grid(&mut self) -> &OccupancyMap {
+        if self.grid_stale {
+            let mut grid = OccupancyMap::new(self.config.grid);
+            for (n, p) in self.nodes.iter().zip(&self.graph.nodes) {
+                grid.insert(&p.compose(&n.mount), &n.scan);
+            }
+            self.grid = grid;
+            self.grid_stale = false;
         }
-        grid
+        &self.grid
+    }
+
+    /// Scans the motion filter passed over (dead-reckoned from the last matched one).
+    pub fn skipped(&self) -> usize {
+        self.skipped
     }
 
     pub fn keyframes(&self) -> usize {

@@ -238,6 +238,22 @@ impl Simulation {
         Pose2::new(t.x as f64, t.y as f64, futago_msgs::wrap_angle(yaw))
     }
 
+    /// Moves the robot to `pose` at rest, without its odometry knowing: a kidnapping (the
+    /// robot picked up and put down elsewhere), for testing localisation's recovery.
+    pub fn teleport(&mut self, pose: Pose2) {
+        let body = &mut self.physics.bodies[self.robot];
+        let z = body.translation().z;
+        body.set_position(
+            Pose::from_parts(
+                Vec3::new(pose.x as f32, pose.y as f32, z),
+                Quat::from_rotation_z(pose.theta as f32),
+            ),
+            true,
+        );
+        body.set_linvel(Vec3::ZERO, true);
+        body.set_angvel(Vec3::ZERO, true);
+    }
+
     /// Ground-truth velocity of the robot in its own frame.
     pub fn robot_velocity(&self) -> PlanarVelocity {
         let b = &self.physics.bodies[self.robot];

@@ -1,0 +1,620 @@
+//! Autonomous navigation (written for futago): goals on a known map by seed 000's node graph
+//! and A* ([`crate::planner::RoadMap`]), or frontier exploration of the map SLAM is building
+//! ([`crate::exploration`]); either way the path is followed by seed 000's look-ahead arc
+//! controller ([`crate::pursuit`]), with two safety behaviours:
+//!
+//! - an obstacle in the laser scan inside the strip the robot is about to sweep stops it, and
+//!   it resumes when the strip is clear (seed 000 stops for people and resumes); after
+//!   `blocked_timeout` it backs off and plans again;
+//! - a bumper press backs it off `backup_distance`, turning away from the pressed side, and it
+//!   plans again from where it ends up.
+
+use crate::exploration::path_to_frontier;
+use crate::planner::{PlannerConfig, RoadMap};
+use crate::pursuit::{FollowParams, PathFollower};
+use crate::script::PoseSource;
+use futago_msgs::grid::OccupancyGrid;
+use futago_msgs::{BumpsAndDrops, DriveCommand, LaserScan, Pose2, Radius, Time};
+use serde::Deserialize;
+
+/// Navigation parameters (`navigation.*`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NavigationConfig {
+    pub planner: PlannerConfig,
+    /// Cell size of the known map the road map is built on, m (seed 000: 50 mm).
+    pub map_resolution: f64,
+    /// Cruise speed, m/s.
+    pub speed: f64,
+    /// Look-ahead distance of the arc controller, m.
+    pub lookahead: f64,
+    /// A goal (or path point) counts as reached within this, m.
+    pub goal_tolerance: f64,
+    /// Turn in place when the aim is further off the heading than this, degrees.
+    pub turn_in_place_deg: f64,
+    pub turn_tolerance_deg: f64,
+    /// Wheel speed in turns in place, m/s.
+    pub turn_speed: f64,
+    /// The Create's radius, m.
+    pub robot_radius: f64,
+    /// Stop for laser returns this far ahead of the bumper, m…
+    pub stop_distance: f64,
+    /// …within the robot's width plus this margin each side, m.
+    pub stop_margin: f64,
+    /// Blocked this long, back off and plan again, s.
+    pub blocked_timeout: f64,
+    /// Back-off after a bump, m, at this speed, m/s.
+    pub backup_distance: f64,
+    pub backup_speed: f64,
+    /// Plan again when the pose is further than this from the path being followed (a
+    /// localisation jump, a kidnapping, a push), m.
+    pub off_path_replan: f64,
+    /// Exploration: plan to a new frontier at least this often, s.
+    pub replan_period: f64,
+    /// Exploration: frontiers shorter than this are ignored, m.
+    pub frontier_min_length: f64,
+    /// Exploration: a frontier reached that is still a frontier is given up within this, m.
+    pub frontier_exclusion: f64,
+}
+
+impl Default for NavigationConfig {
+    fn default() -> Self {
+        NavigationConfig {
+            planner: PlannerConfig::default(),
+            map_resolution: 0.05,
+            speed: 0.3,
+            lookahead: 0.35,
+            goal_tolerance: 0.15,
+            turn_in_place_deg: 45.0,
+            turn_tolerance_deg: 8.0,
+            turn_speed: 0.12,
+            robot_radius: 0.17,
+            stop_distance: 0.15,
+            stop_margin: 0.03,
+            blocked_timeout: 5.0,
+            backup_distance: 0.15,
+            backup_speed: 0.1,
+            off_path_replan: 1.0,
+            replan_period: 4.0,
+            frontier_min_length: 0.4,
+            frontier_exclusion: 0.6,
+        }
+    }
+}
+
+impl NavigationConfig {
+    /// Checks values navigation cannot work with; `(key, expectation)` on error.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        self.planner.validate("navigation.planner")?;
+        for (k, v, lo, hi) in [
+            ("map_resolution", self.map_resolution, 0.01, 0.5),
+            ("speed", self.speed, 0.01, 0.5),
+            ("lookahead", self.lookahead, 0.05, 5.0),
+            ("goal_tolerance", self.goal_tolerance, 0.01, 2.0),
+            ("turn_in_place_deg", self.turn_in_place_deg, 1.0, 180.0),
+            ("turn_tolerance_deg", self.turn_tolerance_deg, 0.1, 90.0),
+            ("turn_speed", self.turn_speed, 0.01, 0.5),
+            ("robot_radius", self.robot_radius, 0.01, 2.0),
+            ("stop_distance", self.stop_distance, 0.0, 5.0),
+            ("stop_margin", self.stop_margin, 0.0, 1.0),
+            ("blocked_timeout", self.blocked_timeout, 0.1, 600.0),
+            ("backup_distance", self.backup_distance, 0.0, 2.0),
+            ("backup_speed", self.backup_speed, 0.01, 0.5),
+            ("off_path_replan", self.off_path_replan, 0.05, 100.0),
+            ("replan_period", self.replan_period, 0.1, 600.0),
+            ("frontier_min_length", self.frontier_min_length, 0.0, 100.0),
+            ("frontier_exclusion", self.frontier_exclusion, 0.0, 100.0),
+        ] {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err((
+                    format!("navigation.{k}"),
+                    format!("expected a value in [{lo}, {hi}], found {v}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn follow_params(&self) -> FollowParams {
+        FollowParams {
+            speed: self.speed,
+            lookahead: self.lookahead,
+            tolerance: self.goal_tolerance,
+            turn_in_place: self.turn_in_place_deg.to_radians(),
+            turn_tolerance: self.turn_tolerance_deg.to_radians(),
+            turn_speed: self.turn_speed,
+        }
+    }
+}
+
+/// `[controller] type = "navigate"`: drive to goals on the known map, planning with the node
+/// graph.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NavigateConfig {
+    /// `[[x, y], …]` in the map (world) frame, m.
+    pub goals: Vec<[f64; 2]>,
+    /// Visit the list this many times.
+    #[serde(default = "one")]
+    pub laps: u32,
+    /// Where the pose comes from (normally the localiser).
+    #[serde(default = "localization")]
+    pub pose_source: PoseSource,
+}
+
+fn one() -> u32 {
+    1
+}
+
+fn localization() -> PoseSource {
+    PoseSource::Localization
+}
+
+impl NavigateConfig {
+    /// The goals of every lap in order.
+    pub fn task(&self) -> Task {
+        Task::Goals(
+            (0..self.laps)
+                .flat_map(|_| self.goals.iter().copied())
+                .collect(),
+        )
+    }
+}
+
+/// `[controller] type = "explore"`: frontier exploration on the map SLAM builds, on SLAM's
+/// pose (the scenario needs a `[slam]` table).
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ExploreConfig {}
+
+/// What the navigator is asked to do.
+#[derive(Debug, Clone)]
+pub enum Task {
+    /// Visit these points of a known map in order.
+    Goals(Vec<[f64; 2]>),
+    /// Explore the map handed in by SLAM until no frontier is left.
+    Explore,
+}
+
+/// What the navigator is told each control tick.
+#[derive(Debug, Clone, Copy)]
+pub struct NavInput<'a> {
+    pub now: Time,
+    /// The robot's pose estimate (localisation or SLAM) in the map frame.
+    pub pose: Pose2,
+    pub bumps: BumpsAndDrops,
+    /// The newest laser scan and the laser's mount on the robot.
+    pub scan: Option<(&'a LaserScan, Pose2)>,
+    /// For exploration: a newer map than the last one given, when there is one.
+    pub map: Option<&'a OccupancyGrid>,
+}
+
+/// Counts of what happened, for the run's summary.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct NavStats {
+    pub goals_reached: usize,
+    pub goals_unreachable: usize,
+    pub plans: usize,
+    pub bumps: usize,
+    pub obstacle_stops: usize,
+    pub frontiers_exhausted: usize,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Mode {
+    Driving,
+    /// Stopped for an obstacle since then.
+    Blocked(Time),
+    /// Backing off until then, then turning away in this direction (+1 left) until the
+    /// second time.
+    Backing(Time, f64, Time),
+    Done,
+}
+
+/// The navigator.
+pub struct Navigator {
+    config: NavigationConfig,
+    task: Task,
+    roadmap: Option<RoadMap>,
+    next_goal: usize,
+    follower: Option<PathFollower>,
+    mode: Mode,
+    map: Option<OccupancyGrid>,
+    last_plan: Option<Time>,
+    exhausted: Vec<[f64; 2]>,
+    /// Where bumpers found obstacles the map does not hold (low, thin, glass); exploration
+    /// plans round them.
+    bump_marks: Vec<[f64; 2]>,
+    stats: NavStats,
+}
+
+impl Navigator {
+    /// A navigator for `task`; `map` is the known map for goals (the road map is built from
+    /// it here), unused for exploration.
+    pub fn new(config: NavigationConfig, task: Task, map: Option<OccupancyGrid>) -> Navigator {
+        let roadmap = match (&task, map) {
+            (Task::Goals(_), Some(m)) => Some(RoadMap::new(m, config.planner)),
+            _ => None,
+        };
+        Navigator {
+            config,
+            task,
+            roadmap,
+            next_goal: 0,
+            follower: None,
+            mode: Mode::Driving,
+            map: None,
+            last_plan: None,
+            exhausted: Vec::new(),
+            bump_marks: Vec::new(),
+            stats: NavStats::default(),
+        }
+    }
+
+    pub fn finished(&self) -> bool {
+        self.mode == Mode::Done
+    }
+
+    pub fn stats(&self) -> NavStats {
+        self.stats
+    }
+
+    /// The road map's node count (goal navigation).
+    pub fn roadmap_nodes(&self) -> usize {
+        self.roadmap.as_ref().map(|r| r.nodes().len()).unwrap_or(0)
+    }
+
+    /// The path being followed.
+    pub fn path(&self) -> Option<&[[f64; 2]]> {
+        self.follower.as_ref().map(|f| f.path())
+    }
+
+    /// One control tick.
+    pub fn update(&mut self, input: &NavInput) -> DriveCommand {
+        if let Some(m) = input.map {
+            self.map = Some(m.clone());
+        }
+        let now = input.now;
+        if self.mode == Mode::Done {
+            return DriveCommand::STOP;
+        }
+        // A bump interrupts everything but a back-off already under way.
+        if input.bumps.bumped() && !matches!(self.mode, Mode::Backing(..)) {
+            self.stats.bumps += 1;
+            // The contact point: the bumper's edge, on the pressed side.
+            let side = match (input.bumps.bump_left, input.bumps.bump_right) {
+                (true, false) => 0.6,
+                (false, true) => -0.6,
+                _ => 0.0,
+            };
+            let r = self.config.robot_radius + 0.02;
+            self.bump_marks.push(
+                input
+                    .pose
+                    .transform_point([r * f64::cos(side), r * f64::sin(side)]),
+            );
+            // Turn away from the pressed side (seed 000: right bumper, turn left).
+            let away = if input.bumps.bump_right && !input.bumps.bump_left {
+                1.0
+            } else {
+                -1.0
+            };
+            self.start_backing(now, away);
+        }
+        if let Mode::Backing(until, away, turn_until) = self.mode {
+            if now < until {
+                return DriveCommand::Drive {
+                    velocity: -self.config.backup_speed,
+                    radius: Radius::Straight,
+                };
+            }
+            if now < turn_until {
+                return DriveCommand::Drive {
+                    velocity: self.config.turn_speed,
+                    radius: if away > 0.0 {
+                        Radius::InPlaceCcw
+                    } else {
+                        Radius::InPlaceCw
+                    },
+                };
+            }
+            self.mode = Mode::Driving;
+            self.follower = None;
+        }
+        // Exploration re-plans as the map grows.
+        if matches!(self.task, Task::Explore)
+            && self
+                .last_plan
+                .is_some_and(|t| (now - t).secs() >= self.config.replan_period)
+        {
+            self.follower = None;
+        }
+        if self
+            .follower
+            .as_ref()
+            .is_some_and(|f| f.distance_from_path(&input.pose) > self.config.off_path_replan)
+        {
+            self.follower = None;
+        }
+        if self.follower.is_none() && !self.plan(now, &input.pose) {
+            return DriveCommand::STOP;
+        }
+        let Some(f) = self.follower.as_mut() else {
+            return DriveCommand::STOP;
+        };
+        let cmd = f.command(&input.pose);
+        if f.done() {
+            self.follower = None;
+            match self.task {
+                Task::Goals(_) => {
+                    self.stats.goals_reached += 1;
+                    self.next_goal += 1;
+                }
+                Task::Explore => {
+                    // The frontier should be seen by now; if it is still there next time,
+                    // it cannot be resolved from here.
+                    self.exhausted.push([input.pose.x, input.pose.y]);
+                    self.stats.frontiers_exhausted += 1;
+                }
+            }
+            return DriveCommand::STOP;
+        }
+        // The obstacle check applies to motion forward (arcs and straight lines).
+        let forward = match cmd {
+            DriveCommand::Drive { velocity, radius } => {
+                velocity > 0.0 && matches!(radius, Radius::Straight | Radius::Arc(_))
+            }
+            DriveCommand::DriveDirect { left, right } => left + right > 0.0,
+        };
+        if forward && let Some((scan, mount)) = input.scan {
+            if self.blocked(scan, &mount, &input.pose) {
+                match self.mode {
+                    Mode::Blocked(since) => {
+                        if (now - since).secs() >= self.config.blocked_timeout {
+                            self.start_backing(now, 1.0);
+                        }
+                    }
+                    _ => {
+                        self.stats.obstacle_stops += 1;
+                        self.mode = Mode::Blocked(now);
+                    }
+                }
+                return DriveCommand::STOP;
+            }
+            self.mode = Mode::Driving;
+        }
+        cmd
+    }
+
+    fn start_backing(&mut self, now: Time, away: f64) {
+        let back = self.config.backup_distance / self.config.backup_speed;
+        // A quarter-turn's worth of turning away: 30° at the turn speed.
+        let wheel_base = crate::pursuit::CREATE_WHEEL_BASE;
+        let turn = 30f64.to_radians() * wheel_base / 2.0 / self.config.turn_speed;
+        self.mode = Mode::Backing(
+            now + futago_msgs::Duration::from_secs(back),
+            away,
+            now + futago_msgs::Duration::from_secs(back + turn),
+        );
+        self.follower = None;
+    }
+
+    /// Whether a laser return the map does not explain lies in the strip ahead the robot is
+    /// about to sweep (seed 000 compares the scan with the map to find obstacles that are not
+    /// in it; walls that are in it are the planner's business).
+    fn blocked(&self, scan: &LaserScan, mount: &Pose2, pose: &Pose2) -> bool {
+        let c = &self.config;
+        let ahead = c.robot_radius + c.stop_distance;
+        let half = c.robot_radius + c.stop_margin;
+        let map = self
+            .roadmap
+            .as_ref()
+            .map(|r| r.grid())
+            .or(self.map.as_ref());
+        scan.ranges.iter().enumerate().any(|(k, &r)| {
+            let r = r as f64;
+            if !r.is_finite() || r < scan.range_min {
+                return false;
+            }
+            let a = scan.angle(k);
+            let p = mount.transform_point([r * a.cos(), r * a.sin()]);
+            if !(p[0] > 0.0 && p[0] < ahead && p[1].abs() < half) {
+                return false;
+            }
+            let w = pose.transform_point(p);
+            !map.is_some_and(|m| mapped_obstacle_near(m, w, MAP_MATCH_CELLS))
+        })
+    }
+
+    /// Plans the next leg; false when there is nothing to do now (done, or no map yet).
+    fn plan(&mut self, now: Time, pose: &Pose2) -> bool {
+        let start = [pose.x, pose.y];
+        self.last_plan = Some(now);
+        match &self.task {
+            Task::Goals(goals) => {
+                let Some(roadmap) = &self.roadmap else {
+                    self.mode = Mode::Done;
+                    return false;
+                };
+                while self.next_goal < goals.len() {
+                    let goal = goals[self.next_goal];
+                    if let Some(path) = roadmap.plan(start, goal) {
+                        self.stats.plans += 1;
+                        self.follower = Some(PathFollower::new(self.config.follow_params(), path));
+                        return true;
+                    }
+                    self.stats.goals_unreachable += 1;
+                    self.next_goal += 1;
+                }
+                self.mode = Mode::Done;
+                false
+            }
+            Task::Explore => {
+                let Some(map) = &self.map else {
+                    return false;
+                };
+                let mut map = map.clone();
+                for m in &self.bump_marks {
+                    if let Some((i, j)) = map.cell_of(m[0], m[1]) {
+                        map.set(i, j, 100);
+                    }
+                }
+                let c = &self.config;
+                match path_to_frontier(
+                    &map,
+                    start,
+                    c.frontier_min_length,
+                    c.planner.clearance,
+                    &self.exhausted,
+                    c.frontier_exclusion,
+                ) {
+                    Some(path) => {
+                        self.stats.plans += 1;
+                        self.follower = Some(PathFollower::new(c.follow_params(), path));
+                        true
+                    }
+                    None => {
+                        self.mode = Mode::Done;
+                        false
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A return within this many cells of an occupied map cell is the map's obstacle.
+const MAP_MATCH_CELLS: i64 = 2;
+
+/// Whether an occupied or unknown cell of `map` lies within `cells` cells of world point `p`
+/// (a return in unknown space is not a contradiction of the map: the map has not caught up).
+fn mapped_obstacle_near(map: &OccupancyGrid, p: [f64; 2], cells: i64) -> bool {
+    let i = ((p[0] - map.origin[0]) / map.resolution).floor() as i64;
+    let j = ((p[1] - map.origin[1]) / map.resolution).floor() as i64;
+    (j - cells..=j + cells).any(|b| {
+        (i - cells..=i + cells).any(|a| {
+            a >= 0 && b >= 0 && (a as usize) < map.width && (b as usize) < map.height && {
+                let c = map.get(a as usize, b as usize);
+                c < 0 || c >= crate::planner::OCCUPIED
+            }
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 6 × 4 m room, free inside, 5 cm cells.
+    fn room() -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 120, 80);
+        for j in 0..80 {
+            for i in 0..120 {
+                let border = i == 0 || j == 0 || i == 119 || j == 79;
+                g.set(i, j, if border { 100 } else { 0 });
+            }
+        }
+        g
+    }
+
+    fn scan_with_return_at(distance: f64) -> LaserScan {
+        LaserScan {
+            frame: "front".into(),
+            stamp: Time::ZERO,
+            angle_min: -0.5,
+            angle_increment: 0.5,
+            time_increment: 0.0,
+            range_min: 0.02,
+            range_max: 30.0,
+            ranges: vec![f32::INFINITY, distance as f32, f32::INFINITY],
+        }
+    }
+
+    /// Drives a unicycle on the commands: the navigator reaches both goals, in order.
+    #[test]
+    fn navigator_drives_to_goals_on_a_known_map() {
+        let mut nav = Navigator::new(
+            NavigationConfig::default(),
+            Task::Goals(vec![[5.0, 3.0], [1.0, 1.0]]),
+            Some(room()),
+        );
+        let mut pose = Pose2::new(1.0, 1.0, 0.0);
+        let dt = 0.05;
+        let mut visited = Vec::new();
+        for k in 0..4000 {
+            let cmd = nav.update(&NavInput {
+                now: Time::from_secs(k as f64 * dt),
+                pose,
+                bumps: BumpsAndDrops::default(),
+                scan: None,
+                map: None,
+            });
+            let (v, w) = unicycle(&cmd);
+            pose = pose.compose(&Pose2::new(v * dt, 0.0, w * dt));
+            if (pose.x - 5.0).hypot(pose.y - 3.0) < 0.2 {
+                visited.push(k);
+            }
+            if nav.finished() {
+                break;
+            }
+        }
+        assert!(nav.finished());
+        assert_eq!(nav.stats().goals_reached, 2);
+        assert!(!visited.is_empty());
+        assert!((pose.x - 1.0).hypot(pose.y - 1.0) < 0.2, "{pose:?}");
+    }
+
+    #[test]
+    fn an_obstacle_ahead_stops_the_robot_and_a_bump_backs_it_off() {
+        let mut nav = Navigator::new(
+            NavigationConfig::default(),
+            Task::Goals(vec![[5.0, 1.0]]),
+            Some(room()),
+        );
+        fn input(t: f64, scan: Option<(&LaserScan, Pose2)>, bumps: BumpsAndDrops) -> NavInput<'_> {
+            NavInput {
+                now: Time::from_secs(t),
+                pose: Pose2::new(1.0, 1.0, 0.0),
+                bumps,
+                scan,
+                map: None,
+            }
+        }
+        let clear = scan_with_return_at(2.0);
+        let close = scan_with_return_at(0.25);
+        let mount = Pose2::IDENTITY;
+        let (v, _) = unicycle(&nav.update(&input(0.0, Some((&clear, mount)), Default::default())));
+        assert!(v > 0.0);
+        assert_eq!(
+            nav.update(&input(0.1, Some((&close, mount)), Default::default())),
+            DriveCommand::STOP
+        );
+        assert_eq!(nav.stats().obstacle_stops, 1);
+        let (v, _) = unicycle(&nav.update(&input(0.2, Some((&clear, mount)), Default::default())));
+        assert!(v > 0.0, "resumes when clear");
+        let right = BumpsAndDrops {
+            bump_right: true,
+            ..Default::default()
+        };
+        let (v, _) = unicycle(&nav.update(&input(0.3, None, right)));
+        assert!(v < 0.0, "backs off");
+        // After the back-off it turns away from the right bumper: left.
+        let (v, w) = unicycle(&nav.update(&input(1.85, None, Default::default())));
+        assert!(v == 0.0 && w > 0.0, "{v} {w}");
+        assert_eq!(nav.stats().bumps, 1);
+    }
+
+    /// (v, ω) of a Create command.
+    fn unicycle(cmd: &DriveCommand) -> (f64, f64) {
+        let b = crate::pursuit::CREATE_WHEEL_BASE;
+        match *cmd {
+            DriveCommand::Drive { velocity, radius } => match radius {
+                Radius::Straight => (velocity, 0.0),
+                Radius::InPlaceCcw => (0.0, 2.0 * velocity / b),
+                Radius::InPlaceCw => (0.0, -2.0 * velocity / b),
+                Radius::Arc(r) => (velocity, velocity / r),
+            },
+            DriveCommand::DriveDirect { left, right } => ((left + right) / 2.0, (right - left) / b),
+        }
+    }
+}
