@@ -427,6 +427,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
             && now.secs() >= e.time
         {
             sim.teleport(e.teleport.pose());
+            prev_truth = e.teleport.pose();
             next_event += 1;
         }
         let out = sim.step(cmd.take().as_ref());

@@ -450,6 +450,117 @@ fn every_shipped_scenario_loads_and_runs() {
     assert!(n >= 5, "scenarios found: {n}");
 }
 
+/// Two 3 × 4 m rooms joined by a 0.9 m doorway; a wall across most of the east room hides its
+/// far side from the doorway, and a cabinet there makes the two rooms look different.
+const TWO_ROOMS: &str = r#"
+name = "two-rooms"
+[materials.plaster]
+color = [0.8, 0.8, 0.8]
+[floor]
+material = "plaster"
+[[walls]]
+material = "plaster"
+points = [[0, 0], [6, 0], [6, 4], [0, 4]]
+closed = true
+height = 1.0
+thickness = 0.1
+[[walls]]
+material = "plaster"
+points = [[3, 0], [3, 4]]
+height = 1.0
+thickness = 0.1
+openings = [{ at = [3, 2.8], width = 0.9, top = 0.9 }]
+[[walls]]
+material = "plaster"
+points = [[4.5, 0], [4.5, 3.0]]
+height = 1.0
+thickness = 0.1
+[[boxes]]
+material = "plaster"
+center = [5.2, 0.8]
+size = [0.8, 0.5, 0.6]
+"#;
+
+/// Exploration closes the loop from an unknown map: the robot maps both rooms through the
+/// doorway on its graph SLAM without touching anything, SLAM's pose stays within 10 cm of the
+/// truth, and the run ends by itself when no frontier is left.
+#[test]
+fn exploration_maps_both_rooms_on_slam_without_a_bump() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = write(tmp.path(), "two-rooms.toml", TWO_ROOMS);
+    let scenario = write(
+        tmp.path(),
+        "explore.toml",
+        &format!(
+            "name = \"explore\"\nworld = {world:?}\nduration = 300.0\nseed = 3\n\
+             start = {{ x = 1.0, y = 1.0, yaw_deg = 0.0 }}\n\
+             [robot.odometry]\nwheel_base_ratio = 1.01\nnoise = 0.002\n\
+             [[lidar]]\nname = \"front\"\npreset = \"urg-04lx\"\nxyz = [0.08, 0.0, 0.2]\n\
+             [slam]\nmethod = \"graph\"\n\
+             [controller]\ntype = \"explore\"\n"
+        ),
+    );
+    let out = tmp.path().join("out");
+    run_for(&scenario, &out, None);
+    let s = summary(&out);
+    assert!(s["controller_finished"].as_bool().unwrap(), "{s}");
+    assert_eq!(s["robot"]["bump_events"], 0, "{s}");
+    let slam = &s["slam"];
+    assert!(
+        slam["online_max_position_error_m"].as_f64().unwrap() < 0.1,
+        "{slam}"
+    );
+    // Both rooms (24 m² inside the walls) are known, in the map SLAM wrote.
+    let area = slam["map_known_area_m2"].as_f64().unwrap();
+    assert!(area > 0.9 * 24.0, "{area} m² known");
+    let map = std::fs::read_to_string(out.join("slam_map.yaml")).unwrap();
+    assert!(map.contains("slam_map.pgm"));
+    // The robot went through the doorway and round the wall that hid the far side.
+    let truth =
+        futago_msgs::tum::parse(&std::fs::read_to_string(out.join("groundtruth.txt")).unwrap())
+            .unwrap();
+    assert!(truth.iter().any(|p| p.pose.translation[0] > 4.7));
+}
+
+/// A kidnapping: the robot, driven by the navigator on the node graph, is carried from the
+/// west room to the east one; Monte Carlo localisation loses it and finds it again.
+#[test]
+fn mcl_recovers_from_a_kidnapping_between_rooms() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = write(tmp.path(), "two-rooms.toml", TWO_ROOMS);
+    let scenario = write(
+        tmp.path(),
+        "kidnap.toml",
+        &format!(
+            "name = \"kidnap\"\nworld = {world:?}\nduration = 60.0\nseed = 4\n\
+             start = {{ x = 1.0, y = 1.0, yaw_deg = 0.0 }}\n\
+             [[lidar]]\nname = \"front\"\npreset = \"urg-04lx\"\nxyz = [0.08, 0.0, 0.2]\n\
+             [localization]\nrate = 4.0\n[localization.mcl]\nmodel = \"likelihood_field\"\n\
+             [[event]]\ntime = 10.0\nteleport = {{ x = 5.2, y = 2.0, yaw_deg = 90.0 }}\n\
+             [controller]\ntype = \"navigate\"\npose_source = \"ground_truth\"\n\
+             goals = [[2.0, 3.0], [1.0, 1.0], [3.8, 3.5], [1.5, 2.0]]\n"
+        ),
+    );
+    let out = tmp.path().join("out");
+    run_for(&scenario, &out, None);
+    let s = summary(&out);
+    let l = &s["localization"];
+    assert!(
+        l["max_position_error_m"].as_f64().unwrap() > 2.0,
+        "it was lost: {l}"
+    );
+    let k = &l["kidnappings"][0];
+    assert_eq!(k["time_s"], 10.0);
+    let after = k["recovered_after_s"].as_f64().expect("recovered");
+    assert!(after < 30.0, "{l}");
+    assert!(l["final_position_error_m"].as_f64().unwrap() < 0.1, "{l}");
+    assert_eq!(s["robot"]["bump_events"], 0, "{s}");
+    assert!(
+        s["navigation"]["stats"]["goals_reached"].as_u64().unwrap() >= 2,
+        "{s}"
+    );
+}
+
 /// Points of a depth PNG's row `v`, in the world, from `camera.yaml` and the frame's pose.
 fn world_points(
     seq: &Path,

@@ -495,7 +495,7 @@ fn mapped_obstacle_near(map: &OccupancyGrid, p: [f64; 2], cells: i64) -> bool {
         (i - cells..=i + cells).any(|a| {
             a >= 0 && b >= 0 && (a as usize) < map.width && (b as usize) < map.height && {
                 let c = map.get(a as usize, b as usize);
-                c < 0 || c >= crate::planner::OCCUPIED
+                !(0..crate::planner::OCCUPIED).contains(&c)
             }
         })
     })

@@ -91,7 +91,7 @@ pub struct PlannerConfig {
     pub connect_radius: f64,
     /// Half-width of the corridor a joining line must keep free, m: the Create's radius
     /// (0.17 m) plus a margin for localisation and tracking error (seed 000 drew a line about
-    /// 40 cm thick; 50 cm here, as the arc controller cuts corners by a few centimetres).
+    /// 40 cm thick; 60 cm here: the arc controller cuts corners, and SLAM maps walls thick).
     pub clearance: f64,
 }
 
@@ -102,7 +102,7 @@ impl Default for PlannerConfig {
             open_distance: 0.8,
             node_spacing: 0.3,
             connect_radius: 1.0,
-            clearance: 0.25,
+            clearance: 0.3,
         }
     }
 }
@@ -149,7 +149,7 @@ pub struct RoadMap {
 impl RoadMap {
     /// Builds the graph over `grid`.
     pub fn new(grid: OccupancyGrid, config: PlannerConfig) -> RoadMap {
-        let distance = obstacle_distance(&grid, |c| c < 0 || c >= OCCUPIED, 10.0);
+        let distance = obstacle_distance(&grid, |c| !(0..OCCUPIED).contains(&c), 10.0);
         let mut map = RoadMap {
             config,
             grid,
@@ -407,7 +407,7 @@ pub fn grid_path(
         let k = j * w + i;
         let c = grid.cells[k];
         let d = distance[k] as f64;
-        if c >= 0 && c < OCCUPIED && d >= clearance {
+        if (0..OCCUPIED).contains(&c) && d >= clearance {
             return true;
         }
         let p = grid.cell_center(i, j);
