@@ -295,6 +295,44 @@ fn bad_input_names_the_file_and_key_and_writes_nothing() {
             "needs a [[lidar]]",
         ),
         (
+            good.clone() + "[slam]\nmethod = \"graph\"\n",
+            "slam",
+            "needs a [[lidar]]",
+        ),
+        (
+            good.clone() + "[[lidar]]\npreset = \"urg-04lx\"\n[slam.graph]\nloop_sigma = -0.1\n",
+            "slam.graph.loop_sigma",
+            "positive",
+        ),
+        (
+            good.clone() + "[[lidar]]\npreset = \"urg-04lx\"\n[slam]\nmethod = \"fastslam\"\n",
+            "slam.method",
+            "graph",
+        ),
+        (
+            good.replace("type = \"idle\"", "type = \"explore\""),
+            "controller.type",
+            "needs a [slam] table",
+        ),
+        (
+            good.replace(
+                "type = \"idle\"",
+                "type = \"navigate\"\ngoals = [[1.0, 1.0]]",
+            ),
+            "controller.pose_source",
+            "[localization]",
+        ),
+        (
+            good.clone() + "[[event]]\ntime = 5.0\nteleport = { x = 1.0, y = 1.0 }\n",
+            "event[0].time",
+            "expected a value in",
+        ),
+        (
+            good.clone() + "[navigation.planner]\nclearance = 0.5\n",
+            "navigation.planner.wall_distance",
+            "clearance",
+        ),
+        (
             good.clone()
                 + "[[lidar]]\npreset = \"urg-04lx\"\n[localization.mcl]\nmodel = \"kalman\"\n",
             "localization.mcl.model",
