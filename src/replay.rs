@@ -129,6 +129,7 @@ pub fn replay(
             "log_duration_s": span,
             "keyframes": slam.keyframes(),
             "unmatched_scans": slam.unmatched(),
+            "skipped_scans": slam.skipped(),
             "config": format!("{config:?}"),
         });
         if let Some(rels) = &rels {

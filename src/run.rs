@@ -486,8 +486,11 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                     u.pose.distance(&truth),
                     futago_msgs::wrap_angle(u.pose.theta - truth.theta).abs(),
                 ));
+                // The explorer plans on SLAM's map: hand it a fresh copy twice per re-plan.
                 let period = Duration::from_secs(spec.navigation.replan_period / 2.0);
-                if r.last_map.is_none_or(|t| now - t >= period) {
+                if matches!(s.controller, ControllerConfig::Explore(_))
+                    && r.last_map.is_none_or(|t| now - t >= period)
+                {
                     r.last_map = Some(now);
                     fresh_map = Some(r.slam.grid().to_grid());
                 }
@@ -596,6 +599,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 "loop_closures": r.slam.loop_closures(),
                 "optimizations": r.slam.optimizations(),
                 "unmatched_scans": r.slam.unmatched(),
+                "skipped_scans": r.slam.skipped(),
                 "online_mean_position_error_m": r.errors.iter().map(|e| e.0).sum::<f64>() / n,
                 "online_max_position_error_m": r.errors.iter().map(|e| e.0).fold(0.0, f64::max),
                 "online_mean_heading_error_deg": r.errors.iter().map(|e| e.1).sum::<f64>() / n * 180.0 / std::f64::consts::PI,

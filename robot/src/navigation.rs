@@ -264,11 +264,6 @@ impl Navigator {
         self.roadmap.as_ref().map(|r| r.nodes().len()).unwrap_or(0)
     }
 
-    /// The path being followed.
-    pub fn path(&self) -> Option<&[[f64; 2]]> {
-        self.follower.as_ref().map(|f| f.path())
-    }
-
     /// One control tick.
     pub fn update(&mut self, input: &NavInput) -> DriveCommand {
         if let Some(m) = input.map {

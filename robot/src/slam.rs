@@ -197,7 +197,6 @@ const GUESS_DISAGREEMENT: f64 = 0.05;
 
 /// A keyframe.
 struct Node {
-    stamp: Time,
     points: Vec<Oriented>,
     scan: LaserScan,
     mount: Pose2,
@@ -369,7 +368,6 @@ impl Slam {
             self.grid.insert(&self.pose.compose(mount), scan);
         }
         self.nodes.push(Node {
-            stamp: scan.stamp,
             points,
             scan: scan.clone(),
             mount: *mount,
@@ -533,15 +531,6 @@ impl Slam {
         self.scans
             .iter()
             .map(|(t, k, rel)| (*t, self.graph.nodes[*k].compose(rel)))
-            .collect()
-    }
-
-    /// The keyframes: stamp and pose.
-    pub fn keyframe_poses(&self) -> Vec<(Time, Pose2)> {
-        self.nodes
-            .iter()
-            .zip(&self.graph.nodes)
-            .map(|(n, p)| (n.stamp, *p))
             .collect()
     }
 
