@@ -1,6 +1,7 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
 mod bench;
+mod ground_truth;
 mod relations;
 mod replay;
 mod rgbd;

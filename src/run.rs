@@ -906,6 +906,7 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             }
         }
         let mut sum = summary(s, &outcome, Value::Object(files));
+        sum["metrics"] = serde_json::to_value(crate::ground_truth::score_trajectories(tmp)?)?;
         sum["performance"] = json!({
             "renderer": outcome.renderer,
             "wall_time_s": outcome.wall_time,

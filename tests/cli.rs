@@ -548,6 +548,11 @@ fn exploration_maps_both_rooms_on_slam_without_a_bump() {
         slam["online_max_position_error_m"].as_f64().unwrap() < 0.1,
         "{slam}"
     );
+    // The scored metrics: SLAM's final trajectory beats odometry's against the ground truth.
+    let m = &s["metrics"];
+    let ate = |k: &str| m[format!("{k}.ate.rmse_m")].as_f64().unwrap();
+    assert!(ate("slam") < 0.05 && ate("slam") < ate("odometry"), "{m}");
+    assert!(m["slam.rpe_1m.trans.max_m"].as_f64().unwrap() < 0.1, "{m}");
     // Both rooms (24 m² inside the walls) are known, in the map SLAM wrote.
     let area = slam["map_known_area_m2"].as_f64().unwrap();
     assert!(area > 0.9 * 24.0, "{area} m² known");
