@@ -906,7 +906,14 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             }
         }
         let mut sum = summary(s, &outcome, Value::Object(files));
-        sum["metrics"] = serde_json::to_value(crate::ground_truth::score_trajectories(tmp)?)?;
+        let mut metrics = crate::ground_truth::score_trajectories(tmp)?;
+        if let Some((_, map)) = &outcome.slam_result {
+            let truth = world_map(s, map.resolution);
+            let m = crate::ground_truth::map::score(map, &truth, [s.start.x, s.start.y])
+                .map_err(|e| anyhow::anyhow!("scoring the SLAM map: {e}"))?;
+            metrics.insert_map("slam.map", &m);
+        }
+        sum["metrics"] = serde_json::to_value(metrics)?;
         sum["performance"] = json!({
             "renderer": outcome.renderer,
             "wall_time_s": outcome.wall_time,

@@ -553,6 +553,11 @@ fn exploration_maps_both_rooms_on_slam_without_a_bump() {
     let ate = |k: &str| m[format!("{k}.ate.rmse_m")].as_f64().unwrap();
     assert!(ate("slam") < 0.05 && ate("slam") < ate("odometry"), "{m}");
     assert!(m["slam.rpe_1m.trans.max_m"].as_f64().unwrap() < 0.1, "{m}");
+    // The map against the world's own grid: walls where the world has them, and both rooms.
+    let v = |k: &str| m[k].as_f64().unwrap();
+    assert!(v("slam.map.precision_2cell") > 0.95, "{m}");
+    assert!(v("slam.map.recall_2cell") > 0.9, "{m}");
+    assert!(v("slam.map.free_iou") > 0.8, "{m}");
     // Both rooms (24 m² inside the walls) are known, in the map SLAM wrote.
     let area = slam["map_known_area_m2"].as_f64().unwrap();
     assert!(area > 0.9 * 24.0, "{area} m² known");

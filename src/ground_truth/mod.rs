@@ -4,6 +4,7 @@
 //! summaries, and later gates, address them by name. A new family is a new module and one
 //! `insert` call where the run has its inputs.
 
+pub mod map;
 pub mod trajectory;
 
 use std::collections::BTreeMap;
@@ -16,6 +17,25 @@ pub struct Metrics(pub BTreeMap<String, f64>);
 impl Metrics {
     pub fn insert(&mut self, name: impl Into<String>, value: f64) {
         self.0.insert(name.into(), value);
+    }
+
+    /// `prefix.precision_1cell`, … `prefix.free_iou` for a map.
+    pub fn insert_map(&mut self, prefix: &str, m: &map::MapScore) {
+        for k in 0..2 {
+            let c = k + 1;
+            self.insert(format!("{prefix}.precision_{c}cell"), m.precision[k]);
+            self.insert(format!("{prefix}.recall_{c}cell"), m.recall[k]);
+            self.insert(format!("{prefix}.f1_{c}cell"), m.f1[k]);
+        }
+        self.insert(
+            format!("{prefix}.mean_distance_to_truth_m"),
+            m.mean_distance_to_truth,
+        );
+        self.insert(
+            format!("{prefix}.mean_distance_from_truth_m"),
+            m.mean_distance_from_truth,
+        );
+        self.insert(format!("{prefix}.free_iou"), m.free_iou);
     }
 
     /// `prefix.rmse{unit}`, `prefix.mean{unit}`, … for a set of errors.

@@ -1,0 +1,309 @@
+//! 2D map metrics (written for futago): an estimated occupancy grid against the world's own
+//! grid of the same height band.
+//!
+//! The map frame is the world frame: SLAM starts at the scenario's start pose, so no alignment
+//! is searched for (a search would hide a map that is offset or turned). What is compared:
+//!
+//! - the true obstacles the robot could have seen: occupied cells next to free space reachable
+//!   from the start (the wall faces; the inside of a wall and the far side of the building's
+//!   shell cannot be mapped by a laser);
+//! - the true free space: the cells reachable from the start.
+//!
+//! Precision: the share of the estimate's occupied cells within `k` cells of a true obstacle.
+//! Recall: the share of true obstacles within `k` cells of an occupied estimated cell. Mean
+//! distances each way are capped at [`DISTANCE_CAP`]. Free-space IoU is computed on the true
+//! grid's cells. Distances are exact Euclidean distances between cell centres (Felzenszwalb
+//! and Huttenlocher's transform).
+
+use futago_msgs::grid::OccupancyGrid;
+
+/// Occupancy at or above which a cell is an obstacle (map_server's 0.65 trinary threshold
+/// lies above it; the grids compared here are trinary 0/100/−1).
+const OCCUPIED: i8 = 50;
+
+/// Distances beyond this count as this in the mean distances, m.
+pub const DISTANCE_CAP: f64 = 1.0;
+
+/// The scores of one map.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct MapScore {
+    /// Precision, recall and F1 within 1 and 2 cells.
+    pub precision: [f64; 2],
+    pub recall: [f64; 2],
+    pub f1: [f64; 2],
+    /// Mean distance from the estimate's obstacles to the true ones, and back, m.
+    pub mean_distance_to_truth: f64,
+    pub mean_distance_from_truth: f64,
+    pub free_iou: f64,
+    pub true_obstacle_cells: usize,
+    pub map_obstacle_cells: usize,
+}
+
+/// Squared Euclidean distance transform of a `w × h` grid of sites, in cells².
+fn squared_edt(sites: &[bool], w: usize, h: usize) -> Vec<f64> {
+    const INF: f64 = 1e20;
+    let mut f: Vec<f64> = sites.iter().map(|&s| if s { 0.0 } else { INF }).collect();
+    // One dimension: the lower envelope of parabolas.
+    fn pass(f: &[f64]) -> Vec<f64> {
+        let n = f.len();
+        let mut d = vec![0.0; n];
+        let mut v = vec![0usize; n];
+        let mut z = vec![0.0f64; n + 1];
+        let mut k = 0usize;
+        z[0] = f64::NEG_INFINITY;
+        z[1] = f64::INFINITY;
+        for q in 1..n {
+            loop {
+                let p = v[k];
+                let s = ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64))
+                    / (2.0 * (q as f64 - p as f64));
+                if s <= z[k] && k > 0 {
+                    k -= 1;
+                    continue;
+                }
+                if s <= z[k] {
+                    // k == 0: replace the first parabola.
+                    v[0] = q;
+                    z[1] = f64::INFINITY;
+                    break;
+                }
+                k += 1;
+                v[k] = q;
+                z[k] = s;
+                z[k + 1] = f64::INFINITY;
+                break;
+            }
+        }
+        k = 0;
+        for (q, dq) in d.iter_mut().enumerate() {
+            while z[k + 1] < q as f64 {
+                k += 1;
+            }
+            let p = v[k];
+            *dq = (q as f64 - p as f64).powi(2) + f[p];
+        }
+        d
+    }
+    for y in 0..h {
+        let row = pass(&f[y * w..(y + 1) * w]);
+        f[y * w..(y + 1) * w].copy_from_slice(&row);
+    }
+    for x in 0..w {
+        let col: Vec<f64> = (0..h).map(|y| f[y * w + x]).collect();
+        let out = pass(&col);
+        for y in 0..h {
+            f[y * w + x] = out[y];
+        }
+    }
+    f
+}
+
+/// Distance (m) from world point `p` to the nearest site of a grid's transform; the cap
+/// outside the grid.
+fn distance_at(grid: &OccupancyGrid, sq: &[f64], p: [f64; 2]) -> f64 {
+    match grid.cell_of(p[0], p[1]) {
+        Some((i, j)) => (sq[j * grid.width + i].sqrt() * grid.resolution).min(DISTANCE_CAP),
+        None => DISTANCE_CAP,
+    }
+}
+
+/// Scores `estimate` against `truth` for a robot that started at `start` (world frame);
+/// `Err` when the start is not in the truth's free space.
+pub fn score(
+    estimate: &OccupancyGrid,
+    truth: &OccupancyGrid,
+    start: [f64; 2],
+) -> Result<MapScore, String> {
+    let (w, h) = (truth.width, truth.height);
+    let free = |c: i8| (0..OCCUPIED).contains(&c);
+    let (si, sj) = truth
+        .cell_of(start[0], start[1])
+        .filter(|&(i, j)| free(truth.get(i, j)))
+        .ok_or_else(|| {
+            format!(
+                "the start ({:.2}, {:.2}) is not in the true map's free space",
+                start[0], start[1]
+            )
+        })?;
+    // Reachable free space (4-connected flood fill).
+    let mut reach = vec![false; w * h];
+    let mut stack = vec![(si, sj)];
+    reach[sj * w + si] = true;
+    while let Some((i, j)) = stack.pop() {
+        for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+            let (a, b) = (i as i64 + di, j as i64 + dj);
+            if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
+                continue;
+            }
+            let (a, b) = (a as usize, b as usize);
+            if !reach[b * w + a] && free(truth.get(a, b)) {
+                reach[b * w + a] = true;
+                stack.push((a, b));
+            }
+        }
+    }
+    // Wall faces: occupied cells with a reachable 4-neighbour.
+    let mut faces = vec![false; w * h];
+    for j in 0..h {
+        for i in 0..w {
+            if truth.get(i, j) < OCCUPIED {
+                continue;
+            }
+            faces[j * w + i] = [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
+                .iter()
+                .any(|(di, dj)| {
+                    let (a, b) = (i as i64 + di, j as i64 + dj);
+                    a >= 0
+                        && b >= 0
+                        && a < w as i64
+                        && b < h as i64
+                        && reach[b as usize * w + a as usize]
+                });
+        }
+    }
+    let est_occ: Vec<bool> = estimate.cells.iter().map(|&c| c >= OCCUPIED).collect();
+    let truth_sq = squared_edt(&faces, w, h);
+    let est_sq = squared_edt(&est_occ, estimate.width, estimate.height);
+    let cells = |g: &OccupancyGrid, mask: &[bool]| -> Vec<[f64; 2]> {
+        (0..g.height)
+            .flat_map(|j| (0..g.width).map(move |i| (i, j)))
+            .filter(|&(i, j)| mask[j * g.width + i])
+            .map(|(i, j)| g.cell_center(i, j))
+            .collect()
+    };
+    let est_points = cells(estimate, &est_occ);
+    let face_points = cells(truth, &faces);
+    let to_truth: Vec<f64> = est_points
+        .iter()
+        .map(|p| distance_at(truth, &truth_sq, *p))
+        .collect();
+    let from_truth: Vec<f64> = face_points
+        .iter()
+        .map(|p| distance_at(estimate, &est_sq, *p))
+        .collect();
+    let share = |d: &[f64], lim: f64| {
+        if d.is_empty() {
+            0.0
+        } else {
+            d.iter().filter(|&&x| x <= lim + 1e-9).count() as f64 / d.len() as f64
+        }
+    };
+    let mean = |d: &[f64]| {
+        if d.is_empty() {
+            DISTANCE_CAP
+        } else {
+            d.iter().sum::<f64>() / d.len() as f64
+        }
+    };
+    let mut precision = [0.0; 2];
+    let mut recall = [0.0; 2];
+    let mut f1 = [0.0; 2];
+    for k in 0..2 {
+        let lim = (k + 1) as f64 * truth.resolution;
+        precision[k] = share(&to_truth, lim);
+        recall[k] = share(&from_truth, lim);
+        f1[k] = if precision[k] + recall[k] > 0.0 {
+            2.0 * precision[k] * recall[k] / (precision[k] + recall[k])
+        } else {
+            0.0
+        };
+    }
+    // Free space on the truth's cells.
+    let (mut both, mut either) = (0usize, 0usize);
+    for j in 0..h {
+        for i in 0..w {
+            let c = truth.cell_center(i, j);
+            let e = estimate
+                .cell_of(c[0], c[1])
+                .is_some_and(|(a, b)| free(estimate.get(a, b)));
+            let t = reach[j * w + i];
+            both += (e && t) as usize;
+            either += (e || t) as usize;
+        }
+    }
+    Ok(MapScore {
+        precision,
+        recall,
+        f1,
+        mean_distance_to_truth: mean(&to_truth),
+        mean_distance_from_truth: mean(&from_truth),
+        free_iou: if either > 0 {
+            both as f64 / either as f64
+        } else {
+            0.0
+        },
+        true_obstacle_cells: face_points.len(),
+        map_obstacle_cells: est_points.len(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 10 × 10-cell room (0.1 m cells): walls on the border, free inside.
+    fn room() -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(0.1, [0.0, 0.0], 10, 10);
+        for j in 0..10 {
+            for i in 0..10 {
+                let wall = i == 0 || j == 0 || i == 9 || j == 9;
+                g.set(i, j, if wall { 100 } else { 0 });
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn edt_is_exact_on_a_knight_move() {
+        let mut sites = vec![false; 25];
+        sites[0] = true;
+        let d = squared_edt(&sites, 5, 5);
+        assert_eq!(d[1 * 5 + 2], 5.0); // (2, 1): 2² + 1²
+        assert_eq!(d[4 * 5 + 4], 32.0);
+    }
+
+    #[test]
+    fn a_perfect_map_scores_one_and_a_shifted_one_by_hand() {
+        let truth = room();
+        let s = score(&truth, &truth, [0.5, 0.5]).unwrap();
+        assert_eq!(s.precision, [1.0, 1.0]);
+        assert_eq!(s.recall, [1.0, 1.0]);
+        assert_eq!(s.free_iou, 1.0);
+        assert_eq!(s.mean_distance_from_truth, 0.0);
+        // The four corner cells are walls but no face: 0.1 m from the nearest face each.
+        assert!((s.mean_distance_to_truth - 4.0 * 0.1 / 36.0).abs() < 1e-12);
+        // Faces: the 36 border cells minus the 4 corners (their neighbours are walls).
+        assert_eq!(s.true_obstacle_cells, 32);
+        // The same map one cell (0.1 m) to the right, with an unknown column on the left.
+        let mut shifted = OccupancyGrid::new(0.1, [0.1, 0.0], 10, 10);
+        shifted.cells = truth.cells.clone();
+        let s = score(&shifted, &truth, [0.5, 0.5]).unwrap();
+        // Within one cell all but the right wall (now beyond the true grid, 10 of 36 cells)
+        // is matched…
+        assert!(
+            (s.precision[0] - 26.0 / 36.0).abs() < 1e-12,
+            "{:?}",
+            s.precision
+        );
+        // …but on the truth's cells the free space moved: inside x 0.2–0.9 and y 0.1–0.8 the
+        // estimate is free (7 × 8 = 56 cells); the truth's 64 free cells and the estimate's
+        // 8 cells at x = 0.9 make the union 64 + 8 = 72.
+        assert!((s.free_iou - 56.0 / 72.0).abs() < 1e-12, "{}", s.free_iou);
+        // Mean distance to the truth over the estimate's 36 wall cells, by hand: the left
+        // wall (x = 0.15) lies 0.1 m from the true left faces for its 8 middle cells and on
+        // the true bottom and top faces for its end cells; the right wall (x = 1.05) is
+        // outside the truth's grid (capped at 1 m, 10 cells); the bottom and top rows sit on
+        // true faces except their cells at x = 0.95, true corners 0.1 m from a face.
+        let expected = (8.0 * 0.1 + 10.0 * 1.0 + 2.0 * 0.1) / 36.0;
+        assert!(
+            (s.mean_distance_to_truth - expected).abs() < 1e-9,
+            "{} vs {expected}",
+            s.mean_distance_to_truth
+        );
+    }
+
+    #[test]
+    fn a_start_in_a_wall_is_an_error() {
+        assert!(score(&room(), &room(), [0.05, 0.05]).is_err());
+    }
+}
