@@ -258,7 +258,7 @@ mod tests {
         let mut sites = vec![false; 25];
         sites[0] = true;
         let d = squared_edt(&sites, 5, 5);
-        assert_eq!(d[1 * 5 + 2], 5.0); // (2, 1): 2² + 1²
+        assert_eq!(d[5 + 2], 5.0); // cell (2, 1) of a 5-wide grid: 2² + 1²
         assert_eq!(d[4 * 5 + 4], 32.0);
     }
 
