@@ -1,5 +1,8 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
+/// Exit status of a run whose results were written but a gate failed (errors exit with 1).
+const GATE_FAILED: i32 = 3;
+
 mod bench;
 mod ground_truth;
 mod relations;
@@ -240,6 +243,23 @@ fn real_main() -> Result<()> {
                 o.final_truth.distance(&o.final_odometry),
                 out.display()
             );
+            let failed: Vec<&serde_json::Value> = summary["gates"]
+                .as_array()
+                .map(|g| g.iter().filter(|r| r["passed"] == false).collect())
+                .unwrap_or_default();
+            let total = summary["gates"].as_array().map_or(0, |g| g.len());
+            if total > 0 {
+                println!("gates: {} of {total} passed", total - failed.len());
+            }
+            if !failed.is_empty() {
+                for r in &failed {
+                    eprintln!(
+                        "futago: gate failed: {}",
+                        r["message"].as_str().unwrap_or("")
+                    );
+                }
+                std::process::exit(GATE_FAILED);
+            }
         }
         Command::Replay {
             log,

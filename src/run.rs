@@ -913,6 +913,7 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
                 .map_err(|e| anyhow::anyhow!("scoring the SLAM map: {e}"))?;
             metrics.insert_map("slam.map", &m);
         }
+        sum["gates"] = serde_json::to_value(crate::ground_truth::evaluate(&s.spec.gate, &metrics))?;
         sum["metrics"] = serde_json::to_value(metrics)?;
         sum["performance"] = json!({
             "renderer": outcome.renderer,

@@ -52,6 +52,9 @@ pub struct ScenarioSpec {
     /// Things that happen to the robot at set times.
     #[serde(default)]
     pub event: Vec<EventSpec>,
+    /// Accuracy gates: `futago run` exits with status 3 when one fails.
+    #[serde(default)]
+    pub gate: Vec<crate::ground_truth::Gate>,
     /// Read as a table and typed by [`controller_config`], so that errors inside it carry
     /// their full key path.
     pub controller: toml::Table,
@@ -352,6 +355,45 @@ impl Scenario {
                     path,
                     format!("event[{i}].teleport"),
                     "expected finite x, y (m) and yaw_deg",
+                ));
+            }
+        }
+        let names =
+            crate::ground_truth::metric_names(spec.localization.is_some(), spec.slam.is_some());
+        for (i, g) in spec.gate.iter().enumerate() {
+            if !names.contains(&g.metric) {
+                let family = g.metric.split('.').next().unwrap_or("");
+                let close: Vec<&String> = names
+                    .iter()
+                    .filter(|n| n.starts_with(family))
+                    .take(6)
+                    .collect();
+                return Err(SpecError::new(
+                    path,
+                    format!("gate[{i}].metric"),
+                    format!(
+                        "this scenario produces no metric `{}`{}",
+                        g.metric,
+                        if close.is_empty() {
+                            format!(
+                                "; its metrics start with {:?}",
+                                [
+                                    "odometry.",
+                                    "localization. (with [localization])",
+                                    "slam. (with [slam])"
+                                ]
+                            )
+                        } else {
+                            format!("; similar: {close:?}")
+                        }
+                    ),
+                ));
+            }
+            if !g.value.is_finite() {
+                return Err(SpecError::new(
+                    path,
+                    format!("gate[{i}].value"),
+                    "expected a finite number",
                 ));
             }
         }

@@ -328,6 +328,22 @@ fn bad_input_names_the_file_and_key_and_writes_nothing() {
             "expected a value in",
         ),
         (
+            good.clone() + "[[gate]]\nmetric = \"slam.ate.rmse_m\"\nop = \"<\"\nvalue = 0.1\n",
+            "gate[0].metric",
+            "produces no metric `slam.ate.rmse_m`",
+        ),
+        (
+            good.clone() + "[[gate]]\nmetric = \"odometry.ate.rmse\"\nop = \"<\"\nvalue = 0.1\n",
+            "gate[0].metric",
+            "odometry.ate.rmse_m",
+        ),
+        (
+            good.clone()
+                + "[[gate]]\nmetric = \"odometry.ate.rmse_m\"\nop = \"less\"\nvalue = 0.1\n",
+            "gate[0].op",
+            "",
+        ),
+        (
             good.clone() + "[navigation.planner]\nclearance = 0.5\n",
             "navigation.planner.wall_distance",
             "clearance",
@@ -535,7 +551,9 @@ fn exploration_maps_both_rooms_on_slam_without_a_bump() {
              [robot.odometry]\nwheel_base_ratio = 1.01\nnoise = 0.002\n\
              [[lidar]]\nname = \"front\"\npreset = \"urg-04lx\"\nxyz = [0.08, 0.0, 0.2]\n\
              [slam]\nmethod = \"graph\"\n\
-             [controller]\ntype = \"explore\"\n"
+             [controller]\ntype = \"explore\"\n\
+             [[gate]]\nmetric = \"slam.ate.rmse_m\"\nop = \"<\"\nvalue = 0.05\n\
+             [[gate]]\nmetric = \"slam.map.f1_2cell\"\nop = \">=\"\nvalue = 0.8\n"
         ),
     );
     let out = tmp.path().join("out");
@@ -543,6 +561,11 @@ fn exploration_maps_both_rooms_on_slam_without_a_bump() {
     let s = summary(&out);
     assert!(s["controller_finished"].as_bool().unwrap(), "{s}");
     assert_eq!(s["robot"]["bump_events"], 0, "{s}");
+    let gates = s["gates"].as_array().unwrap();
+    assert!(
+        gates.len() == 2 && gates.iter().all(|g| g["passed"] == true),
+        "{gates:?}"
+    );
     let slam = &s["slam"];
     assert!(
         slam["online_max_position_error_m"].as_f64().unwrap() < 0.1,
@@ -586,12 +609,37 @@ fn mcl_recovers_from_a_kidnapping_between_rooms() {
              [localization]\nrate = 4.0\n[localization.mcl]\nmodel = \"likelihood_field\"\n\
              [[event]]\ntime = 10.0\nteleport = {{ x = 5.2, y = 2.0, yaw_deg = 90.0 }}\n\
              [controller]\ntype = \"navigate\"\npose_source = \"ground_truth\"\n\
-             goals = [[2.0, 3.0], [1.0, 1.0], [3.8, 3.5], [1.5, 2.0]]\n"
+             goals = [[2.0, 3.0], [1.0, 1.0], [3.8, 3.5], [1.5, 2.0]]\n\
+             [[gate]]\nmetric = \"localization.ate.median_m\"\nop = \"<\"\nvalue = 0.2\n\
+             [[gate]]\nmetric = \"localization.ate.max_m\"\nop = \"<\"\nvalue = 1.0\n"
         ),
     );
     let out = tmp.path().join("out");
-    run_for(&scenario, &out, None);
+    // The kidnapping breaks the second gate: the run writes everything, says which gate failed
+    // and by how much, and exits with status 3.
+    let o = futago(&[
+        "run",
+        scenario.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("gate failed: localization.ate.max_m = "),
+        "{err}"
+    );
+    assert!(err.contains("not < 1 (margin -"), "{err}");
+    assert!(!err.contains("median"), "{err}");
     let s = summary(&out);
+    assert_eq!(s["gates"][0]["passed"], true);
+    assert_eq!(s["gates"][1]["passed"], false);
     let l = &s["localization"];
     assert!(
         l["max_position_error_m"].as_f64().unwrap() > 2.0,

@@ -104,3 +104,184 @@ pub fn score_trajectories(dir: &std::path::Path) -> anyhow::Result<Metrics> {
     }
     Ok(m)
 }
+
+const STATS: [&str; 6] = ["rmse", "mean", "median", "std", "min", "max"];
+
+/// Every metric name a run produces, given what it runs (the odometry trajectory always;
+/// the localiser's and SLAM's with `[localization]` and `[slam]`; SLAM's map with `[slam]`).
+pub fn metric_names(localization: bool, slam: bool) -> Vec<String> {
+    let mut names = Vec::new();
+    for (name, on) in [
+        ("odometry", true),
+        ("localization", localization),
+        ("slam", slam),
+    ] {
+        if !on {
+            continue;
+        }
+        for s in STATS {
+            names.push(format!("{name}.ate.{s}_m"));
+            names.push(format!("{name}.rpe_1m.trans.{s}_m"));
+            names.push(format!("{name}.rpe_1m.rot.{s}_deg"));
+        }
+        names.push(format!("{name}.ate.p95_m"));
+    }
+    if slam {
+        for c in [1, 2] {
+            for k in ["precision", "recall", "f1"] {
+                names.push(format!("slam.map.{k}_{c}cell"));
+            }
+        }
+        for k in [
+            "mean_distance_to_truth_m",
+            "mean_distance_from_truth_m",
+            "free_iou",
+        ] {
+            names.push(format!("slam.map.{k}"));
+        }
+    }
+    names.sort();
+    names
+}
+
+/// A comparison of a gate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+pub enum Comparison {
+    #[serde(rename = "<")]
+    Less,
+    #[serde(rename = "<=")]
+    LessOrEqual,
+    #[serde(rename = ">")]
+    Greater,
+    #[serde(rename = ">=")]
+    GreaterOrEqual,
+}
+
+impl Comparison {
+    fn symbol(self) -> &'static str {
+        match self {
+            Comparison::Less => "<",
+            Comparison::LessOrEqual => "<=",
+            Comparison::Greater => ">",
+            Comparison::GreaterOrEqual => ">=",
+        }
+    }
+
+    fn holds(self, v: f64, t: f64) -> bool {
+        match self {
+            Comparison::Less => v < t,
+            Comparison::LessOrEqual => v <= t,
+            Comparison::Greater => v > t,
+            Comparison::GreaterOrEqual => v >= t,
+        }
+    }
+}
+
+/// `[[gate]]`: the run passes only if `metric op value` holds.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Gate {
+    pub metric: String,
+    pub op: Comparison,
+    pub value: f64,
+}
+
+/// A gate's outcome.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct GateResult {
+    pub metric: String,
+    pub op: Comparison,
+    pub threshold: f64,
+    /// The metric's value (`None`: the run did not produce it).
+    pub value: Option<f64>,
+    pub passed: bool,
+    /// What went wrong, for people: `slam.ate.rmse_m = 0.061, not < 0.05 (over by 0.011)`.
+    pub message: String,
+}
+
+/// Checks `gates` against a run's metrics.
+pub fn evaluate(gates: &[Gate], metrics: &Metrics) -> Vec<GateResult> {
+    gates
+        .iter()
+        .map(|g| {
+            let value = metrics.0.get(&g.metric).copied();
+            let passed = value.is_some_and(|v| g.op.holds(v, g.value));
+            let message = match value {
+                None => format!("{} was not produced by the run", g.metric),
+                Some(v) => format!(
+                    "{} = {v:.6}, {} {} {} (margin {:+.6})",
+                    g.metric,
+                    if passed { "" } else { "not" },
+                    g.op.symbol(),
+                    g.value,
+                    match g.op {
+                        Comparison::Less | Comparison::LessOrEqual => g.value - v,
+                        _ => v - g.value,
+                    }
+                )
+                .replace(",  ", ", "),
+            };
+            GateResult {
+                metric: g.metric.clone(),
+                op: g.op,
+                threshold: g.value,
+                value,
+                passed,
+                message,
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gates_pass_fail_and_say_by_how_much() {
+        let mut m = Metrics::default();
+        m.insert("slam.ate.rmse_m", 0.061);
+        m.insert("slam.map.f1_2cell", 0.95);
+        let gates = [
+            Gate {
+                metric: "slam.ate.rmse_m".into(),
+                op: Comparison::Less,
+                value: 0.05,
+            },
+            Gate {
+                metric: "slam.map.f1_2cell".into(),
+                op: Comparison::GreaterOrEqual,
+                value: 0.9,
+            },
+            Gate {
+                metric: "localization.ate.max_m".into(),
+                op: Comparison::Less,
+                value: 1.0,
+            },
+        ];
+        let r = evaluate(&gates, &m);
+        assert_eq!(
+            r.iter().map(|g| g.passed).collect::<Vec<_>>(),
+            [false, true, false]
+        );
+        assert_eq!(
+            r[0].message,
+            "slam.ate.rmse_m = 0.061000, not < 0.05 (margin -0.011000)"
+        );
+        assert_eq!(
+            r[1].message,
+            "slam.map.f1_2cell = 0.950000, >= 0.9 (margin +0.050000)"
+        );
+        assert!(r[2].message.contains("not produced"));
+    }
+
+    #[test]
+    fn metric_names_follow_what_runs() {
+        let base = metric_names(false, false);
+        assert!(base.contains(&"odometry.ate.rmse_m".to_string()));
+        assert!(!base.iter().any(|n| n.starts_with("slam")));
+        let all = metric_names(true, true);
+        assert!(all.contains(&"slam.map.f1_2cell".to_string()));
+        assert!(all.contains(&"localization.rpe_1m.rot.max_deg".to_string()));
+    }
+}
