@@ -10,6 +10,7 @@ mod replay;
 mod rgbd;
 mod run;
 mod scenario;
+mod suite;
 mod world_cmd;
 
 use anyhow::{Context, Result, bail};
@@ -68,6 +69,24 @@ enum Command {
         /// (seed 000's baseline).
         #[arg(long)]
         method: Option<String>,
+    },
+    /// Run many scenarios in parallel and collect their gates: writes each run into
+    /// OUT/<scenario file name>/, and OUT/suite.json and OUT/junit.xml (JUnit XML: a test case
+    /// per run and per gate). Exits 3 when a gate fails, 1 when a run fails.
+    Suite {
+        /// Scenario files and folders of them (their *.toml files).
+        #[arg(required = true)]
+        paths: Vec<PathBuf>,
+        /// Scenarios run at once [default: the number of CPU cores].
+        #[arg(long)]
+        jobs: Option<usize>,
+        /// Run only the K-th of N equal parts of the suite (1-based), for CI matrices, indexed
+        /// Kubernetes Jobs or Slurm arrays.
+        #[arg(long)]
+        shard: Option<suite::Shard>,
+        /// Output folder [default: out/suite].
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Inspect worlds and export their ground truth.
     World {
@@ -258,6 +277,51 @@ fn real_main() -> Result<()> {
                         r["message"].as_str().unwrap_or("")
                     );
                 }
+                std::process::exit(GATE_FAILED);
+            }
+        }
+        Command::Suite {
+            paths,
+            jobs,
+            shard,
+            out,
+        } => {
+            let jobs =
+                jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+            if jobs == 0 {
+                bail!("--jobs: expected at least 1");
+            }
+            let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
+            let s = suite::suite(&paths, jobs, shard, &out)?;
+            for r in s["results"].as_array().into_iter().flatten() {
+                let status = r["status"].as_str().unwrap_or("");
+                println!("{status:>6}  {}", r["scenario"].as_str().unwrap_or(""));
+                for g in r["gates"].as_array().into_iter().flatten() {
+                    if g["passed"] == false {
+                        println!(
+                            "        gate failed: {}",
+                            g["message"].as_str().unwrap_or("")
+                        );
+                    }
+                }
+                if let Some(e) = r["error"].as_str() {
+                    println!("        error: {e}");
+                }
+            }
+            println!(
+                "suite: {} scenarios, {} passed, {} failed, {} errors in {:.1} s ({:.1} per minute, {jobs} jobs); results in {}",
+                s["scenarios"],
+                s["passed"],
+                s["failed"],
+                s["errors"],
+                s["wall_time_s"].as_f64().unwrap_or(0.0),
+                s["scenarios_per_minute"].as_f64().unwrap_or(0.0),
+                out.display()
+            );
+            if s["errors"].as_u64().unwrap_or(0) > 0 {
+                std::process::exit(1);
+            }
+            if s["failed"].as_u64().unwrap_or(0) > 0 {
                 std::process::exit(GATE_FAILED);
             }
         }

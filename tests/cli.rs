@@ -657,6 +657,103 @@ fn mcl_recovers_from_a_kidnapping_between_rooms() {
     );
 }
 
+/// A suite: scenarios run in parallel; a broken gate fails the suite with exit status 3 and a
+/// JUnit failure naming it; shards split the files; an empty suite is refused.
+#[test]
+fn a_suite_runs_in_parallel_and_reports_gates_as_junit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("suite");
+    std::fs::create_dir(&dir).unwrap();
+    let world = root().join("worlds/lab.toml");
+    for (name, limit) in [("a", 1.0), ("b", -1.0), ("c", 1.0)] {
+        write(
+            &dir,
+            &format!("{name}.toml"),
+            &format!(
+                "name = \"{name}\"\nworld = {world:?}\nduration = 2.0\nstart = \"centre\"\n\
+                 [controller]\ntype = \"segments\"\nsegments = [{{ duration = 2.0, velocity = 0.2 }}]\n\
+                 [[gate]]\nmetric = \"odometry.ate.max_m\"\nop = \"<\"\nvalue = {limit}\n"
+            ),
+        );
+    }
+    let out = tmp.path().join("out");
+    let o = futago(&[
+        "suite",
+        dir.to_str().unwrap(),
+        "--jobs",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("gate failed: odometry.ate.max_m = "),
+        "{stdout}"
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("suite.json")).unwrap()).unwrap();
+    assert_eq!(
+        (s["passed"].as_u64(), s["failed"].as_u64()),
+        (Some(2), Some(1))
+    );
+    let x = std::fs::read_to_string(out.join("junit.xml")).unwrap();
+    assert!(x.contains("tests=\"6\" failures=\"1\" errors=\"0\""), "{x}");
+    assert!(
+        x.contains("<failure message=\"odometry.ate.max_m = "),
+        "{x}"
+    );
+    for name in ["a", "b", "c"] {
+        assert!(out.join(name).join("summary.json").exists());
+    }
+    // The same runs one at a time give the same metrics.
+    let out1 = tmp.path().join("out1");
+    futago(&[
+        "suite",
+        dir.to_str().unwrap(),
+        "--jobs",
+        "1",
+        "--out",
+        out1.to_str().unwrap(),
+    ]);
+    let s1: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out1.join("suite.json")).unwrap()).unwrap();
+    for (a, b) in s["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(s1["results"].as_array().unwrap())
+    {
+        assert_eq!(a["metrics"], b["metrics"]);
+    }
+    // Shard 2 of 2 is the second file only (b: its gate fails).
+    let out2 = tmp.path().join("out2");
+    let o = futago(&[
+        "suite",
+        dir.to_str().unwrap(),
+        "--shard",
+        "2/2",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(3));
+    let s2: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out2.join("suite.json")).unwrap()).unwrap();
+    assert_eq!(s2["scenarios"], 1);
+    assert_eq!(s2["results"][0]["scenario"], "b");
+    // An empty suite is an error before anything runs.
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let o = futago(&["suite", empty.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("the suite is empty"));
+}
+
 /// Points of a depth PNG's row `v`, in the world, from `camera.yaml` and the frame's pose.
 fn world_points(
     seq: &Path,
