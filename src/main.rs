@@ -88,6 +88,16 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Join the results of a suite's shards (their --out folders) into one suite.json and
+    /// junit.xml. Exits 3 when a gate failed, 1 when a run failed, as the suite would have.
+    Merge {
+        /// The shards' output folders.
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+        /// Output folder [default: out/suite].
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Inspect worlds and export their ground truth.
     World {
         #[command(subcommand)]
@@ -227,6 +237,45 @@ fn main() -> std::process::ExitCode {
     }
 }
 
+/// Prints a suite's results and exits with its status: 1 when a run failed, 3 when a gate did.
+fn report_suite(s: &serde_json::Value, out: &std::path::Path) {
+    for r in s["results"].as_array().into_iter().flatten() {
+        let status = r["status"].as_str().unwrap_or("");
+        println!("{status:>6}  {}", r["scenario"].as_str().unwrap_or(""));
+        for g in r["gates"].as_array().into_iter().flatten() {
+            if g["passed"] == false {
+                println!(
+                    "        gate failed: {}",
+                    g["message"].as_str().unwrap_or("")
+                );
+            }
+        }
+        if let Some(e) = r["error"].as_str() {
+            println!("        error: {e}");
+        }
+    }
+    println!(
+        "suite: {} scenarios, {} passed, {} failed, {} errors in {:.1} s ({:.1} per minute{}); results in {}",
+        s["scenarios"],
+        s["passed"],
+        s["failed"],
+        s["errors"],
+        s["wall_time_s"].as_f64().unwrap_or(0.0),
+        s["scenarios_per_minute"].as_f64().unwrap_or(0.0),
+        s["jobs"]
+            .as_u64()
+            .map(|j| format!(", {j} jobs"))
+            .unwrap_or_default(),
+        out.display()
+    );
+    if s["errors"].as_u64().unwrap_or(0) > 0 {
+        std::process::exit(1);
+    }
+    if s["failed"].as_u64().unwrap_or(0) > 0 {
+        std::process::exit(GATE_FAILED);
+    }
+}
+
 fn real_main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
@@ -293,37 +342,12 @@ fn real_main() -> Result<()> {
             }
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
             let s = suite::suite(&paths, jobs, shard, &out)?;
-            for r in s["results"].as_array().into_iter().flatten() {
-                let status = r["status"].as_str().unwrap_or("");
-                println!("{status:>6}  {}", r["scenario"].as_str().unwrap_or(""));
-                for g in r["gates"].as_array().into_iter().flatten() {
-                    if g["passed"] == false {
-                        println!(
-                            "        gate failed: {}",
-                            g["message"].as_str().unwrap_or("")
-                        );
-                    }
-                }
-                if let Some(e) = r["error"].as_str() {
-                    println!("        error: {e}");
-                }
-            }
-            println!(
-                "suite: {} scenarios, {} passed, {} failed, {} errors in {:.1} s ({:.1} per minute, {jobs} jobs); results in {}",
-                s["scenarios"],
-                s["passed"],
-                s["failed"],
-                s["errors"],
-                s["wall_time_s"].as_f64().unwrap_or(0.0),
-                s["scenarios_per_minute"].as_f64().unwrap_or(0.0),
-                out.display()
-            );
-            if s["errors"].as_u64().unwrap_or(0) > 0 {
-                std::process::exit(1);
-            }
-            if s["failed"].as_u64().unwrap_or(0) > 0 {
-                std::process::exit(GATE_FAILED);
-            }
+            report_suite(&s, &out);
+        }
+        Command::Merge { shards, out } => {
+            let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
+            let s = suite::merge(&shards, &out)?;
+            report_suite(&s, &out);
         }
         Command::Replay {
             log,

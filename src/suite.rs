@@ -157,16 +157,7 @@ pub fn suite(paths: &[PathBuf], jobs: usize, shard: Option<Shard>, out: &Path) -
         .map(|e| e.expect("every scenario ran"))
         .collect();
     let summary = summarise(&entries, shard, jobs, wall);
-    // Each file appears whole: written beside its place, then renamed.
-    for (name, text) in [
-        ("suite.json", serde_json::to_string_pretty(&summary)? + "\n"),
-        ("junit.xml", junit(&entries, wall)),
-    ] {
-        let tmp = out.join(format!(".{name}.partial"));
-        std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-        std::fs::rename(&tmp, out.join(name))
-            .with_context(|| format!("writing {}", out.join(name).display()))?;
-    }
+    write_reports(out, &summary)?;
     Ok(summary)
 }
 
@@ -178,7 +169,7 @@ fn gates(e: &Entry) -> Vec<Value> {
 }
 
 fn summarise(entries: &[Entry], shard: Option<Shard>, jobs: usize, wall: f64) -> Value {
-    let scenarios: Vec<Value> = entries
+    let results: Vec<Value> = entries
         .iter()
         .map(|e| {
             let g = gates(e);
@@ -199,18 +190,12 @@ fn summarise(entries: &[Entry], shard: Option<Shard>, jobs: usize, wall: f64) ->
             })
         })
         .collect();
-    let count = |st: &str| scenarios.iter().filter(|s| s["status"] == st).count();
-    json!({
-        "scenarios": scenarios.len(),
-        "passed": count("passed"),
-        "failed": count("failed"),
-        "errors": count("error"),
-        "shard": shard.map(|s| format!("{}/{}", s.k, s.n)),
-        "jobs": jobs,
-        "wall_time_s": wall,
-        "scenarios_per_minute": if wall > 0.0 { entries.len() as f64 * 60.0 / wall } else { 0.0 },
-        "results": scenarios,
-    })
+    totals(
+        results,
+        shard.map(|s| format!("{}/{}", s.k, s.n)),
+        Some(jobs),
+        wall,
+    )
 }
 
 /// XML text with `& < > " '` escaped.
@@ -222,36 +207,33 @@ fn xml(s: &str) -> String {
         .replace('\'', "&apos;")
 }
 
-/// JUnit XML: a test suite per scenario, with a `run` case (an error when the run failed) and
-/// a case per gate (a failure when it did not hold).
-fn junit(entries: &[Entry], wall: f64) -> String {
+/// JUnit XML from a suite's results: a test suite per scenario, with a `run` case (an error
+/// when the run failed) and a case per gate (a failure when it did not hold).
+fn junit(results: &[Value], wall: f64) -> String {
     let mut cases_total = 0;
     let mut failures_total = 0;
     let mut errors_total = 0;
     let mut body = String::new();
-    for e in entries {
-        let g = gates(e);
-        let time = e
-            .result
-            .as_ref()
-            .ok()
-            .and_then(|s| s["performance"]["wall_time_s"].as_f64())
-            .unwrap_or(0.0);
+    for r in results {
+        let name = r["scenario"].as_str().unwrap_or("");
+        let g = r["gates"].as_array().cloned().unwrap_or_default();
+        let time = r["wall_time_s"].as_f64().unwrap_or(0.0);
         let failures = g.iter().filter(|r| r["passed"] == false).count();
-        let errors = e.result.is_err() as usize;
+        let error = r["error"].as_str();
+        let errors = error.is_some() as usize;
         cases_total += 1 + g.len();
         failures_total += failures;
         errors_total += errors;
         body += &format!(
             "  <testsuite name=\"{}\" tests=\"{}\" failures=\"{failures}\" errors=\"{errors}\" time=\"{time:.3}\">\n",
-            xml(&e.name),
+            xml(name),
             1 + g.len()
         );
         body += &format!(
             "    <testcase classname=\"{0}\" name=\"run\" time=\"{time:.3}\">",
-            xml(&e.name)
+            xml(name)
         );
-        if let Err(msg) = &e.result {
+        if let Some(msg) = error {
             body += &format!(
                 "\n      <error message=\"{}\">{}</error>\n    ",
                 xml(msg.lines().next().unwrap_or("")),
@@ -260,7 +242,7 @@ fn junit(entries: &[Entry], wall: f64) -> String {
         }
         body += "</testcase>\n";
         for r in &g {
-            let name = format!(
+            let case = format!(
                 "{} {} {}",
                 r["metric"].as_str().unwrap_or(""),
                 r["op"].as_str().unwrap_or(""),
@@ -269,8 +251,8 @@ fn junit(entries: &[Entry], wall: f64) -> String {
             let msg = r["message"].as_str().unwrap_or("");
             body += &format!(
                 "    <testcase classname=\"{}.gates\" name=\"{}\" time=\"0\">",
-                xml(&e.name),
-                xml(&name)
+                xml(name),
+                xml(&case)
             );
             if r["passed"] == false {
                 body += &format!(
@@ -285,6 +267,78 @@ fn junit(entries: &[Entry], wall: f64) -> String {
     format!(
         "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<testsuites name=\"futago\" tests=\"{cases_total}\" failures=\"{failures_total}\" errors=\"{errors_total}\" time=\"{wall:.3}\">\n{body}</testsuites>\n"
     )
+}
+
+/// Writes `suite.json` and `junit.xml` into `out`, each whole (written beside, then renamed).
+fn write_reports(out: &Path, summary: &Value) -> Result<()> {
+    let results = summary["results"].as_array().cloned().unwrap_or_default();
+    let wall = summary["wall_time_s"].as_f64().unwrap_or(0.0);
+    for (name, text) in [
+        ("suite.json", serde_json::to_string_pretty(summary)? + "\n"),
+        ("junit.xml", junit(&results, wall)),
+    ] {
+        let tmp = out.join(format!(".{name}.partial"));
+        std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+        std::fs::rename(&tmp, out.join(name))
+            .with_context(|| format!("writing {}", out.join(name).display()))?;
+    }
+    Ok(())
+}
+
+/// Counts and throughput over a suite's results.
+fn totals(results: Vec<Value>, shard: Option<String>, jobs: Option<usize>, wall: f64) -> Value {
+    let count = |st: &str| results.iter().filter(|s| s["status"] == st).count();
+    json!({
+        "scenarios": results.len(),
+        "passed": count("passed"),
+        "failed": count("failed"),
+        "errors": count("error"),
+        "shard": shard,
+        "jobs": jobs,
+        "wall_time_s": wall,
+        "scenarios_per_minute": if wall > 0.0 { results.len() as f64 * 60.0 / wall } else { 0.0 },
+        "results": results,
+    })
+}
+
+/// `futago merge`: joins the `suite.json` of several shards into one suite, with its JUnit
+/// file; the wall time is the longest shard's (they ran side by side).
+pub fn merge(shards: &[PathBuf], out: &Path) -> Result<Value> {
+    if shards.is_empty() {
+        bail!("nothing to merge: name the output folders of the shards");
+    }
+    let mut results = Vec::new();
+    let mut wall = 0.0f64;
+    let mut seen = std::collections::BTreeSet::new();
+    for d in shards {
+        let p = d.join("suite.json");
+        let text =
+            std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+        let v: Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a futago suite.json", p.display()))?;
+        let Some(rs) = v["results"].as_array() else {
+            bail!(
+                "{}: key `results`: expected a list of scenario results",
+                p.display()
+            );
+        };
+        for r in rs {
+            let name = r["scenario"].as_str().unwrap_or("").to_string();
+            if !seen.insert(name.clone()) {
+                bail!(
+                    "{}: scenario `{name}` is in more than one shard",
+                    p.display()
+                );
+            }
+            results.push(r.clone());
+        }
+        wall = wall.max(v["wall_time_s"].as_f64().unwrap_or(0.0));
+    }
+    results.sort_by(|a, b| a["scenario"].as_str().cmp(&b["scenario"].as_str()));
+    let summary = totals(results, None, None, wall);
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    write_reports(out, &summary)?;
+    Ok(summary)
 }
 
 #[cfg(test)]
@@ -321,7 +375,8 @@ mod tests {
                 result: Err("GPU <lost> & gone".into()),
             },
         ];
-        let x = junit(&entries, 3.0);
+        let s = summarise(&entries, None, 2, 3.0);
+        let x = junit(s["results"].as_array().unwrap(), 3.0);
         assert!(x.contains("<testsuites name=\"futago\" tests=\"4\" failures=\"1\" errors=\"1\""));
         assert!(x.contains("name=\"slam.ate.rmse_m &lt; 0.05\""));
         assert!(x.contains("<failure message=\"slam.ate.rmse_m = 0.061000, not &lt; 0.05"));

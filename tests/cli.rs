@@ -488,7 +488,23 @@ fn every_shipped_scenario_loads_and_runs() {
         }
         n += 1;
         let out = tmp.path().join(p.file_stem().unwrap());
-        run_for(&p, &out, Some("2"));
+        // Gates judge the whole run; two seconds of it may fail them (status 3), but the run
+        // itself must succeed and write everything.
+        let o = futago(&[
+            "run",
+            p.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+            "--duration",
+            "2",
+        ]);
+        assert!(
+            matches!(o.status.code(), Some(0 | 3)),
+            "{}: {}",
+            p.display(),
+            String::from_utf8_lossy(&o.stderr)
+        );
         let s = summary(&out);
         assert!(
             (s["sim_time_s"].as_f64().unwrap() - 2.0).abs() < 1e-9
@@ -746,6 +762,59 @@ fn a_suite_runs_in_parallel_and_reports_gates_as_junit() {
         serde_json::from_str(&std::fs::read_to_string(out2.join("suite.json")).unwrap()).unwrap();
     assert_eq!(s2["scenarios"], 1);
     assert_eq!(s2["results"][0]["scenario"], "b");
+    // Shard 1 of 2 (a and c) merged with shard 2 gives the whole suite back.
+    let out3 = tmp.path().join("out3");
+    futago(&[
+        "suite",
+        dir.to_str().unwrap(),
+        "--shard",
+        "1/2",
+        "--out",
+        out3.to_str().unwrap(),
+    ]);
+    let merged = tmp.path().join("merged");
+    let o = futago(&[
+        "merge",
+        out3.to_str().unwrap(),
+        out2.to_str().unwrap(),
+        "--out",
+        merged.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(3));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(merged.join("suite.json")).unwrap()).unwrap();
+    assert_eq!(
+        (m["passed"].as_u64(), m["failed"].as_u64()),
+        (Some(2), Some(1))
+    );
+    for (a, b) in m["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(s["results"].as_array().unwrap())
+    {
+        assert_eq!(
+            (&a["scenario"], &a["metrics"]),
+            (&b["scenario"], &b["metrics"])
+        );
+    }
+    assert_eq!(
+        std::fs::read_to_string(merged.join("junit.xml"))
+            .unwrap()
+            .matches("<testcase ")
+            .count(),
+        6
+    );
+    // Merging a shard twice is refused.
+    let o = futago(&[
+        "merge",
+        out2.to_str().unwrap(),
+        out2.to_str().unwrap(),
+        "--out",
+        merged.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("more than one shard"));
     // An empty suite is an error before anything runs.
     let empty = tmp.path().join("empty");
     std::fs::create_dir(&empty).unwrap();
