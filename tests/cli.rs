@@ -40,8 +40,12 @@ fn run_for(scenario: &Path, out: &Path, duration: Option<&str>) {
     ok(&futago(&args));
 }
 
+fn json_file(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
 fn summary(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+    json_file(&dir.join("summary.json"))
 }
 
 #[test]
@@ -712,8 +716,7 @@ fn a_suite_runs_in_parallel_and_reports_gates_as_junit() {
         stdout.contains("gate failed: odometry.ate.max_m = "),
         "{stdout}"
     );
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("suite.json")).unwrap()).unwrap();
+    let s: serde_json::Value = json_file(&out.join("suite.json"));
     assert_eq!(
         (s["passed"].as_u64(), s["failed"].as_u64()),
         (Some(2), Some(1))
@@ -737,8 +740,7 @@ fn a_suite_runs_in_parallel_and_reports_gates_as_junit() {
         "--out",
         out1.to_str().unwrap(),
     ]);
-    let s1: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out1.join("suite.json")).unwrap()).unwrap();
+    let s1: serde_json::Value = json_file(&out1.join("suite.json"));
     for (a, b) in s["results"]
         .as_array()
         .unwrap()
@@ -758,8 +760,7 @@ fn a_suite_runs_in_parallel_and_reports_gates_as_junit() {
         out2.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(3));
-    let s2: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out2.join("suite.json")).unwrap()).unwrap();
+    let s2: serde_json::Value = json_file(&out2.join("suite.json"));
     assert_eq!(s2["scenarios"], 1);
     assert_eq!(s2["results"][0]["scenario"], "b");
     // Shard 1 of 2 (a and c) merged with shard 2 gives the whole suite back.
@@ -781,8 +782,7 @@ fn a_suite_runs_in_parallel_and_reports_gates_as_junit() {
         merged.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(3));
-    let m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(merged.join("suite.json")).unwrap()).unwrap();
+    let m: serde_json::Value = json_file(&merged.join("suite.json"));
     assert_eq!(
         (m["passed"].as_u64(), m["failed"].as_u64()),
         (Some(2), Some(1))
