@@ -641,12 +641,24 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 "final_position_error_m": l.errors.last().map(|e| e.1),
                 "mean_heading_error_deg": l.errors.iter().map(|e| e.2).sum::<f64>() / n * 180.0 / std::f64::consts::PI,
             });
+            let end = sim.time().secs();
+            // Not recovered by the end counts as the rest of the run (a lower bound).
+            let worst = |ts: &[f64]| {
+                ts.iter()
+                    .zip(l.recovery(ts))
+                    .map(|(t, r)| r.unwrap_or(end - t))
+                    .fold(0.0, f64::max)
+            };
             if !events.is_empty() {
                 v["kidnappings"] = json!(events.iter().zip(l.recovery(&events)).map(|(t, r)| json!({
                     "time_s": t,
                     "recovered_after_s": r,
                     "recovered_when": format!("error < {RECOVERED_M} m for {RECOVERED_HOLD_S} s"),
                 })).collect::<Vec<_>>());
+                v["recovery_s"] = json!(worst(&events));
+            }
+            if spec.localization.as_ref().is_some_and(|l| l.global) {
+                v["convergence_s"] = json!(worst(&[0.0]));
             }
             v
         }),
@@ -907,6 +919,11 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
         }
         let mut sum = summary(s, &outcome, Value::Object(files));
         let mut metrics = crate::ground_truth::score_trajectories(tmp)?;
+        for k in ["recovery_s", "convergence_s"] {
+            if let Some(v) = outcome.localization.as_ref().and_then(|l| l[k].as_f64()) {
+                metrics.insert(format!("localization.{k}"), v);
+            }
+        }
         if let Some((_, map)) = &outcome.slam_result {
             let truth = world_map(s, map.resolution);
             let m = crate::ground_truth::map::score(map, &truth, [s.start.x, s.start.y])

@@ -358,8 +358,12 @@ impl Scenario {
                 ));
             }
         }
-        let names =
-            crate::ground_truth::metric_names(spec.localization.is_some(), spec.slam.is_some());
+        let names = crate::ground_truth::metric_names(crate::ground_truth::Produces {
+            localization: spec.localization.is_some(),
+            global_localization: spec.localization.as_ref().is_some_and(|l| l.global),
+            kidnappings: !spec.event.is_empty(),
+            slam: spec.slam.is_some(),
+        });
         for (i, g) in spec.gate.iter().enumerate() {
             if !names.contains(&g.metric) {
                 let family = g.metric.split('.').next().unwrap_or("");

@@ -107,10 +107,30 @@ pub fn score_trajectories(dir: &std::path::Path) -> anyhow::Result<Metrics> {
 
 const STATS: [&str; 6] = ["rmse", "mean", "median", "std", "min", "max"];
 
-/// Every metric name a run produces, given what it runs (the odometry trajectory always;
-/// the localiser's and SLAM's with `[localization]` and `[slam]`; SLAM's map with `[slam]`).
-pub fn metric_names(localization: bool, slam: bool) -> Vec<String> {
+/// What a scenario runs, as far as its metrics go.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Produces {
+    pub localization: bool,
+    /// The localiser starts knowing nothing (`localization.convergence_s`).
+    pub global_localization: bool,
+    /// Kidnapping events (`localization.recovery_s`).
+    pub kidnappings: bool,
+    pub slam: bool,
+}
+
+/// Every metric name a run produces: the odometry trajectory's always; the localiser's and
+/// SLAM's with `[localization]` and `[slam]`; SLAM's map with `[slam]`; the localiser's time to
+/// converge from a global start and worst time to recover from a kidnapping (not recovered by
+/// the end counts as the rest of the run).
+pub fn metric_names(p: Produces) -> Vec<String> {
+    let (localization, slam) = (p.localization, p.slam);
     let mut names = Vec::new();
+    if localization && p.kidnappings {
+        names.push("localization.recovery_s".to_string());
+    }
+    if localization && p.global_localization {
+        names.push("localization.convergence_s".to_string());
+    }
     for (name, on) in [
         ("odometry", true),
         ("localization", localization),
@@ -277,10 +297,17 @@ mod tests {
 
     #[test]
     fn metric_names_follow_what_runs() {
-        let base = metric_names(false, false);
+        let base = metric_names(Produces::default());
         assert!(base.contains(&"odometry.ate.rmse_m".to_string()));
         assert!(!base.iter().any(|n| n.starts_with("slam")));
-        let all = metric_names(true, true);
+        let all = metric_names(Produces {
+            localization: true,
+            global_localization: false,
+            kidnappings: true,
+            slam: true,
+        });
+        assert!(all.contains(&"localization.recovery_s".to_string()));
+        assert!(!all.contains(&"localization.convergence_s".to_string()));
         assert!(all.contains(&"slam.map.f1_2cell".to_string()));
         assert!(all.contains(&"localization.rpe_1m.rot.max_deg".to_string()));
     }
