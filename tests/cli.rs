@@ -668,7 +668,10 @@ fn mcl_recovers_from_a_kidnapping_between_rooms() {
     let k = &l["kidnappings"][0];
     assert_eq!(k["time_s"], 10.0);
     let after = k["recovered_after_s"].as_f64().expect("recovered");
-    assert_eq!(s["metrics"]["localization.recovery_s"].as_f64(), Some(after));
+    assert_eq!(
+        s["metrics"]["localization.recovery_s"].as_f64(),
+        Some(after)
+    );
     assert!(after < 30.0, "{l}");
     assert!(l["final_position_error_m"].as_f64().unwrap() < 0.1, "{l}");
     assert_eq!(s["robot"]["bump_events"], 0, "{s}");
