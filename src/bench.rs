@@ -282,7 +282,7 @@ pub fn bench_mcl(world: &World, start: Pose2, particles: usize, updates: usize) 
             break s;
         }
     };
-    let mount = Pose2::new(lidar.xyz[0], lidar.xyz[1], lidar.rpy_deg[2].to_radians());
+    let mount = lidar.planar_mount();
     let mut out = serde_json::Map::new();
     out.insert("world".into(), json!(world.name));
     out.insert("map_cells".into(), json!(grid.width * grid.height));

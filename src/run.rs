@@ -174,7 +174,7 @@ impl Localizer {
             mcl,
             period: Duration::from_secs(1.0 / spec.rate),
             next: Time::ZERO,
-            mount: Pose2::new(cfg.xyz[0], cfg.xyz[1], cfg.rpy_deg[2].to_radians()),
+            mount: cfg.planar_mount(),
             estimate: None,
             updates: 0,
             errors: Vec::new(),
@@ -296,7 +296,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         let (cfg, _) = &s.lidars[0];
         SlamRunner {
             slam: Slam::new(c, s.start),
-            mount: Pose2::new(cfg.xyz[0], cfg.xyz[1], cfg.rpy_deg[2].to_radians()),
+            mount: cfg.planar_mount(),
             at: s.start,
             errors: Vec::new(),
             last_map: None,
@@ -496,9 +496,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 }
             }
             if i == 0 && matches!(driver, Driver::Navigator { .. }) {
-                let (cfg, _) = &s.lidars[0];
-                let mount = Pose2::new(cfg.xyz[0], cfg.xyz[1], cfg.rpy_deg[2].to_radians());
-                last_scan = Some((scan.clone(), mount));
+                last_scan = Some((scan.clone(), s.lidars[0].0.planar_mount()));
             }
             if i == 0
                 && let Some(l) = localizer.as_mut()
@@ -524,11 +522,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
             if let Some(c) = sinks.as_deref_mut().and_then(|k| k.carmen.as_mut()) {
                 let robot = pose_at(&history, scan.stamp);
                 let cfg = &s.lidars[i].0;
-                let laser = robot.compose(&Pose2::new(
-                    cfg.xyz[0],
-                    cfg.xyz[1],
-                    cfg.rpy_deg[2].to_radians(),
-                ));
+                let laser = robot.compose(&cfg.planar_mount());
                 let (l, r) = sim.wheel_speeds();
                 line.clear();
                 carmen::robotlaser(

@@ -158,6 +158,12 @@ fn yes() -> bool {
 }
 
 impl LidarConfig {
+    /// The mount seen from above: x, y and yaw on the robot, as 2D scan matching and the
+    /// CARMEN log take it.
+    pub fn planar_mount(&self) -> futago_msgs::Pose2 {
+        futago_msgs::Pose2::new(self.xyz[0], self.xyz[1], self.rpy_deg[2].to_radians())
+    }
+
     /// A config of a preset with default mounting.
     pub fn preset(preset: LidarPreset) -> LidarConfig {
         LidarConfig {
