@@ -24,6 +24,7 @@ pub fn bench(s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> 
         seed: None,
         duration,
         progress: false,
+        report: false,
     };
     let full = run_in_memory(s, &opts)?;
     let mut bare = s.clone();

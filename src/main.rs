@@ -5,8 +5,10 @@ const GATE_FAILED: i32 = 3;
 
 mod bench;
 mod ground_truth;
+mod overlay;
 mod relations;
 mod replay;
+mod report;
 mod rgbd;
 mod run;
 mod scenario;
@@ -45,6 +47,8 @@ enum Command {
         /// Simulated seconds (overrides the scenario's duration).
         #[arg(long)]
         duration: Option<f64>,
+        #[command(flatten)]
+        overlays: OverlayArgs,
         /// No progress bar.
         #[arg(long, short)]
         quiet: bool,
@@ -87,6 +91,8 @@ enum Command {
         /// Output folder [default: out/suite].
         #[arg(long)]
         out: Option<PathBuf>,
+        #[command(flatten)]
+        overlays: OverlayArgs,
     },
     /// Join the results of a suite's shards (their --out folders) into one suite.json and
     /// junit.xml. Exits 3 when a gate failed, 1 when a run failed, as the suite would have.
@@ -108,6 +114,33 @@ enum Command {
         #[command(subcommand)]
         command: BenchCommand,
     },
+}
+
+/// Changes laid over scenarios before they are checked (see `futago run --help`).
+#[derive(clap::Args)]
+struct OverlayArgs {
+    /// Overlay file laid over the scenario: a TOML table of the scenario keys it changes (as
+    /// `futago tune` writes). Tables merge; other values replace. Repeatable; later ones win.
+    #[arg(long = "overlay", value_name = "FILE")]
+    files: Vec<PathBuf>,
+    /// One scenario key changed: PATH=VALUE, VALUE in TOML (e.g.
+    /// localization.mcl.particles=300, slam.method=icp). Repeatable; applied after --overlay.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    sets: Vec<String>,
+}
+
+impl OverlayArgs {
+    /// The overlays, read and checked: files first, then assignments, in the order given.
+    fn load(&self) -> Result<Vec<overlay::Overlay>> {
+        let mut out = Vec::new();
+        for f in &self.files {
+            out.push(overlay::Overlay::load(f)?);
+        }
+        for s in &self.sets {
+            out.push(overlay::Overlay::parse_set(s)?);
+        }
+        Ok(out)
+    }
 }
 
 #[derive(Subcommand)]
@@ -254,6 +287,25 @@ fn report_suite(s: &serde_json::Value, out: &std::path::Path) {
             println!("        error: {e}");
         }
     }
+    for (stem, sw) in s["sweeps"].as_object().into_iter().flatten() {
+        let seeds = sw["seeds"].as_array().map_or(0, |a| a.len());
+        let mut line = format!("sweep  {stem}: {} of {seeds} seeds passed", sw["passed"]);
+        let gated: std::collections::BTreeSet<&str> = s["results"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter(|r| r["sweep"].as_str() == Some(stem))
+            .flat_map(|r| r["gates"].as_array().into_iter().flatten())
+            .filter_map(|g| g["metric"].as_str())
+            .collect();
+        for m in gated {
+            let v = &sw["metrics"][m];
+            if let (Some(mean), Some(std)) = (v["mean"].as_f64(), v["std"].as_f64()) {
+                line += &format!("; {m} {mean:.4} ± {std:.4}");
+            }
+        }
+        println!("{line}");
+    }
     println!(
         "suite: {} scenarios, {} passed, {} failed, {} errors in {:.1} s ({:.1} per minute{}); results in {}",
         s["scenarios"],
@@ -284,6 +336,7 @@ fn real_main() -> Result<()> {
             out,
             seed,
             duration,
+            overlays,
             quiet,
         } => {
             if let Some(d) = duration
@@ -291,12 +344,13 @@ fn real_main() -> Result<()> {
             {
                 bail!("--duration: expected a positive number of seconds, found {d}");
             }
-            let s = scenario::Scenario::load(&scenario)?;
+            let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
             let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
             let opts = run::RunOptions {
                 seed,
                 duration,
                 progress: !quiet,
+                report: true,
             };
             let (summary, o) = run::run(&s, &opts, &out)?;
             let rtf = summary["performance"]["real_time_factor"]
@@ -334,6 +388,7 @@ fn real_main() -> Result<()> {
             jobs,
             shard,
             out,
+            overlays,
         } => {
             let jobs =
                 jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
@@ -341,7 +396,7 @@ fn real_main() -> Result<()> {
                 bail!("--jobs: expected at least 1");
             }
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
-            let s = suite::suite(&paths, jobs, shard, &out)?;
+            let s = suite::suite(&paths, &overlays.load()?, jobs, shard, &out)?;
             report_suite(&s, &out);
         }
         Command::Merge { shards, out } => {

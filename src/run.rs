@@ -46,6 +46,8 @@ pub struct RunOptions {
     pub duration: Option<f64>,
     /// Show a progress bar (on a terminal).
     pub progress: bool,
+    /// Write `report.html` (parameter searches skip it).
+    pub report: bool,
 }
 
 /// Text sinks of a run (benchmarks run with none).
@@ -745,6 +747,30 @@ fn sha256_tree(dir: &Path) -> Result<String> {
     Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
 }
 
+/// The run's HTML report (see [`crate::report`]).
+pub const REPORT_FILE: &str = "report.html";
+
+/// Cell size of the ground-truth map drawn in reports of runs without SLAM, m.
+const REPORT_MAP_RESOLUTION: f64 = 0.05;
+
+/// The scenario as run, written beside its results: the file's table with any overlays laid over
+/// it, headed by where each part came from.
+pub const SCENARIO_FILE: &str = "scenario.toml";
+
+/// The text of [`SCENARIO_FILE`].
+pub fn scenario_text(s: &Scenario) -> String {
+    let mut text = String::from("# The scenario as run");
+    if s.overlays.is_empty() {
+        text += ".\n";
+    } else {
+        text += ", with overlays laid over the file:\n";
+        for o in &s.overlays {
+            text += &format!("#   {}: {}\n", o.origin.display(), o.leaves().join(", "));
+        }
+    }
+    text + &toml::to_string(&s.config).unwrap_or_default()
+}
+
 /// The deterministic part of a run's summary (everything but `performance`).
 pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
     let err = o.final_truth.distance(&o.final_odometry);
@@ -754,6 +780,7 @@ pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
         "description": s.spec.description,
         "world": s.world.name,
         "seed": o.seed,
+        "overlays": s.overlays.iter().map(|o| o.origin.display().to_string()).collect::<Vec<_>>(),
         "sim_time_s": o.sim_time,
         "physics_rate_hz": s.spec.physics.rate,
         "steps": o.steps,
@@ -918,8 +945,14 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
                 metrics.insert(format!("localization.{k}"), v);
             }
         }
+        let truth = world_map(
+            s,
+            outcome
+                .slam_result
+                .as_ref()
+                .map_or(REPORT_MAP_RESOLUTION, |(_, m)| m.resolution),
+        );
         if let Some((_, map)) = &outcome.slam_result {
-            let truth = world_map(s, map.resolution);
             let m = crate::ground_truth::map::score(map, &truth, [s.start.x, s.start.y])
                 .map_err(|e| anyhow::anyhow!("scoring the SLAM map: {e}"))?;
             metrics.insert_map("slam.map", &m);
@@ -933,6 +966,20 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
         });
         let text = serde_json::to_string_pretty(&sum)? + "\n";
         std::fs::write(tmp.join("summary.json"), text).context("writing summary.json")?;
+        let config = scenario_text(s);
+        std::fs::write(tmp.join(SCENARIO_FILE), &config)
+            .with_context(|| format!("writing {SCENARIO_FILE}"))?;
+        if opts.report {
+            let html = crate::report::run_report(
+                tmp,
+                &sum,
+                &config,
+                &truth,
+                outcome.slam_result.as_ref().map(|(_, m)| m),
+            );
+            std::fs::write(tmp.join(REPORT_FILE), html)
+                .with_context(|| format!("writing {REPORT_FILE}"))?;
+        }
         Ok((sum, outcome))
     })
 }

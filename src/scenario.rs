@@ -5,6 +5,7 @@
 //! [`CreateConfig`], `[[lidar]]` a [`LidarConfig`], `[controller]` a scripted
 //! [`ControllerConfig`]), so any parameter is reachable by its dotted path.
 
+use crate::overlay::{Overlay, blame};
 use futago_msgs::Pose2;
 use futago_robot::mcl::MclConfig;
 use futago_robot::navigation::NavigationConfig;
@@ -31,6 +32,10 @@ pub struct ScenarioSpec {
     pub duration: f64,
     #[serde(default)]
     pub seed: u64,
+    /// Seeds that `futago suite` sweeps this scenario over (one run each, with the mean and
+    /// spread of every metric); empty runs `seed` once.
+    #[serde(default)]
+    pub seeds: Vec<u64>,
     /// Where the robot starts: a spawn name of the world or `{ x, y, yaw_deg }`.
     pub start: StartSpec,
     #[serde(default)]
@@ -164,6 +169,10 @@ pub struct Scenario {
     pub lidars: Vec<(LidarConfig, LidarSpec)>,
     /// Resolved camera models, in `spec.camera` order.
     pub cameras: Vec<KinectSpec>,
+    /// The scenario as run: the file's table with its overlays laid over it.
+    pub config: toml::Table,
+    /// The overlays laid over the file, in order.
+    pub overlays: Vec<Overlay>,
 }
 
 /// Types the `[controller]` table by its `type` key, naming `controller.KEY` in errors.
@@ -233,13 +242,55 @@ pub const MAX_LIDARS: usize = 2;
 impl Scenario {
     /// Loads and checks a scenario and the world it names. Nothing runs before this succeeds.
     pub fn load(path: &Path) -> Result<Scenario, SpecError> {
-        let spec: ScenarioSpec = load_toml(path)?;
-        Scenario::from_spec(path, spec)
+        Scenario::load_with(path, &[])
+    }
+
+    /// Loads a scenario with overlays laid over it (see [`crate::overlay`]). Errors at keys an
+    /// overlay set name the overlay.
+    pub fn load_with(path: &Path, overlays: &[Overlay]) -> Result<Scenario, SpecError> {
+        let mut config: toml::Table = load_toml(path)?;
+        for o in overlays {
+            o.apply(&mut config);
+        }
+        let spec: ScenarioSpec = if overlays.is_empty() {
+            // Parsed again from the text so that errors carry line numbers.
+            load_toml(path)?
+        } else {
+            serde_path_to_error::deserialize(toml::Value::Table(config.clone())).map_err(|e| {
+                let key = e.path().to_string();
+                let err = SpecError::new(
+                    path,
+                    if key == "." { String::new() } else { key },
+                    e.into_inner().message().to_string(),
+                );
+                blame(err, overlays)
+            })?
+        };
+        let mut s = Scenario::from_spec(path, spec).map_err(|e| blame(e, overlays))?;
+        s.config = config;
+        s.overlays = overlays.to_vec();
+        Ok(s)
     }
 
     /// Checks a parsed scenario and compiles its world.
     pub fn from_spec(path: &Path, spec: ScenarioSpec) -> Result<Scenario, SpecError> {
         check_name(path, "name", &spec.name)?;
+        if spec.seeds.len() > 1000 {
+            return Err(SpecError::new(
+                path,
+                "seeds",
+                format!("expected at most 1000 seeds, found {}", spec.seeds.len()),
+            ));
+        }
+        for (i, s) in spec.seeds.iter().enumerate() {
+            if spec.seeds[..i].contains(s) {
+                return Err(SpecError::new(
+                    path,
+                    format!("seeds[{i}]"),
+                    format!("seed {s} is listed twice; a sweep runs each seed once"),
+                ));
+            }
+        }
         check_range(path, "duration", spec.duration, 1e-3, 1e7, "s")?;
         spec.physics.validate(path, "physics")?;
         spec.robot.validate(path, "robot")?;
@@ -463,6 +514,8 @@ impl Scenario {
             start,
             lidars,
             cameras,
+            config: toml::Table::new(),
+            overlays: Vec::new(),
         })
     }
 }

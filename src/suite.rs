@@ -7,6 +7,8 @@
 //! parallel jobs changes the wall time only, never the results. `--shard K/N` keeps every N-th
 //! scenario from the K-th (in sorted order), so that N machines split a suite between them.
 
+use crate::overlay::Overlay;
+use crate::report::escape;
 use crate::run::{self, RunOptions};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
@@ -69,32 +71,51 @@ pub fn collect(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// One scenario's outcome in a suite.
+/// One scenario run's outcome in a suite.
 struct Entry {
     file: PathBuf,
+    /// The run's name and folder under the suite's: the scenario file's stem, then
+    /// `/seed-N` for the runs of a seed sweep.
     name: String,
+    /// The scenario file's stem and the seed, for the runs of a sweep.
+    sweep: Option<(String, u64)>,
     /// The run's summary, or the error that stopped it.
     result: Result<Value, String>,
 }
 
-/// Runs the suite and writes `out/suite.json` and `out/junit.xml` beside each scenario's
-/// folder; returns the suite summary.
-pub fn suite(paths: &[PathBuf], jobs: usize, shard: Option<Shard>, out: &Path) -> Result<Value> {
+/// One run to do: a scenario, and the seed of a sweep.
+struct Job {
+    file: PathBuf,
+    stem: String,
+    scenario: Scenario,
+    seed: Option<u64>,
+}
+
+impl Job {
+    fn name(&self) -> String {
+        match self.seed {
+            Some(s) => format!("{}/seed-{s}", self.stem),
+            None => self.stem.clone(),
+        }
+    }
+}
+
+/// Runs the suite, with `overlays` laid over every scenario, and writes `out/suite.json` and
+/// `out/junit.xml` beside each run's folder; returns the suite summary. A scenario with
+/// `seeds` is one run per seed; shards split the runs, so a sweep may span machines.
+pub fn suite(
+    paths: &[PathBuf],
+    overlays: &[Overlay],
+    jobs: usize,
+    shard: Option<Shard>,
+    out: &Path,
+) -> Result<Value> {
     let files = collect(paths)?;
-    let files: Vec<PathBuf> = match shard {
-        Some(s) => files
-            .into_iter()
-            .enumerate()
-            .filter(|(i, _)| i % s.n == s.k - 1)
-            .map(|(_, f)| f)
-            .collect(),
-        None => files,
-    };
     // Check everything before anything runs.
-    let mut scenarios = Vec::new();
+    let mut runs = Vec::new();
     let mut stems = std::collections::BTreeSet::new();
     for f in &files {
-        let s = Scenario::load(f)?;
+        let s = Scenario::load_with(f, overlays)?;
         let stem = f
             .file_stem()
             .map(|s| s.to_string_lossy().to_string())
@@ -105,14 +126,34 @@ pub fn suite(paths: &[PathBuf], jobs: usize, shard: Option<Shard>, out: &Path) -
                 f.display()
             );
         }
-        scenarios.push((f.clone(), stem, s));
+        let seeds: Vec<Option<u64>> = if s.spec.seeds.is_empty() {
+            vec![None]
+        } else {
+            s.spec.seeds.iter().map(|&k| Some(k)).collect()
+        };
+        for seed in seeds {
+            runs.push(Job {
+                file: f.clone(),
+                stem: stem.clone(),
+                scenario: s.clone(),
+                seed,
+            });
+        }
     }
+    let runs: Vec<Job> = match shard {
+        Some(s) => runs
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| i % s.n == s.k - 1)
+            .map(|(_, r)| r)
+            .collect(),
+        None => runs,
+    };
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let started = std::time::Instant::now();
     let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<Entry>>> =
-        Mutex::new((0..scenarios.len()).map(|_| None).collect());
-    let bar = indicatif::ProgressBar::new(scenarios.len() as u64);
+    let results: Mutex<Vec<Option<Entry>>> = Mutex::new((0..runs.len()).map(|_| None).collect());
+    let bar = indicatif::ProgressBar::new(runs.len() as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template("{spinner} suite [{bar:40}] {pos}/{len} {msg}")
             .expect("valid template")
@@ -122,26 +163,29 @@ pub fn suite(paths: &[PathBuf], jobs: usize, shard: Option<Shard>, out: &Path) -
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
     std::thread::scope(|scope| {
-        for _ in 0..jobs.max(1).min(scenarios.len()) {
+        for _ in 0..jobs.max(1).min(runs.len()) {
             scope.spawn(|| {
                 loop {
                     let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some((file, stem, s)) = scenarios.get(i) else {
+                    let Some(job) = runs.get(i) else {
                         break;
                     };
                     let opts = RunOptions {
-                        seed: None,
+                        seed: job.seed,
                         duration: None,
                         progress: false,
+                        report: true,
                     };
-                    let result = run::run(s, &opts, &out.join(stem))
+                    let name = job.name();
+                    let result = run::run(&job.scenario, &opts, &out.join(&name))
                         .map(|(summary, _)| summary)
                         .map_err(|e| format!("{e:#}"));
                     bar.inc(1);
-                    bar.set_message(stem.clone());
+                    bar.set_message(name.clone());
                     results.lock().expect("no worker panicked")[i] = Some(Entry {
-                        file: file.clone(),
-                        name: stem.clone(),
+                        file: job.file.clone(),
+                        name,
+                        sweep: job.seed.map(|k| (job.stem.clone(), k)),
                         result,
                     });
                 }
@@ -157,7 +201,8 @@ pub fn suite(paths: &[PathBuf], jobs: usize, shard: Option<Shard>, out: &Path) -
         .map(|e| e.expect("every scenario ran"))
         .collect();
     let summary = summarise(&entries, shard, jobs, wall);
-    write_reports(out, &summary)?;
+    let dirs: Vec<PathBuf> = entries.iter().map(|e| out.join(&e.name)).collect();
+    write_reports(out, &summary, &dirs)?;
     Ok(summary)
 }
 
@@ -177,6 +222,8 @@ fn summarise(entries: &[Entry], shard: Option<Shard>, jobs: usize, wall: f64) ->
             json!({
                 "scenario": e.name,
                 "file": e.file.display().to_string(),
+                "sweep": e.sweep.as_ref().map(|(stem, _)| stem),
+                "seed": e.sweep.as_ref().map(|(_, k)| k),
                 "status": match (&e.result, failed) {
                     (Err(_), _) => "error",
                     (Ok(_), 0) => "passed",
@@ -198,15 +245,6 @@ fn summarise(entries: &[Entry], shard: Option<Shard>, jobs: usize, wall: f64) ->
     )
 }
 
-/// XML text with `& < > " '` escaped.
-fn xml(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-        .replace('\'', "&apos;")
-}
-
 /// JUnit XML from a suite's results: a test suite per scenario, with a `run` case (an error
 /// when the run failed) and a case per gate (a failure when it did not hold).
 fn junit(results: &[Value], wall: f64) -> String {
@@ -226,18 +264,18 @@ fn junit(results: &[Value], wall: f64) -> String {
         errors_total += errors;
         body += &format!(
             "  <testsuite name=\"{}\" tests=\"{}\" failures=\"{failures}\" errors=\"{errors}\" time=\"{time:.3}\">\n",
-            xml(name),
+            escape(name),
             1 + g.len()
         );
         body += &format!(
             "    <testcase classname=\"{0}\" name=\"run\" time=\"{time:.3}\">",
-            xml(name)
+            escape(name)
         );
         if let Some(msg) = error {
             body += &format!(
                 "\n      <error message=\"{}\">{}</error>\n    ",
-                xml(msg.lines().next().unwrap_or("")),
-                xml(msg)
+                escape(msg.lines().next().unwrap_or("")),
+                escape(msg)
             );
         }
         body += "</testcase>\n";
@@ -251,13 +289,13 @@ fn junit(results: &[Value], wall: f64) -> String {
             let msg = r["message"].as_str().unwrap_or("");
             body += &format!(
                 "    <testcase classname=\"{}.gates\" name=\"{}\" time=\"0\">",
-                xml(name),
-                xml(&case)
+                escape(name),
+                escape(&case)
             );
             if r["passed"] == false {
                 body += &format!(
                     "\n      <failure message=\"{0}\" type=\"gate\">{0}</failure>\n    ",
-                    xml(msg)
+                    escape(msg)
                 );
             }
             body += "</testcase>\n";
@@ -269,13 +307,45 @@ fn junit(results: &[Value], wall: f64) -> String {
     )
 }
 
-/// Writes `suite.json` and `junit.xml` into `out`, each whole (written beside, then renamed).
-fn write_reports(out: &Path, summary: &Value) -> Result<()> {
+/// `to` relative to the folder `from` (both made absolute), for links between reports.
+fn relative(from: &Path, to: &Path) -> Option<String> {
+    let abs = |p: &Path| -> Option<Vec<String>> {
+        let p = std::path::absolute(p).ok()?;
+        let mut parts: Vec<String> = Vec::new();
+        for c in p.components() {
+            match c {
+                std::path::Component::ParentDir => {
+                    parts.pop();
+                }
+                std::path::Component::CurDir => {}
+                c => parts.push(c.as_os_str().to_string_lossy().to_string()),
+            }
+        }
+        Some(parts)
+    };
+    let (f, t) = (abs(from)?, abs(to)?);
+    let common = f.iter().zip(&t).take_while(|(a, b)| a == b).count();
+    let mut parts = vec!["..".to_string(); f.len() - common];
+    parts.extend(t[common..].iter().cloned());
+    Some(parts.join("/"))
+}
+
+/// Writes `suite.json`, `junit.xml` and `report.html` into `out`, each whole (written beside,
+/// then renamed). `run_dirs[k]` is the folder of result `k`, for the report's links.
+fn write_reports(out: &Path, summary: &Value, run_dirs: &[PathBuf]) -> Result<()> {
     let results = summary["results"].as_array().cloned().unwrap_or_default();
     let wall = summary["wall_time_s"].as_f64().unwrap_or(0.0);
+    let links: Vec<Option<String>> = run_dirs
+        .iter()
+        .map(|d| {
+            let page = d.join(run::REPORT_FILE);
+            page.is_file().then(|| relative(out, &page)).flatten()
+        })
+        .collect();
     for (name, text) in [
         ("suite.json", serde_json::to_string_pretty(summary)? + "\n"),
         ("junit.xml", junit(&results, wall)),
+        ("report.html", crate::report::suite_report(summary, &links)),
     ] {
         let tmp = out.join(format!(".{name}.partial"));
         std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
@@ -297,7 +367,60 @@ fn totals(results: Vec<Value>, shard: Option<String>, jobs: Option<usize>, wall:
         "jobs": jobs,
         "wall_time_s": wall,
         "scenarios_per_minute": if wall > 0.0 { results.len() as f64 * 60.0 / wall } else { 0.0 },
+        "sweeps": sweeps(&results),
         "results": results,
+    })
+}
+
+/// The mean and spread of every metric over the seeds of each swept scenario: for each, the
+/// seeds that ran and, per metric, `mean`, `std` (sample standard deviation, n − 1), `min`,
+/// `max` and `n` (the runs that produced it).
+fn sweeps(results: &[Value]) -> Value {
+    let mut groups: std::collections::BTreeMap<&str, Vec<&Value>> = Default::default();
+    for r in results {
+        if let Some(stem) = r["sweep"].as_str() {
+            groups.entry(stem).or_default().push(r);
+        }
+    }
+    let mut out = serde_json::Map::new();
+    for (stem, runs) in groups {
+        let mut values: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
+        for r in &runs {
+            for (k, v) in r["metrics"].as_object().into_iter().flatten() {
+                if let Some(v) = v.as_f64() {
+                    values.entry(k.clone()).or_default().push(v);
+                }
+            }
+        }
+        let metrics: serde_json::Map<String, Value> =
+            values.into_iter().map(|(k, v)| (k, spread(&v))).collect();
+        out.insert(
+            stem.to_string(),
+            json!({
+                "seeds": runs.iter().map(|r| r["seed"].clone()).collect::<Vec<_>>(),
+                "passed": runs.iter().filter(|r| r["status"] == "passed").count(),
+                "metrics": metrics,
+            }),
+        );
+    }
+    Value::Object(out)
+}
+
+/// Mean, sample standard deviation, min, max and count of some values.
+pub fn spread(v: &[f64]) -> Value {
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let std = if v.len() > 1 {
+        (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    } else {
+        0.0
+    };
+    json!({
+        "mean": mean,
+        "std": std,
+        "min": v.iter().copied().fold(f64::INFINITY, f64::min),
+        "max": v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        "n": v.len(),
     })
 }
 
@@ -310,6 +433,7 @@ pub fn merge(shards: &[PathBuf], out: &Path) -> Result<Value> {
     let mut results = Vec::new();
     let mut wall = 0.0f64;
     let mut seen = std::collections::BTreeSet::new();
+    let mut dirs = std::collections::BTreeMap::new();
     for d in shards {
         let p = d.join("suite.json");
         let text =
@@ -324,6 +448,7 @@ pub fn merge(shards: &[PathBuf], out: &Path) -> Result<Value> {
         };
         for r in rs {
             let name = r["scenario"].as_str().unwrap_or("").to_string();
+            dirs.insert(name.clone(), d.join(&name));
             if !seen.insert(name.clone()) {
                 bail!(
                     "{}: scenario `{name}` is in more than one shard",
@@ -335,15 +460,65 @@ pub fn merge(shards: &[PathBuf], out: &Path) -> Result<Value> {
         wall = wall.max(v["wall_time_s"].as_f64().unwrap_or(0.0));
     }
     results.sort_by(|a, b| a["scenario"].as_str().cmp(&b["scenario"].as_str()));
+    let run_dirs: Vec<PathBuf> = results
+        .iter()
+        .map(|r| dirs[r["scenario"].as_str().unwrap_or("")].clone())
+        .collect();
     let summary = totals(results, None, None, wall);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    write_reports(out, &summary)?;
+    write_reports(out, &summary, &run_dirs)?;
     Ok(summary)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sweeps_give_mean_and_sample_spread_per_metric() {
+        let run = |seed: u64, ate: f64, status: &str| {
+            json!({ "scenario": format!("a/seed-{seed}"), "sweep": "a", "seed": seed,
+                    "status": status, "metrics": { "slam.ate.rmse_m": ate } })
+        };
+        let results = vec![
+            run(1, 0.1, "passed"),
+            run(2, 0.2, "failed"),
+            run(3, 0.6, "passed"),
+            json!({ "scenario": "b", "sweep": null, "status": "passed", "metrics": { "x": 1.0 } }),
+        ];
+        let s = sweeps(&results);
+        let m = &s["a"]["metrics"]["slam.ate.rmse_m"];
+        // mean 0.3; deviations -0.2, -0.1, 0.3: sum of squares 0.14 over n - 1 = 2.
+        assert!((m["mean"].as_f64().unwrap() - 0.3).abs() < 1e-12);
+        assert!((m["std"].as_f64().unwrap() - 0.07f64.sqrt()).abs() < 1e-12);
+        assert_eq!(
+            (m["min"].as_f64(), m["max"].as_f64()),
+            (Some(0.1), Some(0.6))
+        );
+        assert_eq!(s["a"]["passed"], 2);
+        assert_eq!(s["a"]["seeds"], json!([1, 2, 3]));
+        assert!(s.get("b").is_none());
+    }
+
+    #[test]
+    fn links_between_reports_are_relative() {
+        assert_eq!(
+            relative(
+                Path::new("/a/out"),
+                Path::new("/a/out/x/seed-1/report.html")
+            )
+            .as_deref(),
+            Some("x/seed-1/report.html")
+        );
+        assert_eq!(
+            relative(
+                Path::new("/a/merged"),
+                Path::new("/a/shard-1/x/report.html")
+            )
+            .as_deref(),
+            Some("../shard-1/x/report.html")
+        );
+    }
 
     #[test]
     fn shards_parse_and_refuse_nonsense() {
@@ -359,6 +534,7 @@ mod tests {
             Entry {
                 file: "a.toml".into(),
                 name: "a".into(),
+                sweep: None,
                 result: Ok(json!({
                     "performance": { "wall_time_s": 1.5 },
                     "gates": [
@@ -372,6 +548,7 @@ mod tests {
             Entry {
                 file: "b.toml".into(),
                 name: "b".into(),
+                sweep: None,
                 result: Err("GPU <lost> & gone".into()),
             },
         ];

@@ -827,6 +827,242 @@ fn a_suite_runs_in_parallel_and_reports_gates_as_junit() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("the suite is empty"));
 }
 
+#[test]
+fn a_seed_sweep_reports_mean_and_spread_and_overlays_apply_to_every_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = root().join("worlds/lab.toml");
+    let scenario = write(
+        tmp.path(),
+        "sweep.toml",
+        &format!(
+            "name = \"sweep\"\nworld = {world:?}\nduration = 3.0\nstart = \"centre\"\nseeds = [1, 2, 3]\n\
+             [robot.odometry]\nnoise = 0.05\n\
+             [controller]\ntype = \"segments\"\nsegments = [{{ duration = 3.0, velocity = 0.2, radius = 0.5 }}]\n\
+             [[gate]]\nmetric = \"odometry.ate.max_m\"\nop = \"<\"\nvalue = 1.0\n"
+        ),
+    );
+    let out = tmp.path().join("out");
+    let o = futago(&[
+        "suite",
+        scenario.to_str().unwrap(),
+        "--jobs",
+        "2",
+        "--set",
+        "duration=2.0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    ok(&o);
+    assert!(
+        String::from_utf8_lossy(&o.stdout)
+            .contains("sweep  sweep: 3 of 3 seeds passed; odometry.ate.max_m "),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let s = json_file(&out.join("suite.json"));
+    assert_eq!(s["scenarios"], 3);
+    let mut values = Vec::new();
+    for seed in [1, 2, 3] {
+        let run = summary(&out.join(format!("sweep/seed-{seed}")));
+        assert_eq!(run["seed"], seed);
+        // The overlay shortened every run, and the run records it.
+        assert!(
+            (run["sim_time_s"].as_f64().unwrap() - 2.0).abs() < 0.05,
+            "{run}"
+        );
+        assert_eq!(run["overlays"], serde_json::json!(["--set"]));
+        values.push(run["metrics"]["odometry.ate.max_m"].as_f64().unwrap());
+    }
+    assert!(values[0] != values[1], "seeds must differ: {values:?}");
+    let mean = values.iter().sum::<f64>() / 3.0;
+    let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 2.0).sqrt();
+    let m = &s["sweeps"]["sweep"]["metrics"]["odometry.ate.max_m"];
+    assert!((m["mean"].as_f64().unwrap() - mean).abs() < 1e-12, "{m}");
+    assert!((m["std"].as_f64().unwrap() - std).abs() < 1e-12, "{m}");
+    let text = std::fs::read_to_string(out.join("sweep/seed-2/scenario.toml")).unwrap();
+    assert!(
+        text.contains("duration = 2.0") && text.contains("#   --set: duration"),
+        "{text}"
+    );
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains("href=\"sweep/seed-3/report.html\""));
+    assert!(page.contains("<table class=\"sweeps\">"));
+    // A malformed overlay or a bad --set stops the suite before anything runs.
+    let bad = write(tmp.path(), "bad.toml", "[robot\nx = 1\n");
+    let empty_overlay = write(tmp.path(), "empty.toml", "# nothing\n");
+    let unknown = write(
+        tmp.path(),
+        "unknown.toml",
+        "[slam]\nmethod = \"icp\"\n[robot]\nwheel_bsae = 0.3\n",
+    );
+    for (args, expect) in [
+        (
+            vec!["--overlay", bad.to_str().unwrap()],
+            "bad.toml:1: TOML syntax error",
+        ),
+        (
+            vec!["--overlay", empty_overlay.to_str().unwrap()],
+            "empty.toml: the overlay is empty",
+        ),
+        (
+            vec!["--overlay", unknown.to_str().unwrap()],
+            "unknown.toml: key `robot.wheel_bsae`: unknown field",
+        ),
+        (
+            vec!["--set", "robot.odometry=3"],
+            "--set: key `robot.odometry`: invalid type",
+        ),
+        (
+            vec!["--set", "duration"],
+            "--set: key `duration`: expected PATH=VALUE",
+        ),
+        (
+            vec!["--overlay", "/nonexistent/o.toml"],
+            "/nonexistent/o.toml: cannot read file",
+        ),
+    ] {
+        let fresh = tmp.path().join("fresh");
+        let mut a = vec![
+            "suite",
+            scenario.to_str().unwrap(),
+            "--out",
+            fresh.to_str().unwrap(),
+        ];
+        a.extend(args);
+        let o = futago(&a);
+        assert_eq!(o.status.code(), Some(1), "{a:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(expect), "{a:?}: {err}");
+        assert!(!fresh.exists(), "{a:?} ran something");
+    }
+}
+
+/// A headless browser, if this machine has one: `FUTAGO_CHROMIUM`, else Debian's `chromium`
+/// or Google's `google-chrome`.
+fn browser() -> Option<PathBuf> {
+    if let Ok(p) = std::env::var("FUTAGO_CHROMIUM") {
+        return Some(PathBuf::from(p));
+    }
+    ["chromium", "chromium-browser", "google-chrome"]
+        .iter()
+        .find(|b| {
+            Command::new(b)
+                .arg("--version")
+                .output()
+                .is_ok_and(|o| o.status.success())
+        })
+        .map(PathBuf::from)
+}
+
+/// Opens `page` in headless Chromium: returns the DOM it built and a screenshot of it.
+fn render_page(chromium: &Path, page: &Path, profile: &Path) -> (String, image::RgbImage) {
+    let shot = profile.join("shot.png");
+    let common = [
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--hide-scrollbars",
+        "--window-size=1200,2600",
+    ];
+    let url = format!("file://{}", page.display());
+    let user = format!("--user-data-dir={}", profile.display());
+    let o = Command::new(chromium)
+        .args(common)
+        .arg(&user)
+        .arg("--dump-dom")
+        .arg(&url)
+        .output()
+        .expect("chromium runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let dom = String::from_utf8_lossy(&o.stdout).to_string();
+    let o = Command::new(chromium)
+        .args(common)
+        .arg(&user)
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(&url)
+        .output()
+        .expect("chromium runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    (dom, image::open(&shot).expect("a PNG screenshot").to_rgb8())
+}
+
+/// Pixels of the screenshot within `tol` of `rgb` on every channel.
+fn pixels_like(img: &image::RgbImage, rgb: [u8; 3], tol: i32) -> usize {
+    img.pixels()
+        .filter(|p| (0..3).all(|c| (p[c] as i32 - rgb[c] as i32).abs() <= tol))
+        .count()
+}
+
+#[test]
+fn reports_render_their_figures_and_tables_in_headless_chromium() {
+    let Some(chromium) = browser() else {
+        assert!(
+            std::env::var_os("FUTAGO_REQUIRE_BROWSER").is_none(),
+            "FUTAGO_REQUIRE_BROWSER is set but no chromium was found"
+        );
+        eprintln!("skipped: no headless browser (install Debian's chromium)");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    // A suite of one MCL run, with a gate that fails so that the pages show both states.
+    let scenario = root().join("scenarios/office-mcl.toml");
+    let o = futago(&[
+        "suite",
+        scenario.to_str().unwrap(),
+        "--set",
+        "duration=40.0",
+        "--set",
+        "gate=[{ metric = 'localization.ate.max_m', op = '<', value = 0.3 }, { metric = 'odometry.ate.max_m', op = '<', value = 0.001 }]",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let run_page = out.join("office-mcl/report.html");
+    let (dom, shot) = render_page(&chromium, &run_page, &tmp.path().join("p1"));
+    // The browser built the figures and tables.
+    assert!(dom.contains("<svg class=\"map\""), "no map figure");
+    assert_eq!(
+        dom.matches("<svg class=\"chart\"").count(),
+        2,
+        "error charts"
+    );
+    for series in ["ground truth", "odometry", "localization"] {
+        assert!(dom.contains(&format!("data-name=\"{series}\"")), "{series}");
+    }
+    for t in ["gates", "metrics", "facts"] {
+        assert!(dom.contains(&format!("<table class=\"{t}\">")), "{t} table");
+    }
+    assert!(dom.contains("localization.ate.rmse_m"));
+    assert!(dom.contains("<pre class=\"config\">"));
+    // And drew them: the map's walls (grey cells of the embedded PNG), the truth's green
+    // line, the localiser's purple one and the error charts' red odometry line.
+    for (what, rgb, at_least) in [
+        ("walls", [120, 120, 120], 2000),
+        ("ground truth", [0x1a, 0x96, 0x41], 150),
+        ("localization", [0x7b, 0x32, 0x94], 150),
+        ("odometry", [0xd7, 0x19, 0x1c], 150),
+    ] {
+        let n = pixels_like(&shot, rgb, 12);
+        assert!(n >= at_least, "{what}: {n} pixels");
+    }
+    // The suite's page: its runs table with a link to the run's page, and the headroom of each
+    // gate drawn as a bar, red for the one that failed.
+    let (dom, shot) = render_page(&chromium, &out.join("report.html"), &tmp.path().join("p2"));
+    assert!(dom.contains("<table class=\"runs\">"));
+    assert!(dom.contains("href=\"office-mcl/report.html\""));
+    assert!(dom.matches("<rect class=\"bar\"").count() >= 2);
+    assert!(
+        pixels_like(&shot, [0xd7, 0x19, 0x1c], 12) >= 50,
+        "no red bar"
+    );
+}
+
 /// Points of a depth PNG's row `v`, in the world, from `camera.yaml` and the frame's pose.
 fn world_points(
     seq: &Path,

@@ -161,6 +161,13 @@ impl Pose3 {
             rotation: [0.0, 0.0, s, c],
         }
     }
+
+    /// Projects onto the ground plane: x, y and the yaw (rotation about z) of the orientation.
+    pub fn to_pose2(&self) -> Pose2 {
+        let [x, y, z, w] = self.rotation;
+        let yaw = (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z));
+        Pose2::new(self.translation[0], self.translation[1], yaw)
+    }
 }
 
 /// One laser scan, in the conventions of ROS `sensor_msgs/LaserScan`.
@@ -262,4 +269,26 @@ impl DriveCommand {
         left: 0.0,
         right: 0.0,
     };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn planar_poses_survive_the_trip_through_3d() {
+        for theta in [-3.0, -1.2, 0.0, 0.7, 3.1] {
+            let p = Pose2::new(1.5, -2.0, theta);
+            let q = Pose3::from_pose2(&p, 0.3).to_pose2();
+            assert!((q.x - 1.5).abs() < 1e-12 && (q.y + 2.0).abs() < 1e-12);
+            assert!(wrap_angle(q.theta - theta).abs() < 1e-12, "{theta}");
+        }
+        // A quarter turn about z written by hand: (0, 0, sin 45°, cos 45°).
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let q = Pose3 {
+            translation: [0.0; 3],
+            rotation: [0.0, 0.0, h, h],
+        };
+        assert!((q.to_pose2().theta - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
 }

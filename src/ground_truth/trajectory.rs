@@ -79,7 +79,7 @@ pub enum Alignment {
 
 /// A stamp in seconds exactly as reading its TUM text gives it (the nearest double to the
 /// decimal), so that pairing at the `max_diff` boundary agrees with evo's.
-fn seconds(p: &Stamped) -> f64 {
+pub fn seconds(p: &Stamped) -> f64 {
     p.stamp.nanos() as f64 / 1e9
 }
 
@@ -100,6 +100,18 @@ pub fn associate(
     estimate: &[Stamped],
     max_diff: f64,
 ) -> Vec<(Isometry3<f64>, Isometry3<f64>)> {
+    associate_indices(reference, estimate, max_diff)
+        .into_iter()
+        .map(|(r, e)| (iso(&reference[r]), iso(&estimate[e])))
+        .collect()
+}
+
+/// The pairing of [`associate`], as (reference index, estimate index), in time order.
+pub fn associate_indices(
+    reference: &[Stamped],
+    estimate: &[Stamped],
+    max_diff: f64,
+) -> Vec<(usize, usize)> {
     let estimate_longer = estimate.len() > reference.len();
     let (short, long) = if estimate_longer {
         (reference, estimate)
@@ -111,7 +123,7 @@ pub fn associate(
     if stamps.is_empty() {
         return pairs;
     }
-    for s in short {
+    for (i, s) in short.iter().enumerate() {
         let t = seconds(s);
         if t < stamps[0] - max_diff || t > stamps[stamps.len() - 1] + max_diff {
             continue;
@@ -134,8 +146,11 @@ pub fn associate(
         } else {
             continue;
         };
-        let (a, b) = (iso(s), iso(&long[best]));
-        pairs.push(if estimate_longer { (a, b) } else { (b, a) });
+        pairs.push(if estimate_longer {
+            (i, best)
+        } else {
+            (best, i)
+        });
     }
     pairs
 }

@@ -1,0 +1,707 @@
+//! Self-contained HTML reports, one per run (`report.html` beside its results) and one per suite:
+//! the map over the ground truth with the trajectories, errors over time, metric and gate tables
+//! and the configuration. Figures are inline SVG (the map is an embedded PNG), styles inline,
+//! no scripts: the page shows the same in any browser, offline, and in a CI artefact viewer.
+
+use crate::ground_truth::{SCORED_TRAJECTORIES, trajectory};
+use base64::Engine;
+use futago_msgs::grid::OccupancyGrid;
+use futago_msgs::tum::{self, Stamped};
+use serde_json::Value;
+use std::fmt::Write;
+use std::path::Path;
+
+/// HTML/XML text with `& < > " '` escaped.
+pub fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+        .replace('\'', "&apos;")
+}
+
+/// A line of a figure.
+pub struct Series {
+    pub name: String,
+    pub colour: &'static str,
+    pub points: Vec<[f64; 2]>,
+}
+
+/// Colours of the trajectories, by file: truth, odometry, localisation, SLAM.
+const COLOURS: [(&str, &str); 4] = [
+    ("groundtruth", "#1a9641"),
+    ("odometry", "#d7191c"),
+    ("localization", "#7b3294"),
+    ("slam", "#2c7bb6"),
+];
+
+fn colour(name: &str) -> &'static str {
+    COLOURS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map_or("#555555", |c| c.1)
+}
+
+/// At most `n` points, evenly picked, the last kept.
+fn thin(points: Vec<[f64; 2]>, n: usize) -> Vec<[f64; 2]> {
+    if points.len() <= n {
+        return points;
+    }
+    let step = points.len().div_ceil(n);
+    let last = *points.last().expect("not empty");
+    let mut out: Vec<[f64; 2]> = points.into_iter().step_by(step).collect();
+    out.push(last);
+    out
+}
+
+/// Tick values for an axis over `[lo, hi]`: about five, at 1, 2 or 5 times a power of ten.
+fn ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let span = (hi - lo).max(1e-12);
+    let raw = span / 5.0;
+    let p = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * p)
+        .find(|s| span / s <= 6.0)
+        .unwrap_or(10.0 * p);
+    let mut t = (lo / step).ceil() * step;
+    let mut out = Vec::new();
+    while t <= hi + step * 1e-9 {
+        out.push(if t.abs() < step * 1e-9 { 0.0 } else { t });
+        t += step;
+    }
+    out
+}
+
+/// A line chart: `series` over shared axes, with ticks, labels and a legend.
+pub fn line_chart(title: &str, x_label: &str, y_label: &str, series: &[Series]) -> String {
+    let (w, h, left, right, top, bottom) = (720.0, 300.0, 64.0, 16.0, 28.0, 44.0);
+    let all = series.iter().flat_map(|s| s.points.iter());
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, 0.0f64, f64::MIN);
+    for p in all {
+        x0 = x0.min(p[0]);
+        x1 = x1.max(p[0]);
+        y0 = y0.min(p[1]);
+        y1 = y1.max(p[1]);
+    }
+    if x0 > x1 {
+        (x0, x1, y1) = (0.0, 1.0, 1.0);
+    }
+    if x1 - x0 < 1e-12 {
+        x1 = x0 + 1.0;
+    }
+    if y1 - y0 < 1e-12 {
+        y1 = y0 + 1.0;
+    }
+    y1 *= 1.05;
+    let px = |x: f64| left + (x - x0) / (x1 - x0) * (w - left - right);
+    let py = |y: f64| h - bottom - (y - y0) / (y1 - y0) * (h - top - bottom);
+    let mut svg = format!(
+        "<svg class=\"chart\" xmlns=\"http://www.w3.org/2000/svg\" viewBox=\"0 0 {w} {h}\" width=\"{w}\" height=\"{h}\" role=\"img\" aria-label=\"{0}\">\n<title>{0}</title>\n<rect x=\"{left}\" y=\"{top}\" width=\"{1}\" height=\"{2}\" fill=\"#fafafa\" stroke=\"#999\"/>\n",
+        escape(title),
+        w - left - right,
+        h - top - bottom
+    );
+    for t in ticks(x0, x1) {
+        let x = px(t);
+        let _ = writeln!(
+            svg,
+            "<line x1=\"{x:.1}\" y1=\"{top}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#e0e0e0\"/><text x=\"{x:.1}\" y=\"{:.1}\" font-size=\"11\" text-anchor=\"middle\">{}</text>",
+            h - bottom,
+            h - bottom + 14.0,
+            fmt_tick(t)
+        );
+    }
+    for t in ticks(y0, y1) {
+        let y = py(t);
+        let _ = writeln!(
+            svg,
+            "<line x1=\"{left}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#e0e0e0\"/><text x=\"{:.1}\" y=\"{:.1}\" font-size=\"11\" text-anchor=\"end\">{}</text>",
+            w - right,
+            left - 4.0,
+            y + 4.0,
+            fmt_tick(t)
+        );
+    }
+    let _ = writeln!(
+        svg,
+        "<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"12\" text-anchor=\"middle\">{}</text><text transform=\"translate(14 {:.1}) rotate(-90)\" font-size=\"12\" text-anchor=\"middle\">{}</text><text x=\"{left}\" y=\"18\" font-size=\"13\" font-weight=\"bold\">{}</text>",
+        (left + w - right) / 2.0,
+        h - 8.0,
+        escape(x_label),
+        (top + h - bottom) / 2.0,
+        escape(y_label),
+        escape(title)
+    );
+    for (k, s) in series.iter().enumerate() {
+        let pts: Vec<String> = s
+            .points
+            .iter()
+            .map(|p| format!("{:.1},{:.1}", px(p[0]), py(p[1])))
+            .collect();
+        let _ = writeln!(
+            svg,
+            "<polyline class=\"series\" data-name=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\" points=\"{}\"/>",
+            escape(&s.name),
+            s.colour,
+            pts.join(" ")
+        );
+        let ly = top + 14.0 + 16.0 * k as f64;
+        let lx = w - right - 150.0;
+        let _ = writeln!(
+            svg,
+            "<line x1=\"{lx}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{}\" stroke-width=\"3\"/><text x=\"{}\" y=\"{}\" font-size=\"11\">{}</text>",
+            lx + 18.0,
+            s.colour,
+            lx + 24.0,
+            ly + 4.0,
+            escape(&s.name)
+        );
+    }
+    svg + "</svg>\n"
+}
+
+fn fmt_tick(t: f64) -> String {
+    let s = format!("{t:.4}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" { "0".into() } else { s.into() }
+}
+
+/// The map figure: the ground-truth grid (walls grey, free space white, unknown light grey),
+/// the estimated map's occupied cells over it (blue), and trajectories drawn in world
+/// coordinates (metres; x right, y up). The first path is the ground truth.
+pub fn map_figure(
+    truth: &OccupancyGrid,
+    estimate: Option<&OccupancyGrid>,
+    paths: &[Series],
+) -> String {
+    let mut img = image::RgbImage::from_pixel(
+        truth.width as u32,
+        truth.height as u32,
+        image::Rgb([220, 220, 220]),
+    );
+    for j in 0..truth.height {
+        for i in 0..truth.width {
+            let c = match truth.get(i, j) {
+                v if v >= 50 => [120, 120, 120],
+                v if v >= 0 => [255, 255, 255],
+                _ => [220, 220, 220],
+            };
+            img.put_pixel(i as u32, (truth.height - 1 - j) as u32, image::Rgb(c));
+        }
+    }
+    if let Some(est) = estimate {
+        for j in 0..est.height {
+            for i in 0..est.width {
+                if est.get(i, j) >= 50 {
+                    let [x, y] = est.cell_center(i, j);
+                    if let Some((ti, tj)) = truth.cell_of(x, y) {
+                        img.put_pixel(
+                            ti as u32,
+                            (truth.height - 1 - tj) as u32,
+                            image::Rgb([30, 90, 200]),
+                        );
+                    }
+                }
+            }
+        }
+    }
+    let mut png = Vec::new();
+    image::DynamicImage::ImageRgb8(img)
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .expect("encoding a PNG in memory");
+    let data = base64::engine::general_purpose::STANDARD.encode(&png);
+    let (w, h) = (
+        truth.width as f64 * truth.resolution,
+        truth.height as f64 * truth.resolution,
+    );
+    let [ox, oy] = truth.origin;
+    let px_w = 900.0f64.min(truth.width as f64 * 4.0);
+    let px_h = px_w * h / w;
+    let mut svg = format!(
+        "<svg class=\"map\" xmlns=\"http://www.w3.org/2000/svg\" viewBox=\"{ox} {} {w} {h}\" width=\"{px_w:.0}\" height=\"{px_h:.0}\" role=\"img\" aria-label=\"map over the ground truth\">\n<title>Map over the ground truth</title>\n<image href=\"data:image/png;base64,{data}\" x=\"{ox}\" y=\"{}\" width=\"{w}\" height=\"{h}\" preserveAspectRatio=\"none\" style=\"image-rendering: pixelated\"/>\n",
+        -(oy + h),
+        -(oy + h),
+    );
+    // Estimates first, the truth (the first path) last and dashed, so that both show where
+    // they coincide.
+    for (k, s) in paths
+        .iter()
+        .enumerate()
+        .skip(1)
+        .chain(paths.iter().enumerate().take(1))
+    {
+        let pts: Vec<String> = s
+            .points
+            .iter()
+            .map(|p| format!("{:.3},{:.3}", p[0], -p[1]))
+            .collect();
+        let _ = writeln!(
+            svg,
+            "<polyline class=\"series\" data-name=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"3\" vector-effect=\"non-scaling-stroke\"{} points=\"{}\"/>",
+            escape(&s.name),
+            s.colour,
+            if k == 0 {
+                " stroke-dasharray=\"8 6\""
+            } else {
+                ""
+            },
+            pts.join(" ")
+        );
+    }
+    svg + "</svg>\n"
+}
+
+/// An HTML table; cells are already HTML.
+fn table(class: &str, head: &[&str], rows: &[Vec<String>]) -> String {
+    let mut t = format!("<table class=\"{class}\"><thead><tr>");
+    for h in head {
+        let _ = write!(t, "<th>{}</th>", escape(h));
+    }
+    t += "</tr></thead><tbody>\n";
+    for r in rows {
+        t += "<tr>";
+        for c in r {
+            let _ = write!(t, "<td>{c}</td>");
+        }
+        t += "</tr>\n";
+    }
+    t + "</tbody></table>\n"
+}
+
+fn number(v: &Value) -> String {
+    match v.as_f64() {
+        Some(x) if x.abs() >= 1000.0 || x == x.trunc() => format!("{x}"),
+        Some(x) => format!("{x:.4}"),
+        None => "—".into(),
+    }
+}
+
+fn status_cell(passed: bool) -> String {
+    if passed {
+        "<span class=\"pass\">passed</span>".into()
+    } else {
+        "<span class=\"fail\">failed</span>".into()
+    }
+}
+
+/// Rows of a gates table from a run's `gates`.
+fn gate_rows(gates: &[Value]) -> Vec<Vec<String>> {
+    gates
+        .iter()
+        .map(|g| {
+            vec![
+                escape(g["metric"].as_str().unwrap_or("")),
+                escape(g["op"].as_str().unwrap_or("")),
+                number(&g["threshold"]),
+                number(&g["value"]),
+                status_cell(g["passed"] == true),
+            ]
+        })
+        .collect()
+}
+
+const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:24px;max-width:1100px;color:#222}\
+h1{font-size:22px}h2{font-size:17px;margin-top:28px;border-bottom:1px solid #ddd}\
+table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #ccc;padding:3px 8px;text-align:left}\
+th{background:#f0f0f0}.pass{color:#1a7f37;font-weight:bold}.fail{color:#c62828;font-weight:bold}\
+pre{background:#f6f6f6;padding:10px;font-size:12px;overflow:auto}.legend span{margin-right:14px}\
+figure{margin:12px 0}figcaption{font-size:12px;color:#555}";
+
+fn page(title: &str, body: &str) -> String {
+    format!(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title><style>{STYLE}</style></head><body>\n{body}</body></html>\n",
+        escape(title)
+    )
+}
+
+fn read_tum(dir: &Path, file: &str) -> Option<Vec<Stamped>> {
+    let text = std::fs::read_to_string(dir.join(file)).ok()?;
+    tum::parse(&text).ok()
+}
+
+/// The report of a run whose results are in `dir`: `summary` is its summary.json, `config`
+/// the scenario text as run, `truth` the ground-truth grid and `estimate` SLAM's map.
+pub fn run_report(
+    dir: &Path,
+    summary: &Value,
+    config: &str,
+    truth: &OccupancyGrid,
+    estimate: Option<&OccupancyGrid>,
+) -> String {
+    let name = summary["scenario"].as_str().unwrap_or("run");
+    let gates = summary["gates"].as_array().cloned().unwrap_or_default();
+    let failed = gates.iter().filter(|g| g["passed"] == false).count();
+    let mut body = format!(
+        "<h1>futago run: {}</h1>\n<p>{}</p>\n",
+        escape(name),
+        escape(summary["description"].as_str().unwrap_or(""))
+    );
+    body += &table(
+        "facts",
+        &[
+            "world",
+            "seed",
+            "simulated",
+            "driven",
+            "bumps",
+            "overlays",
+            "gates",
+        ],
+        &[vec![
+            escape(summary["world"].as_str().unwrap_or("")),
+            number(&summary["seed"]),
+            format!("{:.1} s", summary["sim_time_s"].as_f64().unwrap_or(0.0)),
+            format!(
+                "{:.2} m",
+                summary["robot"]["distance_travelled_m"]
+                    .as_f64()
+                    .unwrap_or(0.0)
+            ),
+            number(&summary["robot"]["bump_events"]),
+            escape(
+                &summary["overlays"]
+                    .as_array()
+                    .map(|a| {
+                        a.iter()
+                            .filter_map(|o| o.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    })
+                    .filter(|s| !s.is_empty())
+                    .unwrap_or_else(|| "none".into()),
+            ),
+            if gates.is_empty() {
+                "none".into()
+            } else {
+                format!(
+                    "{} of {} passed {}",
+                    gates.len() - failed,
+                    gates.len(),
+                    status_cell(failed == 0)
+                )
+            },
+        ]],
+    );
+    if !gates.is_empty() {
+        body += "<h2>Gates</h2>\n";
+        body += &table(
+            "gates",
+            &["metric", "op", "threshold", "value", "status"],
+            &gate_rows(&gates),
+        );
+    }
+    // Trajectories and their errors.
+    let truth_traj = read_tum(dir, "groundtruth.txt").unwrap_or_default();
+    let mut paths = vec![Series {
+        name: "ground truth".into(),
+        colour: colour("groundtruth"),
+        points: thin(
+            truth_traj
+                .iter()
+                .map(|p| [p.pose.translation[0], p.pose.translation[1]])
+                .collect(),
+            4000,
+        ),
+    }];
+    let (mut pos_err, mut head_err) = (Vec::new(), Vec::new());
+    for (key, file) in SCORED_TRAJECTORIES {
+        let Some(est) = read_tum(dir, file) else {
+            continue;
+        };
+        paths.push(Series {
+            name: key.into(),
+            colour: colour(key),
+            points: thin(
+                est.iter()
+                    .map(|p| [p.pose.translation[0], p.pose.translation[1]])
+                    .collect(),
+                4000,
+            ),
+        });
+        let pairs =
+            trajectory::associate_indices(&truth_traj, &est, crate::ground_truth::MAX_TIME_DIFF);
+        let (mut pe, mut he) = (Vec::new(), Vec::new());
+        for (r, e) in pairs {
+            let (a, b) = (truth_traj[r].pose.to_pose2(), est[e].pose.to_pose2());
+            let t = trajectory::seconds(&est[e]);
+            pe.push([t, a.distance(&b)]);
+            he.push([
+                t,
+                futago_msgs::wrap_angle(b.theta - a.theta)
+                    .abs()
+                    .to_degrees(),
+            ]);
+        }
+        pos_err.push(Series {
+            name: key.into(),
+            colour: colour(key),
+            points: thin(pe, 1500),
+        });
+        head_err.push(Series {
+            name: key.into(),
+            colour: colour(key),
+            points: thin(he, 1500),
+        });
+    }
+    body += "<h2>Map and trajectories</h2>\n<figure>\n";
+    body += &map_figure(truth, estimate, &paths);
+    body += "<figcaption class=\"legend\">";
+    for s in &paths {
+        let _ = write!(
+            body,
+            "<span style=\"color:{}\">━ {}</span>",
+            s.colour,
+            escape(&s.name)
+        );
+    }
+    body += if estimate.is_some() {
+        "<span>grey: true walls · blue: SLAM's occupied cells</span>"
+    } else {
+        "<span>grey: true walls</span>"
+    };
+    body += "</figcaption>\n</figure>\n";
+    if !pos_err.is_empty() {
+        body += "<h2>Errors over time</h2>\n<figure>\n";
+        body += &line_chart(
+            "Position error against the ground truth",
+            "time (s)",
+            "error (m)",
+            &pos_err,
+        );
+        body += &line_chart(
+            "Heading error against the ground truth",
+            "time (s)",
+            "error (°)",
+            &head_err,
+        );
+        body += "</figure>\n";
+    }
+    body += "<h2>Metrics</h2>\n";
+    let rows: Vec<Vec<String>> = summary["metrics"]
+        .as_object()
+        .into_iter()
+        .flatten()
+        .map(|(k, v)| vec![escape(k), number(v)])
+        .collect();
+    body += &table("metrics", &["metric", "value"], &rows);
+    body += "<h2>Configuration</h2>\n<pre class=\"config\">";
+    body += &escape(config);
+    body += "</pre>\n";
+    page(&format!("futago run: {name}"), &body)
+}
+
+/// The report of a suite from its summary (suite.json): runs with their status and gates, each
+/// gate's headroom as a figure, sweeps' mean and spread, and links to the runs' reports
+/// (`links[k]`, relative to the suite's report, for result `k`).
+pub fn suite_report(summary: &Value, links: &[Option<String>]) -> String {
+    let results = summary["results"].as_array().cloned().unwrap_or_default();
+    let mut body = format!(
+        "<h1>futago suite</h1>\n<p>{} runs: {} passed, {} failed, {} errors, in {:.1} s.</p>\n",
+        summary["scenarios"],
+        summary["passed"],
+        summary["failed"],
+        summary["errors"],
+        summary["wall_time_s"].as_f64().unwrap_or(0.0)
+    );
+    body += "<h2>Runs</h2>\n";
+    let rows: Vec<Vec<String>> = results
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let name = escape(r["scenario"].as_str().unwrap_or(""));
+            let gates = r["gates"].as_array().cloned().unwrap_or_default();
+            let ok = gates.iter().filter(|g| g["passed"] == true).count();
+            let status = r["status"].as_str().unwrap_or("");
+            let failures: Vec<String> = gates
+                .iter()
+                .filter(|g| g["passed"] == false)
+                .filter_map(|g| g["message"].as_str().map(escape))
+                .chain(r["error"].as_str().map(escape))
+                .collect();
+            vec![
+                match links.get(k).cloned().flatten() {
+                    Some(l) => format!("<a href=\"{}\">{name}</a>", escape(&l)),
+                    None => name,
+                },
+                format!(
+                    "<span class=\"{}\">{status}</span>",
+                    if status == "passed" { "pass" } else { "fail" }
+                ),
+                format!("{ok} of {}", gates.len()),
+                format!("{:.1}", r["wall_time_s"].as_f64().unwrap_or(0.0)),
+                failures.join("<br>"),
+            ]
+        })
+        .collect();
+    body += &table(
+        "runs",
+        &["run", "status", "gates", "wall time (s)", "failures"],
+        &rows,
+    );
+    let bars: Vec<(String, f64, bool)> = results
+        .iter()
+        .flat_map(|r| {
+            let run = r["scenario"].as_str().unwrap_or("").to_string();
+            r["gates"]
+                .as_array()
+                .cloned()
+                .unwrap_or_default()
+                .into_iter()
+                .map(move |g| (run.clone(), g))
+        })
+        .map(|(run, g)| {
+            let (v, t) = (
+                g["value"].as_f64().unwrap_or(f64::NAN),
+                g["threshold"].as_f64().unwrap_or(0.0),
+            );
+            let less = g["op"].as_str().is_some_and(|o| o.starts_with('<'));
+            let margin = if less { t - v } else { v - t };
+            let headroom = if v.is_nan() {
+                -1.0
+            } else {
+                (margin / t.abs().max(1e-12)).clamp(-1.0, 1.0)
+            };
+            (
+                format!(
+                    "{run}: {} {} {}",
+                    g["metric"].as_str().unwrap_or(""),
+                    g["op"].as_str().unwrap_or(""),
+                    t
+                ),
+                headroom,
+                g["passed"] == true,
+            )
+        })
+        .collect();
+    if !bars.is_empty() {
+        body += "<h2>Gate headroom</h2>\n<figure>\n";
+        body += &headroom_chart(&bars);
+        body += "<figcaption>How far each gate's value is from its threshold, as a share of the threshold (clipped to ±100 %); right of zero passes.</figcaption>\n</figure>\n";
+    }
+    if let Some(sw) = summary["sweeps"].as_object().filter(|s| !s.is_empty()) {
+        body += "<h2>Seed sweeps</h2>\n";
+        let mut rows = Vec::new();
+        for (stem, s) in sw {
+            for (m, v) in s["metrics"].as_object().into_iter().flatten() {
+                rows.push(vec![
+                    escape(stem),
+                    format!(
+                        "{} of {}",
+                        s["passed"],
+                        s["seeds"].as_array().map_or(0, |a| a.len())
+                    ),
+                    escape(m),
+                    number(&v["mean"]),
+                    number(&v["std"]),
+                    number(&v["min"]),
+                    number(&v["max"]),
+                ]);
+            }
+        }
+        body += &table(
+            "sweeps",
+            &[
+                "scenario",
+                "seeds passed",
+                "metric",
+                "mean",
+                "std",
+                "min",
+                "max",
+            ],
+            &rows,
+        );
+    }
+    page("futago suite", &body)
+}
+
+/// Horizontal bars of gate headroom in [-1, 1], green where the gate passed.
+fn headroom_chart(bars: &[(String, f64, bool)]) -> String {
+    let (w, row, left) = (900.0, 18.0, 430.0);
+    let h = 30.0 + row * bars.len() as f64;
+    let mid = left + (w - left - 20.0) / 2.0;
+    let half = (w - left - 20.0) / 2.0;
+    let mut svg = format!(
+        "<svg class=\"chart\" xmlns=\"http://www.w3.org/2000/svg\" viewBox=\"0 0 {w} {h}\" width=\"{w}\" height=\"{h}\" role=\"img\" aria-label=\"gate headroom\">\n<title>Gate headroom</title>\n"
+    );
+    for (k, (label, v, passed)) in bars.iter().enumerate() {
+        let y = 20.0 + row * k as f64;
+        let (x, bw) = if *v >= 0.0 {
+            (mid, v * half)
+        } else {
+            (mid + v * half, -v * half)
+        };
+        let _ = writeln!(
+            svg,
+            "<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"11\" text-anchor=\"end\">{}</text><rect class=\"bar\" x=\"{x:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"{}\"/>",
+            left - 6.0,
+            y + row * 0.65,
+            escape(label),
+            y + 2.0,
+            bw.max(1.0),
+            row - 4.0,
+            if *passed { "#1a9641" } else { "#d7191c" }
+        );
+    }
+    let _ = writeln!(
+        svg,
+        "<line x1=\"{mid}\" y1=\"10\" x2=\"{mid}\" y2=\"{h}\" stroke=\"#333\"/><text x=\"{mid}\" y=\"10\" font-size=\"10\" text-anchor=\"middle\">0</text><text x=\"{:.0}\" y=\"10\" font-size=\"10\" text-anchor=\"middle\">−100 %</text><text x=\"{:.0}\" y=\"10\" font-size=\"10\" text-anchor=\"middle\">+100 %</text>",
+        mid - half + 14.0,
+        mid + half - 14.0
+    );
+    svg + "</svg>\n"
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_are_round_and_cover_the_range() {
+        assert_eq!(
+            ticks(0.0, 1.0),
+            vec![0.0, 0.2, 0.4, 0.6000000000000001, 0.8, 1.0]
+        );
+        let t = ticks(3.0, 97.0);
+        assert_eq!(t.first(), Some(&20.0));
+        assert!(t.windows(2).all(|w| (w[1] - w[0] - 20.0).abs() < 1e-9));
+        assert_eq!(fmt_tick(0.6000000000000001), "0.6");
+    }
+
+    #[test]
+    fn charts_place_points_on_their_axes() {
+        let svg = line_chart(
+            "t",
+            "x",
+            "y",
+            &[Series {
+                name: "a<b".into(),
+                colour: "#000",
+                points: vec![[0.0, 0.0], [10.0, 2.0]],
+            }],
+        );
+        // x from 0 to 10 spans the plot's 64..704 px; y 0 sits on its bottom edge (256 px).
+        assert!(svg.contains("points=\"64.0,256.0 704.0,"), "{svg}");
+        assert!(svg.contains("data-name=\"a&lt;b\""));
+    }
+
+    #[test]
+    fn the_map_figure_embeds_the_grid_in_world_coordinates() {
+        let mut g = OccupancyGrid::new(0.5, [-1.0, 2.0], 4, 2);
+        g.set(0, 0, 100);
+        let svg = map_figure(
+            &g,
+            None,
+            &[Series {
+                name: "truth".into(),
+                colour: "#000",
+                points: vec![[0.0, 2.5]],
+            }],
+        );
+        // 2 m by 1 m from (-1, 2); SVG y points down, so the top edge is -(2 + 1).
+        assert!(svg.contains("viewBox=\"-1 -3 2 1\""), "{svg}");
+        assert!(svg.contains("data:image/png;base64,"));
+        assert!(svg.contains("points=\"0.000,-2.500\""));
+    }
+}
