@@ -4,6 +4,7 @@
 const GATE_FAILED: i32 = 3;
 
 mod bench;
+mod cmaes;
 mod ground_truth;
 mod overlay;
 mod relations;
@@ -13,6 +14,7 @@ mod rgbd;
 mod run;
 mod scenario;
 mod suite;
+mod tune;
 mod world_cmd;
 
 use anyhow::{Context, Result, bail};
@@ -89,6 +91,44 @@ enum Command {
         #[arg(long)]
         shard: Option<suite::Shard>,
         /// Output folder [default: out/suite].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[command(flatten)]
+        overlays: OverlayArgs,
+    },
+    /// Search a scenario's parameters for the best value of one of its metrics (CMA-ES, or
+    /// random search as the baseline), each candidate scored by the metric's mean over several
+    /// seeds. Writes OUT/best.toml (an overlay: `futago run SCENARIO --overlay OUT/best.toml`),
+    /// trials.csv, tune.json and report.html.
+    Tune {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// A parameter and its range: PATH=LO..HI, or PATH=LO..HI:log for a log scale;
+        /// integer ends search integers. Repeatable.
+        #[arg(long = "param", value_name = "PATH=LO..HI", required = true)]
+        params: Vec<tune::Param>,
+        /// The metric to optimise, by its name in summary.json (e.g. localization.ate.rmse_m).
+        #[arg(long)]
+        objective: String,
+        /// Maximise the objective instead of minimising it.
+        #[arg(long)]
+        maximize: bool,
+        /// Candidates to evaluate, besides the scenario as written.
+        #[arg(long, default_value_t = 40)]
+        budget: usize,
+        /// Search method.
+        #[arg(long, value_enum, default_value = "cmaes")]
+        method: tune::Method,
+        /// Seeds each candidate runs with; its score is the mean over them.
+        #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
+        seeds: Vec<u64>,
+        /// Runs at once [default: the number of CPU cores].
+        #[arg(long)]
+        jobs: Option<usize>,
+        /// Seed of the search's own random stream.
+        #[arg(long, default_value_t = 0)]
+        search_seed: u64,
+        /// Output folder, created or replaced whole [default: out/tune/<scenario name>].
         #[arg(long)]
         out: Option<PathBuf>,
         #[command(flatten)]
@@ -398,6 +438,49 @@ fn real_main() -> Result<()> {
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
             let s = suite::suite(&paths, &overlays.load()?, jobs, shard, &out)?;
             report_suite(&s, &out);
+        }
+        Command::Tune {
+            scenario,
+            params,
+            objective,
+            maximize,
+            budget,
+            method,
+            seeds,
+            jobs,
+            search_seed,
+            out,
+            overlays,
+        } => {
+            let jobs =
+                jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+            if jobs == 0 {
+                bail!("--jobs: expected at least 1");
+            }
+            let base = overlays.load()?;
+            let name = scenario::Scenario::load_with(&scenario, &base)?.spec.name;
+            let out = out.unwrap_or_else(|| PathBuf::from("out/tune").join(name));
+            let opts = tune::TuneOptions {
+                params,
+                objective,
+                maximize,
+                budget,
+                method,
+                seeds,
+                jobs,
+                search_seed,
+            };
+            let s = tune::tune(&scenario, &base, &opts, &out)?;
+            println!(
+                "tune: {} {}: baseline {} -> best {} (trial {} of {}); best parameters in {}",
+                s["direction"].as_str().unwrap_or(""),
+                s["objective"].as_str().unwrap_or(""),
+                s["baseline"]["objective"],
+                s["best"]["objective"],
+                s["best"]["trial"],
+                s["budget"],
+                out.join("best.toml").display()
+            );
         }
         Command::Merge { shards, out } => {
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));

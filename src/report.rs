@@ -25,6 +25,8 @@ pub struct Series {
     pub name: String,
     pub colour: &'static str,
     pub points: Vec<[f64; 2]>,
+    /// Drawn as dots (a scatter) instead of a line.
+    pub markers: bool,
 }
 
 /// Colours of the trajectories, by file: truth, odometry, localisation, SLAM.
@@ -134,18 +136,37 @@ pub fn line_chart(title: &str, x_label: &str, y_label: &str, series: &[Series]) 
         escape(title)
     );
     for (k, s) in series.iter().enumerate() {
+        if s.markers {
+            let _ = write!(
+                svg,
+                "<g class=\"series\" data-name=\"{}\" fill=\"{}\">",
+                escape(&s.name),
+                s.colour
+            );
+            for p in &s.points {
+                let _ = write!(
+                    svg,
+                    "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"3\"/>",
+                    px(p[0]),
+                    py(p[1])
+                );
+            }
+            svg += "</g>\n";
+        }
         let pts: Vec<String> = s
             .points
             .iter()
             .map(|p| format!("{:.1},{:.1}", px(p[0]), py(p[1])))
             .collect();
-        let _ = writeln!(
-            svg,
-            "<polyline class=\"series\" data-name=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\" points=\"{}\"/>",
-            escape(&s.name),
-            s.colour,
-            pts.join(" ")
-        );
+        if !s.markers {
+            let _ = writeln!(
+                svg,
+                "<polyline class=\"series\" data-name=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\" points=\"{}\"/>",
+                escape(&s.name),
+                s.colour,
+                pts.join(" ")
+            );
+        }
         let ly = top + 14.0 + 16.0 * k as f64;
         let lx = w - right - 150.0;
         let _ = writeln!(
@@ -308,7 +329,7 @@ th{background:#f0f0f0}.pass{color:#1a7f37;font-weight:bold}.fail{color:#c62828;f
 pre{background:#f6f6f6;padding:10px;font-size:12px;overflow:auto}.legend span{margin-right:14px}\
 figure{margin:12px 0}figcaption{font-size:12px;color:#555}";
 
-fn page(title: &str, body: &str) -> String {
+pub fn page(title: &str, body: &str) -> String {
     format!(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title><style>{STYLE}</style></head><body>\n{body}</body></html>\n",
         escape(title)
@@ -394,6 +415,7 @@ pub fn run_report(
     // Trajectories and their errors.
     let truth_traj = read_tum(dir, "groundtruth.txt").unwrap_or_default();
     let mut paths = vec![Series {
+        markers: false,
         name: "ground truth".into(),
         colour: colour("groundtruth"),
         points: thin(
@@ -410,6 +432,7 @@ pub fn run_report(
             continue;
         };
         paths.push(Series {
+            markers: false,
             name: key.into(),
             colour: colour(key),
             points: thin(
@@ -437,11 +460,13 @@ pub fn run_report(
             name: key.into(),
             colour: colour(key),
             points: thin(pe, 1500),
+            markers: false,
         });
         head_err.push(Series {
             name: key.into(),
             colour: colour(key),
             points: thin(he, 1500),
+            markers: false,
         });
     }
     body += "<h2>Map and trajectories</h2>\n<figure>\n";
@@ -679,6 +704,7 @@ mod tests {
                 name: "a<b".into(),
                 colour: "#000",
                 points: vec![[0.0, 0.0], [10.0, 2.0]],
+                markers: false,
             }],
         );
         // x from 0 to 10 spans the plot's 64..704 px; y 0 sits on its bottom edge (256 px).
@@ -697,6 +723,7 @@ mod tests {
                 name: "truth".into(),
                 colour: "#000",
                 points: vec![[0.0, 2.5]],
+                markers: false,
             }],
         );
         // 2 m by 1 m from (-1, 2); SVG y points down, so the top edge is -(2 + 1).

@@ -67,6 +67,18 @@ pub struct ScenarioSpec {
     pub output: OutputConfig,
 }
 
+impl ScenarioSpec {
+    /// The names of the metrics a run of this scenario produces (for gates and tuning).
+    pub fn metric_names(&self) -> Vec<String> {
+        crate::ground_truth::metric_names(crate::ground_truth::Produces {
+            localization: self.localization.is_some(),
+            global_localization: self.localization.as_ref().is_some_and(|l| l.global),
+            kidnappings: !self.event.is_empty(),
+            slam: self.slam.is_some(),
+        })
+    }
+}
+
 /// An event: at `time`, the robot is picked up and put down at `teleport` (a kidnapping;
 /// its odometry does not notice).
 #[derive(Debug, Clone, Deserialize)]
@@ -409,12 +421,7 @@ impl Scenario {
                 ));
             }
         }
-        let names = crate::ground_truth::metric_names(crate::ground_truth::Produces {
-            localization: spec.localization.is_some(),
-            global_localization: spec.localization.as_ref().is_some_and(|l| l.global),
-            kidnappings: !spec.event.is_empty(),
-            slam: spec.slam.is_some(),
-        });
+        let names = spec.metric_names();
         for (i, g) in spec.gate.iter().enumerate() {
             if !names.contains(&g.metric) {
                 let family = g.metric.split('.').next().unwrap_or("");

@@ -100,6 +100,37 @@ impl Job {
     }
 }
 
+/// `f` of every item on `jobs` threads, the results in the items' order whatever order the
+/// threads finish in.
+pub fn parallel_map<T: Sync, R: Send>(
+    items: &[T],
+    jobs: usize,
+    f: impl Fn(usize, &T) -> R + Sync,
+) -> Vec<R> {
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<R>>> = Mutex::new((0..items.len()).map(|_| None).collect());
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.max(1).min(items.len()) {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::SeqCst);
+                    let Some(item) = items.get(i) else {
+                        break;
+                    };
+                    let r = f(i, item);
+                    results.lock().expect("no worker panicked")[i] = Some(r);
+                }
+            });
+        }
+    });
+    results
+        .into_inner()
+        .expect("no worker panicked")
+        .into_iter()
+        .map(|r| r.expect("every item was mapped"))
+        .collect()
+}
+
 /// Runs the suite, with `overlays` laid over every scenario, and writes `out/suite.json` and
 /// `out/junit.xml` beside each run's folder; returns the suite summary. A scenario with
 /// `seeds` is one run per seed; shards split the runs, so a sweep may span machines.
@@ -151,8 +182,6 @@ pub fn suite(
     };
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let started = std::time::Instant::now();
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<Entry>>> = Mutex::new((0..runs.len()).map(|_| None).collect());
     let bar = indicatif::ProgressBar::new(runs.len() as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template("{spinner} suite [{bar:40}] {pos}/{len} {msg}")
@@ -162,44 +191,28 @@ pub fn suite(
     if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    std::thread::scope(|scope| {
-        for _ in 0..jobs.max(1).min(runs.len()) {
-            scope.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some(job) = runs.get(i) else {
-                        break;
-                    };
-                    let opts = RunOptions {
-                        seed: job.seed,
-                        duration: None,
-                        progress: false,
-                        report: true,
-                    };
-                    let name = job.name();
-                    let result = run::run(&job.scenario, &opts, &out.join(&name))
-                        .map(|(summary, _)| summary)
-                        .map_err(|e| format!("{e:#}"));
-                    bar.inc(1);
-                    bar.set_message(name.clone());
-                    results.lock().expect("no worker panicked")[i] = Some(Entry {
-                        file: job.file.clone(),
-                        name,
-                        sweep: job.seed.map(|k| (job.stem.clone(), k)),
-                        result,
-                    });
-                }
-            });
+    let entries = parallel_map(&runs, jobs, |_, job| {
+        let opts = RunOptions {
+            seed: job.seed,
+            duration: None,
+            progress: false,
+            report: true,
+        };
+        let name = job.name();
+        let result = run::run(&job.scenario, &opts, &out.join(&name))
+            .map(|(summary, _)| summary)
+            .map_err(|e| format!("{e:#}"));
+        bar.inc(1);
+        bar.set_message(name.clone());
+        Entry {
+            file: job.file.clone(),
+            name,
+            sweep: job.seed.map(|k| (job.stem.clone(), k)),
+            result,
         }
     });
     bar.finish_and_clear();
     let wall = started.elapsed().as_secs_f64();
-    let entries: Vec<Entry> = results
-        .into_inner()
-        .expect("no worker panicked")
-        .into_iter()
-        .map(|e| e.expect("every scenario ran"))
-        .collect();
     let summary = summarise(&entries, shard, jobs, wall);
     let dirs: Vec<PathBuf> = entries.iter().map(|e| out.join(&e.name)).collect();
     write_reports(out, &summary, &dirs)?;

@@ -937,6 +937,141 @@ fn a_seed_sweep_reports_mean_and_spread_and_overlays_apply_to_every_run() {
     }
 }
 
+#[test]
+fn tune_calibrates_a_wheel_base_error_found_by_hand_and_its_overlay_reproduces_the_best() {
+    // Odometry that believes the wheel base 2.5 % too long, without noise: the error of the
+    // odometry's path vanishes at a ratio of exactly 1, the answer the search must find.
+    let tmp = tempfile::tempdir().unwrap();
+    let world = root().join("worlds/lab.toml");
+    let scenario = write(
+        tmp.path(),
+        "cal.toml",
+        &format!(
+            "name = \"calibrate\"\nworld = {world:?}\nduration = 6.0\nstart = \"centre\"\n\
+             [robot.odometry]\nwheel_base_ratio = 1.025\nnoise = 0.0\nquantize = false\n\
+             [controller]\ntype = \"segments\"\nsegments = [{{ duration = 6.0, velocity = 0.3, radius = 0.6 }}]\n"
+        ),
+    );
+    let sc = scenario.to_str().unwrap();
+    let tune = |out: &Path, jobs: &str| {
+        futago(&[
+            "tune",
+            sc,
+            "--param",
+            "robot.odometry.wheel_base_ratio=0.97..1.03",
+            "--objective",
+            "odometry.ate.max_m",
+            "--budget",
+            "16",
+            "--seeds",
+            "1,2",
+            "--jobs",
+            jobs,
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let out = tmp.path().join("tune");
+    ok(&tune(&out, "2"));
+    let t = json_file(&out.join("tune.json"));
+    let baseline = t["baseline"]["objective"].as_f64().unwrap();
+    let best = t["best"]["objective"].as_f64().unwrap();
+    let ratio = t["best"]["values"][0].as_f64().unwrap();
+    assert!((ratio - 1.0).abs() < 0.003, "best wheel_base_ratio {ratio}");
+    assert!(best < baseline / 5.0, "{baseline} -> {best}");
+    assert_eq!(t["trials"].as_array().unwrap().len(), 17);
+    let csv = std::fs::read_to_string(out.join("trials.csv")).unwrap();
+    assert!(csv.starts_with("trial,generation,robot.odometry.wheel_base_ratio,odometry.ate.max_m,seed_1,seed_2,error\n0,0,1.025,"), "{csv}");
+    assert_eq!(csv.lines().count(), 18);
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains("<table class=\"trials\">") && page.contains("<circle "));
+    // The overlay it wrote gives the best trial's value again.
+    let run = tmp.path().join("run");
+    ok(&futago(&[
+        "run",
+        sc,
+        "--overlay",
+        out.join("best.toml").to_str().unwrap(),
+        "--seed",
+        "1",
+        "--out",
+        run.to_str().unwrap(),
+        "-q",
+    ]));
+    assert_eq!(
+        summary(&run)["metrics"]["odometry.ate.max_m"]
+            .as_f64()
+            .unwrap(),
+        t["best"]["per_seed"][0].as_f64().unwrap()
+    );
+    // One job or two: the same search, to the byte.
+    let out1 = tmp.path().join("tune1");
+    ok(&tune(&out1, "1"));
+    assert_eq!(
+        csv,
+        std::fs::read_to_string(out1.join("trials.csv")).unwrap()
+    );
+    // Bad requests are refused before anything runs.
+    for (args, expect) in [
+        (
+            vec![
+                "--param",
+                "robot.odometry.wheel_bsae=0.9..1.1",
+                "--objective",
+                "odometry.ate.max_m",
+            ],
+            "unknown field `wheel_bsae`",
+        ),
+        (
+            vec![
+                "--param",
+                "robot.odometry.wheel_base_ratio=0.9..1.1",
+                "--objective",
+                "slam.ate.rmse_m",
+            ],
+            "produces no metric `slam.ate.rmse_m`",
+        ),
+        (
+            vec![
+                "--param",
+                "robot.odometry.wheel_base_ratio=-1..1.1",
+                "--objective",
+                "odometry.ate.max_m",
+            ],
+            "low end does not give a valid scenario",
+        ),
+        (
+            vec![
+                "--param",
+                "robot.odometry.wheel_base_ratio=1.1..0.9",
+                "--objective",
+                "odometry.ate.max_m",
+            ],
+            "LO must be below HI",
+        ),
+        (
+            vec![
+                "--param",
+                "robot.odometry.wheel_base_ratio=0.9..1.1",
+                "--objective",
+                "odometry.ate.max_m",
+                "--budget",
+                "0",
+            ],
+            "--budget",
+        ),
+    ] {
+        let fresh = tmp.path().join("fresh");
+        let mut a = vec!["tune", sc, "--out", fresh.to_str().unwrap()];
+        a.extend(args);
+        let o = futago(&a);
+        assert!(!o.status.success(), "{a:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(expect), "{a:?}: {err}");
+        assert!(!fresh.exists(), "{a:?} ran something");
+    }
+}
+
 /// A headless browser, if this machine has one: `FUTAGO_CHROMIUM`, else Debian's `chromium`
 /// or Google's `google-chrome`.
 fn browser() -> Option<PathBuf> {
