@@ -11,7 +11,7 @@
 //! This is scoring, not robot code: it lives beside the ground truth, apart from the stack.
 
 use anyhow::{Result, bail};
-use futago_msgs::{Pose2, Time, wrap_angle};
+use futago_msgs::{Duration, Pose2, Time, wrap_angle};
 use serde::Serialize;
 
 /// One ground-truth relation.
@@ -52,6 +52,53 @@ pub fn parse(text: &str, file: &str) -> Result<Vec<Relation>> {
         bail!("{file}: no relations");
     }
     Ok(out)
+}
+
+/// Relations sampled from a ground-truth trajectory (sorted by time), for scoring simulated
+/// runs as real logs are scored: from an anchor every `every_s` seconds to a time a uniform
+/// 0 to `max_span_s` seconds later (seeded, so the same truth gives the same relations). The
+/// spans mix short, scan-to-scan relations with ones across several metres of travel, as the
+/// hand-made relation files of the real datasets do (intel's first relation spans 6.7 s).
+pub fn sample(truth: &[(Time, Pose2)], every_s: f64, max_span_s: f64, seed: u64) -> Vec<Relation> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (Some(first), Some(last)) = (truth.first(), truth.last()) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    let mut t1 = first.0;
+    let step = Duration::from_secs(every_s);
+    while t1 < last.0 {
+        let span = Duration::from_secs(rng.random::<f64>() * max_span_s);
+        let t2 = t1 + span;
+        if let (Some(a), Some(b)) = (interpolate(truth, t1), interpolate(truth, t2))
+            && t2 > t1
+        {
+            out.push(Relation {
+                t1,
+                t2,
+                delta: a.between(&b),
+            });
+        }
+        t1 = t1 + step;
+    }
+    out
+}
+
+/// Relations in the datasets' text format: `t1 t2 x y z roll pitch yaw` per line.
+pub fn format(relations: &[Relation]) -> String {
+    let mut text = String::from("# timestamp1 timestamp2 x y z roll pitch yaw\n");
+    for r in relations {
+        text += &format!(
+            "{:.6} {:.6} {:.6} {:.6} 0.000000 0.000000 0.000000 {:.6}\n",
+            r.t1.secs(),
+            r.t2.secs(),
+            r.delta.x,
+            r.delta.y,
+            r.delta.theta
+        );
+    }
+    text
 }
 
 /// Mean and sample standard deviation.
@@ -179,6 +226,32 @@ mod tests {
             delta: Pose2::IDENTITY,
         };
         assert_eq!(evaluate(&truth, &[outside]).unmatched, 1);
+    }
+
+    #[test]
+    fn sampled_relations_are_exact_on_the_truth_and_round_trip_through_text() {
+        let truth: Vec<(Time, Pose2)> = (0..=200)
+            .map(|i| {
+                let t = i as f64 * 0.1;
+                (
+                    Time::from_secs(t),
+                    Pose2::new(t.cos() * 3.0, t.sin() * 3.0, t + 1.5),
+                )
+            })
+            .collect();
+        let rels = sample(&truth, 1.0, 5.0, 7);
+        // Anchors at 0, 1, …, 19 s; those whose span runs past 20 s are dropped.
+        assert!((12..=20).contains(&rels.len()), "{}", rels.len());
+        assert!(
+            rels.iter()
+                .all(|r| r.t2 > r.t1 && (r.t2 - r.t1).secs() <= 5.0)
+        );
+        assert_eq!(rels, sample(&truth, 1.0, 5.0, 7));
+        let m = evaluate(&truth, &rels);
+        assert!(m.abs_trans_m.mean < 1e-3 && m.unmatched == 0, "{m:?}");
+        let back = parse(&format(&rels), "r").unwrap();
+        assert_eq!(back.len(), rels.len());
+        assert!((back[3].delta.x - rels[3].delta.x).abs() < 1e-6);
     }
 
     #[test]

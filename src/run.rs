@@ -747,6 +747,10 @@ fn sha256_tree(dir: &Path) -> Result<String> {
     Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
 }
 
+/// Relations sampled from the ground truth (the datasets' `t1 t2 x y z roll pitch yaw`), on
+/// which the run's relations metrics are computed; other tools can score against it too.
+pub const RELATIONS_FILE: &str = "groundtruth.relations";
+
 /// The run's HTML report (see [`crate::report`]).
 pub const REPORT_FILE: &str = "report.html";
 
@@ -939,7 +943,17 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             }
         }
         let mut sum = summary(s, &outcome, Value::Object(files));
-        let mut metrics = crate::ground_truth::score_trajectories(tmp)?;
+        let truth_text = std::fs::read_to_string(tmp.join(OUTPUT_FILES[0]))
+            .with_context(|| format!("reading back {}", OUTPUT_FILES[0]))?;
+        let truth_poses = tum::parse(&truth_text)
+            .map_err(|e| anyhow::anyhow!("reading back {}: {e}", OUTPUT_FILES[0]))?;
+        let relations = crate::ground_truth::sample_relations(&truth_poses);
+        std::fs::write(
+            tmp.join(RELATIONS_FILE),
+            crate::relations::format(&relations),
+        )
+        .with_context(|| format!("writing {RELATIONS_FILE}"))?;
+        let mut metrics = crate::ground_truth::score_trajectories(tmp, &relations)?;
         for k in ["recovery_s", "convergence_s"] {
             if let Some(v) = outcome.localization.as_ref().and_then(|l| l[k].as_f64()) {
                 metrics.insert(format!("localization.{k}"), v);

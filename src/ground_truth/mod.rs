@@ -67,10 +67,38 @@ pub const MAX_TIME_DIFF: f64 = 0.01;
 /// Travel between the poses of a relative-error pair, m.
 pub const RPE_DELTA_M: f64 = 1.0;
 
+/// Anchors of the relations sampled from a run's ground truth, s.
+pub const RELATION_EVERY_S: f64 = 1.0;
+/// Longest span of a sampled relation, s.
+pub const RELATION_MAX_SPAN_S: f64 = 10.0;
+/// The relations metric's quantities (Kümmerle et al. 2009), as `NAME.relations.KEY`.
+pub const RELATION_KEYS: [&str; 8] = [
+    "abs_trans_mean_m",
+    "abs_trans_std_m",
+    "sqr_trans_mean_m2",
+    "sqr_trans_std_m2",
+    "abs_rot_mean_deg",
+    "abs_rot_std_deg",
+    "sqr_rot_mean_deg2",
+    "sqr_rot_std_deg2",
+];
+
+/// The relations a run is scored on, sampled from its ground truth (see
+/// [`crate::relations::sample`]; the seed is fixed, so the same truth gives the same relations).
+pub fn sample_relations(truth: &[futago_msgs::tum::Stamped]) -> Vec<crate::relations::Relation> {
+    let planar: Vec<(futago_msgs::Time, futago_msgs::Pose2)> =
+        truth.iter().map(|s| (s.stamp, s.pose.to_pose2())).collect();
+    crate::relations::sample(&planar, RELATION_EVERY_S, RELATION_MAX_SPAN_S, 0)
+}
+
 /// Scores the trajectories in a run's folder against its ground truth: for each one written,
 /// `NAME.ate.*_m` (no alignment: the map frame is the world frame in simulation),
-/// `NAME.ate.p95_m`, and `NAME.rpe_1m.trans.*_m` / `NAME.rpe_1m.rot.*_deg`.
-pub fn score_trajectories(dir: &std::path::Path) -> anyhow::Result<Metrics> {
+/// `NAME.ate.p95_m`, `NAME.rpe_1m.trans.*_m` / `NAME.rpe_1m.rot.*_deg`, and the relations
+/// metric on `relations` as `NAME.relations.*` (see [`RELATION_KEYS`]).
+pub fn score_trajectories(
+    dir: &std::path::Path,
+    relations: &[crate::relations::Relation],
+) -> anyhow::Result<Metrics> {
     use anyhow::Context;
     let read = |name: &str| -> anyhow::Result<Vec<futago_msgs::tum::Stamped>> {
         let p = dir.join(name);
@@ -100,6 +128,24 @@ pub fn score_trajectories(dir: &std::path::Path) -> anyhow::Result<Metrics> {
         let deg: Vec<f64> = r.iter().map(|x| x.to_degrees()).collect();
         if let Some(sd) = Stats::of(&deg) {
             m.insert_stats(&format!("{name}.rpe_1m.rot"), "_deg", &sd);
+        }
+        let planar: Vec<(futago_msgs::Time, futago_msgs::Pose2)> =
+            est.iter().map(|s| (s.stamp, s.pose.to_pose2())).collect();
+        let rel = crate::relations::evaluate(&planar, relations);
+        if rel.relations > 0 {
+            let values = [
+                rel.abs_trans_m.mean,
+                rel.abs_trans_m.std,
+                rel.sqr_trans_m2.mean,
+                rel.sqr_trans_m2.std,
+                rel.abs_rot_deg.mean,
+                rel.abs_rot_deg.std,
+                rel.sqr_rot_deg2.mean,
+                rel.sqr_rot_deg2.std,
+            ];
+            for (k, v) in RELATION_KEYS.iter().zip(values) {
+                m.insert(format!("{name}.relations.{k}"), v);
+            }
         }
     }
     Ok(m)
@@ -145,6 +191,9 @@ pub fn metric_names(p: Produces) -> Vec<String> {
             names.push(format!("{name}.rpe_1m.rot.{s}_deg"));
         }
         names.push(format!("{name}.ate.p95_m"));
+        for k in RELATION_KEYS {
+            names.push(format!("{name}.relations.{k}"));
+        }
     }
     if slam {
         for c in [1, 2] {
