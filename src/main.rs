@@ -103,31 +103,8 @@ enum Command {
     Tune {
         /// Scenario file (TOML).
         scenario: PathBuf,
-        /// A parameter and its range: PATH=LO..HI, or PATH=LO..HI:log for a log scale;
-        /// integer ends search integers. Repeatable.
-        #[arg(long = "param", value_name = "PATH=LO..HI", required = true)]
-        params: Vec<tune::Param>,
-        /// The metric to optimise, by its name in summary.json (e.g. localization.ate.rmse_m).
-        #[arg(long)]
-        objective: String,
-        /// Maximise the objective instead of minimising it.
-        #[arg(long)]
-        maximize: bool,
-        /// Candidates to evaluate, besides the scenario as written.
-        #[arg(long, default_value_t = 40)]
-        budget: usize,
-        /// Search method.
-        #[arg(long, value_enum, default_value = "cmaes")]
-        method: tune::Method,
-        /// Seeds each candidate runs with; its score is the mean over them.
-        #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
-        seeds: Vec<u64>,
-        /// Runs at once [default: the number of CPU cores].
-        #[arg(long)]
-        jobs: Option<usize>,
-        /// Seed of the search's own random stream.
-        #[arg(long, default_value_t = 0)]
-        search_seed: u64,
+        #[command(flatten)]
+        options: tune::TuneOptions,
         /// Output folder, created or replaced whole [default: out/tune/<scenario name>].
         #[arg(long)]
         out: Option<PathBuf>,
@@ -368,6 +345,15 @@ fn report_suite(s: &serde_json::Value, out: &std::path::Path) {
     }
 }
 
+/// `--jobs`, or the number of CPU cores when not given; at least 1.
+fn resolve_jobs(jobs: Option<usize>) -> Result<usize> {
+    let jobs = jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    if jobs == 0 {
+        bail!("--jobs: expected at least 1");
+    }
+    Ok(jobs)
+}
+
 fn real_main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
@@ -430,47 +416,22 @@ fn real_main() -> Result<()> {
             out,
             overlays,
         } => {
-            let jobs =
-                jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-            if jobs == 0 {
-                bail!("--jobs: expected at least 1");
-            }
+            let jobs = resolve_jobs(jobs)?;
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
             let s = suite::suite(&paths, &overlays.load()?, jobs, shard, &out)?;
             report_suite(&s, &out);
         }
         Command::Tune {
             scenario,
-            params,
-            objective,
-            maximize,
-            budget,
-            method,
-            seeds,
-            jobs,
-            search_seed,
+            mut options,
             out,
             overlays,
         } => {
-            let jobs =
-                jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-            if jobs == 0 {
-                bail!("--jobs: expected at least 1");
-            }
+            options.jobs = Some(resolve_jobs(options.jobs)?);
             let base = overlays.load()?;
             let name = scenario::Scenario::load_with(&scenario, &base)?.spec.name;
             let out = out.unwrap_or_else(|| PathBuf::from("out/tune").join(name));
-            let opts = tune::TuneOptions {
-                params,
-                objective,
-                maximize,
-                budget,
-                method,
-                seeds,
-                jobs,
-                search_seed,
-            };
-            let s = tune::tune(&scenario, &base, &opts, &out)?;
+            let s = tune::tune(&scenario, &base, &options, &out)?;
             println!(
                 "tune: {} {}: baseline {} -> best {} (trial {} of {}); best parameters in {}",
                 s["direction"].as_str().unwrap_or(""),

@@ -424,12 +424,7 @@ impl Scenario {
         let names = spec.metric_names();
         for (i, g) in spec.gate.iter().enumerate() {
             if !names.contains(&g.metric) {
-                let family = g.metric.split('.').next().unwrap_or("");
-                let close: Vec<&String> = names
-                    .iter()
-                    .filter(|n| n.starts_with(family))
-                    .take(6)
-                    .collect();
+                let close = crate::ground_truth::similar(&names, &g.metric);
                 return Err(SpecError::new(
                     path,
                     format!("gate[{i}].metric"),

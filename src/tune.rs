@@ -113,15 +113,32 @@ pub enum Method {
 }
 
 /// What `futago tune` was asked.
+#[derive(clap::Args)]
 pub struct TuneOptions {
+    /// A parameter and its range: PATH=LO..HI, or PATH=LO..HI:log for a log scale;
+    /// integer ends search integers. Repeatable.
+    #[arg(long = "param", value_name = "PATH=LO..HI", required = true)]
     pub params: Vec<Param>,
+    /// The metric to optimise, by its name in summary.json (e.g. localization.ate.rmse_m).
+    #[arg(long)]
     pub objective: String,
+    /// Maximise the objective instead of minimising it.
+    #[arg(long)]
     pub maximize: bool,
-    /// Candidates evaluated (each over every seed), beside the baseline.
+    /// Candidates to evaluate, besides the scenario as written.
+    #[arg(long, default_value_t = 40)]
     pub budget: usize,
+    /// Search method.
+    #[arg(long, value_enum, default_value = "cmaes")]
     pub method: Method,
+    /// Seeds each candidate runs with; its score is the mean over them.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
     pub seeds: Vec<u64>,
-    pub jobs: usize,
+    /// Runs at once [default: the number of CPU cores].
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Seed of the search's own random stream.
+    #[arg(long, default_value_t = 0)]
     pub search_seed: u64,
 }
 
@@ -172,12 +189,7 @@ pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> R
     let s = Scenario::load_with(scenario, base)?;
     let names = s.spec.metric_names();
     if !names.contains(&o.objective) {
-        let family = o.objective.split('.').next().unwrap_or("");
-        let close: Vec<&String> = names
-            .iter()
-            .filter(|n| n.starts_with(family))
-            .take(6)
-            .collect();
+        let close = crate::ground_truth::similar(&names, &o.objective);
         bail!(
             "--objective: {} produces no metric `{}`{}",
             scenario.display(),
@@ -219,7 +231,7 @@ pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> R
             let runs: Vec<(usize, u64)> = (0..batch.len())
                 .flat_map(|k| o.seeds.iter().map(move |&seed| (k, seed)))
                 .collect();
-            let results = parallel_map(&runs, o.jobs, |_, &(k, seed)| {
+            let results = parallel_map(&runs, o.jobs.unwrap_or(1), |_, &(k, seed)| {
                 let (index, _, values) = &batch[k];
                 let dir = trials_dir
                     .join(format!("{index:04}"))

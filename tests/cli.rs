@@ -40,6 +40,17 @@ fn run_for(scenario: &Path, out: &Path, duration: Option<&str>) {
     ok(&futago(&args));
 }
 
+/// Asserts the command's exit status, showing its output when it differs.
+fn exits_with(o: &Output, code: i32) {
+    assert_eq!(
+        o.status.code(),
+        Some(code),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
 fn json_file(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -644,12 +655,7 @@ fn mcl_recovers_from_a_kidnapping_between_rooms() {
         out.to_str().unwrap(),
         "-q",
     ]);
-    assert_eq!(
-        o.status.code(),
-        Some(3),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    exits_with(&o, 3);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
         err.contains("gate failed: localization.ate.max_m = "),
@@ -709,12 +715,7 @@ fn a_suite_runs_in_parallel_and_reports_gates_as_junit() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert_eq!(
-        o.status.code(),
-        Some(3),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    exits_with(&o, 3);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(
         stdout.contains("gate failed: odometry.ate.max_m = "),
@@ -1152,12 +1153,7 @@ fn reports_render_their_figures_and_tables_in_headless_chromium() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert_eq!(
-        o.status.code(),
-        Some(3),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    exits_with(&o, 3);
     let run_page = out.join("office-mcl/report.html");
     let (dom, shot) = render_page(&chromium, &run_page, &tmp.path().join("p1"));
     // The browser built the figures and tables.

@@ -213,6 +213,25 @@ pub fn metric_names(p: Produces) -> Vec<String> {
     names
 }
 
+/// Up to six of `names` most like `metric` (in its family, the longest shared prefix first), for
+/// errors about a metric that does not exist.
+pub fn similar<'a>(names: &'a [String], metric: &str) -> Vec<&'a String> {
+    let family = metric.split('.').next().unwrap_or("");
+    let shared = |n: &str| {
+        n.chars()
+            .zip(metric.chars())
+            .take_while(|(a, b)| a == b)
+            .count()
+    };
+    let mut close: Vec<&String> = names
+        .iter()
+        .filter(|n| n.split('.').next() == Some(family))
+        .collect();
+    close.sort_by_key(|n| std::cmp::Reverse(shared(n)));
+    close.truncate(6);
+    close
+}
+
 /// A comparison of a gate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
 pub enum Comparison {
