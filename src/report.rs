@@ -77,9 +77,43 @@ fn ticks(lo: f64, hi: f64) -> Vec<f64> {
 
 /// A line chart: `series` over shared axes, with ticks, labels and a legend.
 pub fn line_chart(title: &str, x_label: &str, y_label: &str, series: &[Series]) -> String {
+    line_chart_scaled(title, x_label, y_label, series, [false, false])
+}
+
+/// A line chart with each axis (x, y) linear or logarithmic; on a log axis, points at or
+/// below zero are left out.
+pub fn line_chart_scaled(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+    log: [bool; 2],
+) -> String {
+    let to_axis = |v: f64, k: usize| if log[k] { v.log10() } else { v };
+    let series: Vec<Series> = series
+        .iter()
+        .map(|s| Series {
+            name: s.name.clone(),
+            colour: s.colour,
+            markers: s.markers,
+            points: s
+                .points
+                .iter()
+                .map(|p| [to_axis(p[0], 0), to_axis(p[1], 1)])
+                .filter(|p| p[0].is_finite() && p[1].is_finite())
+                .collect(),
+        })
+        .collect();
+    let label = |t: f64, k: usize| fmt_tick(if log[k] { 10f64.powf(t) } else { t });
     let (w, h, left, right, top, bottom) = (720.0, 300.0, 64.0, 16.0, 28.0, 44.0);
     let all = series.iter().flat_map(|s| s.points.iter());
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, 0.0f64, f64::MIN);
+    // A linear y axis starts at zero at most, so that errors are seen against nothing.
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::MAX,
+        f64::MIN,
+        if log[1] { f64::MAX } else { 0.0f64 },
+        f64::MIN,
+    );
     for p in all {
         x0 = x0.min(p[0]);
         x1 = x1.max(p[0]);
@@ -87,7 +121,7 @@ pub fn line_chart(title: &str, x_label: &str, y_label: &str, series: &[Series]) 
         y1 = y1.max(p[1]);
     }
     if x0 > x1 {
-        (x0, x1, y1) = (0.0, 1.0, 1.0);
+        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
     }
     if x1 - x0 < 1e-12 {
         x1 = x0 + 1.0;
@@ -95,7 +129,7 @@ pub fn line_chart(title: &str, x_label: &str, y_label: &str, series: &[Series]) 
     if y1 - y0 < 1e-12 {
         y1 = y0 + 1.0;
     }
-    y1 *= 1.05;
+    y1 += 0.05 * (y1 - y0);
     let px = |x: f64| left + (x - x0) / (x1 - x0) * (w - left - right);
     let py = |y: f64| h - bottom - (y - y0) / (y1 - y0) * (h - top - bottom);
     let mut svg = format!(
@@ -104,17 +138,17 @@ pub fn line_chart(title: &str, x_label: &str, y_label: &str, series: &[Series]) 
         w - left - right,
         h - top - bottom
     );
-    for t in ticks(x0, x1) {
+    for t in axis_ticks(x0, x1, log[0]) {
         let x = px(t);
         let _ = writeln!(
             svg,
             "<line x1=\"{x:.1}\" y1=\"{top}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#e0e0e0\"/><text x=\"{x:.1}\" y=\"{:.1}\" font-size=\"11\" text-anchor=\"middle\">{}</text>",
             h - bottom,
             h - bottom + 14.0,
-            fmt_tick(t)
+            label(t, 0)
         );
     }
-    for t in ticks(y0, y1) {
+    for t in axis_ticks(y0, y1, log[1]) {
         let y = py(t);
         let _ = writeln!(
             svg,
@@ -122,7 +156,7 @@ pub fn line_chart(title: &str, x_label: &str, y_label: &str, series: &[Series]) 
             w - right,
             left - 4.0,
             y + 4.0,
-            fmt_tick(t)
+            label(t, 1)
         );
     }
     let _ = writeln!(
@@ -180,6 +214,18 @@ pub fn line_chart(title: &str, x_label: &str, y_label: &str, series: &[Series]) 
         );
     }
     svg + "</svg>\n"
+}
+
+/// Ticks of an axis; a log axis (in decades) spanning more than one and a half decades ticks
+/// at powers of ten only.
+fn axis_ticks(lo: f64, hi: f64, log: bool) -> Vec<f64> {
+    if log && hi - lo >= 1.5 {
+        let (a, b) = (lo.ceil() as i32, hi.floor() as i32);
+        let step = ((b - a) / 6 + 1).max(1);
+        (a..=b).step_by(step as usize).map(f64::from).collect()
+    } else {
+        ticks(lo, hi)
+    }
 }
 
 fn fmt_tick(t: f64) -> String {
@@ -710,6 +756,25 @@ mod tests {
         // x from 0 to 10 spans the plot's 64..704 px; y 0 sits on its bottom edge (256 px).
         assert!(svg.contains("points=\"64.0,256.0 704.0,"), "{svg}");
         assert!(svg.contains("data-name=\"a&lt;b\""));
+        // On log axes, 1 to 100 spans the plot and 10 sits halfway; the tick labels are the
+        // values, not their logarithms.
+        let svg = line_chart_scaled(
+            "t",
+            "x",
+            "y",
+            &[Series {
+                name: "a".into(),
+                colour: "#000",
+                points: vec![[1.0, 1.0], [10.0, 10.0], [100.0, 100.0], [0.0, 5.0]],
+                markers: false,
+            }],
+            [true, true],
+        );
+        assert!(svg.contains("points=\"64.0,256.0 384.0,"), "{svg}");
+        assert!(
+            svg.contains(">100</text>") && !svg.contains(">2</text>"),
+            "{svg}"
+        );
     }
 
     #[test]

@@ -13,7 +13,7 @@
 
 use crate::cmaes::{Cmaes, RandomSearch};
 use crate::overlay::{Overlay, lookup};
-use crate::report::{Series, escape, line_chart};
+use crate::report::{Series, escape, line_chart_scaled};
 use crate::run::{self, RunOptions};
 use crate::scenario::Scenario;
 use crate::suite::parallel_map;
@@ -498,7 +498,13 @@ fn html(trials: &[Trial], o: &TuneOptions, summary: &Value) -> String {
         fmt_opt(summary["best"]["objective"].as_f64()),
         summary["best"]["trial"]
     );
-    body += &line_chart(
+    // A log scale where the scores are positive and spread over more than a decade, so that
+    // failed candidates do not flatten the good ones.
+    let (lo, hi) = points
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p[1]), b.max(p[1])));
+    let log_y = lo > 0.0 && hi / lo > 20.0;
+    body += &line_chart_scaled(
         "Objective of every trial",
         "trial",
         &o.objective,
@@ -516,13 +522,14 @@ fn html(trials: &[Trial], o: &TuneOptions, summary: &Value) -> String {
                 markers: false,
             },
         ],
+        [false, log_y],
     );
     for (k, p) in o.params.iter().enumerate() {
         let pts: Vec<[f64; 2]> = trials
             .iter()
             .filter_map(|t| Some([t.values[k]?, t.objective?]))
             .collect();
-        body += &line_chart(
+        body += &line_chart_scaled(
             &format!("Objective against {}", p.path),
             &p.path,
             &o.objective,
@@ -532,6 +539,7 @@ fn html(trials: &[Trial], o: &TuneOptions, summary: &Value) -> String {
                 points: pts,
                 markers: true,
             }],
+            [p.log, log_y],
         );
     }
     body += "</figure>\n<h2>Trials</h2>\n<table class=\"trials\"><thead><tr><th>trial</th><th>generation</th>";
