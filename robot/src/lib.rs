@@ -7,11 +7,13 @@
 
 pub mod correlative;
 pub mod exploration;
+pub mod floor;
 pub mod icp;
 pub mod mcl;
 pub mod navigation;
 pub mod occupancy;
 pub mod odometry;
+pub mod plane;
 pub mod planner;
 pub mod pose_graph;
 pub mod pursuit;
