@@ -237,8 +237,8 @@ mod tests {
         // z = 0.3x − 0.1y + 2 ⇔ (−0.3, 0.1, 1)·p − 2 = 0, normalised by √1.1.
         let s = 1.1f64.sqrt();
         let want = [-0.3 / s, 0.1 / s, 1.0 / s];
-        for k in 0..3 {
-            assert!((p.normal[k] - want[k]).abs() < 1e-9, "{p:?}");
+        for (got, want) in p.normal.iter().zip(want) {
+            assert!((got - want).abs() < 1e-9, "{p:?}");
         }
         assert!((p.offset + 2.0 / s).abs() < 1e-9);
         assert!(Plane::fit(&[[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]).is_none());
@@ -305,6 +305,6 @@ mod tests {
         axes.sort();
         assert_eq!(axes, vec![0, 1, 2]);
         let total: usize = found.iter().map(|f| f.inliers.len()).sum();
-        assert!(total >= 4400 && total <= 4500, "{total}");
+        assert!((4400..=4500).contains(&total), "{total}");
     }
 }
