@@ -17,5 +17,6 @@ pub mod plane;
 pub mod planner;
 pub mod pose_graph;
 pub mod pursuit;
+pub mod rgbd_map;
 pub mod script;
 pub mod slam;
