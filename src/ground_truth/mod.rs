@@ -4,6 +4,7 @@
 //! summaries, and later gates, address them by name. A new family is a new module and one
 //! `insert` call where the run has its inputs.
 
+pub mod cloud;
 pub mod map;
 pub mod trajectory;
 

@@ -1,0 +1,158 @@
+//! 3D maps against the true surfaces the camera saw, in the Tanks and Temples / ETH3D
+//! conventions (`shared/reference/sensors-robot-metrics.md` §7): accuracy (the share of map
+//! points within τ of the truth), completeness (the share of true points within τ of the map)
+//! and their F1, at τ = 1, 2, 5 and 10 cm; and the mean and median distance of map points to
+//! the truth (ICL-NUIM's mean surface error), capped at [`CAP_M`].
+//!
+//! The truth is a dense cloud of the true surfaces: in a run, each keyframe's depth rendered
+//! without noise at the camera's true pose, voxelised like the map. No alignment is searched
+//! for: the map is in the world frame.
+
+use rustc_hash::FxHashMap;
+
+/// The tolerances, m.
+pub const TOLERANCES: [f64; 4] = [0.01, 0.02, 0.05, 0.10];
+/// Tolerance names in metric names.
+pub const TOLERANCE_NAMES: [&str; 4] = ["1cm", "2cm", "5cm", "10cm"];
+/// Distances beyond this count as this, m: a point that far from every seen surface is wrong
+/// whatever its distance, and the cap keeps the nearest-point search local.
+pub const CAP_M: f64 = 0.10;
+
+/// Scores of a 3D map.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CloudScore {
+    pub accuracy: [f64; 4],
+    pub completeness: [f64; 4],
+    pub f1: [f64; 4],
+    pub mean_distance: f64,
+    pub median_distance: f64,
+    pub map_points: usize,
+    pub truth_points: usize,
+}
+
+/// Nearest-point queries within [`CAP_M`] over a hashed grid of cells of that size.
+struct Grid<'a> {
+    points: &'a [[f64; 3]],
+    cells: FxHashMap<[i64; 3], Vec<u32>>,
+}
+
+impl<'a> Grid<'a> {
+    fn new(points: &'a [[f64; 3]]) -> Grid<'a> {
+        let mut cells: FxHashMap<[i64; 3], Vec<u32>> = FxHashMap::default();
+        for (i, p) in points.iter().enumerate() {
+            cells.entry(key(p)).or_default().push(i as u32);
+        }
+        Grid { points, cells }
+    }
+
+    /// Distance to the nearest point, capped at [`CAP_M`] (exact below it).
+    fn nearest(&self, p: &[f64; 3]) -> f64 {
+        let k = key(p);
+        let mut best = CAP_M * CAP_M;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(ids) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                        for &i in ids {
+                            let q = self.points[i as usize];
+                            let d = (p[0] - q[0]).powi(2)
+                                + (p[1] - q[1]).powi(2)
+                                + (p[2] - q[2]).powi(2);
+                            best = best.min(d);
+                        }
+                    }
+                }
+            }
+        }
+        best.sqrt()
+    }
+}
+
+fn key(p: &[f64; 3]) -> [i64; 3] {
+    p.map(|x| (x / CAP_M).floor() as i64)
+}
+
+/// Scores `map` against `truth`; `None` when either is empty.
+pub fn score(map: &[[f64; 3]], truth: &[[f64; 3]]) -> Option<CloudScore> {
+    if map.is_empty() || truth.is_empty() {
+        return None;
+    }
+    let (to_truth, to_map) = (Grid::new(truth), Grid::new(map));
+    let mut d_map: Vec<f64> = map.iter().map(|p| to_truth.nearest(p)).collect();
+    let d_truth: Vec<f64> = truth.iter().map(|p| to_map.nearest(p)).collect();
+    let share = |d: &[f64], t: f64| d.iter().filter(|&&x| x <= t).count() as f64 / d.len() as f64;
+    let accuracy = TOLERANCES.map(|t| share(&d_map, t));
+    let completeness = TOLERANCES.map(|t| share(&d_truth, t));
+    let mut f1 = [0.0; 4];
+    for k in 0..4 {
+        let (p, r) = (accuracy[k], completeness[k]);
+        f1[k] = if p + r > 0.0 {
+            2.0 * p * r / (p + r)
+        } else {
+            0.0
+        };
+    }
+    let mean_distance = d_map.iter().sum::<f64>() / d_map.len() as f64;
+    d_map.sort_by(f64::total_cmp);
+    let n = d_map.len();
+    let median_distance = if n % 2 == 1 {
+        d_map[n / 2]
+    } else {
+        (d_map[n / 2 - 1] + d_map[n / 2]) / 2.0
+    };
+    Some(CloudScore {
+        accuracy,
+        completeness,
+        f1,
+        mean_distance,
+        median_distance,
+        map_points: map.len(),
+        truth_points: truth.len(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 1 m × 1 m wall at x = 0 sampled every 5 mm.
+    fn wall(x: f64, rows: usize) -> Vec<[f64; 3]> {
+        let mut v = Vec::new();
+        for i in 0..rows {
+            for j in 0..200 {
+                v.push([x, j as f64 * 0.005, i as f64 * 0.005]);
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn scores_of_hand_made_clouds() {
+        let truth = wall(0.0, 200);
+        // The same wall: perfect.
+        let s = score(&truth, &truth).unwrap();
+        assert_eq!(
+            (s.accuracy, s.completeness, s.f1),
+            ([1.0; 4], [1.0; 4], [1.0; 4])
+        );
+        assert_eq!(s.mean_distance, 0.0);
+        // Shifted 2.5 cm off, and only its lower half: every map point is 2.5 cm away (fails
+        // 1 and 2 cm, passes 5 and 10); completeness is the truth's lower half plus the rows
+        // within τ above it.
+        let map = wall(0.025, 100);
+        let s = score(&map, &truth).unwrap();
+        assert_eq!(s.accuracy, [0.0, 0.0, 1.0, 1.0]);
+        assert!((s.mean_distance - 0.025).abs() < 1e-12);
+        assert!((s.median_distance - 0.025).abs() < 1e-12);
+        assert_eq!(s.completeness[0], 0.0);
+        // Within 5 cm: rows 0..=99 plus those h above row 99 with 2.5² + h² ≤ 5², h ≤ 4.33 cm:
+        // 8 more rows of 5 mm, 108 of 200.
+        assert!((s.completeness[2] - 108.0 / 200.0).abs() < 1e-12, "{s:?}");
+        let f = 2.0 * 1.0 * 0.54 / 1.54;
+        assert!((s.f1[2] - f).abs() < 1e-12);
+        // Points far away count as the cap.
+        let s = score(&[[10.0, 0.0, 0.0]], &truth).unwrap();
+        assert_eq!(s.mean_distance, CAP_M);
+        assert!(score(&[], &truth).is_none());
+    }
+}
