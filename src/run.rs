@@ -5,13 +5,15 @@
 //! renamed into place at the end: a failed or interrupted run leaves no half-written results.
 
 use crate::rgbd::TumRgbdWriter;
-use crate::scenario::Scenario;
+use crate::scenario::{MapPose, Scenario};
 use anyhow::{Context, Result};
+use futago_msgs::camera::Intrinsics;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{DriveCommand, Duration, LaserScan, Pose2, Pose3, Time, carmen, tum};
 use futago_robot::mcl::{Mcl, MclMap};
 use futago_robot::navigation::{NavInput, Navigator, Task};
 use futago_robot::odometry::OdometryIntegrator;
+use futago_robot::rgbd_map::{CameraMount, RgbdMapper};
 use futago_robot::script::{ControlInput, ControllerConfig, PoseSource, ScriptedController};
 use futago_robot::slam::Slam;
 use futago_sim::Simulation;
@@ -92,6 +94,78 @@ pub struct Outcome {
     pub laps: Vec<Value>,
     /// SLAM's final trajectory and map, for the files.
     pub slam_result: Option<(Vec<(Time, Pose2)>, OccupancyGrid)>,
+    /// The RGB-D map, the true surfaces its keyframes saw, and its counts.
+    pub rgbd_map: Option<RgbdMapResult>,
+}
+
+/// What an RGB-D mapping run gives.
+#[derive(Debug, Clone)]
+pub struct RgbdMapResult {
+    pub points: Vec<([f64; 3], [u8; 3])>,
+    pub truth: Vec<[f64; 3]>,
+    pub counts: Value,
+}
+
+/// The RGB-D map in the loop, on the first camera, with the true surfaces of its keyframes.
+struct RgbdRunner {
+    mapper: RgbdMapper,
+    source: MapPose,
+    stride: u32,
+    max_depth: f64,
+    voxel: f64,
+    truth: rustc_hash::FxHashMap<[i64; 3], [f64; 3]>,
+    /// Truth voxels in the order first seen (deterministic output).
+    order: Vec<[i64; 3]>,
+}
+
+impl RgbdRunner {
+    /// Adds a noiseless depth image taken from `optical` (the optical frame's world pose) to
+    /// the true surfaces.
+    fn add_truth(
+        &mut self,
+        depth: &futago_msgs::camera::DepthImage,
+        k: &Intrinsics,
+        optical: &Pose3,
+    ) {
+        let [qx, qy, qz, qw] = optical.rotation;
+        let rotate = |v: [f64; 3]| {
+            // v + 2w(q × v) + 2 q × (q × v)
+            let q = [qx, qy, qz];
+            let cross = |a: [f64; 3], b: [f64; 3]| {
+                [
+                    a[1] * b[2] - a[2] * b[1],
+                    a[2] * b[0] - a[0] * b[2],
+                    a[0] * b[1] - a[1] * b[0],
+                ]
+            };
+            let t = cross(q, v).map(|x| 2.0 * x);
+            let u = cross(q, t);
+            [
+                v[0] + qw * t[0] + u[0],
+                v[1] + qw * t[1] + u[1],
+                v[2] + qw * t[2] + u[2],
+            ]
+        };
+        for v in (0..depth.height).step_by(self.stride as usize) {
+            for u in (0..depth.width).step_by(self.stride as usize) {
+                let z = depth.at(u, v) as f64;
+                if !(z.is_finite() && z > 0.0 && z <= self.max_depth) {
+                    continue;
+                }
+                let r = rotate(k.back_project(u as f64, v as f64, z));
+                let w = [
+                    r[0] + optical.translation[0],
+                    r[1] + optical.translation[1],
+                    r[2] + optical.translation[2],
+                ];
+                let key = w.map(|x| (x / self.voxel).floor() as i64);
+                if let std::collections::hash_map::Entry::Vacant(e) = self.truth.entry(key) {
+                    e.insert(w);
+                    self.order.push(key);
+                }
+            }
+        }
+    }
 }
 
 /// Monte Carlo localisation in the loop: updates at its rate from the first laser's scans, and
@@ -256,7 +330,8 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         seed,
     );
     // Cameras render on demand: only when some consumer takes their frames.
-    let consumers = sinks.as_deref().map(|k| k.cameras.len()).unwrap_or(0);
+    let consumers =
+        sinks.as_deref().map(|k| k.cameras.len()).unwrap_or(0) + s.rgbd_map.is_some() as usize;
     let mut kinects: Vec<Kinect> = s
         .cameras
         .iter()
@@ -271,6 +346,32 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         None
     };
     let mut camera_frames = vec![0u64; kinects.len()];
+    let mut rgbd = s.rgbd_map.as_ref().map(|m| {
+        // The camera's place on the robot: x, y and yaw of its mount (height, pitch and roll
+        // come from the floor in each frame).
+        let mount = s.cameras[0].mount;
+        let (_, yaw) = {
+            let f = mount.rotation * glam::Vec3::X;
+            ((), (f.y as f64).atan2(f.x as f64))
+        };
+        RgbdRunner {
+            mapper: RgbdMapper::new(
+                m.config.clone(),
+                CameraMount {
+                    x: mount.translation.x as f64,
+                    y: mount.translation.y as f64,
+                    yaw,
+                },
+                seed,
+            ),
+            source: m.pose_source,
+            stride: m.config.stride,
+            max_depth: m.config.max_depth,
+            voxel: m.config.voxel,
+            truth: Default::default(),
+            order: Vec::new(),
+        }
+    });
     let mut localizer = spec
         .localization
         .as_ref()
@@ -460,19 +561,46 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 }
             }
         }
-        if let (Some(r), Some(k)) = (renderer.as_mut(), sinks.as_deref_mut())
+        if let Some(r) = renderer.as_mut()
             && kinects.iter().any(|c| c.due(now.nanos()))
         {
-            // Pose the scene once for every camera due at this step.
-            let poses = sim.scene_poses();
-            r.set_poses(&poses)?;
-            let base = poses[poses.len() - 1];
-            for (i, cam) in kinects.iter_mut().enumerate() {
-                if cam.due(now.nanos()) {
+            let dataset = sinks.as_deref().is_some_and(|k| !k.cameras.is_empty());
+            // The 2D pose that places a keyframe, and whether the mapper wants one here.
+            let map_pose = rgbd.as_ref().map(|m| match m.source {
+                MapPose::GroundTruth => truth,
+                MapPose::Odometry => odo.pose,
+                MapPose::Localization => localizer
+                    .as_ref()
+                    .map_or(odo.pose, |l| l.current(&odo.pose)),
+                MapPose::Slam => slam.as_ref().map_or(odo.pose, |l| l.current(&odo.pose)),
+            });
+            let map_wants = match (&rgbd, &map_pose) {
+                (Some(m), Some(p)) => m.mapper.wants(p) && kinects[0].due(now.nanos()),
+                _ => false,
+            };
+            if dataset || map_wants {
+                // Pose the scene once for every camera due at this step.
+                let poses = sim.scene_poses();
+                r.set_poses(&poses)?;
+                let base = poses[poses.len() - 1];
+                for (i, cam) in kinects.iter_mut().enumerate() {
+                    let for_map = i == 0 && map_wants;
+                    if !cam.due(now.nanos()) || !(dataset || for_map) {
+                        continue;
+                    }
                     cam.take();
                     let frame = cam.capture(r, &base, now, true)?;
-                    k.cameras[i].write(&frame, &cam.optical_pose(&base))?;
+                    if let Some(k) = sinks.as_deref_mut().filter(|_| dataset) {
+                        k.cameras[i].write(&frame, &cam.optical_pose(&base))?;
+                    }
                     camera_frames[i] += 1;
+                    if for_map
+                        && let (Some(m), Some(p)) = (rgbd.as_mut(), map_pose)
+                        && m.mapper.offer(&frame, &p)
+                    {
+                        let depth = cam.true_depth(r, &base)?;
+                        m.add_truth(&depth, &frame.depth_intrinsics, &cam.optical_pose(&base));
+                    }
                 }
             }
         }
@@ -608,7 +736,13 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         }
         None => (None, None),
     };
+    let rgbd_map = rgbd.map(|m| RgbdMapResult {
+        counts: serde_json::to_value(m.mapper.counts()).unwrap_or_default(),
+        points: m.mapper.points(),
+        truth: m.order.iter().map(|k| m.truth[k]).collect(),
+    });
     Ok(Outcome {
+        rgbd_map,
         slam: slam_summary,
         slam_result,
         navigation,
@@ -750,6 +884,11 @@ fn sha256_tree(dir: &Path) -> Result<String> {
 /// Relations sampled from the ground truth (the datasets' `t1 t2 x y z roll pitch yaw`), on
 /// which the run's relations metrics are computed; other tools can score against it too.
 pub const RELATIONS_FILE: &str = "groundtruth.relations";
+
+/// The RGB-D map (binary PLY, coloured points in the world frame).
+pub const RGBD_MAP_FILE: &str = "rgbd_map.ply";
+/// The true surfaces its keyframes saw (binary PLY), against which it is scored.
+pub const RGBD_TRUTH_FILE: &str = "rgbd_map_truth.ply";
 
 /// The run's HTML report (see [`crate::report`]).
 pub const REPORT_FILE: &str = "report.html";
@@ -922,12 +1061,33 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             map.write_map_server(tmp, SLAM_MAP_STEM)
                 .with_context(|| format!("writing {SLAM_MAP_STEM}.pgm and .yaml"))?;
         }
+        if let Some(m) = &outcome.rgbd_map {
+            let comment = format!("futago RGB-D map of {} (world frame, m)", s.spec.name);
+            std::fs::write(
+                tmp.join(RGBD_MAP_FILE),
+                futago_msgs::ply::points(&m.points, &comment),
+            )
+            .with_context(|| format!("writing {RGBD_MAP_FILE}"))?;
+            let truth: Vec<([f64; 3], [u8; 3])> =
+                m.truth.iter().map(|p| (*p, [26, 150, 65])).collect();
+            let comment = format!(
+                "futago: the true surfaces the RGB-D map's keyframes saw, {}",
+                s.spec.name
+            );
+            std::fs::write(
+                tmp.join(RGBD_TRUTH_FILE),
+                futago_msgs::ply::points(&truth, &comment),
+            )
+            .with_context(|| format!("writing {RGBD_TRUTH_FILE}"))?;
+        }
         let mut files = serde_json::Map::new();
         let slam_map = format!("{SLAM_MAP_STEM}.pgm");
         for f in OUTPUT_FILES.iter().chain([
             &LOCALIZATION_FILE,
             &SLAM_TRAJECTORY_FILE,
             &slam_map.as_str(),
+            &RGBD_MAP_FILE,
+            &RGBD_TRUTH_FILE,
         ]) {
             let p = tmp.join(f);
             if p.exists() {
@@ -970,6 +1130,16 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             let m = crate::ground_truth::map::score(map, &truth, [s.start.x, s.start.y])
                 .map_err(|e| anyhow::anyhow!("scoring the SLAM map: {e}"))?;
             metrics.insert_map("slam.map", &m);
+        }
+        if let Some(m) = &outcome.rgbd_map {
+            let map: Vec<[f64; 3]> = m.points.iter().map(|p| p.0).collect();
+            let mut counts = m.counts.clone();
+            counts["map_points"] = json!(map.len());
+            counts["truth_points"] = json!(m.truth.len());
+            if let Some(score) = crate::ground_truth::cloud::score(&map, &m.truth) {
+                metrics.insert_cloud("rgbd_map", &score);
+            }
+            sum["rgbd_map"] = counts;
         }
         sum["gates"] = serde_json::to_value(crate::ground_truth::evaluate(&s.spec.gate, &metrics))?;
         sum["metrics"] = serde_json::to_value(metrics)?;

@@ -9,6 +9,7 @@ use crate::overlay::{Overlay, blame};
 use futago_msgs::Pose2;
 use futago_robot::mcl::MclConfig;
 use futago_robot::navigation::NavigationConfig;
+use futago_robot::rgbd_map::RgbdMapConfig;
 use futago_robot::script::{ControllerConfig, PoseSource};
 use futago_robot::slam::SlamConfig;
 use futago_sim::config::{SpecError, check_name, check_positive, check_range, load_toml};
@@ -51,6 +52,9 @@ pub struct ScenarioSpec {
     pub localization: Option<LocalizationSpec>,
     /// Laser SLAM in the loop, from the first laser.
     pub slam: Option<SlamConfig>,
+    /// A 3D map from the first camera's RGB-D keyframes, placed by a 2D pose and the floor;
+    /// typed by [`rgbd_map_config`].
+    pub rgbd_map: Option<toml::Table>,
     /// Navigation parameters, for the `navigate` and `explore` controllers.
     #[serde(default)]
     pub navigation: NavigationConfig,
@@ -75,6 +79,7 @@ impl ScenarioSpec {
             global_localization: self.localization.as_ref().is_some_and(|l| l.global),
             kidnappings: !self.event.is_empty(),
             slam: self.slam.is_some(),
+            rgbd_map: self.rgbd_map.is_some(),
         })
     }
 }
@@ -185,6 +190,63 @@ pub struct Scenario {
     pub config: toml::Table,
     /// The overlays laid over the file, in order.
     pub overlays: Vec<Overlay>,
+    /// The `[rgbd_map]` table, typed.
+    pub rgbd_map: Option<RgbdMapSpec>,
+}
+
+/// Which 2D pose places the RGB-D keyframes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapPose {
+    GroundTruth,
+    Odometry,
+    Localization,
+    Slam,
+}
+
+/// `[rgbd_map]`: `pose_source` and the mapper's own keys ([`RgbdMapConfig`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RgbdMapSpec {
+    pub pose_source: MapPose,
+    pub config: RgbdMapConfig,
+}
+
+/// Types the `[rgbd_map]` table: `pose_source` (default `slam`) and the mapper's keys, naming
+/// `rgbd_map.KEY` in errors.
+pub fn rgbd_map_config(path: &Path, table: &toml::Table) -> Result<RgbdMapSpec, SpecError> {
+    let mut rest = table.clone();
+    let pose_source = match rest.remove("pose_source") {
+        None => MapPose::Slam,
+        Some(v) => MapPose::deserialize(v.clone()).map_err(|_| {
+            SpecError::new(
+                path,
+                "rgbd_map.pose_source",
+                format!(
+                    "expected one of \"ground_truth\", \"odometry\", \"localization\", \"slam\"; found {v}"
+                ),
+            )
+        })?,
+    };
+    let config: RgbdMapConfig = serde_path_to_error::deserialize(toml::Value::Table(rest))
+        .map_err(|e| {
+            let key = e.path().to_string();
+            SpecError::new(
+                path,
+                if key == "." {
+                    "rgbd_map".to_string()
+                } else {
+                    format!("rgbd_map.{key}")
+                },
+                e.into_inner().message().to_string(),
+            )
+        })?;
+    config
+        .validate()
+        .map_err(|(k, m)| SpecError::new(path, format!("rgbd_map.{k}"), m))?;
+    Ok(RgbdMapSpec {
+        pose_source,
+        config,
+    })
 }
 
 /// Types the `[controller]` table by its `type` key, naming `controller.KEY` in errors.
@@ -454,6 +516,32 @@ impl Scenario {
                 ));
             }
         }
+        let rgbd_map = match &spec.rgbd_map {
+            None => None,
+            Some(t) => {
+                let m = rgbd_map_config(path, t)?;
+                if cameras.is_empty() {
+                    return Err(SpecError::new(
+                        path,
+                        "rgbd_map",
+                        "an RGB-D map needs a [[camera]]; the scenario has none",
+                    ));
+                }
+                let needs = match m.pose_source {
+                    MapPose::Localization if spec.localization.is_none() => Some("[localization]"),
+                    MapPose::Slam if spec.slam.is_none() => Some("[slam]"),
+                    _ => None,
+                };
+                if let Some(table) = needs {
+                    return Err(SpecError::new(
+                        path,
+                        "rgbd_map.pose_source",
+                        format!("this pose source needs a {table} table"),
+                    ));
+                }
+                Some(m)
+            }
+        };
         let controller = controller_config(path, &spec.controller)?;
         controller
             .validate()
@@ -518,6 +606,7 @@ impl Scenario {
             cameras,
             config: toml::Table::new(),
             overlays: Vec::new(),
+            rgbd_map,
         })
     }
 }

@@ -1073,6 +1073,95 @@ fn tune_calibrates_a_wheel_base_error_found_by_hand_and_its_overlay_reproduces_t
     }
 }
 
+#[test]
+fn an_rgbd_map_is_scored_against_the_surfaces_it_saw_and_a_worse_pose_scores_worse() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = root().join("worlds/lab.toml");
+    let scenario = write(
+        tmp.path(),
+        "map.toml",
+        &format!(
+            "name = \"map\"\nworld = {world:?}\nduration = 14.0\nseed = 1\nstart = \"centre\"\n\
+             [robot.odometry]\nwheel_base_ratio = 1.03\n\
+             [[camera]]\nname = \"kinect\"\npreset = \"seed000\"\nxyz = [0.1, 0.0, 0.42]\nnoise = {{ model = \"nguyen\" }}\n\
+             [rgbd_map]\npose_source = \"ground_truth\"\n\
+             [controller]\ntype = \"waypoints\"\nspeed = 0.3\npose_source = \"ground_truth\"\n\
+             waypoints = [[9.5, 3.5], [9.5, 5.0], [6.0, 5.0]]\n"
+        ),
+    );
+    let sc = scenario.to_str().unwrap();
+    let truth = tmp.path().join("truth");
+    run_for(&scenario, &truth, None);
+    let odo = tmp.path().join("odo");
+    ok(&futago(&[
+        "run",
+        sc,
+        "--out",
+        odo.to_str().unwrap(),
+        "-q",
+        "--set",
+        "rgbd_map.pose_source=odometry",
+    ]));
+    let (a, b) = (summary(&truth), summary(&odo));
+    let m =
+        |s: &serde_json::Value, k: &str| s["metrics"][format!("rgbd_map.{k}")].as_f64().unwrap();
+    // Placed by the true pose, only the Kinect's noise is left: most of the map lies within
+    // 5 cm of the true surfaces, and the mean distance is about a centimetre.
+    assert!(m(&a, "f1_5cm") > 0.9, "{a}");
+    assert!(m(&a, "mean_distance_m") < 0.02, "{a}");
+    assert!(
+        m(&a, "accuracy_1cm") < m(&a, "accuracy_2cm")
+            && m(&a, "accuracy_2cm") <= m(&a, "accuracy_5cm")
+    );
+    // Placed by odometry with a 3 % wheel-base error, it is worse on every count.
+    for k in ["f1_2cm", "f1_5cm", "accuracy_5cm"] {
+        assert!(
+            m(&b, k) < m(&a, k) - 0.05,
+            "{k}: {} vs {}",
+            m(&b, k),
+            m(&a, k)
+        );
+    }
+    assert!(m(&b, "mean_distance_m") > m(&a, "mean_distance_m") + 0.005);
+    // The map and the truth are PLY files with as many points as the summary says.
+    let counts = &a["rgbd_map"];
+    assert!(counts["keyframes"].as_u64().unwrap() >= 5, "{counts}");
+    for (file, key) in [
+        ("rgbd_map.ply", "map_points"),
+        ("rgbd_map_truth.ply", "truth_points"),
+    ] {
+        let bytes = std::fs::read(truth.join(file)).unwrap();
+        let head = String::from_utf8_lossy(&bytes[..300]).to_string();
+        let n = counts[key].as_u64().unwrap();
+        assert!(
+            head.contains(&format!("element vertex {n}\n")),
+            "{file}: {head}"
+        );
+        let end = head.find("end_header\n").unwrap() + "end_header\n".len();
+        assert_eq!(bytes.len() - end, 15 * n as usize, "{file}");
+    }
+    // Bad tables are refused before anything runs.
+    for (set, expect) in [
+        (
+            "rgbd_map.pose_source=slam",
+            "this pose source needs a [slam] table",
+        ),
+        ("rgbd_map.pose_source=compass", "rgbd_map.pose_source"),
+        (
+            "rgbd_map.stride=0",
+            "key `rgbd_map.stride`: expected at least 1 pixel",
+        ),
+        ("camera=[]", "an RGB-D map needs a [[camera]]"),
+    ] {
+        let fresh = tmp.path().join("fresh");
+        let o = futago(&["run", sc, "--out", fresh.to_str().unwrap(), "--set", set]);
+        exits_with(&o, 1);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(expect), "{set}: {err}");
+        assert!(!fresh.exists());
+    }
+}
+
 /// A headless browser, if this machine has one: `FUTAGO_CHROMIUM`, else Debian's `chromium`
 /// or Google's `google-chrome`.
 fn browser() -> Option<PathBuf> {

@@ -101,7 +101,8 @@ pub struct CameraMount {
 pub struct RgbdMapCounts {
     pub frames: u64,
     pub keyframes: u64,
-    /// Keyframe candidates without a floor, left out.
+    /// Keyframe candidates without a floor, left out (the next frame is tried in their place,
+    /// so a stretch without floor in view counts every frame of it).
     pub no_floor: u64,
     /// Sampled pixels without valid depth (0, NaN, infinite or beyond `max_depth`).
     pub invalid_pixels: u64,

@@ -477,6 +477,17 @@ impl Kinect {
         })
     }
 
+    /// The depth image this camera would measure without noise (every pixel's true distance
+    /// along the optical axis), for scoring maps against the surfaces it saw. Draws nothing
+    /// from the noise stream, so it leaves the camera's measurements as they were.
+    pub fn true_depth(
+        &self,
+        renderer: &mut Renderer,
+        base: &Pose,
+    ) -> Result<DepthImage, RenderError> {
+        renderer.render_depth(&self.spec.depth, &(*base * self.spec.mount))
+    }
+
     /// The optical frame's pose in the world for a robot base pose (TUM ground truth).
     pub fn optical_pose(&self, base: &Pose) -> Pose3 {
         let o = optical_from_body(&(*base * self.spec.mount));

@@ -45,10 +45,10 @@ impl<'a> Grid<'a> {
         Grid { points, cells }
     }
 
-    /// Distance to the nearest point, capped at [`CAP_M`] (exact below it).
+    /// Distance to the nearest point if it is within [`CAP_M`], else infinity.
     fn nearest(&self, p: &[f64; 3]) -> f64 {
         let k = key(p);
-        let mut best = CAP_M * CAP_M;
+        let mut best = f64::INFINITY;
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
@@ -64,7 +64,11 @@ impl<'a> Grid<'a> {
                 }
             }
         }
-        best.sqrt()
+        if best <= CAP_M * CAP_M {
+            best.sqrt()
+        } else {
+            f64::INFINITY
+        }
     }
 }
 
@@ -91,6 +95,9 @@ pub fn score(map: &[[f64; 3]], truth: &[[f64; 3]]) -> Option<CloudScore> {
         } else {
             0.0
         };
+    }
+    for d in &mut d_map {
+        *d = d.min(CAP_M);
     }
     let mean_distance = d_map.iter().sum::<f64>() / d_map.len() as f64;
     d_map.sort_by(f64::total_cmp);
@@ -153,6 +160,12 @@ mod tests {
         // Points far away count as the cap.
         let s = score(&[[10.0, 0.0, 0.0]], &truth).unwrap();
         assert_eq!(s.mean_distance, CAP_M);
+        assert_eq!((s.accuracy, s.completeness), ([0.0; 4], [0.0; 4]));
+        // 9.9 cm off passes at 10 cm only; 10.1 cm passes nothing.
+        let s = score(&wall(0.099, 200), &truth).unwrap();
+        assert_eq!(s.accuracy, [0.0, 0.0, 0.0, 1.0]);
+        let s = score(&wall(0.101, 200), &truth).unwrap();
+        assert_eq!(s.accuracy, [0.0; 4]);
         assert!(score(&[], &truth).is_none());
     }
 }

@@ -39,6 +39,17 @@ impl Metrics {
         self.insert(format!("{prefix}.free_iou"), m.free_iou);
     }
 
+    /// `prefix.accuracy_1cm`, … `prefix.mean_distance_m` for a 3D map.
+    pub fn insert_cloud(&mut self, prefix: &str, s: &cloud::CloudScore) {
+        for (k, t) in cloud::TOLERANCE_NAMES.iter().enumerate() {
+            self.insert(format!("{prefix}.accuracy_{t}"), s.accuracy[k]);
+            self.insert(format!("{prefix}.completeness_{t}"), s.completeness[k]);
+            self.insert(format!("{prefix}.f1_{t}"), s.f1[k]);
+        }
+        self.insert(format!("{prefix}.mean_distance_m"), s.mean_distance);
+        self.insert(format!("{prefix}.median_distance_m"), s.median_distance);
+    }
+
     /// `prefix.rmse{unit}`, `prefix.mean{unit}`, … for a set of errors.
     pub fn insert_stats(&mut self, prefix: &str, unit: &str, s: &Stats) {
         for (k, v) in [
@@ -163,6 +174,8 @@ pub struct Produces {
     /// Kidnapping events (`localization.recovery_s`).
     pub kidnappings: bool,
     pub slam: bool,
+    /// An RGB-D map (`rgbd_map.*`).
+    pub rgbd_map: bool,
 }
 
 /// Every metric name a run produces: the odometry trajectory's always; the localiser's and
@@ -209,6 +222,15 @@ pub fn metric_names(p: Produces) -> Vec<String> {
         ] {
             names.push(format!("slam.map.{k}"));
         }
+    }
+    if p.rgbd_map {
+        for t in cloud::TOLERANCE_NAMES {
+            for k in ["accuracy", "completeness", "f1"] {
+                names.push(format!("rgbd_map.{k}_{t}"));
+            }
+        }
+        names.push("rgbd_map.mean_distance_m".to_string());
+        names.push("rgbd_map.median_distance_m".to_string());
     }
     names.sort();
     names
@@ -374,7 +396,10 @@ mod tests {
             global_localization: false,
             kidnappings: true,
             slam: true,
+            rgbd_map: true,
         });
+        assert!(all.contains(&"rgbd_map.f1_5cm".to_string()));
+        assert!(!base.iter().any(|n| n.starts_with("rgbd_map")));
         assert!(all.contains(&"localization.recovery_s".to_string()));
         assert!(!all.contains(&"localization.convergence_s".to_string()));
         assert!(all.contains(&"slam.map.f1_2cell".to_string()));
