@@ -101,6 +101,8 @@ pub struct Outcome {
 /// What an RGB-D mapping run gives.
 #[derive(Debug, Clone)]
 pub struct RgbdMapResult {
+    /// The polygon map as a PLY mesh.
+    pub planes_ply: Vec<u8>,
     pub points: Vec<([f64; 3], [u8; 3])>,
     pub truth: Vec<[f64; 3]>,
     pub counts: Value,
@@ -737,7 +739,18 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         None => (None, None),
     };
     let rgbd_map = rgbd.map(|m| RgbdMapResult {
-        counts: serde_json::to_value(m.mapper.counts()).unwrap_or_default(),
+        planes_ply: m.mapper.polygons().to_ply(&format!(
+            "futago polygon map of {} (world frame, m)",
+            spec.name
+        )),
+        counts: {
+            let mut c = serde_json::to_value(m.mapper.counts()).unwrap_or_default();
+            let (faces, vertices) = m.mapper.polygons().size();
+            c["planes_found"] = json!(m.mapper.polygons().found);
+            c["plane_faces"] = json!(faces);
+            c["plane_vertices"] = json!(vertices);
+            c
+        },
         points: m.mapper.points(),
         truth: m.order.iter().map(|k| m.truth[k]).collect(),
     });
@@ -887,6 +900,8 @@ pub const RELATIONS_FILE: &str = "groundtruth.relations";
 
 /// The RGB-D map (binary PLY, coloured points in the world frame).
 pub const RGBD_MAP_FILE: &str = "rgbd_map.ply";
+/// The polygon map (binary PLY mesh, a face per plane).
+pub const RGBD_PLANES_FILE: &str = "rgbd_planes.ply";
 /// The true surfaces its keyframes saw (binary PLY), against which it is scored.
 pub const RGBD_TRUTH_FILE: &str = "rgbd_map_truth.ply";
 
@@ -1079,6 +1094,8 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
                 futago_msgs::ply::points(&truth, &comment),
             )
             .with_context(|| format!("writing {RGBD_TRUTH_FILE}"))?;
+            std::fs::write(tmp.join(RGBD_PLANES_FILE), &m.planes_ply)
+                .with_context(|| format!("writing {RGBD_PLANES_FILE}"))?;
         }
         let mut files = serde_json::Map::new();
         let slam_map = format!("{SLAM_MAP_STEM}.pgm");
@@ -1088,6 +1105,7 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             &slam_map.as_str(),
             &RGBD_MAP_FILE,
             &RGBD_TRUTH_FILE,
+            &RGBD_PLANES_FILE,
         ]) {
             let p = tmp.join(f);
             if p.exists() {

@@ -1140,6 +1140,19 @@ fn an_rgbd_map_is_scored_against_the_surfaces_it_saw_and_a_worse_pose_scores_wor
         let end = head.find("end_header\n").unwrap() + "end_header\n".len();
         assert_eq!(bytes.len() - end, 15 * n as usize, "{file}");
     }
+    // The polygon map: the lab's floor and walls, far fewer faces than planes found.
+    let faces = counts["plane_faces"].as_u64().unwrap();
+    assert!(
+        faces >= 2 && faces < counts["planes_found"].as_u64().unwrap(),
+        "{counts}"
+    );
+    let ply = std::fs::read(truth.join("rgbd_planes.ply")).unwrap();
+    let head = String::from_utf8_lossy(&ply[..400]).to_string();
+    assert!(head.contains(&format!("element face {faces}\n")), "{head}");
+    assert!(
+        head.contains(&format!("element vertex {}\n", counts["plane_vertices"])),
+        "{head}"
+    );
     // Bad tables are refused before anything runs.
     for (set, expect) in [
         (

@@ -15,6 +15,7 @@ pub mod occupancy;
 pub mod odometry;
 pub mod plane;
 pub mod planner;
+pub mod polygons;
 pub mod pose_graph;
 pub mod pursuit;
 pub mod rgbd_map;

@@ -11,6 +11,7 @@
 //! first point of a voxel keeps its colour; later ones add to its mean position).
 
 use crate::floor::{FloorConfig, Level, level, optical_to_body};
+use crate::polygons::{PolygonConfig, PolygonMap};
 use futago_msgs::Pose2;
 use futago_msgs::camera::RgbdFrame;
 use rand::SeedableRng;
@@ -34,6 +35,8 @@ pub struct RgbdMapConfig {
     /// Voxel size of the map, m.
     pub voxel: f64,
     pub floor: FloorConfig,
+    /// The polygon map built beside the points (seed 000 §3.2).
+    pub polygons: PolygonConfig,
 }
 
 impl Default for RgbdMapConfig {
@@ -45,6 +48,7 @@ impl Default for RgbdMapConfig {
             max_depth: 4.0,
             voxel: 0.01,
             floor: FloorConfig::default(),
+            polygons: PolygonConfig::default(),
         }
     }
 }
@@ -128,12 +132,13 @@ pub struct RgbdMapper {
     rng: ChaCha8Rng,
     /// Each keyframe's robot pose and levelling.
     keyframes: Vec<(Pose2, Level)>,
+    polygons: PolygonMap,
 }
 
 impl RgbdMapper {
     pub fn new(config: RgbdMapConfig, mount: CameraMount, seed: u64) -> RgbdMapper {
         RgbdMapper {
-            config,
+            config: config.clone(),
             mount,
             last: None,
             voxels: FxHashMap::default(),
@@ -141,6 +146,7 @@ impl RgbdMapper {
             counts: RgbdMapCounts::default(),
             rng: ChaCha8Rng::seed_from_u64(seed),
             keyframes: Vec::new(),
+            polygons: PolygonMap::new(config.polygons),
         }
     }
 
@@ -200,6 +206,7 @@ impl RgbdMapper {
         let cam = pose.compose(&Pose2::new(self.mount.x, self.mount.y, self.mount.yaw));
         let (s, c) = cam.theta.sin_cos();
         let size = cfg.voxel;
+        let mut world = Vec::with_capacity(pts.len());
         for (p, colour) in pts {
             let q = lv.apply(p);
             let w = [
@@ -208,6 +215,7 @@ impl RgbdMapper {
                 q[2],
             ];
             let key = w.map(|x| (x / size).floor() as i64);
+            world.push(w);
             self.counts.points += 1;
             match self.voxels.get_mut(&key) {
                 Some(vx) => {
@@ -229,7 +237,13 @@ impl RgbdMapper {
                 }
             }
         }
+        self.polygons.add_frame(&world, &mut self.rng);
         true
+    }
+
+    /// The polygon map of the keyframes so far.
+    pub fn polygons(&self) -> &PolygonMap {
+        &self.polygons
     }
 
     /// The map's points (one per voxel, the mean of its points) and colours, in the order the
