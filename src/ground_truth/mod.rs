@@ -231,6 +231,8 @@ pub fn metric_names(p: Produces) -> Vec<String> {
         }
         names.push("rgbd_map.mean_distance_m".to_string());
         names.push("rgbd_map.median_distance_m".to_string());
+        names.push("rgbd_map.slice_rms_m".to_string());
+        names.push("rgbd_map.slice_median_m".to_string());
     }
     names.sort();
     names
