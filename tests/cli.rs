@@ -1105,9 +1105,12 @@ fn an_rgbd_map_is_scored_against_the_surfaces_it_saw_and_a_worse_pose_scores_wor
     let (a, b) = (summary(&truth), summary(&odo));
     let m =
         |s: &serde_json::Value, k: &str| s["metrics"][format!("rgbd_map.{k}")].as_f64().unwrap();
-    // Placed by the true pose, only the Kinect's noise is left: most of the map lies within
-    // 5 cm of the true surfaces, and the mean distance is about a centimetre.
-    assert!(m(&a, "f1_5cm") > 0.9, "{a}");
+    // Placed by the true pose, only the Kinect's noise is left: nearly all the map lies within
+    // 5 cm of the true surfaces, and the mean distance is about a centimetre. Completeness is
+    // lower (measured 0.82 to 0.83): the noise model drops pixels that the noiseless view
+    // keeps. (F1 at 5 cm measured 0.900 on GL and a little more on Vulkan.)
+    assert!(m(&a, "accuracy_5cm") > 0.97, "{a}");
+    assert!(m(&a, "f1_5cm") > 0.85, "{a}");
     assert!(m(&a, "mean_distance_m") < 0.02, "{a}");
     assert!(
         m(&a, "accuracy_1cm") < m(&a, "accuracy_2cm")
