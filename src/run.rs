@@ -130,24 +130,9 @@ impl RgbdRunner {
         optical: &Pose3,
     ) {
         let [qx, qy, qz, qw] = optical.rotation;
-        let rotate = |v: [f64; 3]| {
-            // v + 2w(q × v) + 2 q × (q × v)
-            let q = [qx, qy, qz];
-            let cross = |a: [f64; 3], b: [f64; 3]| {
-                [
-                    a[1] * b[2] - a[2] * b[1],
-                    a[2] * b[0] - a[0] * b[2],
-                    a[0] * b[1] - a[1] * b[0],
-                ]
-            };
-            let t = cross(q, v).map(|x| 2.0 * x);
-            let u = cross(q, t);
-            [
-                v[0] + qw * t[0] + u[0],
-                v[1] + qw * t[1] + u[1],
-                v[2] + qw * t[2] + u[2],
-            ]
-        };
+        let q =
+            nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, qx, qy, qz));
+        let rotate = |v: [f64; 3]| -> [f64; 3] { (q * nalgebra::Vector3::from(v)).into() };
         for v in (0..depth.height).step_by(self.stride as usize) {
             for u in (0..depth.width).step_by(self.stride as usize) {
                 let z = depth.at(u, v) as f64;
@@ -352,10 +337,8 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         // The camera's place on the robot: x, y and yaw of its mount (height, pitch and roll
         // come from the floor in each frame).
         let mount = s.cameras[0].mount;
-        let (_, yaw) = {
-            let f = mount.rotation * glam::Vec3::X;
-            ((), (f.y as f64).atan2(f.x as f64))
-        };
+        let forward = mount.rotation * glam::Vec3::X;
+        let yaw = (forward.y as f64).atan2(forward.x as f64);
         RgbdRunner {
             mapper: RgbdMapper::new(
                 m.config.clone(),

@@ -3,18 +3,39 @@
 
 /// A binary PLY file of coloured points.
 pub fn points(points: &[([f64; 3], [u8; 3])], comment: &str) -> Vec<u8> {
+    mesh(points, &[], comment)
+}
+
+/// A binary PLY mesh: coloured vertices and polygonal faces (vertex indices, at most 255 a
+/// face); without faces, a point cloud (no face element).
+pub fn mesh(vertices: &[([f64; 3], [u8; 3])], faces: &[Vec<u32>], comment: &str) -> Vec<u8> {
     let comment = comment.replace(['\n', '\r'], " ");
+    let face_element = if faces.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "element face {}\nproperty list uchar uint vertex_indices\n",
+            faces.len()
+        )
+    };
     let mut out = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
-        points.len()
+        "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n{face_element}end_header\n",
+        vertices.len()
     )
     .into_bytes();
-    out.reserve(points.len() * 15);
-    for (p, c) in points {
+    out.reserve(vertices.len() * 15);
+    for (p, c) in vertices {
         for v in p {
             out.extend_from_slice(&(*v as f32).to_le_bytes());
         }
         out.extend_from_slice(c);
+    }
+    for f in faces {
+        let f = &f[..f.len().min(255)];
+        out.push(f.len() as u8);
+        for i in f {
+            out.extend_from_slice(&i.to_le_bytes());
+        }
     }
     out
 }

@@ -259,12 +259,8 @@ impl PolygonMap {
     /// A binary PLY mesh of the polygons (one face per polygon, vertices in its outline's
     /// order), coloured by orientation: floors grey, walls by their heading.
     pub fn to_ply(&self, comment: &str) -> Vec<u8> {
-        let (faces, vertices) = self.size();
-        let comment = comment.replace(['\n', '\r'], " ");
-        let mut out = format!(
-            "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nelement face {faces}\nproperty list uchar uint vertex_indices\nend_header\n"
-        )
-        .into_bytes();
+        let mut vertices = Vec::new();
+        let mut faces = Vec::new();
         for p in &self.polygons {
             let n = p.plane.normal;
             let colour = if n[2].abs() > 0.9 {
@@ -273,23 +269,11 @@ impl PolygonMap {
                 let h = n[1].atan2(n[0]).abs() / std::f64::consts::PI;
                 [(80.0 + 150.0 * h) as u8, 120, (230.0 - 150.0 * h) as u8]
             };
-            for v in &p.outline {
-                for x in v {
-                    out.extend_from_slice(&(*x as f32).to_le_bytes());
-                }
-                out.extend_from_slice(&colour);
-            }
+            let first = vertices.len() as u32;
+            faces.push((first..first + p.outline.len() as u32).collect());
+            vertices.extend(p.outline.iter().map(|v| (*v, colour)));
         }
-        let mut first = 0u32;
-        for p in &self.polygons {
-            let n = p.outline.len().min(255);
-            out.push(n as u8);
-            for k in 0..n as u32 {
-                out.extend_from_slice(&(first + k).to_le_bytes());
-            }
-            first += p.outline.len() as u32;
-        }
-        out
+        futago_msgs::ply::mesh(&vertices, &faces, comment)
     }
 }
 
