@@ -1119,7 +1119,7 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             crate::relations::format(&relations),
         )
         .with_context(|| format!("writing {RELATIONS_FILE}"))?;
-        let mut metrics = crate::ground_truth::score_trajectories(tmp, &relations)?;
+        let mut metrics = crate::ground_truth::score_trajectories(tmp, &truth_poses, &relations)?;
         for k in ["recovery_s", "convergence_s"] {
             if let Some(v) = outcome.localization.as_ref().and_then(|l| l[k].as_f64()) {
                 metrics.insert(format!("localization.{k}"), v);

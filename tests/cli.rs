@@ -51,6 +51,21 @@ fn exits_with(o: &Output, code: i32) {
     );
 }
 
+/// Runs `args` with `--out fresh` and asserts that it fails (with status `code` when given;
+/// clap's own refusals exit 2), says `expect`, and writes nothing.
+fn refused_before_running(args: &[&str], fresh: &Path, expect: &str, code: Option<i32>) {
+    let mut a = args.to_vec();
+    a.extend(["--out", fresh.to_str().unwrap()]);
+    let o = futago(&a);
+    match code {
+        Some(c) => exits_with(&o, c),
+        None => assert!(!o.status.success(), "{a:?}"),
+    }
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains(expect), "{a:?}: {err}");
+    assert!(!fresh.exists(), "{a:?} ran something");
+}
+
 fn json_file(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -922,19 +937,9 @@ fn a_seed_sweep_reports_mean_and_spread_and_overlays_apply_to_every_run() {
             "/nonexistent/o.toml: cannot read file",
         ),
     ] {
-        let fresh = tmp.path().join("fresh");
-        let mut a = vec![
-            "suite",
-            scenario.to_str().unwrap(),
-            "--out",
-            fresh.to_str().unwrap(),
-        ];
+        let mut a = vec!["suite", scenario.to_str().unwrap()];
         a.extend(args);
-        let o = futago(&a);
-        assert_eq!(o.status.code(), Some(1), "{a:?}");
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(err.contains(expect), "{a:?}: {err}");
-        assert!(!fresh.exists(), "{a:?} ran something");
+        refused_before_running(&a, &tmp.path().join("fresh"), expect, Some(1));
     }
 }
 
@@ -1062,14 +1067,9 @@ fn tune_calibrates_a_wheel_base_error_found_by_hand_and_its_overlay_reproduces_t
             "--budget",
         ),
     ] {
-        let fresh = tmp.path().join("fresh");
-        let mut a = vec!["tune", sc, "--out", fresh.to_str().unwrap()];
+        let mut a = vec!["tune", sc];
         a.extend(args);
-        let o = futago(&a);
-        assert!(!o.status.success(), "{a:?}");
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(err.contains(expect), "{a:?}: {err}");
-        assert!(!fresh.exists(), "{a:?} ran something");
+        refused_before_running(&a, &tmp.path().join("fresh"), expect, None);
     }
 }
 
@@ -1174,12 +1174,12 @@ fn an_rgbd_map_is_scored_against_the_surfaces_it_saw_and_a_worse_pose_scores_wor
         ),
         ("camera=[]", "an RGB-D map needs a [[camera]]"),
     ] {
-        let fresh = tmp.path().join("fresh");
-        let o = futago(&["run", sc, "--out", fresh.to_str().unwrap(), "--set", set]);
-        exits_with(&o, 1);
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(err.contains(expect), "{set}: {err}");
-        assert!(!fresh.exists());
+        refused_before_running(
+            &["run", sc, "--set", set],
+            &tmp.path().join("fresh"),
+            expect,
+            Some(1),
+        );
     }
 }
 

@@ -103,12 +103,14 @@ pub fn sample_relations(truth: &[futago_msgs::tum::Stamped]) -> Vec<crate::relat
     crate::relations::sample(&planar, RELATION_EVERY_S, RELATION_MAX_SPAN_S, 0)
 }
 
-/// Scores the trajectories in a run's folder against its ground truth: for each one written,
+/// Scores the trajectories in a run's folder against its ground truth `truth` (the run's
+/// `groundtruth.txt`, already read): for each one written,
 /// `NAME.ate.*_m` (no alignment: the map frame is the world frame in simulation),
 /// `NAME.ate.p95_m`, `NAME.rpe_1m.trans.*_m` / `NAME.rpe_1m.rot.*_deg`, and the relations
 /// metric on `relations` as `NAME.relations.*` (see [`RELATION_KEYS`]).
 pub fn score_trajectories(
     dir: &std::path::Path,
+    truth: &[futago_msgs::tum::Stamped],
     relations: &[crate::relations::Relation],
 ) -> anyhow::Result<Metrics> {
     use anyhow::Context;
@@ -118,14 +120,13 @@ pub fn score_trajectories(
             std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
         futago_msgs::tum::parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))
     };
-    let truth = read("groundtruth.txt")?;
     let mut m = Metrics::default();
     for (name, file) in SCORED_TRAJECTORIES {
         if !dir.join(file).exists() {
             continue;
         }
         let est = read(file)?;
-        let pairs = trajectory::associate(&truth, &est, MAX_TIME_DIFF);
+        let pairs = trajectory::associate(truth, &est, MAX_TIME_DIFF);
         let ate = trajectory::ate(&pairs, trajectory::Alignment::None);
         if let Some(s) = Stats::of(&ate) {
             m.insert_stats(&format!("{name}.ate"), "_m", &s);
