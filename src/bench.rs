@@ -316,3 +316,39 @@ pub fn bench_mcl(world: &World, start: Pose2, particles: usize, updates: usize) 
     }
     Ok(Value::Object(out))
 }
+
+/// Processing time per keyframe of the RGB-D map: making a keyframe (floor RANSAC, levelling,
+/// features) and each method's registration with the building of its points and planes, on
+/// the scenario's own run (one core).
+pub fn bench_rgbd(s: &Scenario, duration: Option<f64>) -> Result<Value> {
+    if s.rgbd_map.is_none() {
+        bail!("{}: the scenario has no [rgbd_map]", s.spec.name);
+    }
+    let opts = RunOptions {
+        seed: None,
+        duration,
+        progress: false,
+        report: false,
+    };
+    let out = run_in_memory(s, &opts)?;
+    let m = out.rgbd_map.as_ref().context("the run made no RGB-D map")?;
+    let keyframes = m.truth_poses.len().max(1) as f64;
+    let methods: serde_json::Map<String, Value> = m
+        .maps
+        .iter()
+        .zip(&m.build_seconds)
+        .map(|(map, t)| {
+            (
+                map.method.name().to_string(),
+                json!({ "seconds": t, "ms_per_keyframe": 1e3 * t / keyframes }),
+            )
+        })
+        .collect();
+    Ok(json!({
+        "scenario": s.spec.name,
+        "keyframes": m.truth_poses.len(),
+        "points_per_keyframe": m.counts["points"].as_f64().unwrap_or(0.0) / keyframes,
+        "keyframe_ms": 1e3 * m.keyframe_seconds / keyframes,
+        "methods": methods,
+    }))
+}

@@ -174,6 +174,15 @@ enum BenchCommand {
         #[arg(long, default_value_t = 2_000_000)]
         rays: usize,
     },
+    /// Time per keyframe of the RGB-D map: keyframe making and each registration method.
+    Rgbd {
+        /// Scenario with an [rgbd_map] to measure.
+        #[arg(default_value = "scenarios/office-rgbd-methods.toml")]
+        scenario: PathBuf,
+        /// Simulated seconds (overrides the scenario's duration).
+        #[arg(long)]
+        duration: Option<f64>,
+    },
     /// Monte Carlo localisation update time on a world's own map (seed 000: 500 particles,
     /// one beam every 15°), for the beam and likelihood-field models.
     Mcl {
@@ -561,6 +570,13 @@ fn real_main() -> Result<()> {
         } => {
             let s = scenario::Scenario::load(&scenario)?;
             let r = bench::bench(&s, duration, rays.max(682))?;
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+        Command::Bench {
+            command: BenchCommand::Rgbd { scenario, duration },
+        } => {
+            let s = scenario::Scenario::load(&scenario)?;
+            let r = bench::bench_rgbd(&s, duration)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
         Command::Bench {

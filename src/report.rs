@@ -234,6 +234,44 @@ fn fmt_tick(t: f64) -> String {
     if s == "-0" { "0".into() } else { s.into() }
 }
 
+/// A PNG of points over a 2D map: the grid's walls grey, free space white, unknown light
+/// grey, each cell drawn `scale` × `scale` pixels, and each point (world x, y in metres) a red
+/// pixel. North (y) is up. Seed 000 judged its 3D maps by this picture: the laser-height slice
+/// of the map over the 2D map, thin and on the walls when the map is right.
+pub fn points_over_map_png(grid: &OccupancyGrid, points: &[[f64; 2]], scale: u32) -> Vec<u8> {
+    let scale = scale.max(1);
+    let (w, h) = (grid.width as u32 * scale, grid.height as u32 * scale);
+    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([220, 220, 220]));
+    for j in 0..grid.height {
+        for i in 0..grid.width {
+            let c = match grid.get(i, j) {
+                v if v >= 50 => [120, 120, 120],
+                v if v >= 0 => [255, 255, 255],
+                _ => [220, 220, 220],
+            };
+            let top = (grid.height - 1 - j) as u32 * scale;
+            for dy in 0..scale {
+                for dx in 0..scale {
+                    img.put_pixel(i as u32 * scale + dx, top + dy, image::Rgb(c));
+                }
+            }
+        }
+    }
+    let px = grid.resolution / scale as f64;
+    for p in points {
+        let u = ((p[0] - grid.origin[0]) / px).floor();
+        let v = ((p[1] - grid.origin[1]) / px).floor();
+        if u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64 {
+            img.put_pixel(u as u32, h - 1 - v as u32, image::Rgb([220, 30, 30]));
+        }
+    }
+    let mut png = Vec::new();
+    image::DynamicImage::ImageRgb8(img)
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .expect("encoding a PNG in memory");
+    png
+}
+
 /// The map figure: the ground-truth grid (walls grey, free space white, unknown light grey),
 /// the estimated map's occupied cells over it (blue), and trajectories drawn in world
 /// coordinates (metres; x right, y up). The first path is the ground truth.
@@ -794,6 +832,19 @@ mod tests {
         // 2 m by 1 m from (-1, 2); SVG y points down, so the top edge is -(2 + 1).
         assert!(svg.contains("viewBox=\"-1 -3 2 1\""), "{svg}");
         assert!(svg.contains("data:image/png;base64,"));
+        // The slice picture: a point lands on its pixel, red, over the grid's colours.
+        let mut g = OccupancyGrid::new(0.05, [-1.0, -1.0], 4, 2);
+        g.cells = vec![100, 0, 0, 0, -1, -1, -1, -1];
+        let png = points_over_map_png(&g, &[[-0.995, -0.995], [-0.805, -0.905]], 5);
+        let img = image::load_from_memory(&png).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (20, 10));
+        // (-0.995, -0.995): first pixel of the bottom-left cell, bottom row of the image.
+        assert_eq!(img.get_pixel(0, 9).0, [220, 30, 30]);
+        assert_eq!(img.get_pixel(1, 9).0, [120, 120, 120]);
+        // (-0.805, -0.905): x pixel 19, y pixel 9 from the bottom.
+        assert_eq!(img.get_pixel(19, 0).0, [220, 30, 30]);
+        assert_eq!(img.get_pixel(10, 8).0, [255, 255, 255]);
+        assert_eq!(img.get_pixel(10, 2).0, [220, 220, 220]);
         assert!(svg.contains("points=\"0.000,-2.500\""));
     }
 }

@@ -13,6 +13,7 @@ use futago_msgs::{DriveCommand, Duration, LaserScan, Pose2, Pose3, Time, carmen,
 use futago_robot::mcl::{Mcl, MclMap};
 use futago_robot::navigation::{NavInput, Navigator, Task};
 use futago_robot::odometry::OdometryIntegrator;
+use futago_robot::registration::EnvironmentMap;
 use futago_robot::rgbd_map::{CameraMount, RgbdMapper};
 use futago_robot::script::{ControlInput, ControllerConfig, PoseSource, ScriptedController};
 use futago_robot::slam::Slam;
@@ -98,14 +99,19 @@ pub struct Outcome {
     pub rgbd_map: Option<RgbdMapResult>,
 }
 
-/// What an RGB-D mapping run gives.
+/// What an RGB-D mapping run gives: one map per method, the first the run's.
 #[derive(Debug, Clone)]
 pub struct RgbdMapResult {
-    /// The polygon map as a PLY mesh.
-    pub planes_ply: Vec<u8>,
-    pub points: Vec<([f64; 3], [u8; 3])>,
+    pub maps: Vec<futago_robot::rgbd_map::RgbdMap>,
+    /// The true surfaces the keyframes saw.
     pub truth: Vec<[f64; 3]>,
+    /// The robot's true pose at each keyframe.
+    pub truth_poses: Vec<Pose2>,
     pub counts: Value,
+    /// Wall time of making keyframes (levelling, features), and of each method's build, s
+    /// (for `futago bench rgbd`; not written to the run's files).
+    pub keyframe_seconds: f64,
+    pub build_seconds: Vec<f64>,
 }
 
 /// The RGB-D map in the loop, on the first camera, with the true surfaces of its keyframes.
@@ -118,6 +124,8 @@ struct RgbdRunner {
     truth: rustc_hash::FxHashMap<[i64; 3], [f64; 3]>,
     /// Truth voxels in the order first seen (deterministic output).
     order: Vec<[i64; 3]>,
+    truth_poses: Vec<Pose2>,
+    offer_seconds: f64,
 }
 
 impl RgbdRunner {
@@ -355,6 +363,8 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
             voxel: m.config.voxel,
             truth: Default::default(),
             order: Vec::new(),
+            truth_poses: Vec::new(),
+            offer_seconds: 0.0,
         }
     });
     let mut localizer = spec
@@ -581,10 +591,16 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                     camera_frames[i] += 1;
                     if for_map
                         && let (Some(m), Some(p)) = (rgbd.as_mut(), map_pose)
-                        && m.mapper.offer(&frame, &p)
+                        && {
+                            let t0 = std::time::Instant::now();
+                            let taken = m.mapper.offer(&frame, &p);
+                            m.offer_seconds += t0.elapsed().as_secs_f64();
+                            taken
+                        }
                     {
                         let depth = cam.true_depth(r, &base)?;
                         m.add_truth(&depth, &frame.depth_intrinsics, &cam.optical_pose(&base));
+                        m.truth_poses.push(truth);
                     }
                 }
             }
@@ -721,21 +737,61 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         }
         None => (None, None),
     };
-    let rgbd_map = rgbd.map(|m| RgbdMapResult {
-        planes_ply: m.mapper.polygons().to_ply(&format!(
-            "futago polygon map of {} (world frame, m)",
-            spec.name
-        )),
-        counts: {
-            let mut c = serde_json::to_value(m.mapper.counts()).unwrap_or_default();
-            let (faces, vertices) = m.mapper.polygons().size();
-            c["planes_found"] = json!(m.mapper.polygons().found);
+    let rgbd_map = rgbd.map(|m| {
+        // The 2D map for the map term: SLAM's final map, else the map the localiser was
+        // given, at the first laser's height.
+        let height = s.lidars.first().map_or(DEFAULT_SLICE_Z, |(c, _)| c.xyz[2]);
+        let grid = slam_result.as_ref().map(|(_, g)| g.clone()).or_else(|| {
+            spec.localization
+                .as_ref()
+                .map(|l| world_map(s, l.map_resolution))
+        });
+        let env = grid
+            .as_ref()
+            .map(|g| EnvironmentMap::new(g, height, MAP_OCCUPIED));
+        let spec_map = s.rgbd_map.as_ref().expect("an RGB-D runner has a spec");
+        let mut build_seconds = Vec::new();
+        let maps: Vec<_> = spec_map
+            .config
+            .methods
+            .iter()
+            .map(|method| {
+                let t0 = std::time::Instant::now();
+                let map = m.mapper.build(*method, env.as_ref());
+                build_seconds.push(t0.elapsed().as_secs_f64());
+                map
+            })
+            .collect();
+        let mut counts = serde_json::to_value(m.mapper.counts()).unwrap_or_default();
+        counts["environment_map_points"] = json!(env.as_ref().map_or(0, |e| e.len()));
+        for map in &maps {
+            let (faces, vertices) = map.polygons.size();
+            let mut c = serde_json::to_value(map.registration).unwrap_or_default();
+            c["planes_found"] = json!(map.polygons.found);
             c["plane_faces"] = json!(faces);
             c["plane_vertices"] = json!(vertices);
-            c
-        },
-        points: m.mapper.points(),
-        truth: m.order.iter().map(|k| m.truth[k]).collect(),
+            c["map_points"] = json!(map.points.len());
+            counts[map.method.name()] = c;
+        }
+        // The run's map (the first method's) at the top level too.
+        if let Some(first) = maps.first() {
+            for k in [
+                "map_points",
+                "planes_found",
+                "plane_faces",
+                "plane_vertices",
+            ] {
+                counts[k] = counts[first.method.name()][k].clone();
+            }
+        }
+        RgbdMapResult {
+            maps,
+            truth: m.order.iter().map(|k| m.truth[k]).collect(),
+            truth_poses: m.truth_poses,
+            counts,
+            keyframe_seconds: m.offer_seconds,
+            build_seconds,
+        }
     });
     Ok(Outcome {
         rgbd_map,
@@ -887,11 +943,79 @@ pub const RGBD_MAP_FILE: &str = "rgbd_map.ply";
 const SLICE_HALF_WIDTH: f64 = 0.05;
 /// The slice's height without a laser, m.
 const DEFAULT_SLICE_Z: f64 = 0.2;
+/// Cells of the 2D map at least this occupied (0–100) are walls for the map term.
+const MAP_OCCUPIED: i8 = 50;
+
+/// One RGB-D map's scores (metric names below `rgbd_map.`): the cloud against the true
+/// surfaces, the laser-height slice against the true walls (seed 000 judged its methods by how
+/// thin and true this trace was), the keyframes' poses against the truth and the planes
+/// against the true surfaces.
+fn score_rgbd_map(
+    map: &futago_robot::rgbd_map::RgbdMap,
+    run: &RgbdMapResult,
+    walls: &OccupancyGrid,
+    z: f64,
+) -> Vec<(String, f64)> {
+    let mut out = Vec::new();
+    let points: Vec<[f64; 3]> = map.points.iter().map(|p| p.0).collect();
+    if let Some(score) = crate::ground_truth::cloud::score(&points, &run.truth) {
+        let mut m = crate::ground_truth::Metrics::default();
+        m.insert_cloud("x", &score);
+        out.extend(m.0.iter().map(|(k, v)| (k[2..].to_string(), *v)));
+    }
+    let slice: Vec<[f64; 2]> = points
+        .iter()
+        .filter(|p| (p[2] - z).abs() <= SLICE_HALF_WIDTH)
+        .map(|p| [p[0], p[1]])
+        .collect();
+    if !slice.is_empty() {
+        let mut d = crate::ground_truth::map::wall_distances(walls, &slice);
+        let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
+        d.sort_by(f64::total_cmp);
+        out.push(("slice_rms_m".into(), rms));
+        out.push(("slice_median_m".into(), d[d.len() / 2]));
+    }
+    let errors: Vec<(f64, f64)> = map
+        .poses
+        .iter()
+        .zip(&run.truth_poses)
+        .map(|(p, t)| {
+            (
+                p.distance(t),
+                futago_msgs::wrap_angle(p.theta - t.theta).to_degrees(),
+            )
+        })
+        .collect();
+    if !errors.is_empty() {
+        let n = errors.len() as f64;
+        let rms = |f: fn(&(f64, f64)) -> f64| {
+            (errors.iter().map(|e| f(e).powi(2)).sum::<f64>() / n).sqrt()
+        };
+        out.push(("keyframe_pose.rmse_m".into(), rms(|e| e.0)));
+        out.push((
+            "keyframe_pose.max_m".into(),
+            errors.iter().map(|e| e.0).fold(0.0, f64::max),
+        ));
+        out.push(("keyframe_pose.rmse_deg".into(), rms(|e| e.1)));
+    }
+    if let Some(p) = crate::ground_truth::planes::score(&map.polygons.polygons, &run.truth) {
+        out.push(("planes.angle_mean_deg".into(), p.angle_mean_deg));
+        out.push(("planes.offset_mean_m".into(), p.offset_mean_m));
+    }
+    let (faces, vertices) = map.polygons.size();
+    out.push(("planes.faces".into(), faces as f64));
+    out.push(("planes.vertices".into(), vertices as f64));
+    out
+}
 
 /// The polygon map (binary PLY mesh, a face per plane).
 pub const RGBD_PLANES_FILE: &str = "rgbd_planes.ply";
 /// The true surfaces its keyframes saw (binary PLY), against which it is scored.
 pub const RGBD_TRUTH_FILE: &str = "rgbd_map_truth.ply";
+/// The RGB-D map's laser-height slice (red) over the world's true 2D map, 1 cm a pixel.
+pub const RGBD_SLICE_FILE: &str = "rgbd_slice.png";
+/// Cell of the true 2D map under the slice picture, m (5 px of 1 cm each).
+const SLICE_MAP_RESOLUTION: f64 = 0.05;
 
 /// The run's HTML report (see [`crate::report`]).
 pub const REPORT_FILE: &str = "report.html";
@@ -1065,10 +1189,15 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
                 .with_context(|| format!("writing {SLAM_MAP_STEM}.pgm and .yaml"))?;
         }
         if let Some(m) = &outcome.rgbd_map {
-            let comment = format!("futago RGB-D map of {} (world frame, m)", s.spec.name);
+            let first = &m.maps[0];
+            let comment = format!(
+                "futago RGB-D map of {} placed by {} (world frame, m)",
+                s.spec.name,
+                first.method.name()
+            );
             std::fs::write(
                 tmp.join(RGBD_MAP_FILE),
-                futago_msgs::ply::points(&m.points, &comment),
+                futago_msgs::ply::points(&first.points, &comment),
             )
             .with_context(|| format!("writing {RGBD_MAP_FILE}"))?;
             let truth: Vec<([f64; 3], [u8; 3])> =
@@ -1082,8 +1211,26 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
                 futago_msgs::ply::points(&truth, &comment),
             )
             .with_context(|| format!("writing {RGBD_TRUTH_FILE}"))?;
-            std::fs::write(tmp.join(RGBD_PLANES_FILE), &m.planes_ply)
+            let planes = first.polygons.to_ply(&format!(
+                "futago polygon map of {} placed by {} (world frame, m)",
+                s.spec.name,
+                first.method.name()
+            ));
+            std::fs::write(tmp.join(RGBD_PLANES_FILE), planes)
                 .with_context(|| format!("writing {RGBD_PLANES_FILE}"))?;
+            let z = s.lidars.first().map_or(DEFAULT_SLICE_Z, |(c, _)| c.xyz[2]);
+            let slice: Vec<[f64; 2]> = first
+                .points
+                .iter()
+                .filter(|p| (p.0[2] - z).abs() <= SLICE_HALF_WIDTH)
+                .map(|p| [p.0[0], p.0[1]])
+                .collect();
+            let grid = world_map(s, SLICE_MAP_RESOLUTION);
+            std::fs::write(
+                tmp.join(RGBD_SLICE_FILE),
+                crate::report::points_over_map_png(&grid, &slice, 5),
+            )
+            .with_context(|| format!("writing {RGBD_SLICE_FILE}"))?;
         }
         let mut files = serde_json::Map::new();
         let slam_map = format!("{SLAM_MAP_STEM}.pgm");
@@ -1094,6 +1241,7 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             &RGBD_MAP_FILE,
             &RGBD_TRUTH_FILE,
             &RGBD_PLANES_FILE,
+            &RGBD_SLICE_FILE,
         ]) {
             let p = tmp.join(f);
             if p.exists() {
@@ -1138,29 +1286,19 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             metrics.insert_map("slam.map", &m);
         }
         if let Some(m) = &outcome.rgbd_map {
-            let map: Vec<[f64; 3]> = m.points.iter().map(|p| p.0).collect();
             let mut counts = m.counts.clone();
-            counts["map_points"] = json!(map.len());
             counts["truth_points"] = json!(m.truth.len());
-            if let Some(score) = crate::ground_truth::cloud::score(&map, &m.truth) {
-                metrics.insert_cloud("rgbd_map", &score);
-            }
-            // The laser-height slice against the true walls of the 2D map (seed 000 judged its
-            // methods by how thin and true this trace was).
             let z = s.lidars.first().map_or(DEFAULT_SLICE_Z, |(c, _)| c.xyz[2]);
-            let slice: Vec<[f64; 2]> = map
-                .iter()
-                .filter(|p| (p[2] - z).abs() <= SLICE_HALF_WIDTH)
-                .map(|p| [p[0], p[1]])
-                .collect();
-            if !slice.is_empty() {
-                let d = crate::ground_truth::map::wall_distances(&truth, &slice);
-                let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
-                metrics.insert("rgbd_map.slice_rms_m", rms);
-                let mut sorted = d.clone();
-                sorted.sort_by(f64::total_cmp);
-                metrics.insert("rgbd_map.slice_median_m", sorted[sorted.len() / 2]);
-                counts["slice_points"] = json!(slice.len());
+            for (k, map) in m.maps.iter().enumerate() {
+                let found = score_rgbd_map(map, m, &truth, z);
+                if k == 0 {
+                    for (name, v) in &found {
+                        metrics.insert(format!("rgbd_map.{name}"), *v);
+                    }
+                }
+                for (name, v) in found {
+                    metrics.insert(format!("rgbd_map.{}.{name}", map.method.name()), v);
+                }
             }
             sum["rgbd_map"] = counts;
         }

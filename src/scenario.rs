@@ -79,7 +79,19 @@ impl ScenarioSpec {
             global_localization: self.localization.as_ref().is_some_and(|l| l.global),
             kidnappings: !self.event.is_empty(),
             slam: self.slam.is_some(),
-            rgbd_map: self.rgbd_map.is_some(),
+            rgbd_map: self
+                .rgbd_map
+                .as_ref()
+                .map(|t| {
+                    // The methods as typed; a table that does not type yet has the default.
+                    rgbd_map_config(Path::new(""), t)
+                        .map(|m| m.config.methods)
+                        .unwrap_or_else(|_| RgbdMapConfig::default().methods)
+                        .iter()
+                        .map(|m| m.name())
+                        .collect()
+                })
+                .unwrap_or_default(),
         })
     }
 }
@@ -508,11 +520,31 @@ impl Scenario {
                     ),
                 ));
             }
-            if !g.value.is_finite() {
+            match (&g.value, &g.than) {
+                (None, None) => {
+                    return Err(SpecError::new(
+                        path,
+                        format!("gate[{i}].value"),
+                        "expected a number (or `than`, a metric to compare with)",
+                    ));
+                }
+                (Some(v), _) if !v.is_finite() => {
+                    return Err(SpecError::new(
+                        path,
+                        format!("gate[{i}].value"),
+                        "expected a finite number",
+                    ));
+                }
+                _ => {}
+            }
+            if let Some(m) = g.than.as_ref().filter(|m| !names.contains(m)) {
                 return Err(SpecError::new(
                     path,
-                    format!("gate[{i}].value"),
-                    "expected a finite number",
+                    format!("gate[{i}].than"),
+                    format!(
+                        "this scenario produces no metric `{m}`; similar: {:?}",
+                        crate::ground_truth::similar(&names, m)
+                    ),
                 ));
             }
         }

@@ -7,6 +7,7 @@
 
 pub mod correlative;
 pub mod exploration;
+pub mod features;
 pub mod floor;
 pub mod icp;
 pub mod mcl;
@@ -18,6 +19,7 @@ pub mod planner;
 pub mod polygons;
 pub mod pose_graph;
 pub mod pursuit;
+pub mod registration;
 pub mod rgbd_map;
 pub mod script;
 pub mod slam;

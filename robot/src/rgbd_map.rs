@@ -1,17 +1,22 @@
-//! A 3D map from RGB-D keyframes placed by the robot's 2D pose and the floor (seed 000 §3.1):
-//! the first of the thesis's Fig. 3.7 variants, "robot pose only", on which the registration
-//! variants build.
+//! A 3D map from RGB-D keyframes (seed 000 §3.1): keyframes levelled by the floor, placed by
+//! a registration method ([`crate::registration`]: the variants of the thesis's Fig. 3.7 and
+//! a baseline) after the run, as the thesis does, and reduced to points and planes.
 //!
 //! A frame becomes a keyframe after the robot has travelled `keyframe_distance` or turned
 //! `keyframe_turn` since the last one. Its depth pixels (every `stride`-th in each direction)
 //! are back-projected in the camera's body frame, levelled by the floor found in them
-//! ([`crate::floor`]: height, pitch, roll), turned by the robot's yaw plus the camera's
-//! mounting yaw and moved to the camera's position on the robot. Frames without a floor and
-//! pixels without valid depth are counted and skipped. Points are kept one per voxel (the
-//! first point of a voxel keeps its colour; later ones add to its mean position).
+//! ([`crate::floor`]: height, pitch, roll), and moved to the robot's base frame by the
+//! camera's mount; its colour image gives features ([`crate::features`]). Frames without a
+//! floor and pixels without valid depth are counted and skipped. [`RgbdMapper::build`] places
+//! the keyframes and keeps one point per voxel (the first point of a voxel keeps its colour;
+//! later ones add to its mean position).
 
+use crate::features::{Detector, grey};
 use crate::floor::{FloorConfig, Level, level, optical_to_body};
 use crate::polygons::{PolygonConfig, PolygonMap};
+use crate::registration::{
+    EnvironmentMap, Keyframe, Method, RegistrationConfig, RegistrationCounts, place, register,
+};
 use futago_msgs::Pose2;
 use futago_msgs::camera::RgbdFrame;
 use rand::SeedableRng;
@@ -37,6 +42,10 @@ pub struct RgbdMapConfig {
     pub floor: FloorConfig,
     /// The polygon map built beside the points (seed 000 §3.2).
     pub polygons: PolygonConfig,
+    /// How keyframes are placed; every method listed builds its own map from the same
+    /// keyframes, and the first is the run's map.
+    pub methods: Vec<Method>,
+    pub registration: RegistrationConfig,
 }
 
 impl Default for RgbdMapConfig {
@@ -49,6 +58,8 @@ impl Default for RgbdMapConfig {
             voxel: 0.01,
             floor: FloorConfig::default(),
             polygons: PolygonConfig::default(),
+            methods: vec![Method::Full],
+            registration: RegistrationConfig::default(),
         }
     }
 }
@@ -87,7 +98,17 @@ impl RgbdMapConfig {
                 format!("expected a voxel of at least 0.1 mm, found {}", self.voxel),
             );
         }
-        Ok(())
+        if self.methods.is_empty() {
+            return bad("methods", "expected at least one method".into());
+        }
+        for (i, m) in self.methods.iter().enumerate() {
+            if self.methods[..i].contains(m) {
+                return bad("methods", format!("{} is listed twice", m.name()));
+            }
+        }
+        self.registration
+            .validate()
+            .map_err(|(k, m)| (format!("registration.{k}"), m))
     }
 }
 
@@ -112,6 +133,8 @@ pub struct RgbdMapCounts {
     pub invalid_pixels: u64,
     /// Points added to the map (before voxel merging).
     pub points: u64,
+    /// Image features with valid depth, over all keyframes.
+    pub features: u64,
 }
 
 struct Voxel {
@@ -120,33 +143,45 @@ struct Voxel {
     colour: [u8; 3],
 }
 
-/// The map and its keyframe logic.
+/// A map built by one method.
+#[derive(Debug, Clone)]
+pub struct RgbdMap {
+    pub method: Method,
+    /// Each keyframe's robot pose as placed.
+    pub poses: Vec<Pose2>,
+    /// One point per voxel (the mean of its points) and its colour, in the order the voxels
+    /// were first filled.
+    pub points: Vec<([f64; 3], [u8; 3])>,
+    pub polygons: PolygonMap,
+    pub registration: RegistrationCounts,
+}
+
+/// The keyframes and their logic.
 pub struct RgbdMapper {
     config: RgbdMapConfig,
     mount: CameraMount,
+    seed: u64,
     last: Option<Pose2>,
-    voxels: FxHashMap<[i64; 3], Voxel>,
-    /// Voxel keys in insertion order, so that the output is deterministic.
-    order: Vec<[i64; 3]>,
     counts: RgbdMapCounts,
     rng: ChaCha8Rng,
-    /// Each keyframe's robot pose and levelling.
-    keyframes: Vec<(Pose2, Level)>,
-    polygons: PolygonMap,
+    detector: Detector,
+    /// Each keyframe's levelling.
+    levels: Vec<Level>,
+    keyframes: Vec<Keyframe>,
 }
 
 impl RgbdMapper {
     pub fn new(config: RgbdMapConfig, mount: CameraMount, seed: u64) -> RgbdMapper {
         RgbdMapper {
-            config: config.clone(),
+            detector: Detector::new(config.registration.features, seed),
+            config,
             mount,
+            seed,
             last: None,
-            voxels: FxHashMap::default(),
-            order: Vec::new(),
             counts: RgbdMapCounts::default(),
             rng: ChaCha8Rng::seed_from_u64(seed),
+            levels: Vec::new(),
             keyframes: Vec::new(),
-            polygons: PolygonMap::new(config.polygons),
         }
     }
 
@@ -171,9 +206,16 @@ impl RgbdMapper {
         }
         let cfg = &self.config;
         let (k, d) = (&frame.depth_intrinsics, &frame.depth);
+        let step = cfg.stride as usize;
+        let (cols, rows) = (
+            (d.width as usize).div_ceil(step),
+            (d.height as usize).div_ceil(step),
+        );
+        // The sampled grid: each cell's point, if its depth is valid.
+        let mut grid: Vec<Option<usize>> = vec![None; cols * rows];
         let mut pts: Vec<([f64; 3], [u8; 3])> = Vec::new();
-        for v in (0..d.height).step_by(cfg.stride as usize) {
-            for u in (0..d.width).step_by(cfg.stride as usize) {
+        for (r, v) in (0..d.height).step_by(step).enumerate() {
+            for (c, u) in (0..d.width).step_by(step).enumerate() {
                 let z = d.at(u, v) as f64;
                 if !(z.is_finite() && z > 0.0 && z <= cfg.max_depth) {
                     self.counts.invalid_pixels += 1;
@@ -189,6 +231,7 @@ impl RgbdMapper {
                         rgb.at(cu.min(rgb.width - 1), cv.min(rgb.height - 1))
                     })
                     .unwrap_or([200, 200, 200]);
+                grid[r * cols + c] = Some(pts.len());
                 pts.push((
                     optical_to_body(k.back_project(u as f64, v as f64, z)),
                     colour,
@@ -200,71 +243,126 @@ impl RgbdMapper {
             self.counts.no_floor += 1;
             return false;
         };
-        self.last = Some(*pose);
-        self.counts.keyframes += 1;
-        self.keyframes.push((*pose, lv));
-        let cam = pose.compose(&Pose2::new(self.mount.x, self.mount.y, self.mount.yaw));
-        let (s, c) = cam.theta.sin_cos();
-        let size = cfg.voxel;
-        let mut world = Vec::with_capacity(pts.len());
-        for (p, colour) in pts {
-            let q = lv.apply(p);
-            let w = [
-                cam.x + c * q[0] - s * q[1],
-                cam.y + s * q[0] + c * q[1],
-                q[2],
-            ];
-            let key = w.map(|x| (x / size).floor() as i64);
-            world.push(w);
-            self.counts.points += 1;
-            match self.voxels.get_mut(&key) {
-                Some(vx) => {
-                    for (a, b) in vx.sum.iter_mut().zip(w) {
-                        *a += b;
-                    }
-                    vx.n += 1;
-                }
-                None => {
-                    self.voxels.insert(
-                        key,
-                        Voxel {
-                            sum: w,
-                            n: 1,
-                            colour,
-                        },
-                    );
-                    self.order.push(key);
+        // A point is on the data's boundary when a neighbouring cell has no depth.
+        let mut boundary = vec![false; pts.len()];
+        for r in 0..rows {
+            for c in 0..cols {
+                let Some(i) = grid[r * cols + c] else {
+                    continue;
+                };
+                let has = |rr: isize, cc: isize| {
+                    rr >= 0
+                        && cc >= 0
+                        && (rr as usize) < rows
+                        && (cc as usize) < cols
+                        && grid[rr as usize * cols + cc as usize].is_some()
+                };
+                let (ri, ci) = (r as isize, c as isize);
+                boundary[i] =
+                    !(has(ri - 1, ci) && has(ri + 1, ci) && has(ri, ci - 1) && has(ri, ci + 1));
+            }
+        }
+        let mount = Pose2::new(self.mount.x, self.mount.y, self.mount.yaw);
+        let to_base = |p: [f64; 3]| place(&mount, lv.apply(p));
+        // Features: corners of the colour image with valid depth under them.
+        let mut features = Vec::new();
+        if let Some(rgb) = &frame.rgb {
+            for ([cu, cv], desc) in self
+                .detector
+                .detect(&grey(rgb.width, rgb.height, &rgb.data))
+            {
+                let du = ((cu as f64 + 0.5) * d.width as f64 / rgb.width as f64) as u32;
+                let dv = ((cv as f64 + 0.5) * d.height as f64 / rgb.height as f64) as u32;
+                let z = d.at(du.min(d.width - 1), dv.min(d.height - 1)) as f64;
+                if z.is_finite() && z > 0.0 && z <= cfg.max_depth {
+                    let body = optical_to_body(k.back_project(du as f64, dv as f64, z));
+                    features.push((to_base(body), desc));
                 }
             }
         }
-        self.polygons.add_frame(&world, &mut self.rng);
+        self.last = Some(*pose);
+        self.counts.keyframes += 1;
+        self.counts.points += pts.len() as u64;
+        self.counts.features += features.len() as u64;
+        self.levels.push(lv);
+        self.keyframes.push(Keyframe {
+            pose: *pose,
+            points: pts.iter().map(|p| to_base(p.0)).collect(),
+            colours: pts.iter().map(|p| p.1).collect(),
+            boundary,
+            features,
+        });
         true
     }
 
-    /// The polygon map of the keyframes so far.
-    pub fn polygons(&self) -> &PolygonMap {
-        &self.polygons
-    }
-
-    /// The map's points (one per voxel, the mean of its points) and colours, in the order the
-    /// voxels were first filled.
-    pub fn points(&self) -> Vec<([f64; 3], [u8; 3])> {
-        self.order
-            .iter()
-            .map(|k| {
-                let v = &self.voxels[k];
-                (v.sum.map(|s| s / v.n as f64), v.colour)
-            })
-            .collect()
+    /// Places the keyframes by `method` and builds the points and planes. `map`: the 2D map
+    /// for the map term.
+    pub fn build(&self, method: Method, map: Option<&EnvironmentMap>) -> RgbdMap {
+        let (poses, registration) = register(
+            &self.keyframes,
+            method,
+            map,
+            &self.config.registration,
+            self.seed,
+        );
+        let size = self.config.voxel;
+        let mut voxels: FxHashMap<[i64; 3], Voxel> = FxHashMap::default();
+        let mut order = Vec::new();
+        let mut polygons = PolygonMap::new(self.config.polygons);
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
+        for (kf, pose) in self.keyframes.iter().zip(&poses) {
+            let world: Vec<[f64; 3]> = kf.points.iter().map(|p| place(pose, *p)).collect();
+            for (w, colour) in world.iter().zip(&kf.colours) {
+                let key = w.map(|x| (x / size).floor() as i64);
+                match voxels.get_mut(&key) {
+                    Some(vx) => {
+                        for (a, b) in vx.sum.iter_mut().zip(w) {
+                            *a += b;
+                        }
+                        vx.n += 1;
+                    }
+                    None => {
+                        voxels.insert(
+                            key,
+                            Voxel {
+                                sum: *w,
+                                n: 1,
+                                colour: *colour,
+                            },
+                        );
+                        order.push(key);
+                    }
+                }
+            }
+            polygons.add_frame(&world, &mut rng);
+        }
+        RgbdMap {
+            method,
+            poses,
+            points: order
+                .iter()
+                .map(|k| {
+                    let v = &voxels[k];
+                    (v.sum.map(|s| s / v.n as f64), v.colour)
+                })
+                .collect(),
+            polygons,
+            registration,
+        }
     }
 
     pub fn counts(&self) -> RgbdMapCounts {
         self.counts
     }
 
-    /// Each keyframe's robot pose and the levelling found in it.
-    pub fn keyframes(&self) -> &[(Pose2, Level)] {
+    /// The keyframes, levelled, in the robot's base frame.
+    pub fn keyframes(&self) -> &[Keyframe] {
         &self.keyframes
+    }
+
+    /// The levelling found in each keyframe.
+    pub fn levels(&self) -> &[Level] {
+        &self.levels
     }
 }
 
@@ -338,7 +436,7 @@ mod tests {
         // world y = 1 + 0.1 + 2 = 3.1; a 3° nose-down pitch is levelled away.
         let pose = Pose2::new(2.0, 1.0, std::f64::consts::FRAC_PI_2);
         assert!(m.offer(&frame(2.0, 3f64.to_radians()), &pose));
-        let pts = m.points();
+        let pts = m.build(Method::Pose, None).points;
         assert!(pts.len() > 3000, "{}", pts.len());
         let (mut floor, mut wall) = (0, 0);
         for (p, _) in &pts {
@@ -352,7 +450,7 @@ mod tests {
             }
         }
         assert!(floor > 1000 && wall > 1000, "{floor} {wall}");
-        let (_, lv) = m.keyframes()[0];
+        let lv = m.levels()[0];
         // The wall's foot, within 1 cm of the floor, joins the floor's inliers and tilts the
         // refit a little (measured: 1.9 mm and 0.09°).
         assert!(
@@ -388,6 +486,6 @@ mod tests {
         assert!(!m.offer(&f, &Pose2::IDENTITY));
         let c = m.counts();
         assert_eq!((c.frames, c.keyframes, c.no_floor), (2, 0, 2));
-        assert!(m.points().is_empty());
+        assert!(m.build(Method::Full, None).points.is_empty());
     }
 }

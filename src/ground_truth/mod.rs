@@ -6,6 +6,7 @@
 
 pub mod cloud;
 pub mod map;
+pub mod planes;
 pub mod trajectory;
 
 use std::collections::BTreeMap;
@@ -167,7 +168,7 @@ pub fn score_trajectories(
 const STATS: [&str; 6] = ["rmse", "mean", "median", "std", "min", "max"];
 
 /// What a scenario runs, as far as its metrics go.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct Produces {
     pub localization: bool,
     /// The localiser starts knowing nothing (`localization.convergence_s`).
@@ -175,9 +176,27 @@ pub struct Produces {
     /// Kidnapping events (`localization.recovery_s`).
     pub kidnappings: bool,
     pub slam: bool,
-    /// An RGB-D map (`rgbd_map.*`).
-    pub rgbd_map: bool,
+    /// An RGB-D map's methods, the first the run's map (`rgbd_map.*` and
+    /// `rgbd_map.METHOD.*`); empty without one.
+    pub rgbd_map: Vec<&'static str>,
 }
+
+/// The RGB-D map's metrics besides the cloud scores: distances to the true surfaces, the
+/// laser-height slice against the true walls, the keyframes' placing against their true poses
+/// and the planes against the true surfaces.
+pub const RGBD_MAP_KEYS: [&str; 11] = [
+    "mean_distance_m",
+    "median_distance_m",
+    "slice_rms_m",
+    "slice_median_m",
+    "keyframe_pose.rmse_m",
+    "keyframe_pose.max_m",
+    "keyframe_pose.rmse_deg",
+    "planes.angle_mean_deg",
+    "planes.offset_mean_m",
+    "planes.faces",
+    "planes.vertices",
+];
 
 /// Every metric name a run produces: the odometry trajectory's always; the localiser's and
 /// SLAM's with `[localization]` and `[slam]`; SLAM's map with `[slam]`; the localiser's time to
@@ -224,16 +243,19 @@ pub fn metric_names(p: Produces) -> Vec<String> {
             names.push(format!("slam.map.{k}"));
         }
     }
-    if p.rgbd_map {
+    let prefixes = (!p.rgbd_map.is_empty())
+        .then(|| "rgbd_map".to_string())
+        .into_iter()
+        .chain(p.rgbd_map.iter().map(|m| format!("rgbd_map.{m}")));
+    for prefix in prefixes {
         for t in cloud::TOLERANCE_NAMES {
             for k in ["accuracy", "completeness", "f1"] {
-                names.push(format!("rgbd_map.{k}_{t}"));
+                names.push(format!("{prefix}.{k}_{t}"));
             }
         }
-        names.push("rgbd_map.mean_distance_m".to_string());
-        names.push("rgbd_map.median_distance_m".to_string());
-        names.push("rgbd_map.slice_rms_m".to_string());
-        names.push("rgbd_map.slice_median_m".to_string());
+        for k in RGBD_MAP_KEYS {
+            names.push(format!("{prefix}.{k}"));
+        }
     }
     names.sort();
     names
@@ -291,13 +313,18 @@ impl Comparison {
     }
 }
 
-/// `[[gate]]`: the run passes only if `metric op value` holds.
+/// `[[gate]]`: the run passes only if `metric op value` holds, or with `than`, `metric op
+/// than + value` (value 0 unless given): a gate that ranks one metric against another of the
+/// same run, e.g. one method's map against another's.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Gate {
     pub metric: String,
     pub op: Comparison,
-    pub value: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub than: Option<String>,
 }
 
 /// A gate's outcome.
@@ -319,18 +346,36 @@ pub fn evaluate(gates: &[Gate], metrics: &Metrics) -> Vec<GateResult> {
         .iter()
         .map(|g| {
             let value = metrics.0.get(&g.metric).copied();
-            let passed = value.is_some_and(|v| g.op.holds(v, g.value));
-            let message = match value {
-                None => format!("{} was not produced by the run", g.metric),
-                Some(v) => format!(
-                    "{} = {v:.6}, {} {} {} (margin {:+.6})",
+            let offset = g.value.unwrap_or(0.0);
+            let threshold = match &g.than {
+                None => Some(offset),
+                Some(m) => metrics.0.get(m).map(|t| t + offset),
+            };
+            let passed = value.zip(threshold).is_some_and(|(v, t)| g.op.holds(v, t));
+            let what = match &g.than {
+                None => format!("{offset}"),
+                Some(m) if offset == 0.0 => m.clone(),
+                Some(m) => format!("{m} {offset:+}"),
+            };
+            let message = match (value, threshold) {
+                (None, _) => format!("{} was not produced by the run", g.metric),
+                (_, None) => format!(
+                    "{} was not produced by the run",
+                    g.than.as_deref().unwrap_or_default()
+                ),
+                (Some(v), Some(t)) => format!(
+                    "{} = {v:.6}, {} {} {what}{} (margin {:+.6})",
                     g.metric,
                     if passed { "" } else { "not" },
                     g.op.symbol(),
-                    g.value,
+                    if g.than.is_some() {
+                        format!(" = {t:.6}")
+                    } else {
+                        String::new()
+                    },
                     match g.op {
-                        Comparison::Less | Comparison::LessOrEqual => g.value - v,
-                        _ => v - g.value,
+                        Comparison::Less | Comparison::LessOrEqual => t - v,
+                        _ => v - t,
                     }
                 )
                 .replace(",  ", ", "),
@@ -338,7 +383,7 @@ pub fn evaluate(gates: &[Gate], metrics: &Metrics) -> Vec<GateResult> {
             GateResult {
                 metric: g.metric.clone(),
                 op: g.op,
-                threshold: g.value,
+                threshold: threshold.unwrap_or(f64::NAN),
                 value,
                 passed,
                 message,
@@ -360,24 +405,45 @@ mod tests {
             Gate {
                 metric: "slam.ate.rmse_m".into(),
                 op: Comparison::Less,
-                value: 0.05,
+                value: Some(0.05),
+                than: None,
             },
             Gate {
                 metric: "slam.map.f1_2cell".into(),
                 op: Comparison::GreaterOrEqual,
-                value: 0.9,
+                value: Some(0.9),
+                than: None,
             },
             Gate {
                 metric: "localization.ate.max_m".into(),
                 op: Comparison::Less,
-                value: 1.0,
+                value: Some(1.0),
+                than: None,
+            },
+            Gate {
+                metric: "slam.ate.rmse_m".into(),
+                op: Comparison::Less,
+                value: None,
+                than: Some("odometry.ate.rmse_m".into()),
+            },
+            Gate {
+                metric: "slam.ate.rmse_m".into(),
+                op: Comparison::Less,
+                value: Some(-0.05),
+                than: Some("odometry.ate.rmse_m".into()),
             },
         ];
+        m.insert("odometry.ate.rmse_m", 0.1);
         let r = evaluate(&gates, &m);
         assert_eq!(
             r.iter().map(|g| g.passed).collect::<Vec<_>>(),
-            [false, true, false]
+            [false, true, false, true, false]
         );
+        assert_eq!(
+            r[3].message,
+            "slam.ate.rmse_m = 0.061000, < odometry.ate.rmse_m = 0.100000 (margin +0.039000)"
+        );
+        assert_eq!(r[4].threshold, 0.05);
         assert_eq!(
             r[0].message,
             "slam.ate.rmse_m = 0.061000, not < 0.05 (margin -0.011000)"
@@ -399,9 +465,10 @@ mod tests {
             global_localization: false,
             kidnappings: true,
             slam: true,
-            rgbd_map: true,
+            rgbd_map: vec!["full", "pose"],
         });
         assert!(all.contains(&"rgbd_map.f1_5cm".to_string()));
+        assert!(all.contains(&"rgbd_map.pose.keyframe_pose.rmse_m".to_string()));
         assert!(!base.iter().any(|n| n.starts_with("rgbd_map")));
         assert!(all.contains(&"localization.recovery_s".to_string()));
         assert!(!all.contains(&"localization.convergence_s".to_string()));
