@@ -240,6 +240,22 @@ fn fmt_tick(t: f64) -> String {
 /// of the map over the 2D map, thin and on the walls when the map is right.
 pub fn points_over_map_png(grid: &OccupancyGrid, points: &[[f64; 2]], scale: u32) -> Vec<u8> {
     let scale = scale.max(1);
+    let mut img = grid_image(grid, scale);
+    let (w, h) = img.dimensions();
+    let px = grid.resolution / scale as f64;
+    for p in points {
+        let u = ((p[0] - grid.origin[0]) / px).floor();
+        let v = ((p[1] - grid.origin[1]) / px).floor();
+        if u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64 {
+            img.put_pixel(u as u32, h - 1 - v as u32, image::Rgb([220, 30, 30]));
+        }
+    }
+    png(img)
+}
+
+/// A grid as an image, north up, each cell `scale` × `scale` pixels: walls grey, free space
+/// white, unknown light grey.
+fn grid_image(grid: &OccupancyGrid, scale: u32) -> image::RgbImage {
     let (w, h) = (grid.width as u32 * scale, grid.height as u32 * scale);
     let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([220, 220, 220]));
     for j in 0..grid.height {
@@ -257,19 +273,15 @@ pub fn points_over_map_png(grid: &OccupancyGrid, points: &[[f64; 2]], scale: u32
             }
         }
     }
-    let px = grid.resolution / scale as f64;
-    for p in points {
-        let u = ((p[0] - grid.origin[0]) / px).floor();
-        let v = ((p[1] - grid.origin[1]) / px).floor();
-        if u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64 {
-            img.put_pixel(u as u32, h - 1 - v as u32, image::Rgb([220, 30, 30]));
-        }
-    }
-    let mut png = Vec::new();
+    img
+}
+
+fn png(img: image::RgbImage) -> Vec<u8> {
+    let mut out = Vec::new();
     image::DynamicImage::ImageRgb8(img)
-        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
         .expect("encoding a PNG in memory");
-    png
+    out
 }
 
 /// The map figure: the ground-truth grid (walls grey, free space white, unknown light grey),
@@ -280,21 +292,7 @@ pub fn map_figure(
     estimate: Option<&OccupancyGrid>,
     paths: &[Series],
 ) -> String {
-    let mut img = image::RgbImage::from_pixel(
-        truth.width as u32,
-        truth.height as u32,
-        image::Rgb([220, 220, 220]),
-    );
-    for j in 0..truth.height {
-        for i in 0..truth.width {
-            let c = match truth.get(i, j) {
-                v if v >= 50 => [120, 120, 120],
-                v if v >= 0 => [255, 255, 255],
-                _ => [220, 220, 220],
-            };
-            img.put_pixel(i as u32, (truth.height - 1 - j) as u32, image::Rgb(c));
-        }
-    }
+    let mut img = grid_image(truth, 1);
     if let Some(est) = estimate {
         for j in 0..est.height {
             for i in 0..est.width {
@@ -311,11 +309,7 @@ pub fn map_figure(
             }
         }
     }
-    let mut png = Vec::new();
-    image::DynamicImage::ImageRgb8(img)
-        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .expect("encoding a PNG in memory");
-    let data = base64::engine::general_purpose::STANDARD.encode(&png);
+    let data = base64::engine::general_purpose::STANDARD.encode(png(img));
     let (w, h) = (
         truth.width as f64 * truth.resolution,
         truth.height as f64 * truth.resolution,
