@@ -580,6 +580,7 @@ pub fn run_report(
         );
         body += "</figure>\n";
     }
+    body += &rgbd_section(dir, summary);
     body += "<h2>Metrics</h2>\n";
     let rows: Vec<Vec<String>> = summary["metrics"]
         .as_object()
@@ -592,6 +593,53 @@ pub fn run_report(
     body += &escape(config);
     body += "</pre>\n";
     page(&format!("futago run: {name}"), &body)
+}
+
+/// The RGB-D map's section: each method's main scores, and the laser-height slice picture
+/// (`rgbd_slice.png` in `dir`) embedded; empty for a run without one.
+fn rgbd_section(dir: &Path, summary: &Value) -> String {
+    let metrics = &summary["metrics"];
+    let methods: Vec<&str> = futago_robot::registration::Method::ALL
+        .iter()
+        .map(|m| m.name())
+        .filter(|m| metrics.get(format!("rgbd_map.{m}.f1_5cm")).is_some())
+        .collect();
+    if methods.is_empty() {
+        return String::new();
+    }
+    let keys = [
+        ("f1_5cm", "F1 at 5 cm"),
+        ("f1_1cm", "F1 at 1 cm"),
+        ("mean_distance_m", "mean distance (m)"),
+        ("slice_rms_m", "slice RMS (m)"),
+        ("keyframe_pose.rmse_m", "keyframe RMSE (m)"),
+        ("keyframe_pose.rmse_deg", "keyframe RMSE (°)"),
+        ("planes.angle_mean_deg", "plane angle (°)"),
+        ("planes.offset_mean_m", "plane offset (m)"),
+        ("planes.faces", "faces"),
+    ];
+    let mut head = vec!["method"];
+    head.extend(keys.iter().map(|k| k.1));
+    let rows: Vec<Vec<String>> = methods
+        .iter()
+        .map(|m| {
+            std::iter::once(escape(m))
+                .chain(
+                    keys.iter()
+                        .map(|(k, _)| number(&metrics[format!("rgbd_map.{m}.{k}")])),
+                )
+                .collect()
+        })
+        .collect();
+    let mut out = String::from("<h2>3D map</h2>\n");
+    out += &table("rgbd-methods", &head, &rows);
+    if let Ok(png) = std::fs::read(dir.join("rgbd_slice.png")) {
+        out += &format!(
+            "<figure>\n<img class=\"slice\" src=\"data:image/png;base64,{}\" alt=\"the first method's laser-height slice (red) over the true 2D map\" style=\"max-width: 100%\">\n<figcaption>The first method's points at the laser's height (red) over the world's 2D map.</figcaption>\n</figure>\n",
+            base64::engine::general_purpose::STANDARD.encode(png)
+        );
+    }
+    out
 }
 
 /// The report of a suite from its summary (suite.json): runs with their status and gates, each

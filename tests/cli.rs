@@ -1140,6 +1140,19 @@ fn an_rgbd_map_is_scored_against_the_surfaces_it_saw_and_a_worse_pose_scores_wor
             r["metrics"]
         );
     }
+    // The slice picture (red points over the grid) and the report's table of the methods.
+    let slice = image::open(reg.join("rgbd_slice.png")).unwrap().to_rgb8();
+    let red = slice.pixels().filter(|p| p.0 == [220, 30, 30]).count();
+    assert!(red > 500, "{red} slice pixels");
+    let html = std::fs::read_to_string(reg.join("report.html")).unwrap();
+    assert!(
+        html.contains("<table class=\"rgbd-methods\">"),
+        "no methods table"
+    );
+    for method in ["pose", "map", "full"] {
+        assert!(html.contains(&format!("<td>{method}</td>")), "{method}");
+    }
+    assert!(html.contains("<img class=\"slice\" src=\"data:image/png;base64,"));
     // The relative gates: the first holds, the second (the pose ahead of the map) does not,
     // and the run says so.
     let gates = r["gates"].as_array().unwrap();

@@ -105,6 +105,8 @@ pub struct RegistrationConfig {
     pub max_iterations: usize,
     /// Stop when a step moves less than this (m, and rad per metre).
     pub tolerance: f64,
+    /// Directions whose eigenvalue of JᵀJ is below this are not stepped in (0: all are).
+    pub degenerate: f64,
     /// A registration that moves a keyframe farther than this from the robot's pose is taken
     /// for a failure (a slide along a corridor, a wrong match) and the robot's pose is kept, m.
     pub max_correction: f64,
@@ -138,6 +140,7 @@ impl Default for RegistrationConfig {
             min_feature_inliers: 6,
             max_iterations: 30,
             tolerance: 1e-4,
+            degenerate: 0.02,
             max_correction: 0.3,
             max_correction_turn: 0.1,
             loop_radius: 1.5,
@@ -194,6 +197,12 @@ impl RegistrationConfig {
                     "expected at least 3 points for a plane, found {}",
                     self.normal_neighbours
                 ),
+            );
+        }
+        if !(self.degenerate.is_finite() && self.degenerate >= 0.0) {
+            return bad(
+                "degenerate",
+                format!("expected an eigenvalue ≥ 0, found {}", self.degenerate),
             );
         }
         if !(0.0..=1.0).contains(&self.min_fitness) {
@@ -432,11 +441,19 @@ fn cost(pose: &Pose2, terms: &[Term]) -> f64 {
     c
 }
 
-/// Levenberg–Marquardt steps with the pairs fixed; returns the new pose.
-fn minimise(start: Pose2, terms: &[Term], steps: usize) -> Pose2 {
+/// Levenberg–Marquardt steps with the pairs fixed; returns the new pose and whether a
+/// direction was left out as degenerate.
+///
+/// Directions in which JᵀJ's eigenvalue is below `degenerate` (the weights sum to one, so a
+/// translation's eigenvalue is about the share of weighted pairs that constrain it) get no
+/// step: along a corridor the walls say nothing of x, and the few pairs that do (door frames,
+/// a 5 cm map's steps) would slide the keyframe (Zhang, Kaess and Singh 2016's solution
+/// remapping).
+fn minimise(start: Pose2, terms: &[Term], steps: usize, degenerate: f64) -> (Pose2, bool) {
     let mut pose = start;
     let mut lambda = 1e-4;
     let mut current = cost(&pose, terms);
+    let mut suppressed = false;
     for _ in 0..steps {
         let mut h = nalgebra::Matrix3::<f64>::zeros();
         let mut g = nalgebra::Vector3::<f64>::zeros();
@@ -445,10 +462,20 @@ fn minimise(start: Pose2, terms: &[Term], steps: usize) -> Pose2 {
             h += j * j.transpose();
             g += j * r;
         });
+        let eig = h.symmetric_eigen();
+        let mut keep = nalgebra::Matrix3::<f64>::zeros();
+        for k in 0..3 {
+            if eig.eigenvalues[k] >= degenerate {
+                let v = eig.eigenvectors.column(k);
+                keep += v * v.transpose();
+            } else {
+                suppressed = true;
+            }
+        }
         let mut improved = false;
         for _ in 0..8 {
             let a = h + nalgebra::Matrix3::identity() * lambda;
-            let Some(d) = a.cholesky().map(|c| c.solve(&(-g))) else {
+            let Some(d) = a.cholesky().map(|c| keep * c.solve(&(-g))) else {
                 lambda *= 10.0;
                 continue;
             };
@@ -467,7 +494,7 @@ fn minimise(start: Pose2, terms: &[Term], steps: usize) -> Pose2 {
             break;
         }
     }
-    pose
+    (pose, suppressed)
 }
 
 /// Per-keyframe search structures, normals made when first needed.
@@ -652,6 +679,8 @@ pub struct RegistrationCounts {
     /// Keyframes whose registration moved them beyond `max_correction` and kept the robot's
     /// pose instead.
     pub rejected: u64,
+    /// Keyframes with a direction left unchanged as degenerate (`degenerate`).
+    pub degenerate: u64,
     /// Baseline: ICP edges between consecutive keyframes, and loop edges, kept.
     pub sequential_edges: u64,
     pub loop_edges: u64,
@@ -702,6 +731,7 @@ pub fn register(
         }
         let mut pose = init;
         let mut iterations = 0;
+        let mut degenerate = false;
         let (mut n_cloud, mut n_map) = (0, 0);
         for _ in 0..config.max_iterations {
             iterations += 1;
@@ -738,7 +768,8 @@ pub fn register(
             for t in &mut terms {
                 t.weight /= total;
             }
-            let next = minimise(pose, &terms, 3);
+            let (next, flat) = minimise(pose, &terms, 3, config.degenerate);
+            degenerate |= flat;
             let step = (next.x - pose.x).hypot(next.y - pose.y)
                 + wrap_angle(next.theta - pose.theta).abs();
             pose = next;
@@ -759,6 +790,7 @@ pub fn register(
             map_sum += n_map as f64;
         }
         iter_sum += iterations as f64;
+        counts.degenerate += degenerate as u64;
         if pose.distance(&init) > config.max_correction
             || wrap_angle(pose.theta - init.theta).abs() > config.max_correction_turn
         {
@@ -793,7 +825,7 @@ fn pairwise(
         if n < 10 {
             return (pose, 0.0);
         }
-        let next = minimise(pose, &[Term { weight: 1.0, pairs }], 3);
+        let (next, _) = minimise(pose, &[Term { weight: 1.0, pairs }], 3, config.degenerate);
         let step =
             (next.x - pose.x).hypot(next.y - pose.y) + wrap_angle(next.theta - pose.theta).abs();
         pose = next;
@@ -1049,6 +1081,36 @@ mod tests {
         assert!(c.map_pairs_mean > 0.0 && c.cloud_pairs_mean > 0.0, "{c:?}");
         // The same input gives the same bytes.
         assert_eq!(register(&kfs, Method::Full, Some(&map), &cfg, 1).0, full);
+    }
+
+    #[test]
+    fn a_direction_few_pairs_constrain_is_left_alone() {
+        // A corridor: 200 pairs on walls facing y, 2 cm off, and one pair on a door frame
+        // facing x, 10 cm off.
+        let mut pairs: Vec<Pair> = (0..200)
+            .map(|k| Pair {
+                p: [k as f64 * 0.02, if k % 2 == 0 { 1.0 } else { -1.0 }, 0.2],
+                q: [k as f64 * 0.02, if k % 2 == 0 { 1.02 } else { -0.98 }, 0.2],
+                n: Some([0.0, 1.0, 0.0]),
+            })
+            .collect();
+        pairs.push(Pair {
+            p: [3.0, 0.5, 0.2],
+            q: [3.1, 0.5, 0.2],
+            n: Some([1.0, 0.0, 0.0]),
+        });
+        let terms = [Term { weight: 1.0, pairs }];
+        // x's eigenvalue is 1/201 of the weight: below 0.02, so x is not stepped; y is.
+        let (p, flat) = minimise(Pose2::IDENTITY, &terms, 10, 0.02);
+        assert!(flat);
+        assert!(p.x.abs() < 1e-3 && (p.y - 0.02).abs() < 1e-3, "{p:?}");
+        // Without the check the one pair moves the keyframe its 10 cm.
+        let (p, flat) = minimise(Pose2::IDENTITY, &terms, 10, 0.0);
+        assert!(!flat);
+        assert!(
+            (p.x - 0.1).abs() < 1e-4 && (p.y - 0.02).abs() < 1e-4,
+            "{p:?}"
+        );
     }
 
     #[test]

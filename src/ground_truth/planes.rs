@@ -1,6 +1,6 @@
 //! A polygon map's planes against the true surfaces (issue 6 §7): for each polygon, the true
-//! surface under it is the plane fitted to the true points within [`BAND_M`] of its plane and
-//! inside its outline; its angle error is the angle between the two normals and its offset
+//! surface under it is the plane fitted to the true points near its plane (within 3 cm, or
+//! [`BAND_M`] if too few are) and inside its outline, refitted twice to the points within 2 cm; its angle error is the angle between the two normals and its offset
 //! error the distance of the polygon's centroid from the true plane. Means are weighted by the
 //! polygons' areas, as large faces (walls, floor) matter more than small ones.
 
@@ -9,8 +9,10 @@ use futago_robot::polygons::Polygon;
 
 /// True points farther than this from a polygon's plane are not its surface, m.
 pub const BAND_M: f64 = 0.10;
-/// After a first fit, points farther than this from it are left out and the plane refitted
-/// (the foot of a wall under a floor polygon's edge), m.
+/// The first fit takes the true points within this of the polygon's plane (all within
+/// [`BAND_M`] if too few are), m.
+const START_M: f64 = 0.03;
+/// Each refit takes the true points within this of the previous fit, m.
 const REFIT_M: f64 = 0.02;
 /// A polygon with fewer true points under it is not scored.
 const MIN_POINTS: usize = 30;
@@ -65,16 +67,29 @@ pub fn score(polygons: &[Polygon], truth: &[[f64; 3]]) -> Option<PlaneScore> {
             .filter(|p| poly.plane.distance(**p).abs() <= BAND_M && inside(poly, **p))
             .copied()
             .collect();
-        let fitted = Plane::fit(&under).and_then(|first| {
-            let near: Vec<[f64; 3]> = under
+        // Start near the polygon's own plane, so that a second surface inside the band (the
+        // floor at a wall's foot, the other wall of a corner) does not pull the fit; then
+        // refit twice to the points near the fit.
+        let near = |plane: &Plane, within: f64| -> Vec<[f64; 3]> {
+            under
                 .iter()
-                .filter(|p| first.distance(**p).abs() <= REFIT_M)
+                .filter(|p| plane.distance(**p).abs() <= within)
                 .copied()
-                .collect();
-            (near.len() >= MIN_POINTS)
-                .then(|| Plane::fit(&near))
-                .flatten()
-        });
+                .collect()
+        };
+        let mut start = near(&poly.plane, START_M);
+        if start.len() < MIN_POINTS {
+            start.clone_from(&under);
+        }
+        let mut fitted = Plane::fit(&start);
+        for _ in 0..2 {
+            fitted = fitted.and_then(|f| {
+                let pts = near(&f, REFIT_M);
+                (pts.len() >= MIN_POINTS)
+                    .then(|| Plane::fit(&pts))
+                    .flatten()
+            });
+        }
         let Some(t) = fitted.filter(|_| under.len() >= MIN_POINTS) else {
             unmatched += 1;
             continue;
@@ -146,6 +161,19 @@ mod tests {
         let s = score(&[square(0.0, 0.0), big], &truth).unwrap();
         assert!((s.offset_mean_m - 0.015).abs() < 1e-9, "{s:?}");
         assert_eq!((s.scored, s.unmatched), (2, 0));
+        // Under the polygon the camera saw only a 30 cm patch of floor, and a wall stands
+        // across it (x = 0.5, every 2.5 cm along y, 5 cm steps up): the wall's foot, within
+        // the band, outnumbers the floor and must not be taken for the surface.
+        let mut walled: Vec<[f64; 3]> = (0..36)
+            .map(|k| [(k % 6) as f64 * 0.05, (k / 6) as f64 * 0.05, 0.0])
+            .collect();
+        for i in 0..40 {
+            for k in 1..20 {
+                walled.push([0.5, i as f64 * 0.025, k as f64 * 0.05]);
+            }
+        }
+        let s = score(&[square(0.0, 0.0)], &walled).unwrap();
+        assert!(s.angle_mean_deg < 1e-6 && s.offset_mean_m < 1e-9, "{s:?}");
         // Nothing under a polygon in the air.
         assert!(score(&[square(1.0, 0.0)], &truth).is_none());
     }
