@@ -612,6 +612,7 @@ fn rgbd_section(dir: &Path, summary: &Value) -> String {
         ("f1_1cm", "F1 at 1 cm"),
         ("mean_distance_m", "mean distance (m)"),
         ("slice_rms_m", "slice RMS (m)"),
+        ("slice_thickness_m", "slice thickness (m)"),
         ("keyframe_pose.rmse_m", "keyframe RMSE (m)"),
         ("keyframe_pose.rmse_deg", "keyframe RMSE (°)"),
         ("planes.angle_mean_deg", "plane angle (°)"),

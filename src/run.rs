@@ -963,11 +963,15 @@ fn score_rgbd_map(
         m.insert_cloud("x", &score);
         out.extend(m.0.iter().map(|(k, v)| (k[2..].to_string(), *v)));
     }
-    let slice: Vec<[f64; 2]> = points
+    let band: Vec<[f64; 3]> = points
         .iter()
         .filter(|p| (p[2] - z).abs() <= SLICE_HALF_WIDTH)
-        .map(|p| [p[0], p[1]])
+        .copied()
         .collect();
+    if let Some(t) = crate::ground_truth::cloud::thickness(&band, &run.truth) {
+        out.push(("slice_thickness_m".into(), t));
+    }
+    let slice: Vec<[f64; 2]> = band.iter().map(|p| [p[0], p[1]]).collect();
     if !slice.is_empty() {
         let mut d = crate::ground_truth::map::wall_distances(walls, &slice);
         let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();

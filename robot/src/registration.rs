@@ -144,7 +144,7 @@ impl Default for RegistrationConfig {
             max_correction: 0.3,
             max_correction_turn: 0.1,
             loop_radius: 1.5,
-            min_fitness: 0.5,
+            min_fitness: 0.3,
             icp_sigma: [0.01, 0.01, 0.005],
             prior_sigma: [0.05, 0.05, 0.02],
         }

@@ -76,6 +76,29 @@ fn key(p: &[f64; 3]) -> [i64; 3] {
     p.map(|x| (x / CAP_M).floor() as i64)
 }
 
+/// The distance of each of `points` to the nearest of `truth`, capped at [`CAP_M`].
+pub fn distances(points: &[[f64; 3]], truth: &[[f64; 3]]) -> Vec<f64> {
+    let grid = Grid::new(truth);
+    points
+        .iter()
+        .map(|p| grid.nearest(p).min(CAP_M))
+        .collect()
+}
+
+/// The thickness of a trace of points along true surfaces: twice the 90th percentile of their
+/// distances to the surfaces (the width of the band about the surface that holds 90 % of
+/// them); `None` without points. A map whose keyframes disagree draws each wall twice, a few
+/// centimetres apart, and its trace thickens (seed 000's Fig. 3.7, method ②).
+pub fn thickness(points: &[[f64; 3]], truth: &[[f64; 3]]) -> Option<f64> {
+    let mut d = distances(points, truth);
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_by(f64::total_cmp);
+    let k = ((0.9 * d.len() as f64).ceil() as usize).clamp(1, d.len()) - 1;
+    Some(2.0 * d[k])
+}
+
 /// Scores `map` against `truth`; `None` when either is empty.
 pub fn score(map: &[[f64; 3]], truth: &[[f64; 3]]) -> Option<CloudScore> {
     if map.is_empty() || truth.is_empty() {
@@ -121,6 +144,21 @@ pub fn score(map: &[[f64; 3]], truth: &[[f64; 3]]) -> Option<CloudScore> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_wall_drawn_twice_has_a_thick_trace() {
+        // The true wall x = 0; one map draws it on it, another also 3 cm in front.
+        let truth = wall(0.0, 20);
+        let once = wall(0.002, 20);
+        let mut twice = once.clone();
+        twice.extend(wall(0.03, 20));
+        let t1 = thickness(&once, &truth).unwrap();
+        let t2 = thickness(&twice, &truth).unwrap();
+        assert!((t1 - 0.004).abs() < 1e-9, "{t1}");
+        assert!((t2 - 0.06).abs() < 1e-9, "{t2}");
+        assert_eq!(distances(&[[0.5, 0.5, 0.05]], &truth), vec![CAP_M]);
+        assert!(thickness(&[], &truth).is_none());
+    }
 
     /// A 1 m × 1 m wall at x = 0 sampled every 5 mm.
     fn wall(x: f64, rows: usize) -> Vec<[f64; 3]> {

@@ -184,11 +184,12 @@ pub struct Produces {
 /// The RGB-D map's metrics besides the cloud scores: distances to the true surfaces, the
 /// laser-height slice against the true walls, the keyframes' placing against their true poses
 /// and the planes against the true surfaces.
-pub const RGBD_MAP_KEYS: [&str; 11] = [
+pub const RGBD_MAP_KEYS: [&str; 12] = [
     "mean_distance_m",
     "median_distance_m",
     "slice_rms_m",
     "slice_median_m",
+    "slice_thickness_m",
     "keyframe_pose.rmse_m",
     "keyframe_pose.max_m",
     "keyframe_pose.rmse_deg",
