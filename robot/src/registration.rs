@@ -985,7 +985,13 @@ mod tests {
         assert_eq!(p[0], off);
         // A robot pose that leaves the map: no pairs, the pose is kept, nothing breaks.
         let lost = keyframe(truth, Pose2::new(50.0, -40.0, 1.0));
-        let (p, c) = register(std::slice::from_ref(&lost), Method::Full, Some(&map), &cfg, 1);
+        let (p, c) = register(
+            std::slice::from_ref(&lost),
+            Method::Full,
+            Some(&map),
+            &cfg,
+            1,
+        );
         assert_eq!(p[0], lost.pose);
         assert_eq!(c.map_pairs_mean, 0.0);
     }

@@ -79,10 +79,7 @@ fn key(p: &[f64; 3]) -> [i64; 3] {
 /// The distance of each of `points` to the nearest of `truth`, capped at [`CAP_M`].
 pub fn distances(points: &[[f64; 3]], truth: &[[f64; 3]]) -> Vec<f64> {
     let grid = Grid::new(truth);
-    points
-        .iter()
-        .map(|p| grid.nearest(p).min(CAP_M))
-        .collect()
+    points.iter().map(|p| grid.nearest(p).min(CAP_M)).collect()
 }
 
 /// The thickness of a trace of points along true surfaces: twice the 90th percentile of their
