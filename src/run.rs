@@ -959,9 +959,7 @@ fn score_rgbd_map(
     let mut out = Vec::new();
     let points: Vec<[f64; 3]> = map.points.iter().map(|p| p.0).collect();
     if let Some(score) = crate::ground_truth::cloud::score(&points, &run.truth) {
-        let mut m = crate::ground_truth::Metrics::default();
-        m.insert_cloud("x", &score);
-        out.extend(m.0.iter().map(|(k, v)| (k[2..].to_string(), *v)));
+        out.extend(score.named());
     }
     let band: Vec<[f64; 3]> = points
         .iter()

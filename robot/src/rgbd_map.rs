@@ -355,11 +355,6 @@ impl RgbdMapper {
         self.counts
     }
 
-    /// The keyframes, levelled, in the robot's base frame.
-    pub fn keyframes(&self) -> &[Keyframe] {
-        &self.keyframes
-    }
-
     /// The levelling found in each keyframe.
     pub fn levels(&self) -> &[Level] {
         &self.levels

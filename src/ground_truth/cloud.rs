@@ -76,6 +76,22 @@ fn key(p: &[f64; 3]) -> [i64; 3] {
     p.map(|x| (x / CAP_M).floor() as i64)
 }
 
+impl CloudScore {
+    /// The scores by metric name: `accuracy_1cm`, … `f1_10cm`, `mean_distance_m`,
+    /// `median_distance_m`.
+    pub fn named(&self) -> Vec<(String, f64)> {
+        let mut out = Vec::new();
+        for (k, t) in TOLERANCE_NAMES.iter().enumerate() {
+            out.push((format!("accuracy_{t}"), self.accuracy[k]));
+            out.push((format!("completeness_{t}"), self.completeness[k]));
+            out.push((format!("f1_{t}"), self.f1[k]));
+        }
+        out.push(("mean_distance_m".into(), self.mean_distance));
+        out.push(("median_distance_m".into(), self.median_distance));
+        out
+    }
+}
+
 /// The distance of each of `points` to the nearest of `truth`, capped at [`CAP_M`].
 pub fn distances(points: &[[f64; 3]], truth: &[[f64; 3]]) -> Vec<f64> {
     let grid = Grid::new(truth);

@@ -40,17 +40,6 @@ impl Metrics {
         self.insert(format!("{prefix}.free_iou"), m.free_iou);
     }
 
-    /// `prefix.accuracy_1cm`, … `prefix.mean_distance_m` for a 3D map.
-    pub fn insert_cloud(&mut self, prefix: &str, s: &cloud::CloudScore) {
-        for (k, t) in cloud::TOLERANCE_NAMES.iter().enumerate() {
-            self.insert(format!("{prefix}.accuracy_{t}"), s.accuracy[k]);
-            self.insert(format!("{prefix}.completeness_{t}"), s.completeness[k]);
-            self.insert(format!("{prefix}.f1_{t}"), s.f1[k]);
-        }
-        self.insert(format!("{prefix}.mean_distance_m"), s.mean_distance);
-        self.insert(format!("{prefix}.median_distance_m"), s.median_distance);
-    }
-
     /// `prefix.rmse{unit}`, `prefix.mean{unit}`, … for a set of errors.
     pub fn insert_stats(&mut self, prefix: &str, unit: &str, s: &Stats) {
         for (k, v) in [
