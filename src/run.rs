@@ -118,6 +118,8 @@ pub struct RgbdMapResult {
 struct RgbdRunner {
     mapper: RgbdMapper,
     source: MapPose,
+    /// The methods that place the keyframes after the run, the first the run's map.
+    methods: Vec<futago_robot::registration::Method>,
     stride: u32,
     max_depth: f64,
     voxel: f64,
@@ -358,6 +360,7 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
                 seed,
             ),
             source: m.pose_source,
+            methods: m.config.methods.clone(),
             stride: m.config.stride,
             max_depth: m.config.max_depth,
             voxel: m.config.voxel,
@@ -749,10 +752,8 @@ fn simulate(s: &Scenario, opts: &RunOptions, mut sinks: Option<&mut Sinks>) -> R
         let env = grid
             .as_ref()
             .map(|g| EnvironmentMap::new(g, height, MAP_OCCUPIED));
-        let spec_map = s.rgbd_map.as_ref().expect("an RGB-D runner has a spec");
         let mut build_seconds = Vec::new();
-        let maps: Vec<_> = spec_map
-            .config
+        let maps: Vec<_> = m
             .methods
             .iter()
             .map(|method| {
