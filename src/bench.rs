@@ -265,7 +265,8 @@ pub fn bench_sensors(world: &World, poses: Option<Vec<Pose>>, b: &SensorBench) -
 pub fn bench_mcl(world: &World, start: Pose2, particles: usize, updates: usize) -> Result<Value> {
     use futago_robot::mcl::{Mcl, MclConfig, MclMap, SensorModel};
     use futago_sim::lidar::{LidarConfig, LidarPreset};
-    let grid = futago_sim::world::export::occupancy_grid(world, 0.05, 0.15, 0.25, 0.5);
+    let grid = futago_sim::world::export::occupancy_grid(world, 0.05, 0.15, 0.25, 0.5)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
     let lidar = LidarConfig::preset(LidarPreset::Seed000);
     let spec = lidar
         .resolve(Path::new("bench"), "lidar")
@@ -331,24 +332,31 @@ pub fn bench_rgbd(s: &Scenario, duration: Option<f64>) -> Result<Value> {
         report: false,
     };
     let out = run_in_memory(s, &opts)?;
-    let m = out.rgbd_map.as_ref().context("the run made no RGB-D map")?;
-    let keyframes = m.truth_poses.len().max(1) as f64;
-    let methods: serde_json::Map<String, Value> = m
-        .maps
+    // The mapper's own timings, from its entry of the run's performance block.
+    let m = &out.performance["nodes"]["rgbd_map"];
+    let count = m["keyframes"]
+        .as_u64()
+        .context("the run made no RGB-D map")?;
+    let keyframes = count.max(1) as f64;
+    let methods: serde_json::Map<String, Value> = s
+        .rgbd_map
         .iter()
-        .zip(&m.build_seconds)
-        .map(|(map, t)| {
+        .flat_map(|r| r.config.methods.iter())
+        .map(|method| {
+            let t = m[format!("build_{}_s", method.name())]
+                .as_f64()
+                .unwrap_or(0.0);
             (
-                map.method.name().to_string(),
+                method.name().to_string(),
                 json!({ "seconds": t, "ms_per_keyframe": 1e3 * t / keyframes }),
             )
         })
         .collect();
     Ok(json!({
         "scenario": s.spec.name,
-        "keyframes": m.truth_poses.len(),
-        "points_per_keyframe": m.counts["points"].as_f64().unwrap_or(0.0) / keyframes,
-        "keyframe_ms": 1e3 * m.keyframe_seconds / keyframes,
+        "keyframes": count,
+        "points_per_keyframe": m["points"].as_f64().unwrap_or(0.0) / keyframes,
+        "keyframe_ms": 1e3 * m["keyframe_s"].as_f64().unwrap_or(0.0) / keyframes,
         "methods": methods,
     }))
 }

@@ -13,6 +13,7 @@ mod report;
 mod rgbd;
 mod run;
 mod scenario;
+mod stack;
 mod suite;
 mod tune;
 mod world_cmd;
@@ -113,6 +114,14 @@ enum Command {
     },
     /// Join the results of a suite's shards (their --out folders) into one suite.json and
     /// junit.xml. Exits 3 when a gate failed, 1 when a run failed, as the suite would have.
+    /// List the metrics a scenario's run produces (the names its gates, `than` and tuning
+    /// objectives may use), one a line, as the stack's scorers declare them.
+    Metrics {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        #[command(flatten)]
+        overlays: OverlayArgs,
+    },
     Merge {
         /// The shards' output folders.
         #[arg(required = true)]
@@ -451,6 +460,12 @@ fn real_main() -> Result<()> {
                 s["budget"],
                 out.join("best.toml").display()
             );
+        }
+        Command::Metrics { scenario, overlays } => {
+            let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
+            for name in s.spec.metric_names() {
+                println!("{name}");
+            }
         }
         Command::Merge { shards, out } => {
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));

@@ -3,7 +3,7 @@
 //! and the configuration. Figures are inline SVG (the map is an embedded PNG), styles inline,
 //! no scripts: the page shows the same in any browser, offline, and in a CI artefact viewer.
 
-use crate::ground_truth::{SCORED_TRAJECTORIES, trajectory};
+use crate::ground_truth::trajectory;
 use base64::Engine;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::tum::{self, Stamped};
@@ -427,6 +427,7 @@ pub fn run_report(
     config: &str,
     truth: &OccupancyGrid,
     estimate: Option<&OccupancyGrid>,
+    trajectories: &[(String, String)],
 ) -> String {
     let name = summary["scenario"].as_str().unwrap_or("run");
     let gates = summary["gates"].as_array().cloned().unwrap_or_default();
@@ -505,7 +506,8 @@ pub fn run_report(
         ),
     }];
     let (mut pos_err, mut head_err) = (Vec::new(), Vec::new());
-    for (key, file) in SCORED_TRAJECTORIES {
+    for (key, file) in trajectories {
+        let key = key.as_str();
         let Some(est) = read_tum(dir, file) else {
             continue;
         };

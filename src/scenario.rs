@@ -48,12 +48,12 @@ pub struct ScenarioSpec {
     /// RGB-D cameras (Kinect models); rendered only when something consumes their frames.
     #[serde(default)]
     pub camera: Vec<KinectConfig>,
-    /// Monte Carlo localisation on the world's map, from the first laser.
+    /// Monte Carlo localisation on the world's map, from its laser's scans.
     pub localization: Option<LocalizationSpec>,
-    /// Laser SLAM in the loop, from the first laser.
-    pub slam: Option<SlamConfig>,
-    /// A 3D map from the first camera's RGB-D keyframes, placed by a 2D pose and the floor;
-    /// typed by [`rgbd_map_config`].
+    /// Laser SLAM in the loop, from its laser's scans; typed by [`slam_config`].
+    pub slam: Option<toml::Table>,
+    /// A 3D map from a camera's RGB-D keyframes, placed by a 2D pose and the floor; typed by
+    /// [`rgbd_map_config`].
     pub rgbd_map: Option<toml::Table>,
     /// Navigation parameters, for the `navigate` and `explore` controllers.
     #[serde(default)]
@@ -72,27 +72,10 @@ pub struct ScenarioSpec {
 }
 
 impl ScenarioSpec {
-    /// The names of the metrics a run of this scenario produces (for gates and tuning).
+    /// The names of the metrics a run of this scenario produces (for gates and tuning), as
+    /// the stack's scorers declare them.
     pub fn metric_names(&self) -> Vec<String> {
-        crate::ground_truth::metric_names(crate::ground_truth::Produces {
-            localization: self.localization.is_some(),
-            global_localization: self.localization.as_ref().is_some_and(|l| l.global),
-            kidnappings: !self.event.is_empty(),
-            slam: self.slam.is_some(),
-            rgbd_map: self
-                .rgbd_map
-                .as_ref()
-                .map(|t| {
-                    // The methods as typed; a table that does not type yet has the default.
-                    rgbd_map_config(Path::new(""), t)
-                        .map(|m| m.config.methods)
-                        .unwrap_or_else(|_| RgbdMapConfig::default().methods)
-                        .iter()
-                        .map(|m| m.name())
-                        .collect()
-                })
-                .unwrap_or_default(),
-        })
+        crate::stack::metric_names(self)
     }
 }
 
@@ -127,6 +110,9 @@ impl PoseSpec {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LocalizationSpec {
+    /// The laser it localises with (by name; may be left out when the scenario has one).
+    #[serde(default)]
+    pub laser: Option<String>,
     /// Map cell size, m (seed 000: 50 mm).
     #[serde(default = "default_map_resolution")]
     pub map_resolution: f64,
@@ -202,8 +188,70 @@ pub struct Scenario {
     pub config: toml::Table,
     /// The overlays laid over the file, in order.
     pub overlays: Vec<Overlay>,
-    /// The `[rgbd_map]` table, typed.
+    /// The `[rgbd_map]` table, typed, its camera and laser resolved.
     pub rgbd_map: Option<RgbdMapSpec>,
+    /// The `[slam]` table, typed, its laser resolved.
+    pub slam: Option<SlamSpec>,
+    /// The laser the navigator avoids obstacles with (`controller.laser`, or the only one).
+    pub driver_laser: Option<String>,
+}
+
+/// `[slam]`: `laser` (the name of the laser it maps with) and SLAM's own keys.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlamSpec {
+    pub laser: Option<String>,
+    pub config: SlamConfig,
+}
+
+/// Types a module's table whose wiring keys (`wiring`: which sensor it reads, where its pose
+/// comes from) have been taken out, naming `KEY.…` in errors.
+fn typed_table<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    key: &str,
+    rest: toml::Table,
+) -> Result<T, SpecError> {
+    serde_path_to_error::deserialize(toml::Value::Table(rest)).map_err(|e| {
+        let k = e.path().to_string();
+        SpecError::new(
+            path,
+            if k == "." {
+                key.to_string()
+            } else {
+                format!("{key}.{k}")
+            },
+            e.into_inner().message().to_string(),
+        )
+    })
+}
+
+/// Takes the string key `key` out of `table` (a sensor's name), naming `module.key` in errors.
+fn take_name(
+    path: &Path,
+    module: &str,
+    key: &str,
+    table: &mut toml::Table,
+) -> Result<Option<String>, SpecError> {
+    match table.remove(key) {
+        None => Ok(None),
+        Some(toml::Value::String(s)) => Ok(Some(s)),
+        Some(other) => Err(SpecError::new(
+            path,
+            format!("{module}.{key}"),
+            format!("expected a sensor's name (a string), found {other}"),
+        )),
+    }
+}
+
+/// Types the `[slam]` table: `laser` and SLAM's keys ([`SlamConfig`]), naming `slam.KEY` in
+/// errors.
+pub fn slam_config(path: &Path, table: &toml::Table) -> Result<SlamSpec, SpecError> {
+    let mut rest = table.clone();
+    let laser = take_name(path, "slam", "laser", &mut rest)?;
+    let config: SlamConfig = typed_table(path, "slam", rest)?;
+    config
+        .validate()
+        .map_err(|(k, m)| SpecError::new(path, k, m))?;
+    Ok(SlamSpec { laser, config })
 }
 
 /// Which 2D pose places the RGB-D keyframes.
@@ -216,10 +264,15 @@ pub enum MapPose {
     Slam,
 }
 
-/// `[rgbd_map]`: `pose_source` and the mapper's own keys ([`RgbdMapConfig`]).
+/// `[rgbd_map]`: `pose_source`, `camera` (its frames), `laser` (the height of its 2D-map
+/// term and slice) and the mapper's own keys ([`RgbdMapConfig`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RgbdMapSpec {
     pub pose_source: MapPose,
+    /// The camera's name (resolved: the only camera when the table names none).
+    pub camera: String,
+    /// The laser's name, if any.
+    pub laser: Option<String>,
     pub config: RgbdMapConfig,
 }
 
@@ -227,6 +280,8 @@ pub struct RgbdMapSpec {
 /// `rgbd_map.KEY` in errors.
 pub fn rgbd_map_config(path: &Path, table: &toml::Table) -> Result<RgbdMapSpec, SpecError> {
     let mut rest = table.clone();
+    let camera = take_name(path, "rgbd_map", "camera", &mut rest)?.unwrap_or_default();
+    let laser = take_name(path, "rgbd_map", "laser", &mut rest)?;
     let pose_source = match rest.remove("pose_source") {
         None => MapPose::Slam,
         Some(v) => MapPose::deserialize(v.clone()).map_err(|_| {
@@ -239,24 +294,14 @@ pub fn rgbd_map_config(path: &Path, table: &toml::Table) -> Result<RgbdMapSpec, 
             )
         })?,
     };
-    let config: RgbdMapConfig = serde_path_to_error::deserialize(toml::Value::Table(rest))
-        .map_err(|e| {
-            let key = e.path().to_string();
-            SpecError::new(
-                path,
-                if key == "." {
-                    "rgbd_map".to_string()
-                } else {
-                    format!("rgbd_map.{key}")
-                },
-                e.into_inner().message().to_string(),
-            )
-        })?;
+    let config: RgbdMapConfig = typed_table(path, "rgbd_map", rest)?;
     config
         .validate()
         .map_err(|(k, m)| SpecError::new(path, format!("rgbd_map.{k}"), m))?;
     Ok(RgbdMapSpec {
         pose_source,
+        camera,
+        laser,
         config,
     })
 }
@@ -317,6 +362,35 @@ pub fn controller_config(path: &Path, table: &toml::Table) -> Result<ControllerC
             format!(
                 "unknown controller `{other}`; expected one of {:?}",
                 ControllerConfig::TYPES
+            ),
+        )),
+    }
+}
+
+/// The name of the laser module `key` reads: the one `name` names, or the only laser when it
+/// names none. Errors name `KEY.laser` and the scenario's lasers.
+fn resolve_laser(
+    path: &Path,
+    key: &str,
+    name: &Option<String>,
+    lidars: &[(LidarConfig, LidarSpec)],
+) -> Result<String, SpecError> {
+    let names: Vec<&str> = lidars.iter().map(|(c, _)| c.name.as_str()).collect();
+    match name {
+        Some(n) if names.contains(&n.as_str()) => Ok(n.clone()),
+        Some(n) => Err(SpecError::new(
+            path,
+            format!("{key}.laser"),
+            format!("no laser is named `{n}`; the scenario's lasers are {names:?}"),
+        )),
+        None if names.len() == 1 => Ok(names[0].to_string()),
+        None => Err(SpecError::new(
+            path,
+            format!("{key}.laser"),
+            format!(
+                "the scenario has {} lasers {names:?}: name the one it reads, e.g. {key}.laser = \"{}\"",
+                names.len(),
+                names.first().copied().unwrap_or("front")
             ),
         )),
     }
@@ -428,6 +502,7 @@ impl Scenario {
                 "an RGB-D dataset needs a [[camera]]; the scenario has none",
             ));
         }
+        let mut localization_laser = None;
         if let Some(l) = &spec.localization {
             if lidars.is_empty() {
                 return Err(SpecError::new(
@@ -436,6 +511,7 @@ impl Scenario {
                     "Monte Carlo localisation needs a [[lidar]]; the scenario has none",
                 ));
             }
+            localization_laser = Some(resolve_laser(path, "localization", &l.laser, &lidars)?);
             check_range(
                 path,
                 "localization.map_resolution",
@@ -455,25 +531,25 @@ impl Scenario {
                     "m or rad",
                 )?;
             }
-            if !(1..=100_000).contains(&l.mcl.particles) {
-                return Err(SpecError::new(
-                    path,
-                    "localization.mcl.particles",
-                    format!("expected 1 to 100000 particles, found {}", l.mcl.particles),
-                ));
-            }
-        }
-        if let Some(slam) = &spec.slam {
-            if lidars.is_empty() {
-                return Err(SpecError::new(
-                    path,
-                    "slam",
-                    "laser SLAM needs a [[lidar]]; the scenario has none",
-                ));
-            }
-            slam.validate()
+            l.mcl
+                .validate("localization.mcl")
                 .map_err(|(k, m)| SpecError::new(path, k, m))?;
         }
+        let slam = match &spec.slam {
+            None => None,
+            Some(t) => {
+                let mut slam = slam_config(path, t)?;
+                if lidars.is_empty() {
+                    return Err(SpecError::new(
+                        path,
+                        "slam",
+                        "laser SLAM needs a [[lidar]]; the scenario has none",
+                    ));
+                }
+                slam.laser = Some(resolve_laser(path, "slam", &slam.laser, &lidars)?);
+                Some(slam)
+            }
+        };
         spec.navigation
             .validate()
             .map_err(|(k, m)| SpecError::new(path, k, m))?;
@@ -551,7 +627,7 @@ impl Scenario {
         let rgbd_map = match &spec.rgbd_map {
             None => None,
             Some(t) => {
-                let m = rgbd_map_config(path, t)?;
+                let mut m = rgbd_map_config(path, t)?;
                 if cameras.is_empty() {
                     return Err(SpecError::new(
                         path,
@@ -559,6 +635,40 @@ impl Scenario {
                         "an RGB-D map needs a [[camera]]; the scenario has none",
                     ));
                 }
+                let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
+                if m.camera.is_empty() {
+                    if cameras.len() > 1 {
+                        return Err(SpecError::new(
+                            path,
+                            "rgbd_map.camera",
+                            format!(
+                                "the scenario has {} cameras {names:?}: name one, e.g. rgbd_map.camera = \"{}\"",
+                                names.len(),
+                                names[0]
+                            ),
+                        ));
+                    }
+                    m.camera = cameras[0].name.clone();
+                } else if !names.contains(&m.camera.as_str()) {
+                    return Err(SpecError::new(
+                        path,
+                        "rgbd_map.camera",
+                        format!(
+                            "no camera is named `{}`; the scenario's cameras are {names:?}",
+                            m.camera
+                        ),
+                    ));
+                }
+                // The laser of its slice and 2D-map term: the one named, else SLAM's, else the
+                // localiser's, else the only one.
+                m.laser = match &m.laser {
+                    Some(_) => Some(resolve_laser(path, "rgbd_map", &m.laser, &lidars)?),
+                    None => slam
+                        .as_ref()
+                        .and_then(|s| s.laser.clone())
+                        .or_else(|| localization_laser.clone())
+                        .or_else(|| (lidars.len() == 1).then(|| lidars[0].0.name.clone())),
+                };
                 let needs = match m.pose_source {
                     MapPose::Localization if spec.localization.is_none() => Some("[localization]"),
                     MapPose::Slam if spec.slam.is_none() => Some("[slam]"),
@@ -574,7 +684,32 @@ impl Scenario {
                 Some(m)
             }
         };
-        let controller = controller_config(path, &spec.controller)?;
+        let mut controller_table = spec.controller.clone();
+        let controller_laser = take_name(path, "controller", "laser", &mut controller_table)?;
+        let controller = controller_config(path, &controller_table)?;
+        let navigates = matches!(
+            controller,
+            ControllerConfig::Navigate(_) | ControllerConfig::Explore(_)
+        );
+        let driver_laser = match (&controller_laser, navigates) {
+            (Some(_), false) => {
+                return Err(SpecError::new(
+                    path,
+                    "controller.laser",
+                    "only the navigate and explore controllers read a laser",
+                ));
+            }
+            (Some(_), true) => Some(resolve_laser(
+                path,
+                "controller",
+                &controller_laser,
+                &lidars,
+            )?),
+            (None, true) if !lidars.is_empty() => {
+                Some(resolve_laser(path, "controller", &None, &lidars)?)
+            }
+            _ => None,
+        };
         controller
             .validate()
             .map_err(|(k, m)| SpecError::new(path, format!("controller.{k}"), m))?;
@@ -629,6 +764,33 @@ impl Scenario {
                 Pose2::new(*x, *y, yaw_deg.to_radians())
             }
         };
+        // The robot starts, and is put down, inside the world's bounds.
+        let (lo, hi) = world.bounds();
+        let inside = |p: &Pose2| {
+            p.x >= lo.x as f64 && p.x <= hi.x as f64 && p.y >= lo.y as f64 && p.y <= hi.y as f64
+        };
+        let bounds = format!(
+            "expected a pose inside the world's bounds x ∈ [{}, {}], y ∈ [{}, {}] m",
+            lo.x, hi.x, lo.y, hi.y
+        );
+        let at = |p: &Pose2| format!("({:.6e}, {:.6e})", p.x, p.y).replace(".000000e0", "");
+        if !inside(&start) {
+            return Err(SpecError::new(
+                path,
+                "start",
+                format!("{bounds}; found {}", at(&start)),
+            ));
+        }
+        for (i, e) in spec.event.iter().enumerate() {
+            let p = e.teleport.pose();
+            if !inside(&p) {
+                return Err(SpecError::new(
+                    path,
+                    format!("event[{i}].teleport"),
+                    format!("{bounds}; found {}", at(&p)),
+                ));
+            }
+        }
         Ok(Scenario {
             controller,
             spec,
@@ -639,6 +801,8 @@ impl Scenario {
             config: toml::Table::new(),
             overlays: Vec::new(),
             rgbd_map,
+            slam,
+            driver_laser,
         })
     }
 }

@@ -1,8 +1,8 @@
 //! Scoring against the simulated world's ground truth, apart from the robot stack (as
 //! Cartographer keeps its metrics in `ground_truth/`): each module computes one family of
 //! metrics, and [`Metrics`] collects them under dotted names (`slam.ate.rmse_m`) so that
-//! summaries, and later gates, address them by name. A new family is a new module and one
-//! `insert` call where the run has its inputs.
+//! summaries and gates address them by name. The stack's nodes (`crate::stack`) call these
+//! scorers and declare the names they produce; a new family is a new module here.
 
 pub mod cloud;
 pub mod map;
@@ -55,13 +55,6 @@ impl Metrics {
     }
 }
 
-/// The trajectories a run may write, scored against its `groundtruth.txt`.
-pub const SCORED_TRAJECTORIES: [(&str, &str); 3] = [
-    ("odometry", "odometry.txt"),
-    ("localization", "localization.txt"),
-    ("slam", "slam_trajectory.txt"),
-];
-
 /// Largest time difference for pairing an estimate with a ground-truth pose, s (evo's
 /// default; the ground truth's 50 Hz puts every stamp within 10 ms of one).
 pub const MAX_TIME_DIFF: f64 = 0.01;
@@ -93,62 +86,57 @@ pub fn sample_relations(truth: &[futago_msgs::tum::Stamped]) -> Vec<crate::relat
     crate::relations::sample(&planar, RELATION_EVERY_S, RELATION_MAX_SPAN_S, 0)
 }
 
-/// Scores the trajectories in a run's folder against its ground truth `truth` (the run's
-/// `groundtruth.txt`, already read): for each one written,
+/// Scores the trajectory `file` in the run's folder (TUM) against the run's ground truth, as
 /// `NAME.ate.*_m` (no alignment: the map frame is the world frame in simulation),
 /// `NAME.ate.p95_m`, `NAME.rpe_1m.trans.*_m` / `NAME.rpe_1m.rot.*_deg`, and the relations
-/// metric on `relations` as `NAME.relations.*` (see [`RELATION_KEYS`]).
-pub fn score_trajectories(
-    dir: &std::path::Path,
-    truth: &[futago_msgs::tum::Stamped],
-    relations: &[crate::relations::Relation],
+/// metric as `NAME.relations.*` (see [`RELATION_KEYS`]). A file the run did not write scores
+/// nothing.
+pub fn score_trajectory(
+    truth: &crate::stack::Truth,
+    name: &str,
+    file: &str,
 ) -> anyhow::Result<Metrics> {
     use anyhow::Context;
-    let read = |name: &str| -> anyhow::Result<Vec<futago_msgs::tum::Stamped>> {
-        let p = dir.join(name);
-        let text =
-            std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
-        futago_msgs::tum::parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))
-    };
     let mut m = Metrics::default();
-    for (name, file) in SCORED_TRAJECTORIES {
-        if !dir.join(file).exists() {
-            continue;
+    let p = truth.dir.join(file);
+    if !p.exists() {
+        return Ok(m);
+    }
+    let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+    let est =
+        futago_msgs::tum::parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
+    let pairs = trajectory::associate(truth.poses, &est, MAX_TIME_DIFF);
+    let ate = trajectory::ate(&pairs, trajectory::Alignment::None);
+    if let Some(s) = Stats::of(&ate) {
+        m.insert_stats(&format!("{name}.ate"), "_m", &s);
+        if let Some(p) = Stats::percentile(&ate, 95.0) {
+            m.insert(format!("{name}.ate.p95_m"), p);
         }
-        let est = read(file)?;
-        let pairs = trajectory::associate(truth, &est, MAX_TIME_DIFF);
-        let ate = trajectory::ate(&pairs, trajectory::Alignment::None);
-        if let Some(s) = Stats::of(&ate) {
-            m.insert_stats(&format!("{name}.ate"), "_m", &s);
-            if let Some(p) = Stats::percentile(&ate, 95.0) {
-                m.insert(format!("{name}.ate.p95_m"), p);
-            }
-        }
-        let (t, r) = trajectory::rpe(&pairs, trajectory::Delta::Metres(RPE_DELTA_M));
-        if let Some(st) = Stats::of(&t) {
-            m.insert_stats(&format!("{name}.rpe_1m.trans"), "_m", &st);
-        }
-        let deg: Vec<f64> = r.iter().map(|x| x.to_degrees()).collect();
-        if let Some(sd) = Stats::of(&deg) {
-            m.insert_stats(&format!("{name}.rpe_1m.rot"), "_deg", &sd);
-        }
-        let planar: Vec<(futago_msgs::Time, futago_msgs::Pose2)> =
-            est.iter().map(|s| (s.stamp, s.pose.to_pose2())).collect();
-        let rel = crate::relations::evaluate(&planar, relations);
-        if rel.relations > 0 {
-            let values = [
-                rel.abs_trans_m.mean,
-                rel.abs_trans_m.std,
-                rel.sqr_trans_m2.mean,
-                rel.sqr_trans_m2.std,
-                rel.abs_rot_deg.mean,
-                rel.abs_rot_deg.std,
-                rel.sqr_rot_deg2.mean,
-                rel.sqr_rot_deg2.std,
-            ];
-            for (k, v) in RELATION_KEYS.iter().zip(values) {
-                m.insert(format!("{name}.relations.{k}"), v);
-            }
+    }
+    let (t, r) = trajectory::rpe(&pairs, trajectory::Delta::Metres(RPE_DELTA_M));
+    if let Some(st) = Stats::of(&t) {
+        m.insert_stats(&format!("{name}.rpe_1m.trans"), "_m", &st);
+    }
+    let deg: Vec<f64> = r.iter().map(|x| x.to_degrees()).collect();
+    if let Some(sd) = Stats::of(&deg) {
+        m.insert_stats(&format!("{name}.rpe_1m.rot"), "_deg", &sd);
+    }
+    let planar: Vec<(futago_msgs::Time, futago_msgs::Pose2)> =
+        est.iter().map(|s| (s.stamp, s.pose.to_pose2())).collect();
+    let rel = crate::relations::evaluate(&planar, truth.relations);
+    if rel.relations > 0 {
+        let values = [
+            rel.abs_trans_m.mean,
+            rel.abs_trans_m.std,
+            rel.sqr_trans_m2.mean,
+            rel.sqr_trans_m2.std,
+            rel.abs_rot_deg.mean,
+            rel.abs_rot_deg.std,
+            rel.sqr_rot_deg2.mean,
+            rel.sqr_rot_deg2.std,
+        ];
+        for (k, v) in RELATION_KEYS.iter().zip(values) {
+            m.insert(format!("{name}.relations.{k}"), v);
         }
     }
     Ok(m)
@@ -156,98 +144,36 @@ pub fn score_trajectories(
 
 const STATS: [&str; 6] = ["rmse", "mean", "median", "std", "min", "max"];
 
-/// What a scenario runs, as far as its metrics go.
-#[derive(Debug, Clone, Default)]
-pub struct Produces {
-    pub localization: bool,
-    /// The localiser starts knowing nothing (`localization.convergence_s`).
-    pub global_localization: bool,
-    /// Kidnapping events (`localization.recovery_s`).
-    pub kidnappings: bool,
-    pub slam: bool,
-    /// An RGB-D map's methods, the first the run's map (`rgbd_map.*` and
-    /// `rgbd_map.METHOD.*`); empty without one.
-    pub rgbd_map: Vec<&'static str>,
+/// The names [`score_trajectory`] gives trajectory `name`.
+pub fn trajectory_metric_names(name: &str) -> Vec<String> {
+    let mut names = Vec::new();
+    for s in STATS {
+        names.push(format!("{name}.ate.{s}_m"));
+        names.push(format!("{name}.rpe_1m.trans.{s}_m"));
+        names.push(format!("{name}.rpe_1m.rot.{s}_deg"));
+    }
+    names.push(format!("{name}.ate.p95_m"));
+    for k in RELATION_KEYS {
+        names.push(format!("{name}.relations.{k}"));
+    }
+    names
 }
 
-/// The RGB-D map's metrics besides the cloud scores: distances to the true surfaces, the
-/// laser-height slice against the true walls, the keyframes' placing against their true poses
-/// and the planes against the true surfaces.
-pub const RGBD_MAP_KEYS: [&str; 12] = [
-    "mean_distance_m",
-    "median_distance_m",
-    "slice_rms_m",
-    "slice_median_m",
-    "slice_thickness_m",
-    "keyframe_pose.rmse_m",
-    "keyframe_pose.max_m",
-    "keyframe_pose.rmse_deg",
-    "planes.angle_mean_deg",
-    "planes.offset_mean_m",
-    "planes.faces",
-    "planes.vertices",
-];
-
-/// Every metric name a run produces: the odometry trajectory's always; the localiser's and
-/// SLAM's with `[localization]` and `[slam]`; SLAM's map with `[slam]`; the localiser's time to
-/// converge from a global start and worst time to recover from a kidnapping (not recovered by
-/// the end counts as the rest of the run).
-pub fn metric_names(p: Produces) -> Vec<String> {
-    let (localization, slam) = (p.localization, p.slam);
+/// The names [`Metrics::insert_map`] gives a map scored under `prefix`.
+pub fn map_metric_names(prefix: &str) -> Vec<String> {
     let mut names = Vec::new();
-    if localization && p.kidnappings {
-        names.push("localization.recovery_s".to_string());
+    for c in [1, 2] {
+        for k in ["precision", "recall", "f1"] {
+            names.push(format!("{prefix}.{k}_{c}cell"));
+        }
     }
-    if localization && p.global_localization {
-        names.push("localization.convergence_s".to_string());
-    }
-    for (name, on) in [
-        ("odometry", true),
-        ("localization", localization),
-        ("slam", slam),
+    for k in [
+        "mean_distance_to_truth_m",
+        "mean_distance_from_truth_m",
+        "free_iou",
     ] {
-        if !on {
-            continue;
-        }
-        for s in STATS {
-            names.push(format!("{name}.ate.{s}_m"));
-            names.push(format!("{name}.rpe_1m.trans.{s}_m"));
-            names.push(format!("{name}.rpe_1m.rot.{s}_deg"));
-        }
-        names.push(format!("{name}.ate.p95_m"));
-        for k in RELATION_KEYS {
-            names.push(format!("{name}.relations.{k}"));
-        }
+        names.push(format!("{prefix}.{k}"));
     }
-    if slam {
-        for c in [1, 2] {
-            for k in ["precision", "recall", "f1"] {
-                names.push(format!("slam.map.{k}_{c}cell"));
-            }
-        }
-        for k in [
-            "mean_distance_to_truth_m",
-            "mean_distance_from_truth_m",
-            "free_iou",
-        ] {
-            names.push(format!("slam.map.{k}"));
-        }
-    }
-    let prefixes = (!p.rgbd_map.is_empty())
-        .then(|| "rgbd_map".to_string())
-        .into_iter()
-        .chain(p.rgbd_map.iter().map(|m| format!("rgbd_map.{m}")));
-    for prefix in prefixes {
-        for t in cloud::TOLERANCE_NAMES {
-            for k in ["accuracy", "completeness", "f1"] {
-                names.push(format!("{prefix}.{k}_{t}"));
-            }
-        }
-        for k in RGBD_MAP_KEYS {
-            names.push(format!("{prefix}.{k}"));
-        }
-    }
-    names.sort();
     names
 }
 
@@ -443,26 +369,5 @@ mod tests {
             "slam.map.f1_2cell = 0.950000, >= 0.9 (margin +0.050000)"
         );
         assert!(r[2].message.contains("not produced"));
-    }
-
-    #[test]
-    fn metric_names_follow_what_runs() {
-        let base = metric_names(Produces::default());
-        assert!(base.contains(&"odometry.ate.rmse_m".to_string()));
-        assert!(!base.iter().any(|n| n.starts_with("slam")));
-        let all = metric_names(Produces {
-            localization: true,
-            global_localization: false,
-            kidnappings: true,
-            slam: true,
-            rgbd_map: vec!["full", "pose"],
-        });
-        assert!(all.contains(&"rgbd_map.f1_5cm".to_string()));
-        assert!(all.contains(&"rgbd_map.pose.keyframe_pose.rmse_m".to_string()));
-        assert!(!base.iter().any(|n| n.starts_with("rgbd_map")));
-        assert!(all.contains(&"localization.recovery_s".to_string()));
-        assert!(!all.contains(&"localization.convergence_s".to_string()));
-        assert!(all.contains(&"slam.map.f1_2cell".to_string()));
-        assert!(all.contains(&"localization.rpe_1m.rot.max_deg".to_string()));
     }
 }

@@ -1,0 +1,126 @@
+//! The [`Bus`]: what the nodes of the loop share on the simulation clock.
+//!
+//! Messages that are events (scans, frames, odometry reports) are handed to nodes by the
+//! loop; what a node publishes for others is kept here as latest values: pose estimates (each
+//! with the odometry pose it was made at, so that a consumer carries it to now by odometry,
+//! as tf's `map → odom → base` chain does), 2D maps with their stamps, and the drive command.
+
+use futago_msgs::grid::OccupancyGrid;
+use futago_msgs::{BumpsAndDrops, DriveCommand, Duration, Pose2, Time, wrap_angle};
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
+
+/// Odometry poses kept for interpolation at scan stamps.
+const HISTORY: usize = 256;
+
+/// State shared by the nodes of one run.
+pub struct Bus {
+    /// Simulation time of the current phase.
+    pub now: Time,
+    /// The robot base's true pose now: for recorders, scorers and oracle pose sources only;
+    /// stack modules never read it.
+    pub truth: Pose2,
+    /// The Create's wheel odometry integrated from the start pose (the `odom` frame).
+    pub odometry: Pose2,
+    /// The wheels' commanded speeds (left, right), m/s, as the Create reports them.
+    pub wheel_speeds: (f64, f64),
+    /// Bumper and wheel-drop state of this step's report (default without one).
+    pub bumps: BumpsAndDrops,
+    /// The drive command published at the last control tick, until the loop takes it.
+    pub command: Option<DriveCommand>,
+    history: VecDeque<(Time, Pose2)>,
+    estimates: BTreeMap<String, Option<(Pose2, Pose2)>>,
+    maps: BTreeMap<String, (Time, Arc<OccupancyGrid>)>,
+    subscriptions: BTreeMap<String, Option<Duration>>,
+}
+
+impl Bus {
+    /// A bus at time zero with the robot at `start`; `estimates` are the pose topics some
+    /// node publishes, `subscriptions` the map topics consumed (with the period the
+    /// consumer wants them at).
+    pub fn new(
+        start: Pose2,
+        estimates: impl IntoIterator<Item = String>,
+        subscriptions: impl IntoIterator<Item = (String, Option<Duration>)>,
+    ) -> Bus {
+        Bus {
+            now: Time::ZERO,
+            truth: start,
+            odometry: start,
+            wheel_speeds: (0.0, 0.0),
+            bumps: BumpsAndDrops::default(),
+            command: None,
+            history: VecDeque::from([(Time::ZERO, start)]),
+            estimates: estimates.into_iter().map(|t| (t, None)).collect(),
+            maps: BTreeMap::new(),
+            subscriptions: subscriptions.into_iter().collect(),
+        }
+    }
+
+    /// Records the odometry pose at `t` (the loop does this for every report).
+    pub fn push_odometry(&mut self, t: Time, pose: Pose2) {
+        self.odometry = pose;
+        self.history.push_back((t, pose));
+        while self.history.len() > HISTORY {
+            self.history.pop_front();
+        }
+    }
+
+    /// The odometry pose at `t`, interpolated in the recent history (the newest after it,
+    /// the oldest kept before it).
+    pub fn odometry_at(&self, t: Time) -> Pose2 {
+        let Some(&(t_last, p_last)) = self.history.back() else {
+            return Pose2::IDENTITY;
+        };
+        if t >= t_last {
+            return p_last;
+        }
+        for (&(t0, p0), &(t1, p1)) in self.history.iter().zip(self.history.iter().skip(1)) {
+            if t >= t0 && t <= t1 {
+                let a = if t1 > t0 {
+                    (t - t0).secs() / (t1 - t0).secs()
+                } else {
+                    0.0
+                };
+                let dth = wrap_angle(p1.theta - p0.theta);
+                return Pose2::new(
+                    p0.x + a * (p1.x - p0.x),
+                    p0.y + a * (p1.y - p0.y),
+                    wrap_angle(p0.theta + a * dth),
+                );
+            }
+        }
+        self.history.front().map(|h| h.1).unwrap_or(p_last)
+    }
+
+    /// Publishes estimate `pose` on `pose/TOPIC`, made when odometry read `at`.
+    pub fn publish_pose(&mut self, topic: &str, pose: Pose2, at: Pose2) {
+        self.estimates.insert(topic.to_string(), Some((pose, at)));
+    }
+
+    /// The estimate on `pose/TOPIC` now, carried from when it was made by odometry; odometry
+    /// itself before the first estimate; `None` when no node publishes that topic.
+    pub fn pose(&self, topic: &str) -> Option<Pose2> {
+        self.estimates.get(topic).map(|e| match e {
+            Some((est, at)) => est.compose(&at.between(&self.odometry)),
+            None => self.odometry,
+        })
+    }
+
+    /// Publishes a map on `map/TOPIC`, stamped now.
+    pub fn publish_map(&mut self, topic: &str, map: OccupancyGrid) {
+        self.maps
+            .insert(topic.to_string(), (self.now, Arc::new(map)));
+    }
+
+    /// The latest map on `map/TOPIC` and its stamp.
+    pub fn map(&self, topic: &str) -> Option<(Time, &Arc<OccupancyGrid>)> {
+        self.maps.get(topic).map(|(t, m)| (*t, m))
+    }
+
+    /// Whether some node consumes `map/TOPIC`, and at which period (`Some(None)`: whenever
+    /// it changes).
+    pub fn subscription(&self, topic: &str) -> Option<Option<Duration>> {
+        self.subscriptions.get(topic).copied()
+    }
+}

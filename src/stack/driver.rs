@@ -1,0 +1,228 @@
+//! The driver node: a scripted controller or the navigator, whichever the scenario's
+//! `[controller]` names. It publishes the drive command at every control tick.
+
+use super::{Bus, Node, Report, Streams};
+use crate::scenario::Scenario;
+use anyhow::{Context, Result};
+use futago_msgs::{DriveCommand, Duration, LaserScan, Odometry, Pose2, Time};
+use futago_robot::navigation::{NavInput, Navigator, Task};
+use futago_robot::odometry::OdometryIntegrator;
+use futago_robot::script::{ControlInput, ControllerConfig, PoseSource, ScriptedController};
+use serde_json::{Value, json};
+use std::path::Path;
+
+enum Driver {
+    Scripted(ScriptedController),
+    Navigator {
+        nav: Box<Navigator>,
+        /// Where the navigator's pose comes from: `None` drives on SLAM's.
+        pose_source: Option<PoseSource>,
+        odometry: OdometryIntegrator,
+        last: Option<DriveCommand>,
+    },
+}
+
+/// Drives the robot.
+pub struct DriverNode {
+    driver: Driver,
+    /// The navigator's laser for obstacles: its name and mount.
+    laser: Option<(String, Pose2)>,
+    last_scan: Option<LaserScan>,
+    /// The navigator plans on SLAM's map, taken at this period.
+    map_period: Option<Duration>,
+    map_seen: Option<Time>,
+    /// Odometry reports since the last tick.
+    pending: Vec<Odometry>,
+    /// Return-to-start errors per lap of a waypoint list (seed 000, Fig. 2.8).
+    laps: Vec<Value>,
+    localizes: bool,
+}
+
+impl DriverNode {
+    pub fn new(s: &Scenario) -> Result<DriverNode> {
+        let spec = &s.spec;
+        let navigation_map = || {
+            let height = s
+                .driver_laser
+                .as_ref()
+                .and_then(|n| s.lidars.iter().find(|(c, _)| &c.name == n))
+                .map_or(0.2, |(c, _)| c.xyz[2]);
+            super::world_map(s, spec.navigation.map_resolution, height)
+                .context("navigation.map_resolution")
+        };
+        let driver = match &s.controller {
+            ControllerConfig::Navigate(n) => Driver::Navigator {
+                nav: Box::new(Navigator::new(
+                    spec.navigation,
+                    n.task(),
+                    Some(navigation_map()?),
+                )),
+                pose_source: Some(n.pose_source),
+                odometry: OdometryIntegrator::new(s.start),
+                last: None,
+            },
+            ControllerConfig::Explore(_) => Driver::Navigator {
+                nav: Box::new(Navigator::new(spec.navigation, Task::Explore, None)),
+                pose_source: None,
+                odometry: OdometryIntegrator::new(s.start),
+                last: None,
+            },
+            other => Driver::Scripted(ScriptedController::new(other.clone(), Time::ZERO, s.start)),
+        };
+        let navigates = matches!(driver, Driver::Navigator { .. });
+        let laser = if navigates {
+            s.driver_laser.as_ref().and_then(|n| {
+                s.lidars
+                    .iter()
+                    .find(|(c, _)| &c.name == n)
+                    .map(|(c, _)| (n.clone(), c.planar_mount()))
+            })
+        } else {
+            None
+        };
+        Ok(DriverNode {
+            map_period: matches!(s.controller, ControllerConfig::Explore(_))
+                .then(|| Duration::from_secs(spec.navigation.replan_period / 2.0)),
+            driver,
+            laser,
+            last_scan: None,
+            map_seen: None,
+            pending: Vec::new(),
+            laps: Vec::new(),
+            localizes: spec.localization.is_some(),
+        })
+    }
+}
+
+impl Node for DriverNode {
+    fn name(&self) -> &'static str {
+        "driver"
+    }
+
+    fn streams(&self) -> Streams {
+        let mut consumes = vec!["odometry".to_string()];
+        consumes.extend(self.laser.iter().map(|(n, _)| format!("scan/{n}")));
+        let mut periods = Vec::new();
+        match &self.driver {
+            Driver::Navigator {
+                pose_source: None, ..
+            } => {
+                consumes.push("pose/slam".into());
+                consumes.push("map/slam".into());
+                periods.extend(self.map_period.map(|p| ("map/slam".to_string(), p)));
+            }
+            Driver::Navigator {
+                pose_source: Some(PoseSource::Localization),
+                ..
+            } => consumes.push("pose/localization".into()),
+            Driver::Scripted(_) if self.localizes => consumes.push("pose/localization".into()),
+            _ => {}
+        }
+        Streams {
+            consumes,
+            publishes: vec!["cmd_vel".into()],
+            periods,
+        }
+    }
+
+    fn on_odometry(&mut self, o: &Odometry, _bus: &mut Bus) -> Result<()> {
+        self.pending.push(*o);
+        Ok(())
+    }
+
+    fn on_scan(&mut self, laser: &str, scan: &LaserScan, _bus: &mut Bus) -> Result<()> {
+        if self.laser.as_ref().is_some_and(|(n, _)| n == laser) {
+            self.last_scan = Some(scan.clone());
+        }
+        Ok(())
+    }
+
+    fn on_control(&mut self, bus: &mut Bus) -> Result<()> {
+        let localization = bus.pose("localization");
+        let input = ControlInput {
+            now: bus.now,
+            odometry: &self.pending,
+            bumps: bus.bumps,
+            ground_truth: Some(bus.truth),
+            localization,
+        };
+        let cmd = match &mut self.driver {
+            Driver::Scripted(c) => c.update(&input),
+            Driver::Navigator {
+                nav,
+                pose_source,
+                odometry,
+                last,
+            } => {
+                for o in input.odometry {
+                    odometry.integrate(o);
+                }
+                let pose = match pose_source {
+                    Some(PoseSource::GroundTruth) => input.ground_truth,
+                    Some(PoseSource::Localization) => input.localization,
+                    Some(PoseSource::Odometry) => Some(odometry.pose),
+                    None => bus.pose("slam"),
+                }
+                .unwrap_or(odometry.pose);
+                // A newer map than the last one taken, when the explorer plans on one.
+                let map = bus
+                    .map("slam")
+                    .filter(|(t, _)| self.map_seen.is_none_or(|seen| *t > seen));
+                if let Some((t, _)) = map {
+                    self.map_seen = Some(t);
+                }
+                let cmd = nav.update(&NavInput {
+                    now: input.now,
+                    pose,
+                    bumps: input.bumps,
+                    scan: self
+                        .last_scan
+                        .as_ref()
+                        .zip(self.laser.as_ref().map(|l| l.1)),
+                    map: map.map(|(_, m)| m.as_ref()),
+                });
+                (*last != Some(cmd)).then(|| {
+                    *last = Some(cmd);
+                    cmd
+                })
+            }
+        };
+        self.pending.clear();
+        bus.command = cmd;
+        if let Driver::Scripted(c) = &self.driver
+            && c.laps_completed() > self.laps.len()
+        {
+            self.laps.push(json!({
+                "lap": self.laps.len() + 1,
+                "time_s": bus.now.secs(),
+                "odometry_error_m": bus.odometry.distance(&bus.truth),
+                "localization_error_m": localization.map(|l| l.distance(&bus.truth)),
+            }));
+        }
+        Ok(())
+    }
+
+    fn finished(&self) -> bool {
+        match &self.driver {
+            Driver::Scripted(c) => c.finished(),
+            Driver::Navigator { nav, .. } => nav.finished(),
+        }
+    }
+
+    fn finish(&mut self, _bus: &mut Bus, _out: Option<&Path>) -> Result<Report> {
+        let mut summary = vec![
+            ("controller_finished".to_string(), json!(self.finished())),
+            ("laps".to_string(), json!(self.laps)),
+        ];
+        if let Driver::Navigator { nav, .. } = &self.driver {
+            summary.push((
+                "navigation".into(),
+                json!({ "stats": nav.stats(), "roadmap_nodes": nav.roadmap_nodes() }),
+            ));
+        }
+        Ok(Report {
+            summary,
+            ..Report::default()
+        })
+    }
+}

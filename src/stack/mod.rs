@@ -1,0 +1,237 @@
+//! The robot stack in the loop, as a deterministic schedule of nodes (ROS's nodes and topics,
+//! made deterministic).
+//!
+//! Each stack module (localiser, SLAM, RGB-D mapper, driver) and each recorder of the run's
+//! files is a [`Node`]: it declares the named streams it consumes and publishes
+//! ([`Streams`]), takes messages through the callbacks of its phases, and at the end writes
+//! its files, its part of the summary and its scores ([`Node::finish`], [`Node::score`]).
+//! The run loop (`crate::run`) only steps the simulation and hands each message to its
+//! consumers on the simulation clock, in this fixed order within one physics step:
+//!
+//! 1. **truth**: at the ground-truth rate, before the step ([`Node::on_truth`]);
+//! 2. the simulation steps;
+//! 3. **odometry**: the Create's report, when one fell due ([`Node::on_odometry`]);
+//! 4. **frames**: each camera that is due, in the scenario's order, is rendered only if some
+//!    consumer wants a frame now ([`Node::wants_frame`]), then handed to those that do
+//!    ([`Node::on_frame`]);
+//! 5. **scans**: each completed scan, in the scenario's laser order ([`Node::on_scan`]);
+//! 6. **control**: at the rate of the Create's reports ([`Node::on_control`]); the driver
+//!    publishes the next drive command on the [`Bus`].
+//!
+//! Within a phase, nodes run in the order of [`build`]. Nothing depends on threads or the wall
+//! clock, so a scenario and a seed give the same bytes. A new module is a new file here with
+//! its node, a line in [`build`], its typed config in the scenario, and its scorer; the loop
+//! does not change.
+
+pub mod bus;
+pub mod driver;
+pub mod localization;
+pub mod record;
+pub mod rgbd_map;
+pub mod slam;
+
+pub use bus::Bus;
+
+use crate::ground_truth::Metrics;
+use crate::scenario::Scenario;
+use anyhow::Result;
+use futago_msgs::camera::{DepthImage, RgbdFrame};
+use futago_msgs::grid::OccupancyGrid;
+use futago_msgs::{LaserScan, Odometry, Pose2, Pose3, Time, tum};
+use serde_json::Value;
+use std::path::Path;
+
+/// The named streams a node consumes and publishes. Names follow ROS's habits:
+/// `odometry`, `scan/NAME` (a laser's scans), `camera/NAME` (a camera's frames),
+/// `pose/NAME` (a pose estimate), `map/NAME` (a 2D map), `cmd_vel` (drive commands),
+/// `truth` (the simulator's ground truth, for recorders and scorers only).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Streams {
+    pub consumes: Vec<String>,
+    pub publishes: Vec<String>,
+    /// Consumed topics wanted no more often than a period (a map for a planner).
+    pub periods: Vec<(String, futago_msgs::Duration)>,
+}
+
+/// A stack module or recorder in the loop. Every callback has a default that does nothing,
+/// so a node implements only the phases of the streams it declares.
+pub trait Node {
+    /// The node's name, as in `summary.json`'s `performance.nodes` and in errors.
+    fn name(&self) -> &'static str;
+
+    /// The streams it consumes and publishes; the loop delivers only what is consumed.
+    fn streams(&self) -> Streams;
+
+    /// Before the first step, in node order: publish initial estimates, write headers.
+    fn start(&mut self, _bus: &mut Bus) -> Result<()> {
+        Ok(())
+    }
+
+    /// The ground truth at its rate (recorders only).
+    fn on_truth(&mut self, _bus: &Bus) -> Result<()> {
+        Ok(())
+    }
+
+    /// A report of the Create's sensor stream, already integrated into the bus's odometry.
+    fn on_odometry(&mut self, _odometry: &Odometry, _bus: &mut Bus) -> Result<()> {
+        Ok(())
+    }
+
+    /// Whether the node wants a frame of camera `camera` now (cameras render only then).
+    fn wants_frame(&self, _camera: &str, _bus: &Bus) -> bool {
+        false
+    }
+
+    /// A frame of camera `camera`, which the node asked for.
+    fn on_frame(
+        &mut self,
+        _camera: &str,
+        _frame: &CameraFrame,
+        _truth: &mut dyn FrameTruth,
+        _bus: &mut Bus,
+    ) -> Result<()> {
+        Ok(())
+    }
+
+    /// A completed scan of laser `laser`.
+    fn on_scan(&mut self, _laser: &str, _scan: &LaserScan, _bus: &mut Bus) -> Result<()> {
+        Ok(())
+    }
+
+    /// A control tick (also one at time zero, before the first step).
+    fn on_control(&mut self, _bus: &mut Bus) -> Result<()> {
+        Ok(())
+    }
+
+    /// Whether the node is done (the run ends once every node is done and the robot stands).
+    fn finished(&self) -> bool {
+        true
+    }
+
+    /// After the last step, in node order: write files into `out` (when the run writes
+    /// any), publish final outputs (a final map) for the nodes after it, and say what the
+    /// summary and the scorers get.
+    fn finish(&mut self, _bus: &mut Bus, _out: Option<&Path>) -> Result<Report> {
+        Ok(Report::default())
+    }
+
+    /// The metrics this node's scorer produces, from the run's folder and the truth.
+    fn score(&self, _truth: &Truth) -> Result<Metrics> {
+        Ok(Metrics::default())
+    }
+}
+
+/// A camera frame with its optical frame's true pose (for recorders' ground truth).
+pub struct CameraFrame {
+    pub frame: RgbdFrame,
+    pub optical: Pose3,
+}
+
+/// The true depth a camera would measure at the frame just taken (for scorers of 3D maps).
+pub trait FrameTruth {
+    fn true_depth(&mut self) -> Result<DepthImage>;
+}
+
+/// What a node leaves at the end.
+#[derive(Default)]
+pub struct Report {
+    /// Top-level entries of `summary.json`.
+    pub summary: Vec<(String, Value)>,
+    /// Files (or folders, ending in `/`) it wrote into the run's folder, for their digests.
+    pub files: Vec<String>,
+    /// Its estimated 2D map, drawn in the report.
+    pub map: Option<OccupancyGrid>,
+    /// Trajectories it wrote (name, file), drawn in the report with their errors.
+    pub trajectories: Vec<(String, String)>,
+    /// Its own measured costs beyond the wall time of its callbacks (`performance`).
+    pub performance: serde_json::Map<String, Value>,
+}
+
+/// What the scorers are given: the run's folder and the simulated truth.
+pub struct Truth<'a> {
+    pub dir: &'a Path,
+    pub scenario: &'a Scenario,
+    /// The run's `groundtruth.txt`, read back.
+    pub poses: &'a [tum::Stamped],
+    pub relations: &'a [crate::relations::Relation],
+}
+
+impl Truth<'_> {
+    /// The world's occupancy grid of the 10 cm band at `height`, at `resolution`.
+    pub fn world_map(&self, resolution: f64, height: f64) -> Result<OccupancyGrid> {
+        world_map(self.scenario, resolution, height)
+    }
+}
+
+/// The world's ground-truth occupancy grid of the 10 cm band around `height` (the map a
+/// perfect mapping run at that laser height would give).
+pub fn world_map(s: &Scenario, resolution: f64, height: f64) -> Result<OccupancyGrid> {
+    futago_sim::world::export::occupancy_grid(
+        &s.world,
+        resolution,
+        height - 0.05,
+        height + 0.05,
+        0.5,
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+/// The laser a module names (`KEY.laser`), or the scenario's only laser when it names none.
+pub fn pick_laser<'a>(
+    s: &'a Scenario,
+    key: &str,
+    name: Option<&str>,
+) -> Result<&'a (futago_sim::lidar::LidarConfig, futago_sim::lidar::LidarSpec), String> {
+    let names: Vec<&str> = s.lidars.iter().map(|(c, _)| c.name.as_str()).collect();
+    match name {
+        Some(n) => {
+            s.lidars.iter().find(|(c, _)| c.name == n).ok_or_else(|| {
+                format!("no laser is named `{n}`; the scenario's lasers are {names:?}")
+            })
+        }
+        None if s.lidars.len() == 1 => Ok(&s.lidars[0]),
+        None if s.lidars.is_empty() => Err("needs a [[lidar]]; the scenario has none".into()),
+        None => Err(format!(
+            "the scenario has {} lasers {names:?}: name one, e.g. {key}.laser = \"{}\"",
+            names.len(),
+            names[0]
+        )),
+    }
+}
+
+/// The stack of a scenario, in the order of every phase: the recorders of the run's files
+/// (when it writes them), the driver, the localiser, SLAM, the RGB-D mapper. Each factory
+/// returns `None` where the scenario does not run its module.
+pub fn build(s: &Scenario, seed: u64, out: Option<&Path>) -> Result<Vec<Box<dyn Node>>> {
+    let mut nodes: Vec<Box<dyn Node>> = Vec::new();
+    if let Some(dir) = out {
+        nodes.extend(record::recorders(s, dir)?);
+    }
+    nodes.push(Box::new(driver::DriverNode::new(s)?));
+    nodes.extend(localization::node(s, seed)?.map(|n| Box::new(n) as Box<dyn Node>));
+    nodes.extend(slam::node(s)?.map(|n| Box::new(n) as Box<dyn Node>));
+    nodes.extend(rgbd_map::node(s, seed)?.map(|n| Box::new(n) as Box<dyn Node>));
+    Ok(nodes)
+}
+
+/// Every metric name a run of `s` produces: each module's scorer declares its own.
+pub fn metric_names(s: &crate::scenario::ScenarioSpec) -> Vec<String> {
+    let mut names = record::metric_names(s);
+    names.extend(localization::metric_names(s));
+    names.extend(slam::metric_names(s));
+    names.extend(rgbd_map::metric_names(s));
+    names.sort();
+    names.dedup();
+    names
+}
+
+/// Writes a pose as a TUM line.
+pub fn tum_line(line: &mut String, t: Time, p: &Pose2) {
+    tum::format_line(
+        line,
+        &tum::Stamped {
+            stamp: t,
+            pose: Pose3::from_pose2(p, 0.0),
+        },
+    );
+}

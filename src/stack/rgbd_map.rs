@@ -1,0 +1,447 @@
+//! The RGB-D map node (seed 000 §3.1): keyframes of one named camera placed by a 2D pose
+//! (the truth, odometry, or another node's `pose/…`) and the floor, each method's map built
+//! after the run against the 2D map SLAM or the localiser had (`map/slam`, else
+//! `map/localization`). It keeps the true surfaces its keyframes saw for scoring, writes the
+//! map, its planes, its truth and its laser-height slice, and scores every method's map.
+
+use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
+use crate::ground_truth::Metrics;
+use crate::scenario::{MapPose, Scenario, ScenarioSpec};
+use anyhow::{Context, Result};
+use futago_msgs::camera::{DepthImage, Intrinsics};
+use futago_msgs::grid::OccupancyGrid;
+use futago_msgs::{Pose2, Pose3};
+use futago_robot::registration::{EnvironmentMap, Method};
+use futago_robot::rgbd_map::{CameraMount, RgbdMap, RgbdMapper};
+use serde_json::json;
+use std::path::Path;
+use std::time::Instant;
+
+/// The RGB-D map (binary PLY, coloured points in the world frame).
+pub const RGBD_MAP_FILE: &str = "rgbd_map.ply";
+/// The polygon map (binary PLY mesh, a face per plane).
+pub const RGBD_PLANES_FILE: &str = "rgbd_planes.ply";
+/// The true surfaces its keyframes saw (binary PLY), against which it is scored.
+pub const RGBD_TRUTH_FILE: &str = "rgbd_map_truth.ply";
+/// The RGB-D map's laser-height slice (red) over the world's true 2D map, 1 cm a pixel.
+pub const RGBD_SLICE_FILE: &str = "rgbd_slice.png";
+/// Cell of the true 2D map under the slice picture, m (5 px of 1 cm each).
+const SLICE_MAP_RESOLUTION: f64 = 0.05;
+/// Half the height of the laser-height slice of a 3D map, m.
+const SLICE_HALF_WIDTH: f64 = 0.05;
+/// The slice's height without a laser, m.
+const DEFAULT_SLICE_Z: f64 = 0.2;
+/// Cells of the 2D map at least this occupied (0–100) are walls for the map term.
+const MAP_OCCUPIED: i8 = 50;
+
+/// The RGB-D mapper in the loop.
+pub struct RgbdMapNode {
+    mapper: RgbdMapper,
+    camera: String,
+    source: MapPose,
+    /// The methods that place the keyframes after the run, the first the run's map.
+    methods: Vec<Method>,
+    stride: u32,
+    max_depth: f64,
+    voxel: f64,
+    /// Height of the laser-height slice (its laser's, if it has one).
+    slice_z: f64,
+    /// The world's walls at that height, at the 2D map's cell size (for scoring the slice)
+    /// and at 5 cm (under the slice picture).
+    walls: OccupancyGrid,
+    picture: OccupancyGrid,
+    truth: rustc_hash::FxHashMap<[i64; 3], [f64; 3]>,
+    /// Truth voxels in the order first seen (deterministic output).
+    order: Vec<[i64; 3]>,
+    truth_poses: Vec<Pose2>,
+    offer_seconds: f64,
+    maps: Vec<RgbdMap>,
+    scenario: String,
+}
+
+/// The mapper when the scenario has `[rgbd_map]`.
+pub fn node(s: &Scenario, seed: u64) -> Result<Option<RgbdMapNode>> {
+    let Some(m) = &s.rgbd_map else {
+        return Ok(None);
+    };
+    let cam = s
+        .cameras
+        .iter()
+        .find(|c| c.name == m.camera)
+        .with_context(|| format!("rgbd_map: no camera is named `{}`", m.camera))?;
+    // The camera's place on the robot: x, y and yaw of its mount (height, pitch and roll come
+    // from the floor in each frame).
+    let mount = cam.mount;
+    let forward = mount.rotation * glam::Vec3::X;
+    let yaw = (forward.y as f64).atan2(forward.x as f64);
+    let slice_z = match &m.laser {
+        Some(n) => s
+            .lidars
+            .iter()
+            .find(|(c, _)| &c.name == n)
+            .map_or(DEFAULT_SLICE_Z, |(c, _)| c.xyz[2]),
+        None => DEFAULT_SLICE_Z,
+    };
+    // The true walls the slice is scored against, at the 2D map's cell size.
+    let resolution = s
+        .slam
+        .as_ref()
+        .map_or(SLICE_MAP_RESOLUTION, |l| l.config.grid.resolution);
+    let picture = super::world_map(s, SLICE_MAP_RESOLUTION, slice_z)?;
+    let walls = if resolution == SLICE_MAP_RESOLUTION {
+        picture.clone()
+    } else {
+        super::world_map(s, resolution, slice_z)?
+    };
+    Ok(Some(RgbdMapNode {
+        mapper: RgbdMapper::new(
+            m.config.clone(),
+            CameraMount {
+                x: mount.translation.x as f64,
+                y: mount.translation.y as f64,
+                yaw,
+            },
+            seed,
+        ),
+        camera: m.camera.clone(),
+        source: m.pose_source,
+        methods: m.config.methods.clone(),
+        stride: m.config.stride,
+        max_depth: m.config.max_depth,
+        voxel: m.config.voxel,
+        slice_z,
+        walls,
+        picture,
+        truth: Default::default(),
+        order: Vec::new(),
+        truth_poses: Vec::new(),
+        offer_seconds: 0.0,
+        maps: Vec::new(),
+        scenario: s.spec.name.clone(),
+    }))
+}
+
+/// The RGB-D map's metrics besides the cloud scores: distances to the true surfaces, the
+/// laser-height slice against the true walls, the keyframes' placing against their true poses
+/// and the planes against the true surfaces.
+pub const RGBD_MAP_KEYS: [&str; 12] = [
+    "mean_distance_m",
+    "median_distance_m",
+    "slice_rms_m",
+    "slice_median_m",
+    "slice_thickness_m",
+    "keyframe_pose.rmse_m",
+    "keyframe_pose.max_m",
+    "keyframe_pose.rmse_deg",
+    "planes.angle_mean_deg",
+    "planes.offset_mean_m",
+    "planes.faces",
+    "planes.vertices",
+];
+
+/// `rgbd_map.*` for the first method and `rgbd_map.METHOD.*` for each.
+pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
+    let Some(table) = &s.rgbd_map else {
+        return Vec::new();
+    };
+    // The methods as typed; a table that does not type yet has the default.
+    let methods: Vec<&'static str> = crate::scenario::rgbd_map_config(Path::new(""), table)
+        .map(|m| m.config.methods)
+        .unwrap_or_else(|_| futago_robot::rgbd_map::RgbdMapConfig::default().methods)
+        .iter()
+        .map(|m| m.name())
+        .collect();
+    let mut names = Vec::new();
+    let prefixes = std::iter::once("rgbd_map".to_string())
+        .chain(methods.iter().map(|m| format!("rgbd_map.{m}")));
+    for prefix in prefixes {
+        for t in crate::ground_truth::cloud::TOLERANCE_NAMES {
+            for k in ["accuracy", "completeness", "f1"] {
+                names.push(format!("{prefix}.{k}_{t}"));
+            }
+        }
+        for k in RGBD_MAP_KEYS {
+            names.push(format!("{prefix}.{k}"));
+        }
+    }
+    names
+}
+
+impl RgbdMapNode {
+    /// The 2D pose that places a keyframe now.
+    fn map_pose(&self, bus: &Bus) -> Pose2 {
+        match self.source {
+            MapPose::GroundTruth => bus.truth,
+            MapPose::Odometry => bus.odometry,
+            MapPose::Localization => bus.pose("localization").unwrap_or(bus.odometry),
+            MapPose::Slam => bus.pose("slam").unwrap_or(bus.odometry),
+        }
+    }
+
+    /// Adds a noiseless depth image taken from `optical` (the optical frame's world pose) to
+    /// the true surfaces.
+    fn add_truth(&mut self, depth: &DepthImage, k: &Intrinsics, optical: &Pose3) {
+        let [qx, qy, qz, qw] = optical.rotation;
+        let q =
+            nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, qx, qy, qz));
+        let rotate = |v: [f64; 3]| -> [f64; 3] { (q * nalgebra::Vector3::from(v)).into() };
+        for v in (0..depth.height).step_by(self.stride as usize) {
+            for u in (0..depth.width).step_by(self.stride as usize) {
+                let z = depth.at(u, v) as f64;
+                if !(z.is_finite() && z > 0.0 && z <= self.max_depth) {
+                    continue;
+                }
+                let r = rotate(k.back_project(u as f64, v as f64, z));
+                let w = [
+                    r[0] + optical.translation[0],
+                    r[1] + optical.translation[1],
+                    r[2] + optical.translation[2],
+                ];
+                let key = w.map(|x| (x / self.voxel).floor() as i64);
+                if let std::collections::hash_map::Entry::Vacant(e) = self.truth.entry(key) {
+                    e.insert(w);
+                    self.order.push(key);
+                }
+            }
+        }
+    }
+
+    fn truth_points(&self) -> Vec<[f64; 3]> {
+        self.order.iter().map(|k| self.truth[k]).collect()
+    }
+}
+
+impl Node for RgbdMapNode {
+    fn name(&self) -> &'static str {
+        "rgbd_map"
+    }
+
+    fn streams(&self) -> Streams {
+        let mut consumes = vec![format!("camera/{}", self.camera)];
+        match self.source {
+            MapPose::Localization => consumes.push("pose/localization".into()),
+            MapPose::Slam => consumes.push("pose/slam".into()),
+            _ => {}
+        }
+        Streams {
+            consumes,
+            ..Streams::default()
+        }
+    }
+
+    fn wants_frame(&self, camera: &str, bus: &Bus) -> bool {
+        camera == self.camera && self.mapper.wants(&self.map_pose(bus))
+    }
+
+    fn on_frame(
+        &mut self,
+        camera: &str,
+        frame: &CameraFrame,
+        truth: &mut dyn FrameTruth,
+        bus: &mut Bus,
+    ) -> Result<()> {
+        if camera != self.camera {
+            return Ok(());
+        }
+        let pose = self.map_pose(bus);
+        let t0 = Instant::now();
+        let taken = self.mapper.offer(&frame.frame, &pose);
+        self.offer_seconds += t0.elapsed().as_secs_f64();
+        if taken {
+            let depth = truth.true_depth()?;
+            self.add_truth(&depth, &frame.frame.depth_intrinsics, &frame.optical);
+            self.truth_poses.push(bus.truth);
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self, bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
+        // The 2D map for the map term: SLAM's final map, else the map the localiser was given.
+        let grid = bus
+            .map("slam")
+            .or_else(|| bus.map("localization"))
+            .map(|(_, g)| g.clone());
+        let env = grid
+            .as_ref()
+            .map(|g| EnvironmentMap::new(g, self.slice_z, MAP_OCCUPIED));
+        let mut build_seconds = serde_json::Map::new();
+        let maps: Vec<RgbdMap> = self
+            .methods
+            .iter()
+            .map(|method| {
+                let t0 = Instant::now();
+                let map = self.mapper.build(*method, env.as_ref());
+                build_seconds.insert(
+                    format!("build_{}_s", method.name()),
+                    json!(t0.elapsed().as_secs_f64()),
+                );
+                map
+            })
+            .collect();
+        let mut counts = serde_json::to_value(self.mapper.counts()).unwrap_or_default();
+        counts["environment_map_points"] = json!(env.as_ref().map_or(0, |e| e.len()));
+        for map in &maps {
+            let (faces, vertices) = map.polygons.size();
+            let mut c = serde_json::to_value(map.registration).unwrap_or_default();
+            c["planes_found"] = json!(map.polygons.found);
+            c["plane_faces"] = json!(faces);
+            c["plane_vertices"] = json!(vertices);
+            c["map_points"] = json!(map.points.len());
+            counts[map.method.name()] = c;
+        }
+        // The run's map (the first method's) at the top level too.
+        if let Some(first) = maps.first() {
+            for k in [
+                "map_points",
+                "planes_found",
+                "plane_faces",
+                "plane_vertices",
+            ] {
+                counts[k] = counts[first.method.name()][k].clone();
+            }
+        }
+        let truth = self.truth_points();
+        counts["truth_points"] = json!(truth.len());
+        let mut files = Vec::new();
+        if let (Some(dir), Some(first)) = (out, maps.first()) {
+            let name = &self.scenario;
+            let comment = format!(
+                "futago RGB-D map of {name} placed by {} (world frame, m)",
+                first.method.name()
+            );
+            std::fs::write(
+                dir.join(RGBD_MAP_FILE),
+                futago_msgs::ply::points(&first.points, &comment),
+            )
+            .with_context(|| format!("writing {RGBD_MAP_FILE}"))?;
+            let coloured: Vec<([f64; 3], [u8; 3])> =
+                truth.iter().map(|p| (*p, [26, 150, 65])).collect();
+            let comment =
+                format!("futago: the true surfaces the RGB-D map's keyframes saw, {name}");
+            std::fs::write(
+                dir.join(RGBD_TRUTH_FILE),
+                futago_msgs::ply::points(&coloured, &comment),
+            )
+            .with_context(|| format!("writing {RGBD_TRUTH_FILE}"))?;
+            let planes = first.polygons.to_ply(&format!(
+                "futago polygon map of {name} placed by {} (world frame, m)",
+                first.method.name()
+            ));
+            std::fs::write(dir.join(RGBD_PLANES_FILE), planes)
+                .with_context(|| format!("writing {RGBD_PLANES_FILE}"))?;
+            let slice: Vec<[f64; 2]> = first
+                .points
+                .iter()
+                .filter(|p| (p.0[2] - self.slice_z).abs() <= SLICE_HALF_WIDTH)
+                .map(|p| [p.0[0], p.0[1]])
+                .collect();
+            std::fs::write(
+                dir.join(RGBD_SLICE_FILE),
+                crate::report::points_over_map_png(&self.picture, &slice, 5),
+            )
+            .with_context(|| format!("writing {RGBD_SLICE_FILE}"))?;
+            files.extend(
+                [
+                    RGBD_MAP_FILE,
+                    RGBD_TRUTH_FILE,
+                    RGBD_PLANES_FILE,
+                    RGBD_SLICE_FILE,
+                ]
+                .map(String::from),
+            );
+        }
+        self.maps = maps;
+        let mut performance = build_seconds;
+        performance.insert("keyframe_s".into(), json!(self.offer_seconds));
+        performance.insert("keyframes".into(), json!(self.truth_poses.len()));
+        performance.insert("points".into(), counts["points"].clone());
+        Ok(Report {
+            summary: vec![("rgbd_map".into(), counts)],
+            files,
+            performance,
+            ..Report::default()
+        })
+    }
+
+    fn score(&self, _truth: &Truth) -> Result<Metrics> {
+        let mut metrics = Metrics::default();
+        let points = self.truth_points();
+        for (k, map) in self.maps.iter().enumerate() {
+            let found = score_map(map, &points, &self.truth_poses, &self.walls, self.slice_z);
+            if k == 0 {
+                for (name, v) in &found {
+                    metrics.insert(format!("rgbd_map.{name}"), *v);
+                }
+            }
+            for (name, v) in found {
+                metrics.insert(format!("rgbd_map.{}.{name}", map.method.name()), v);
+            }
+        }
+        Ok(metrics)
+    }
+}
+
+/// One RGB-D map's scores (metric names below `rgbd_map.`): the cloud against the true
+/// surfaces, the laser-height slice against the true walls (seed 000 judged its methods by how
+/// thin and true this trace was), the keyframes' poses against the truth and the planes
+/// against the true surfaces.
+fn score_map(
+    map: &RgbdMap,
+    truth: &[[f64; 3]],
+    truth_poses: &[Pose2],
+    walls: &OccupancyGrid,
+    z: f64,
+) -> Vec<(String, f64)> {
+    let mut out = Vec::new();
+    let points: Vec<[f64; 3]> = map.points.iter().map(|p| p.0).collect();
+    if let Some(score) = crate::ground_truth::cloud::score(&points, truth) {
+        out.extend(score.named());
+    }
+    let band: Vec<[f64; 3]> = points
+        .iter()
+        .filter(|p| (p[2] - z).abs() <= SLICE_HALF_WIDTH)
+        .copied()
+        .collect();
+    if let Some(t) = crate::ground_truth::cloud::thickness(&band, truth) {
+        out.push(("slice_thickness_m".into(), t));
+    }
+    let slice: Vec<[f64; 2]> = band.iter().map(|p| [p[0], p[1]]).collect();
+    if !slice.is_empty() {
+        let mut d = crate::ground_truth::map::wall_distances(walls, &slice);
+        let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
+        d.sort_by(f64::total_cmp);
+        out.push(("slice_rms_m".into(), rms));
+        out.push(("slice_median_m".into(), d[d.len() / 2]));
+    }
+    let errors: Vec<(f64, f64)> = map
+        .poses
+        .iter()
+        .zip(truth_poses)
+        .map(|(p, t)| {
+            (
+                p.distance(t),
+                futago_msgs::wrap_angle(p.theta - t.theta).to_degrees(),
+            )
+        })
+        .collect();
+    if !errors.is_empty() {
+        let n = errors.len() as f64;
+        let rms = |f: fn(&(f64, f64)) -> f64| {
+            (errors.iter().map(|e| f(e).powi(2)).sum::<f64>() / n).sqrt()
+        };
+        out.push(("keyframe_pose.rmse_m".into(), rms(|e| e.0)));
+        out.push((
+            "keyframe_pose.max_m".into(),
+            errors.iter().map(|e| e.0).fold(0.0, f64::max),
+        ));
+        out.push(("keyframe_pose.rmse_deg".into(), rms(|e| e.1)));
+    }
+    if let Some(p) = crate::ground_truth::planes::score(&map.polygons.polygons, truth) {
+        out.push(("planes.angle_mean_deg".into(), p.angle_mean_deg));
+        out.push(("planes.offset_mean_m".into(), p.offset_mean_m));
+    }
+    let (faces, vertices) = map.polygons.size();
+    out.push(("planes.faces".into(), faces as f64));
+    out.push(("planes.vertices".into(), vertices as f64));
+    out
+}

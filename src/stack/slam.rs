@@ -1,0 +1,178 @@
+//! The SLAM node: laser SLAM on one named laser's scans. It publishes `pose/slam` (the start
+//! pose until its first scan), `map/slam` at the period
+//! a consumer asks for and once more at the end, writes its trajectory and map, and scores
+//! both against the truth.
+
+use super::{Bus, Node, Report, Streams, Truth, tum_line};
+use crate::ground_truth::Metrics;
+use crate::scenario::{Scenario, ScenarioSpec};
+use anyhow::{Context, Result};
+use futago_msgs::grid::OccupancyGrid;
+use futago_msgs::{LaserScan, Pose2, Time, wrap_angle};
+use futago_robot::slam::Slam;
+use serde_json::json;
+use std::path::Path;
+
+/// SLAM's trajectory (TUM, every scan of its laser, as optimised at the end).
+pub const SLAM_TRAJECTORY_FILE: &str = "slam_trajectory.txt";
+/// SLAM's map (`slam_map.pgm` + `slam_map.yaml`).
+pub const SLAM_MAP_STEM: &str = "slam_map";
+
+/// Laser SLAM in the loop.
+pub struct SlamNode {
+    slam: Slam,
+    laser: String,
+    height: f64,
+    mount: Pose2,
+    /// Odometry pose at the last scan SLAM processed.
+    at: Pose2,
+    /// (position error m, heading error rad) at each scan.
+    errors: Vec<(f64, f64)>,
+    /// When a map was last published.
+    last_map: Option<Time>,
+    name: String,
+    /// The final map, kept for scoring.
+    map: Option<OccupancyGrid>,
+}
+
+/// SLAM when the scenario has `[slam]`.
+pub fn node(s: &Scenario) -> Result<Option<SlamNode>> {
+    let Some(spec) = &s.slam else {
+        return Ok(None);
+    };
+    let (cfg, _) = super::pick_laser(s, "slam", spec.laser.as_deref())
+        .map_err(|e| anyhow::anyhow!("slam: {e}"))?;
+    Ok(Some(SlamNode {
+        slam: Slam::new(spec.config, s.start),
+        laser: cfg.name.clone(),
+        height: cfg.xyz[2],
+        mount: cfg.planar_mount(),
+        at: s.start,
+        errors: Vec::new(),
+        last_map: None,
+        name: s.spec.name.clone(),
+        map: None,
+    }))
+}
+
+/// `slam.*` trajectory metrics and `slam.map.*` (the map against the world's grid).
+pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
+    if s.slam.is_none() {
+        return Vec::new();
+    }
+    let mut names = crate::ground_truth::trajectory_metric_names("slam");
+    names.extend(crate::ground_truth::map_metric_names("slam.map"));
+    names
+}
+
+/// Area of a grid's known cells, m².
+fn known_area(g: &OccupancyGrid) -> f64 {
+    g.cells.iter().filter(|&&c| c >= 0).count() as f64 * g.resolution * g.resolution
+}
+
+impl Node for SlamNode {
+    fn name(&self) -> &'static str {
+        "slam"
+    }
+
+    fn streams(&self) -> Streams {
+        Streams {
+            consumes: vec![format!("scan/{}", self.laser), "odometry".into()],
+            publishes: vec!["pose/slam".into(), "map/slam".into()],
+            ..Streams::default()
+        }
+    }
+
+    fn start(&mut self, bus: &mut Bus) -> Result<()> {
+        bus.publish_pose("slam", self.slam.pose(), self.at);
+        Ok(())
+    }
+
+    fn on_scan(&mut self, laser: &str, scan: &LaserScan, bus: &mut Bus) -> Result<()> {
+        if laser != self.laser {
+            return Ok(());
+        }
+        let at = bus.odometry_at(scan.stamp);
+        let u = self.slam.update(scan, &at, &self.mount);
+        self.at = at;
+        bus.publish_pose("slam", self.slam.pose(), at);
+        self.errors.push((
+            u.pose.distance(&bus.truth),
+            wrap_angle(u.pose.theta - bus.truth.theta).abs(),
+        ));
+        // A planner that plans on the map gets a fresh copy at the period it asked for.
+        if let Some(period) = bus.subscription("map/slam") {
+            let due = match (self.last_map, period) {
+                (None, _) | (_, None) => true,
+                (Some(t), Some(p)) => bus.now - t >= p,
+            };
+            if due {
+                self.last_map = Some(bus.now);
+                bus.publish_map("slam", self.slam.grid().to_grid());
+            }
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self, bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
+        self.slam.finish();
+        let e = &self.errors;
+        let n = e.len().max(1) as f64;
+        let grid = self.slam.grid().to_grid();
+        let summary = json!({
+            "method": format!("{:?}", self.slam.config().method).to_lowercase(),
+            "keyframes": self.slam.keyframes(),
+            "loop_closures": self.slam.loop_closures(),
+            "optimizations": self.slam.optimizations(),
+            "unmatched_scans": self.slam.unmatched(),
+            "skipped_scans": self.slam.skipped(),
+            "online_mean_position_error_m": e.iter().map(|e| e.0).sum::<f64>() / n,
+            "online_max_position_error_m": e.iter().map(|e| e.0).fold(0.0, f64::max),
+            "online_mean_heading_error_deg": e.iter().map(|e| e.1).sum::<f64>() / n * 180.0 / std::f64::consts::PI,
+            "map_known_area_m2": known_area(&grid),
+        });
+        let mut files = Vec::new();
+        if let Some(dir) = out {
+            let mut text = format!(
+                "# futago SLAM of {} (laser `{}`), optimised at the end\n# timestamp tx ty tz qx qy qz qw\n",
+                self.name, self.laser
+            );
+            for (t, p) in self.slam.trajectory() {
+                tum_line(&mut text, t, &p);
+            }
+            std::fs::write(dir.join(SLAM_TRAJECTORY_FILE), text)
+                .with_context(|| format!("writing {SLAM_TRAJECTORY_FILE}"))?;
+            grid.write_map_server(dir, SLAM_MAP_STEM)
+                .with_context(|| format!("writing {SLAM_MAP_STEM}.pgm and .yaml"))?;
+            files.extend([
+                SLAM_TRAJECTORY_FILE.to_string(),
+                format!("{SLAM_MAP_STEM}.pgm"),
+                format!("{SLAM_MAP_STEM}.yaml"),
+            ]);
+        }
+        bus.publish_map("slam", grid.clone());
+        self.map = Some(grid.clone());
+        Ok(Report {
+            summary: vec![("slam".into(), summary)],
+            files,
+            map: Some(grid),
+            trajectories: out
+                .map(|_| ("slam".to_string(), SLAM_TRAJECTORY_FILE.to_string()))
+                .into_iter()
+                .collect(),
+            ..Report::default()
+        })
+    }
+
+    fn score(&self, truth: &Truth) -> Result<Metrics> {
+        let mut m = crate::ground_truth::score_trajectory(truth, "slam", SLAM_TRAJECTORY_FILE)?;
+        if let Some(map) = &self.map {
+            let world = truth.world_map(map.resolution, self.height)?;
+            let s = truth.scenario.start;
+            let score = crate::ground_truth::map::score(map, &world, [s.x, s.y])
+                .map_err(|e| anyhow::anyhow!("scoring the SLAM map: {e}"))?;
+            m.insert_map("slam.map", &score);
+        }
+        Ok(m)
+    }
+}
