@@ -42,6 +42,19 @@ pub fn parse(text: &str, file: &str) -> Result<Vec<Relation>> {
                 i + 1
             );
         }
+        if futago_msgs::bounded_stamp(v[0]).is_none()
+            || futago_msgs::bounded_stamp(v[1]).is_none()
+            || v[2..5]
+                .iter()
+                .any(|&x| futago_msgs::bounded_coordinate(x).is_none())
+        {
+            bail!(
+                "{file} line {}: stamps must lie within ±{} s and offsets within ±{} m, found `{line}`",
+                i + 1,
+                futago_msgs::MAX_STAMP,
+                futago_msgs::MAX_COORDINATE
+            );
+        }
         out.push(Relation {
             t1: Time::from_secs(v[0]),
             t2: Time::from_secs(v[1]),

@@ -44,11 +44,19 @@ pub fn export_world(
     dir: &Path,
     o: &ExportOptions,
 ) -> Result<Vec<std::path::PathBuf>> {
+    // The grid is made (or refused) before anything is written.
+    let grid = if o.grid {
+        Some(
+            export::occupancy_grid(world, o.resolution, o.band.0, o.band.1, o.margin)
+                .map_err(|e| anyhow::anyhow!("--resolution: {e}"))?,
+        )
+    } else {
+        None
+    };
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut written = Vec::new();
     let stem = &world.name;
-    if o.grid {
-        let grid = export::occupancy_grid(world, o.resolution, o.band.0, o.band.1, o.margin);
+    if let Some(grid) = grid {
         let pgm = dir.join(format!("{stem}.pgm"));
         write_atomic(&pgm, &grid.to_pgm())?;
         let yaml = dir.join(format!("{stem}.yaml"));

@@ -149,10 +149,30 @@ impl<'a> Fields<'a> {
             .ok_or_else(|| self.err(format!("{what} `{w}` is not a count (0 to 100000)")))
     }
 
+    fn coordinate(&mut self, what: &str) -> Result<f64, ReadError> {
+        let v = self.num(what)?;
+        crate::bounded_coordinate(v).ok_or_else(|| {
+            self.err(format!(
+                "{what} {v:e} is beyond ±{} m of the origin",
+                crate::MAX_COORDINATE
+            ))
+        })
+    }
+
+    fn stamp(&mut self) -> Result<f64, ReadError> {
+        let v = self.num("ipc_timestamp")?;
+        crate::bounded_stamp(v).ok_or_else(|| {
+            self.err(format!(
+                "ipc_timestamp {v:e} is beyond ±{} s",
+                crate::MAX_STAMP
+            ))
+        })
+    }
+
     fn pose(&mut self, what: &str) -> Result<Pose2, ReadError> {
         Ok(Pose2::new(
-            self.num(&format!("{what} x"))?,
-            self.num(&format!("{what} y"))?,
+            self.coordinate(&format!("{what} x"))?,
+            self.coordinate(&format!("{what} y"))?,
             self.num(&format!("{what} theta"))?,
         ))
     }
@@ -208,7 +228,7 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
                 let ranges = f.ranges(n, FLASER_NO_RETURN)?;
                 let _corrected = f.pose("pose")?;
                 let odometry = f.pose("odometry pose")?;
-                let t = f.num("ipc_timestamp")?;
+                let t = f.stamp()?;
                 let inc = if n > 1 {
                     std::f64::consts::PI / (n - 1) as f64
                 } else {
@@ -257,7 +277,7 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
                 ] {
                     f.num(what)?;
                 }
-                let t = f.num("ipc_timestamp")?;
+                let t = f.stamp()?;
                 Ok(Record::Scan(
                     t,
                     LogScan {
@@ -286,7 +306,7 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
                 for what in ["tv", "rv", "accel"] {
                     f.num(what)?;
                 }
-                Ok(Record::Odom(f.num("ipc_timestamp")?, pose))
+                Ok(Record::Odom(f.stamp()?, pose))
             })(),
             other => {
                 skip(&mut log, format!("unknown record type {other}"));

@@ -78,6 +78,26 @@ impl Duration {
     }
 }
 
+/// The largest coordinate a log, trajectory or world may hold, m: 10 km from the origin
+/// keeps f64 and f32 positions to the millimetre and every grid over them bounded.
+pub const MAX_COORDINATE: f64 = 1e4;
+
+/// The largest timestamp a log may hold, s (|t|; the year 2096 in Unix time): differences of
+/// such stamps fit [`Time`]'s nanoseconds.
+pub const MAX_STAMP: f64 = 4e9;
+
+/// Checks a coordinate read from a file: `None` when it is not finite or beyond
+/// [`MAX_COORDINATE`].
+pub fn bounded_coordinate(v: f64) -> Option<f64> {
+    (v.is_finite() && v.abs() <= MAX_COORDINATE).then_some(v)
+}
+
+/// Checks a timestamp read from a file: `None` when it is not finite or beyond
+/// [`MAX_STAMP`].
+pub fn bounded_stamp(v: f64) -> Option<f64> {
+    (v.is_finite() && v.abs() <= MAX_STAMP).then_some(v)
+}
+
 /// Wraps an angle to (-π, π].
 pub fn wrap_angle(a: f64) -> f64 {
     let mut a = a % (2.0 * PI);

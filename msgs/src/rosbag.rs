@@ -155,6 +155,12 @@ fn odometry(data: &[u8]) -> Result<(Time, Pose2), String> {
     c.string("header frame_id")?;
     c.string("child_frame_id")?;
     let (x, y) = (c.f64("position x")?, c.f64("position y")?);
+    if crate::bounded_coordinate(x).is_none() || crate::bounded_coordinate(y).is_none() {
+        return Err(format!(
+            "odometry position ({x}, {y}) is beyond ±{} m of the origin",
+            crate::MAX_COORDINATE
+        ));
+    }
     c.f64("position z")?;
     let q = [
         c.f64("orientation x")?,

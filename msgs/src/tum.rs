@@ -83,6 +83,25 @@ pub fn parse(text: &str) -> Result<Vec<Stamped>, ParseError> {
         if v.iter().any(|x| !x.is_finite()) {
             return Err(err("non-finite value".into()));
         }
+        if crate::bounded_stamp(v[0]).is_none() {
+            return Err(err(format!(
+                "timestamp {} is beyond ±{} s",
+                v[0],
+                crate::MAX_STAMP
+            )));
+        }
+        if v[1..4]
+            .iter()
+            .any(|&x| crate::bounded_coordinate(x).is_none())
+        {
+            return Err(err(format!(
+                "position ({}, {}, {}) is beyond ±{} m of the origin",
+                v[1],
+                v[2],
+                v[3],
+                crate::MAX_COORDINATE
+            )));
+        }
         let n = (v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]).sqrt();
         if (n - 1.0).abs() > 1e-3 {
             return Err(err(format!("quaternion norm is {n:.6}, expected 1")));

@@ -5,6 +5,7 @@
 //! So far: odometry integration ([`odometry`]) and scripted drive plans ([`script`]); the
 //! mapping, localisation and navigation stack plugs in beside them.
 
+pub mod config;
 pub mod correlative;
 pub mod exploration;
 pub mod features;

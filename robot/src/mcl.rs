@@ -85,6 +85,60 @@ impl Default for MclConfig {
     }
 }
 
+impl MclConfig {
+    /// Checks values MCL cannot run with, naming `PREFIX.KEY` (e.g. `localization.mcl`).
+    pub fn validate(&self, prefix: &str) -> Result<(), crate::config::ConfigError> {
+        use std::f64::consts::PI;
+        crate::config::check_counts(
+            prefix,
+            &[
+                ("particles", self.particles, 1, 100_000),
+                ("min_particles", self.min_particles, 1, 100_000),
+                ("max_particles", self.max_particles, 1, 100_000),
+            ],
+        )?;
+        if self.min_particles > self.max_particles {
+            return Err((
+                format!("{prefix}.min_particles"),
+                format!(
+                    "expected at most max_particles ({}), found {}",
+                    self.max_particles, self.min_particles
+                ),
+            ));
+        }
+        crate::config::check_ranges(
+            prefix,
+            &[
+                ("beam_step", self.beam_step, 1e-4, 2.0 * PI),
+                ("max_range", self.max_range, 0.1, 1000.0),
+                ("z_hit", self.z_hit, 0.0, 1.0),
+                ("z_short", self.z_short, 0.0, 1.0),
+                ("z_max", self.z_max, 0.0, 1.0),
+                ("z_rand", self.z_rand, 0.0, 1.0),
+                ("sigma_hit", self.sigma_hit, 1e-3, 10.0),
+                ("lambda_short", self.lambda_short, 1e-3, 100.0),
+                ("alpha[0]", self.alpha[0], 0.0, 10.0),
+                ("alpha[1]", self.alpha[1], 0.0, 10.0),
+                ("alpha[2]", self.alpha[2], 0.0, 10.0),
+                ("alpha[3]", self.alpha[3], 0.0, 10.0),
+                ("kld_err", self.kld_err, 1e-6, 1.0),
+                ("kld_z", self.kld_z, 0.5, 0.999_999),
+                ("kld_bin", self.kld_bin, 1e-3, 10.0),
+                ("kld_bin_angle", self.kld_bin_angle, 1e-3, PI),
+                ("alpha_slow", self.alpha_slow, 0.0, 1.0),
+                ("alpha_fast", self.alpha_fast, 0.0, 1.0),
+            ],
+        )?;
+        if self.z_hit + self.z_short + self.z_max + self.z_rand <= 0.0 {
+            return Err((
+                format!("{prefix}.z_hit"),
+                "expected z_hit + z_short + z_max + z_rand > 0".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The map as MCL reads it: occupancy for ray casting, distance to the nearest obstacle for
 /// the likelihood field, and the free cells for drawing random particles.
 pub struct MclMap {

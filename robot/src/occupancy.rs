@@ -56,6 +56,10 @@ impl OccupancyConfig {
     }
 }
 
+/// The most cells a grid may hold (2²⁸: 1 GiB of log-odds; 800 km² at 5 cm). A scan that
+/// would grow the grid beyond it is refused and counted (see [`OccupancyMap::refused`]).
+pub const MAX_CELLS: usize = 1 << 28;
+
 /// A growing log-odds grid.
 #[derive(Debug, Clone)]
 pub struct OccupancyMap {
@@ -65,6 +69,7 @@ pub struct OccupancyMap {
     width: usize,
     height: usize,
     logodds: Vec<f32>,
+    refused: usize,
 }
 
 impl OccupancyMap {
@@ -75,7 +80,13 @@ impl OccupancyMap {
             width: 0,
             height: 0,
             logodds: Vec::new(),
+            refused: 0,
         }
+    }
+
+    /// Scans refused because the grid would have grown beyond [`MAX_CELLS`].
+    pub fn refused(&self) -> usize {
+        self.refused
     }
 
     fn cell(&self, x: f64, y: f64) -> [i64; 2] {
@@ -83,8 +94,9 @@ impl OccupancyMap {
         [(x / r).floor() as i64, (y / r).floor() as i64]
     }
 
-    /// Grows the storage to hold cells `lo..=hi` (with a margin, to grow rarely).
-    fn reserve(&mut self, lo: [i64; 2], hi: [i64; 2]) {
+    /// Grows the storage to hold cells `lo..=hi` (with a margin, to grow rarely); `false`
+    /// when that would pass [`MAX_CELLS`].
+    fn reserve(&mut self, lo: [i64; 2], hi: [i64; 2]) -> bool {
         let have_lo = self.offset;
         let have_hi = [
             self.offset[0] + self.width as i64 - 1,
@@ -96,30 +108,34 @@ impl OccupancyMap {
             && hi[0] <= have_hi[0]
             && hi[1] <= have_hi[1]
         {
-            return;
+            return true;
         }
         let margin = 64;
         let (nlo, nhi) = if self.width == 0 {
             (
-                [lo[0] - margin, lo[1] - margin],
-                [hi[0] + margin, hi[1] + margin],
+                [lo[0].saturating_sub(margin), lo[1].saturating_sub(margin)],
+                [hi[0].saturating_add(margin), hi[1].saturating_add(margin)],
             )
         } else {
             (
                 [
-                    lo[0].min(have_lo[0]) - margin,
-                    lo[1].min(have_lo[1]) - margin,
+                    lo[0].min(have_lo[0]).saturating_sub(margin),
+                    lo[1].min(have_lo[1]).saturating_sub(margin),
                 ],
                 [
-                    hi[0].max(have_hi[0]) + margin,
-                    hi[1].max(have_hi[1]) + margin,
+                    hi[0].max(have_hi[0]).saturating_add(margin),
+                    hi[1].max(have_hi[1]).saturating_add(margin),
                 ],
             )
         };
         let (w, h) = (
-            (nhi[0] - nlo[0] + 1) as usize,
-            (nhi[1] - nlo[1] + 1) as usize,
+            nhi[0].saturating_sub(nlo[0]).saturating_add(1),
+            nhi[1].saturating_sub(nlo[1]).saturating_add(1),
         );
+        if w <= 0 || h <= 0 || w.saturating_mul(h) > MAX_CELLS as i64 {
+            return false;
+        }
+        let (w, h) = (w as usize, h as usize);
         let mut grid = vec![0f32; w * h];
         for j in 0..self.height {
             let src = &self.logodds[j * self.width..(j + 1) * self.width];
@@ -131,6 +147,7 @@ impl OccupancyMap {
         self.width = w;
         self.height = h;
         self.logodds = grid;
+        true
     }
 
     fn add(&mut self, c: [i64; 2], delta: f32) {
@@ -172,7 +189,10 @@ impl OccupancyMap {
             hi = [hi[0].max(e[0]), hi[1].max(e[1])];
             ends.push(e);
         }
-        self.reserve(lo, hi);
+        if !self.reserve(lo, hi) {
+            self.refused += 1;
+            return;
+        }
         let (hit, miss) = (self.config.hit, self.config.miss);
         for e in ends {
             for c in line(start, e) {

@@ -19,7 +19,7 @@ fn shipped(name: &str) -> World {
 fn occupancy_grid_marks_exactly_what_crosses_the_band() {
     let desk = "[[boxes]]\nmaterial = \"m\"\ncenter = [2.0, 2.0]\nbase = 0.7\nsize = [1.0, 0.6, 0.03]\n[[boxes]]\nmaterial = \"m\"\ncenter = [1.6, 1.8]\nsize = [0.04, 0.04, 0.7]\n";
     let w = box_room(4.0, 3.0, desk);
-    let g = export::occupancy_grid(&w, 0.05, 0.15, 0.25, 0.0);
+    let g = export::occupancy_grid(&w, 0.05, 0.15, 0.25, 0.0).unwrap();
     let at = |x: f64, y: f64| {
         let (i, j) = g.cell_of(x, y).unwrap();
         g.get(i, j)
@@ -29,7 +29,7 @@ fn occupancy_grid_marks_exactly_what_crosses_the_band() {
     assert_eq!(at(0.03, 1.5), 0, "just inside the room");
     assert_eq!(at(1.6, 1.8), 100, "the desk leg");
     assert_eq!(at(2.2, 2.1), 0, "under the desk top, at laser height");
-    let top = export::occupancy_grid(&w, 0.05, 0.7, 0.72, 0.0);
+    let top = export::occupancy_grid(&w, 0.05, 0.7, 0.72, 0.0).unwrap();
     let (i, j) = top.cell_of(2.2, 2.1).unwrap();
     assert_eq!(top.get(i, j), 100, "the desk top in its own band");
     // Walls 0.2 m thick and 3 m / 4 m long: occupied area close to their footprint.

@@ -8,6 +8,9 @@ use rapier3d::math::Pose;
 use rapier3d::parry::query::intersection_test;
 use rapier3d::parry::shape::Cuboid;
 
+/// The most cells a ground-truth grid may have (2²⁸: 256 MiB; 4 km × 4 km at 25 cm).
+pub const MAX_GRID_CELLS: usize = 1 << 28;
+
 /// Rasterises the static colliders that intersect the height band `[z_min, z_max]` into an
 /// occupancy grid (0 free, 100 occupied) covering the world's bounds plus `margin`.
 ///
@@ -20,7 +23,7 @@ pub fn occupancy_grid(
     z_min: f64,
     z_max: f64,
     margin: f64,
-) -> OccupancyGrid {
+) -> Result<OccupancyGrid, String> {
     let (lo, hi) = world.bounds();
     let origin = [
         ((lo.x as f64 - margin) / resolution).floor() * resolution,
@@ -28,10 +31,17 @@ pub fn occupancy_grid(
     ];
     let width = (((hi.x as f64 + margin) - origin[0]) / resolution)
         .ceil()
-        .max(1.0) as usize;
+        .max(1.0);
     let height = (((hi.y as f64 + margin) - origin[1]) / resolution)
         .ceil()
-        .max(1.0) as usize;
+        .max(1.0);
+    if !(resolution.is_finite() && resolution > 0.0 && width * height <= MAX_GRID_CELLS as f64) {
+        return Err(format!(
+            "a grid of world `{}` at {resolution} m a cell would have {width} × {height} cells; at most {MAX_GRID_CELLS}",
+            world.name
+        ));
+    }
+    let (width, height) = (width as usize, height as usize);
     let mut grid = OccupancyGrid::new(resolution, origin, width, height);
     grid.cells.fill(0);
     // Cells shrink by a hair so that a face lying exactly on a cell border (a wall's inner
@@ -74,7 +84,7 @@ pub fn occupancy_grid(
             }
         }
     }
-    grid
+    Ok(grid)
 }
 
 /// The world's render meshes at their initial poses as a binary little-endian PLY with

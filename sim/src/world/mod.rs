@@ -156,6 +156,10 @@ impl World {
 
 /// Builds the world from its parsed spec; `path` resolves relative asset paths and names the
 /// file in errors.
+/// How far from the origin any part of a world may lie, m (in x, y and z). A building of
+/// 4 km across fits; f32 coordinates keep millimetres out there.
+pub const MAX_EXTENT: f32 = 2000.0;
+
 pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
     let mut c = Compiler {
         path,
@@ -328,6 +332,25 @@ pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
             "",
             "the world has no geometry: expected walls, boxes, cylinders, meshes or a floor",
         ));
+    }
+    // Coordinates far from the origin lose f32 precision and make grids of the world
+    // unbounded in size: everything must lie within MAX_EXTENT of the origin.
+    for o in &c.world.objects {
+        let far = o.parts.iter().flat_map(|p| &p.mesh.positions).find(|&&v| {
+            let w = o.pose * v;
+            !(w.x.abs() <= MAX_EXTENT && w.y.abs() <= MAX_EXTENT && w.z.abs() <= MAX_EXTENT)
+        });
+        if let Some(&v) = far {
+            let w = o.pose * v;
+            return Err(SpecError::new(
+                path,
+                &o.name,
+                format!(
+                    "reaches ({}, {}, {}) m: expected every part of the world within {MAX_EXTENT} m of the origin",
+                    w.x, w.y, w.z
+                ),
+            ));
+        }
     }
     Ok(c.world)
 }
