@@ -507,6 +507,10 @@ fn world_export_writes_map_server_grid_and_meshes() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("spawns: dock"));
 }
 
+/// Every shipped scenario runs, and its scorers produce exactly the metric names they declare
+/// (`futago metrics`, which gates and tuning are checked against): none undeclared, none
+/// declared but missing. Twelve seconds drive every robot over a metre, which the relative
+/// pose error needs.
 #[test]
 fn every_shipped_scenario_loads_and_runs() {
     let tmp = tempfile::tempdir().unwrap();
@@ -527,7 +531,7 @@ fn every_shipped_scenario_loads_and_runs() {
             out.to_str().unwrap(),
             "-q",
             "--duration",
-            "2",
+            "12",
         ]);
         assert!(
             matches!(o.status.code(), Some(0 | 3)),
@@ -537,9 +541,46 @@ fn every_shipped_scenario_loads_and_runs() {
         );
         let s = summary(&out);
         assert!(
-            (s["sim_time_s"].as_f64().unwrap() - 2.0).abs() < 1e-9
+            (s["sim_time_s"].as_f64().unwrap() - 12.0).abs() < 1e-9
                 || s["controller_finished"].as_bool().unwrap()
         );
+        let listed = futago(&["metrics", p.to_str().unwrap()]);
+        ok(&listed);
+        let declared: std::collections::BTreeSet<String> = String::from_utf8_lossy(&listed.stdout)
+            .lines()
+            .map(String::from)
+            .collect();
+        let produced: std::collections::BTreeSet<String> =
+            s["metrics"].as_object().unwrap().keys().cloned().collect();
+        assert!(
+            produced.is_subset(&declared),
+            "{}: produced but not declared: {:?}",
+            p.display(),
+            produced.difference(&declared).collect::<Vec<_>>()
+        );
+        assert!(
+            declared.is_subset(&produced),
+            "{}: declared but not produced: {:?}",
+            p.display(),
+            declared.difference(&produced).collect::<Vec<_>>()
+        );
+        // Every file the run wrote has its digest, but the summary and the report.
+        let files = s["files"].as_object().unwrap();
+        for e in std::fs::read_dir(&out).unwrap() {
+            let name = e.unwrap().file_name().to_string_lossy().to_string();
+            let key = if out.join(&name).is_dir() {
+                format!("{name}/")
+            } else {
+                name.clone()
+            };
+            if name != "summary.json" && name != "report.html" {
+                assert!(
+                    files.contains_key(&key),
+                    "{}: no digest of {key}",
+                    p.display()
+                );
+            }
+        }
         assert_eq!(
             s["robot"]["wheel_drop_steps"].as_u64().unwrap(),
             0,
@@ -1739,4 +1780,113 @@ fn the_robot_drives_on_mcl_and_stays_localised_while_odometry_drifts() {
         futago_msgs::tum::parse(&std::fs::read_to_string(out.join("localization.txt")).unwrap())
             .unwrap();
     assert!(est.len() >= 200);
+}
+
+/// Inputs that once crashed the program (a panic, an allocation abort, or a whole run before a
+/// misleading error) are refused up front with the file, the key and what was expected.
+#[test]
+fn inputs_that_crashed_are_refused_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let fresh = d.join("out");
+    refused_before_running(
+        &[
+            "run",
+            "scenarios/office-mcl.toml",
+            "--set",
+            "localization.mcl.min_particles=6000",
+        ],
+        &fresh,
+        "localization.mcl.min_particles`: expected at most max_particles (5000)",
+        Some(1),
+    );
+    refused_before_running(
+        &[
+            "run",
+            "scenarios/office-mcl.toml",
+            "--set",
+            "start={ x = 1e300, y = 0 }",
+        ],
+        &fresh,
+        "key `start`: expected a pose inside the world's bounds",
+        Some(1),
+    );
+    // A world reaching 1e9 m would need an 800 GB grid.
+    let far = write(
+        d,
+        "far.toml",
+        "name = \"far\"\n[materials.wall]\ncolor = [0.9, 0.9, 0.9]\n[[boxes]]\ncenter = [1e9, 0]\nsize = [1, 1, 1]\nmaterial = \"wall\"\n",
+    );
+    refused_before_running(
+        &["world", "export", far.to_str().unwrap()],
+        &fresh,
+        "far.toml: key `boxes[0]`: reaches (1000000000",
+        Some(1),
+    );
+    // A world that fits but whose grid at 1 mm would not (5 × 10⁸ cells).
+    refused_before_running(
+        &[
+            "world",
+            "export",
+            "worlds/office.toml",
+            "--resolution",
+            "0.001",
+        ],
+        &fresh,
+        "--resolution: a grid of world `office`",
+        Some(1),
+    );
+    // Odometry far beyond any building, in CARMEN and TUM files.
+    for x in ["1e12", "1e300"] {
+        let log = write(
+            d,
+            "far.clf",
+            &format!("ODOM {x} 0 0 0 0 0 1.0 host 1.0\nODOM {x} 0 0 0 0 0 2.0 host 2.0\n"),
+        );
+        refused_before_running(
+            &["replay", log.to_str().unwrap()],
+            &fresh,
+            "far.clf: line 1: odometry pose x",
+            Some(1),
+        );
+    }
+    // Two lasers: a module must say which it reads.
+    let two = write(
+        d,
+        "two.toml",
+        &format!(
+            "name = \"two\"\nworld = {:?}\nduration = 1.0\nstart = \"corridor\"\n[[lidar]]\nname = \"front\"\npreset = \"utm-30lx\"\n[[lidar]]\nname = \"rear\"\npreset = \"lms200\"\n[slam]\n[controller]\ntype = \"segments\"\nsegments = [{{ duration = 1.0, velocity = 0.2 }}]\n",
+            root().join("worlds/hall.toml")
+        ),
+    );
+    refused_before_running(
+        &["run", two.to_str().unwrap()],
+        &fresh,
+        "key `slam.laser`: the scenario has 2 lasers [\"front\", \"rear\"]: name the one it reads",
+        Some(1),
+    );
+    refused_before_running(
+        &["run", two.to_str().unwrap(), "--set", "slam.laser=\"side\""],
+        &fresh,
+        "no laser is named `side`",
+        Some(1),
+    );
+    // Named, it runs on the rear laser.
+    let o = futago(&[
+        "run",
+        two.to_str().unwrap(),
+        "--set",
+        "slam.laser=\"rear\"",
+        "-q",
+        "--out",
+        fresh.to_str().unwrap(),
+    ]);
+    ok(&o);
+    let s = summary(&fresh);
+    assert!(s["slam"]["keyframes"].as_u64().unwrap() >= 1);
+    assert!(
+        std::fs::read_to_string(fresh.join("slam_trajectory.txt"))
+            .unwrap()
+            .contains("(laser `rear`)")
+    );
 }
