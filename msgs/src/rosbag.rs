@@ -174,7 +174,7 @@ fn odometry(data: &[u8]) -> Result<(Time, Pose2), String> {
 }
 
 /// Walks the records of `data` (the file after its magic line, or a chunk's contents).
-fn records(data: &[u8], base: usize, raw: &mut Raw) -> Result<(), BagError> {
+fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<(), BagError> {
     let mut c = Cursor { data, at: 0 };
     while c.at < data.len() {
         let offset = base + c.at;
@@ -189,6 +189,11 @@ fn records(data: &[u8], base: usize, raw: &mut Raw) -> Result<(), BagError> {
             .and_then(|v| v.first().copied())
             .ok_or_else(|| err("record without `op`".into()))?;
         match op {
+            0x05 if in_chunk => {
+                // The format puts messages and connections in chunks, never chunks: refusing
+                // them bounds the recursion at one level.
+                return Err(err("a chunk inside a chunk".into()));
+            }
             0x05 => {
                 let compression = f
                     .get("compression")
@@ -198,10 +203,20 @@ fn records(data: &[u8], base: usize, raw: &mut Raw) -> Result<(), BagError> {
                 let inner = match compression.as_str() {
                     "none" => body.to_vec(),
                     "bz2" => {
-                        let mut out = Vec::with_capacity(size);
+                        // Decompressed no further than the header's size (a bz2 bomb stops
+                        // there), into memory that grows only with what is read.
+                        let mut out = Vec::new();
                         bzip2::read::BzDecoder::new(body)
+                            .take(size as u64 + 1)
                             .read_to_end(&mut out)
                             .map_err(|e| err(format!("bz2 chunk: {e}")))?;
+                        if out.len() != size {
+                            return Err(err(format!(
+                                "bz2 chunk decompresses to {}{} bytes, but its header says {size}",
+                                if out.len() > size { "more than " } else { "" },
+                                out.len().min(size)
+                            )));
+                        }
                         out
                     }
                     other => {
@@ -210,7 +225,7 @@ fn records(data: &[u8], base: usize, raw: &mut Raw) -> Result<(), BagError> {
                         )));
                     }
                 };
-                records(&inner, offset, raw)?;
+                records(&inner, offset, raw, true)?;
             }
             0x07 => {
                 let conn = field_u32(&f, "conn").map_err(err)?;
@@ -289,7 +304,7 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
         });
     }
     let mut raw = Raw::default();
-    records(&bytes[MAGIC.len()..], MAGIC.len(), &mut raw)?;
+    records(&bytes[MAGIC.len()..], MAGIC.len(), &mut raw, false)?;
     raw.odometry.sort_by_key(|o| o.0);
     raw.scans.sort_by_key(|s| s.stamp);
     if !raw.scans.is_empty() && raw.odometry.is_empty() {
@@ -450,5 +465,36 @@ mod tests {
                 .message
                 .contains("not a ROS bag")
         );
+    }
+
+    #[test]
+    fn a_chunk_bigger_than_its_header_or_inside_a_chunk_is_an_error() {
+        // The header promises 10 bytes fewer than the chunk holds.
+        let mut b = bag();
+        let at = b.windows(5).position(|w| w == b"size=").unwrap() + 5;
+        let size = u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+        b[at..at + 4].copy_from_slice(&(size - 10).to_le_bytes());
+        let e = read(&b).unwrap_err();
+        assert!(e.message.contains("decompresses to more than"), "{e}");
+        // A chunk whose content is another chunk.
+        let inner = record(
+            &[
+                field("op", &[0x05]),
+                field("compression", b"none"),
+                field("size", &0u32.to_le_bytes()),
+            ],
+            &[],
+        );
+        let mut nested = b"#ROSBAG V2.0\n".to_vec();
+        nested.extend(record(
+            &[
+                field("op", &[0x05]),
+                field("compression", b"none"),
+                field("size", &(inner.len() as u32).to_le_bytes()),
+            ],
+            &inner,
+        ));
+        let e = read(&nested).unwrap_err();
+        assert!(e.message.contains("a chunk inside a chunk"), "{e}");
     }
 }
