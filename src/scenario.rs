@@ -433,7 +433,7 @@ impl Scenario {
     }
 
     /// Checks a parsed scenario and compiles its world.
-    pub fn from_spec(path: &Path, spec: ScenarioSpec) -> Result<Scenario, SpecError> {
+    pub fn from_spec(path: &Path, mut spec: ScenarioSpec) -> Result<Scenario, SpecError> {
         check_name(path, "name", &spec.name)?;
         if spec.seeds.len() > 1000 {
             return Err(SpecError::new(
@@ -534,6 +534,10 @@ impl Scenario {
             l.mcl
                 .validate("localization.mcl")
                 .map_err(|(k, m)| SpecError::new(path, k, m))?;
+        }
+        // The localiser reads its laser by the resolved name.
+        if let Some(l) = spec.localization.as_mut() {
+            l.laser = localization_laser.clone();
         }
         let slam = match &spec.slam {
             None => None,

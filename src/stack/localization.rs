@@ -47,8 +47,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<LocalizationNode>> {
     let Some(spec) = &s.spec.localization else {
         return Ok(None);
     };
-    let (cfg, _) = super::pick_laser(s, "localization", spec.laser.as_deref())
-        .map_err(|e| anyhow::anyhow!("localization: {e}"))?;
+    let (cfg, _) = super::laser(s, spec.laser.as_deref()).context("localization.laser")?;
     let grid = super::world_map(s, spec.map_resolution, cfg.xyz[2])
         .context("localization.map_resolution")?;
     let mut mcl = Mcl::new(

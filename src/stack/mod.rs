@@ -176,27 +176,15 @@ pub fn world_map(s: &Scenario, resolution: f64, height: f64) -> Result<Occupancy
     .map_err(|e| anyhow::anyhow!("{e}"))
 }
 
-/// The laser a module names (`KEY.laser`), or the scenario's only laser when it names none.
-pub fn pick_laser<'a>(
+/// The laser named `name` (resolved when the scenario was loaded: named, or the only one).
+pub fn laser<'a>(
     s: &'a Scenario,
-    key: &str,
     name: Option<&str>,
-) -> Result<&'a (futago_sim::lidar::LidarConfig, futago_sim::lidar::LidarSpec), String> {
-    let names: Vec<&str> = s.lidars.iter().map(|(c, _)| c.name.as_str()).collect();
-    match name {
-        Some(n) => {
-            s.lidars.iter().find(|(c, _)| c.name == n).ok_or_else(|| {
-                format!("no laser is named `{n}`; the scenario's lasers are {names:?}")
-            })
-        }
-        None if s.lidars.len() == 1 => Ok(&s.lidars[0]),
-        None if s.lidars.is_empty() => Err("needs a [[lidar]]; the scenario has none".into()),
-        None => Err(format!(
-            "the scenario has {} lasers {names:?}: name one, e.g. {key}.laser = \"{}\"",
-            names.len(),
-            names[0]
-        )),
-    }
+) -> Result<&'a (futago_sim::lidar::LidarConfig, futago_sim::lidar::LidarSpec)> {
+    s.lidars
+        .iter()
+        .find(|(c, _)| Some(c.name.as_str()) == name)
+        .ok_or_else(|| anyhow::anyhow!("no laser is named {name:?}"))
 }
 
 /// The stack of a scenario, in the order of every phase: the recorders of the run's files

@@ -40,8 +40,7 @@ pub fn node(s: &Scenario) -> Result<Option<SlamNode>> {
     let Some(spec) = &s.slam else {
         return Ok(None);
     };
-    let (cfg, _) = super::pick_laser(s, "slam", spec.laser.as_deref())
-        .map_err(|e| anyhow::anyhow!("slam: {e}"))?;
+    let (cfg, _) = super::laser(s, spec.laser.as_deref()).context("slam.laser")?;
     Ok(Some(SlamNode {
         slam: Slam::new(spec.config, s.start),
         laser: cfg.name.clone(),
