@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use futago_msgs::Pose2;
 use futago_sim::create::CreateConfig;
 use futago_sim::lidar::LidarPreset;
-use futago_sim::render::{Intrinsics, Renderer, Scene};
+use futago_sim::render::{Intrinsics, Renderer};
 use futago_sim::{PhysicsConfig, Simulation, World};
 use glam::{Quat, Vec3};
 use rand::{Rng, SeedableRng};
@@ -185,7 +185,7 @@ pub fn bench_sensors(world: &World, poses: Option<Vec<Pose>>, b: &SensorBench) -
         );
     }
     let started = Instant::now();
-    let mut r = Renderer::new(&Scene::from_world(world)).context("starting the renderer")?;
+    let mut r = Renderer::new(&world.scene()).context("starting the renderer")?;
     let startup = started.elapsed().as_secs_f64();
     let fov = (57f64.to_radians(), 43f64.to_radians());
     let intr = |w, h| Intrinsics::from_fov(w, h, fov.0, fov.1).map_err(anyhow::Error::msg);

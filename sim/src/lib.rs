@@ -7,7 +7,7 @@
 //! - [`kinect`]: the Kinect v1 RGB-D camera model and its depth noise;
 //! - [`lidar`]: ray-cast laser range finders;
 //! - [`noise`]: seeded random streams per noise source;
-//! - [`render`]: wgpu camera rendering (RGB and metric depth, single views and batches);
+//! - [`render`]: the wgpu camera renderer (the `futago-render` crate, re-exported);
 //! - [`config`]: TOML loading with errors that name file, key and expectation.
 //!
 //! The simulator knows nothing of the robot stack: it takes [`futago_msgs::DriveCommand`]s and
@@ -18,9 +18,12 @@ pub mod create;
 pub mod kinect;
 pub mod lidar;
 pub mod noise;
-pub mod render;
 pub mod sim;
 pub mod world;
+
+/// The camera renderer, its own crate ([`futago_render`]) so that the robot stack can draw
+/// predicted views too; re-exported here under its old path.
+pub use futago_render as render;
 
 pub use config::SpecError;
 pub use sim::{PhysicsConfig, Simulation, StepOutput};

@@ -483,7 +483,7 @@ pub fn robot_parts(robot: &CreateConfig) -> Vec<(Material, TriMesh)> {
 /// What a camera sees: the world's objects in order, then the robot (posed by
 /// [`Simulation::scene_poses`]).
 pub fn scene(world: &World, robot: &CreateConfig, start: Pose2) -> Scene {
-    let mut scene = Scene::from_world(world);
+    let mut scene = world.scene();
     scene.add_body(
         "robot",
         Pose::from_parts(

@@ -9,7 +9,7 @@ use common::*;
 use futago_msgs::Pose2;
 use futago_sim::World;
 use futago_sim::create::CreateConfig;
-use futago_sim::render::{DepthImage, Intrinsics, Renderer, Scene, optical_rotation};
+use futago_sim::render::{DepthImage, Intrinsics, Renderer, optical_rotation};
 use futago_sim::world::Material;
 use futago_sim::world::mesh::{TriMesh, UvMap};
 use glam::{Quat, Vec3};
@@ -82,7 +82,7 @@ fn stepped_sim(world: &World, start: Pose2) -> futago_sim::Simulation {
 fn check_world(file: &str, start: Pose2, poses: &[Pose]) {
     let world = load(file);
     let s = stepped_sim(&world, start);
-    let mut r = Renderer::new(&Scene::from_world(&world)).unwrap();
+    let mut r = Renderer::new(&world.scene()).unwrap();
     let intr = kinect(320, 240);
     for p in poses {
         let depth = r.render_depth(&intr, p).unwrap();
@@ -141,7 +141,7 @@ fn lab_depth_equals_a_ray_cast() {
 fn back_projected_wall_fits_its_plane_and_material_renders_its_colour() {
     // Room interior [0, 4] × [0, 4], walls 2 m high; the far wall's inner face is x = 4.
     let world = box_room(4.0, 4.0, "");
-    let mut r = Renderer::new(&Scene::from_world(&world)).unwrap();
+    let mut r = Renderer::new(&world.scene()).unwrap();
     let intr = kinect(320, 240);
     let pose = cam(1.0, 2.0, 1.0, 0.3, 0.1);
     let (rgb, depth) = r.render(&intr, &pose).unwrap();
@@ -209,7 +209,7 @@ fn back_projected_wall_fits_its_plane_and_material_renders_its_colour() {
 #[test]
 fn batches_equal_single_renders_and_movable_bodies_follow_their_poses() {
     let world = box_room(6.0, 4.0, "");
-    let mut scene = Scene::from_world(&world);
+    let mut scene = world.scene();
     let red = Material {
         name: "red".into(),
         color: [0.8, 0.1, 0.1],
@@ -278,7 +278,7 @@ fn bad_sizes_fields_of_view_and_pose_counts_are_errors() {
     let e = Intrinsics::from_fov(640, 480, 3.2, 0.8).unwrap_err();
     assert!(e.contains("horizontal field of view"), "{e}");
     let world = box_room(2.0, 2.0, "");
-    let mut r = Renderer::new(&Scene::from_world(&world)).unwrap();
+    let mut r = Renderer::new(&world.scene()).unwrap();
     let mut bad = kinect(64, 48);
     bad.width = 0;
     let e = r.render_depth(&bad, &Pose::IDENTITY).unwrap_err();
@@ -286,7 +286,7 @@ fn bad_sizes_fields_of_view_and_pose_counts_are_errors() {
     let e = r.set_poses(&[]).unwrap_err();
     assert!(e.to_string().contains("0 poses"), "{e}");
     // A mesh whose triangle indexes a missing vertex is refused by name.
-    let mut scene = Scene::from_world(&world);
+    let mut scene = world.scene();
     let mut mesh = TriMesh::cuboid(Vec3::ONE, UvMap::Fit);
     mesh.indices.push([0, 1, 99]);
     scene.add_body(

@@ -7,8 +7,8 @@
 //! factor is baked into the texture: a futago material is a colour *or* a texture.
 
 use super::mesh::TriMesh;
-use super::texture::Texture;
 use super::{Motion, World};
+use futago_render::Texture;
 use glam::{Mat3, Mat4, Quat, Vec2, Vec3};
 use serde_json::{Value, json};
 use std::path::Path;

@@ -8,12 +8,13 @@
 
 pub mod export;
 pub mod gltf_io;
-pub mod mesh;
 pub mod spec;
 pub mod texture;
 
 use crate::config::{SpecError, check_name, check_positive, check_range, load_toml};
 use futago_msgs::Pose2;
+pub use futago_render::mesh;
+pub use futago_render::{Material, MeshPart, Texture};
 use glam::{Quat, Vec2, Vec3};
 use mesh::{TriMesh, UvMap};
 use rapier3d::math::Pose;
@@ -21,25 +22,6 @@ use rapier3d::prelude::SharedShape;
 use spec::*;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
-pub use texture::Texture;
-
-/// A surface material.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Material {
-    pub name: String,
-    /// sRGB base colour in [0, 1].
-    pub color: [f64; 3],
-    /// Index into [`World::textures`].
-    pub texture: Option<usize>,
-}
-
-/// A render mesh with one material, in its object's frame.
-#[derive(Debug, Clone)]
-pub struct MeshPart {
-    /// Index into [`World::materials`].
-    pub material: usize,
-    pub mesh: TriMesh,
-}
 
 /// How an object moves.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -84,6 +66,25 @@ pub struct World {
 pub type Bounds = (Vec3, Vec3);
 
 impl World {
+    /// The render scene of every object, in [`World::objects`] order: static objects merged,
+    /// dynamic ones movable. Bodies the world does not list (the robot) are added after them.
+    pub fn scene(&self) -> futago_render::Scene {
+        futago_render::Scene {
+            materials: self.materials.clone(),
+            textures: self.textures.clone(),
+            bodies: self
+                .objects
+                .iter()
+                .map(|o| futago_render::SceneBody {
+                    name: o.name.clone(),
+                    pose: o.pose,
+                    movable: matches!(o.motion, Motion::Dynamic { .. }),
+                    parts: o.parts.clone(),
+                })
+                .collect(),
+        }
+    }
+
     /// Loads and compiles a world file, with its meshes and textures. A bare glTF file
     /// (`.glb`, `.gltf`) is a world of that one static mesh, its triangles the collider.
     pub fn load(path: &Path) -> Result<World, SpecError> {

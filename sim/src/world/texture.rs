@@ -5,69 +5,9 @@
 //! them), bricks and noise break up plain walls. Random patterns are seeded and deterministic.
 
 use super::spec::Pattern;
+use futago_render::Texture;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::path::Path;
-
-/// An sRGB RGBA8 image, row-major from the top-left.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Texture {
-    /// Where it came from (file path or pattern description).
-    pub name: String,
-    pub width: u32,
-    pub height: u32,
-    pub rgba: Vec<u8>,
-}
-
-impl Texture {
-    /// Loads a PNG file; the error names the file.
-    pub fn load_png(path: &Path) -> Result<Texture, String> {
-        let img = image::open(path)
-            .map_err(|e| format!("cannot load texture image {}: {e}", path.display()))?;
-        let img = img.to_rgba8();
-        if img.width() == 0 || img.height() == 0 {
-            return Err(format!("texture image {} is empty", path.display()));
-        }
-        Ok(Texture {
-            name: path.display().to_string(),
-            width: img.width(),
-            height: img.height(),
-            rgba: img.into_raw(),
-        })
-    }
-
-    /// Wraps decoded pixels (e.g. from a glTF file).
-    pub fn from_rgba(name: String, width: u32, height: u32, rgba: Vec<u8>) -> Texture {
-        Texture {
-            name,
-            width,
-            height,
-            rgba,
-        }
-    }
-
-    /// Mean colour (sRGB, 0–1), used where a single colour stands for the texture (PLY export).
-    pub fn mean_color(&self) -> [f64; 3] {
-        let mut s = [0.0f64; 3];
-        let n = (self.width * self.height) as f64;
-        for px in self.rgba.chunks_exact(4) {
-            for c in 0..3 {
-                s[c] += px[c] as f64 / 255.0;
-            }
-        }
-        s.map(|v| v / n)
-    }
-
-    /// Encodes as PNG (for glTF export).
-    pub fn to_png(&self) -> Vec<u8> {
-        let mut out = Vec::new();
-        let img = image::RgbaImage::from_raw(self.width, self.height, self.rgba.clone())
-            .expect("texture size matches its pixels");
-        img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
-            .expect("PNG encoding to memory cannot fail");
-        out
-    }
-}
 
 fn to_u8(c: [f64; 3]) -> [u8; 4] {
     let q = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;

@@ -17,14 +17,16 @@
 //! used for pixels and for TUM trajectories.
 
 pub mod gpu;
+pub mod mesh;
+pub mod scene;
 
 pub use futago_msgs::camera::{DepthImage, Intrinsics, RgbImage};
 
-use crate::world::mesh::TriMesh;
-use crate::world::{Material, MeshPart, Motion, Texture, World};
 use glam::{Mat3, Mat4, Quat, Vec3};
+pub use glamx::Pose3 as Pose;
 use gpu::{BackendChoice, Gpu};
-use rapier3d::math::Pose;
+pub use mesh::TriMesh;
+pub use scene::{Material, MeshPart, Texture};
 use std::collections::HashMap;
 use std::time::Duration as StdDuration;
 use thiserror::Error;
@@ -98,8 +100,8 @@ pub struct SceneBody {
     pub parts: Vec<MeshPart>,
 }
 
-/// What a renderer draws: materials, textures and bodies. [`Scene::from_world`] takes a
-/// world's objects in order; bodies the world does not list (the robot) are added after them.
+/// What a renderer draws: materials, textures and bodies. The simulator builds one from its
+/// world's objects in order and adds the bodies the world does not list (the robot) after them.
 #[derive(Debug, Clone, Default)]
 pub struct Scene {
     pub materials: Vec<Material>,
@@ -108,24 +110,6 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Every object of `world`, in [`World::objects`] order.
-    pub fn from_world(world: &World) -> Scene {
-        Scene {
-            materials: world.materials.clone(),
-            textures: world.textures.clone(),
-            bodies: world
-                .objects
-                .iter()
-                .map(|o| SceneBody {
-                    name: o.name.clone(),
-                    pose: o.pose,
-                    movable: matches!(o.motion, Motion::Dynamic { .. }),
-                    parts: o.parts.clone(),
-                })
-                .collect(),
-        }
-    }
-
     /// Adds a movable body with its own untextured materials; returns its index.
     pub fn add_body(&mut self, name: &str, pose: Pose, parts: Vec<(Material, TriMesh)>) -> usize {
         let parts = parts
@@ -1154,7 +1138,7 @@ impl Renderer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::mesh::UvMap;
+    use crate::mesh::UvMap;
 
     #[test]
     fn a_lost_device_is_reported_not_hung_on() {
