@@ -263,7 +263,7 @@ pub fn bench_sensors(world: &World, poses: Option<Vec<Pose>>, b: &SensorBench) -
 /// `particles` particles, one beam every 15°, for each measurement model. The scan is seed
 /// 000's laser (240°, 961 beams) cast in the simulator.
 pub fn bench_mcl(world: &World, start: Pose2, particles: usize, updates: usize) -> Result<Value> {
-    use futago_robot::mcl::{Mcl, MclConfig, MclMap, SensorModel};
+    use futago_robot::localization::mcl::{Mcl, MclConfig, MclMap, SensorModel};
     use futago_sim::lidar::{LidarConfig, LidarPreset};
     let grid = futago_sim::world::export::occupancy_grid(world, 0.05, 0.15, 0.25, 0.5)
         .map_err(|e| anyhow::anyhow!("{e}"))?;

@@ -479,14 +479,14 @@ fn real_main() -> Result<()> {
             config,
             method,
         } => {
-            let mut slam_config: futago_robot::slam::SlamConfig = match &config {
+            let mut slam_config: futago_robot::mapping::slam::SlamConfig = match &config {
                 Some(p) => futago_sim::config::load_toml(p)?,
                 None => Default::default(),
             };
             if let Some(m) = method {
                 slam_config.method = match m.as_str() {
-                    "graph" => futago_robot::slam::SlamMethod::Graph,
-                    "icp" => futago_robot::slam::SlamMethod::Icp,
+                    "graph" => futago_robot::mapping::slam::SlamMethod::Graph,
+                    "icp" => futago_robot::mapping::slam::SlamMethod::Icp,
                     other => anyhow::bail!("--method {other}: expected `graph` or `icp`"),
                 };
             }

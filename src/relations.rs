@@ -153,23 +153,10 @@ pub struct Metrics {
     pub sqr_rot_deg2: MeanStd,
 }
 
-/// The estimated pose at `t`, linearly interpolated (yaw along the shorter arc) between the
-/// samples around it; `None` outside the trajectory. `traj` is sorted by time.
+/// The pose at `t`, interpolated between the samples around it; `None` outside the
+/// trajectory, so that a relation is never scored against an invented pose.
 pub fn interpolate(traj: &[(Time, Pose2)], t: Time) -> Option<Pose2> {
-    let k = traj.partition_point(|s| s.0 < t);
-    if k < traj.len() && traj[k].0 == t {
-        return Some(traj[k].1);
-    }
-    if k == 0 || k == traj.len() {
-        return None;
-    }
-    let ((t0, a), (t1, b)) = (traj[k - 1], traj[k]);
-    let f = (t - t0).secs() / (t1 - t0).secs();
-    Some(Pose2::new(
-        a.x + f * (b.x - a.x),
-        a.y + f * (b.y - a.y),
-        wrap_angle(a.theta + f * wrap_angle(b.theta - a.theta)),
-    ))
+    futago_msgs::pose_at(traj, t, futago_msgs::Outside::None)
 }
 
 /// Scores an estimated trajectory (sorted by time) against relations.

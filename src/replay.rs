@@ -5,7 +5,7 @@ use crate::relations::{self, Metrics};
 use crate::run::write_atomically;
 use anyhow::{Context, Result, bail};
 use futago_msgs::{Pose2, Pose3, Time, carmen, tum};
-use futago_robot::slam::{Slam, SlamConfig, SlamMethod};
+use futago_robot::mapping::slam::{Slam, SlamConfig, SlamMethod};
 use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Instant;

@@ -601,7 +601,7 @@ pub fn run_report(
 /// (`rgbd_slice.png` in `dir`) embedded; empty for a run without one.
 fn rgbd_section(dir: &Path, summary: &Value) -> String {
     let metrics = &summary["metrics"];
-    let methods: Vec<&str> = futago_robot::registration::Method::ALL
+    let methods: Vec<&str> = futago_robot::mapping::registration::Method::ALL
         .iter()
         .map(|m| m.name())
         .filter(|m| metrics.get(format!("rgbd_map.{m}.f1_5cm")).is_some())

@@ -12,7 +12,7 @@ use anyhow::{Context, Result, bail};
 use futago_msgs::camera::DepthImage;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{Duration, Pose2, Time};
-use futago_robot::odometry::OdometryIntegrator;
+use futago_robot::localization::odometry::OdometryIntegrator;
 use futago_sim::Simulation;
 use futago_sim::kinect::Kinect;
 use futago_sim::noise::stream;

@@ -7,11 +7,13 @@
 
 use crate::overlay::{Overlay, blame};
 use futago_msgs::Pose2;
-use futago_robot::mcl::MclConfig;
+use futago_robot::control::PoseSource;
+use futago_robot::control::script::{Script, SegmentsConfig, WaypointConfig};
+use futago_robot::localization::mcl::MclConfig;
+use futago_robot::mapping::rgbd_map::RgbdMapConfig;
+use futago_robot::mapping::slam::SlamConfig;
 use futago_robot::navigation::NavigationConfig;
-use futago_robot::rgbd_map::RgbdMapConfig;
-use futago_robot::script::{ControllerConfig, PoseSource};
-use futago_robot::slam::SlamConfig;
+use futago_robot::navigation::{ExploreConfig, NavigateConfig};
 use futago_sim::config::{SpecError, check_name, check_positive, check_range, load_toml};
 use futago_sim::create::CreateConfig;
 use futago_sim::kinect::{KinectConfig, KinectSpec};
@@ -304,6 +306,46 @@ pub fn rgbd_map_config(path: &Path, table: &toml::Table) -> Result<RgbdMapSpec, 
         laser,
         config,
     })
+}
+
+/// What drives the robot, as a scenario's `[controller]` table declares it, selected by its
+/// `type` key: a scripted plan ([`Script`]) or the navigator.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ControllerConfig {
+    /// Stand still.
+    Idle,
+    Segments(SegmentsConfig),
+    /// Follow waypoints.
+    Waypoints(WaypointConfig),
+    /// Navigate to goals on the known map ([`futago_robot::navigation`]).
+    Navigate(NavigateConfig),
+    /// Explore an unknown world with SLAM ([`futago_robot::navigation`]).
+    Explore(ExploreConfig),
+}
+
+impl ControllerConfig {
+    /// The `type` names, in declaration order.
+    pub const TYPES: [&'static str; 5] = ["idle", "segments", "waypoints", "navigate", "explore"];
+
+    /// Checks values a controller cannot run with; returns `(key, expectation)` on error.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        match self {
+            ControllerConfig::Idle | ControllerConfig::Explore(_) => Ok(()),
+            ControllerConfig::Segments(s) => s.validate(),
+            ControllerConfig::Waypoints(w) => w.validate(),
+            ControllerConfig::Navigate(n) => n.validate(),
+        }
+    }
+
+    /// The scripted plan, for the controllers that are one.
+    pub fn script(&self) -> Option<Script> {
+        match self {
+            ControllerConfig::Idle => Some(Script::Idle),
+            ControllerConfig::Segments(s) => Some(Script::Segments(s.clone())),
+            ControllerConfig::Waypoints(w) => Some(Script::Waypoints(w.clone())),
+            ControllerConfig::Navigate(_) | ControllerConfig::Explore(_) => None,
+        }
+    }
 }
 
 /// Types the `[controller]` table by its `type` key, naming `controller.KEY` in errors.

@@ -164,6 +164,43 @@ impl Pose2 {
     pub fn distance(&self, other: &Pose2) -> f64 {
         (self.x - other.x).hypot(self.y - other.y)
     }
+
+    /// The pose a fraction `f` of the way from `self` to `other`: the position linearly, the
+    /// heading along the shorter arc.
+    pub fn lerp(&self, other: &Pose2, f: f64) -> Pose2 {
+        Pose2::new(
+            self.x + f * (other.x - self.x),
+            self.y + f * (other.y - self.y),
+            wrap_angle(self.theta + f * wrap_angle(other.theta - self.theta)),
+        )
+    }
+}
+
+/// How [`pose_at`] answers for a time outside a trajectory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outside {
+    /// No pose: a metric must not invent one.
+    None,
+    /// The nearest end's pose: a sensor stamped just past the last odometry report.
+    Clamp,
+}
+
+/// The pose at `t` in a trajectory sorted by time: a sample's own pose at its stamp, else
+/// [`Pose2::lerp`] between the samples around `t`. The one pose interpolation of the project:
+/// the relations metric, the log readers and the run loop's odometry history all use it.
+pub fn pose_at(traj: &[(Time, Pose2)], t: Time, outside: Outside) -> Option<Pose2> {
+    let k = traj.partition_point(|s| s.0 < t);
+    if k < traj.len() && traj[k].0 == t {
+        return Some(traj[k].1);
+    }
+    if k == 0 || k == traj.len() {
+        return match outside {
+            Outside::None => None,
+            Outside::Clamp => traj.get(k.saturating_sub(1)).map(|s| s.1),
+        };
+    }
+    let ((t0, a), (t1, b)) = (traj[k - 1], traj[k]);
+    Some(a.lerp(&b, (t - t0).secs() / (t1 - t0).secs()))
 }
 
 /// A 3D pose: translation (m) and unit quaternion `[x, y, z, w]`.
@@ -295,6 +332,28 @@ impl DriveCommand {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pose_at_interpolates_inside_and_answers_outside_as_asked() {
+        let t = Time::from_secs;
+        // Heading from 170° to −170°: the short way is through 180°, 20° in all.
+        let a = Pose2::new(0.0, 0.0, 170f64.to_radians());
+        let b = Pose2::new(2.0, -4.0, -170f64.to_radians());
+        let traj = [(t(1.0), a), (t(3.0), b)];
+        let p = pose_at(&traj, t(1.5), Outside::None).unwrap();
+        assert!(
+            (p.x - 0.5).abs() < 1e-12 && (p.y + 1.0).abs() < 1e-12,
+            "{p:?}"
+        );
+        assert!((p.theta - 175f64.to_radians()).abs() < 1e-12, "{p:?}");
+        // A sample's own stamp gives its own pose, bit for bit.
+        assert_eq!(pose_at(&traj, t(3.0), Outside::None), Some(b));
+        assert_eq!(pose_at(&traj, t(0.5), Outside::None), None);
+        assert_eq!(pose_at(&traj, t(4.0), Outside::None), None);
+        assert_eq!(pose_at(&traj, t(0.5), Outside::Clamp), Some(a));
+        assert_eq!(pose_at(&traj, t(4.0), Outside::Clamp), Some(b));
+        assert_eq!(pose_at(&[], t(4.0), Outside::Clamp), None);
+    }
 
     #[test]
     fn planar_poses_survive_the_trip_through_3d() {

@@ -10,7 +10,7 @@
 //! The laser's mount on the robot is taken as the base frame (tf is not read yet).
 
 use crate::carmen::{Log, LogScan};
-use crate::{LaserScan, Pose2, Time, wrap_angle};
+use crate::{LaserScan, Pose2, Time};
 use std::collections::HashMap;
 use std::io::Read;
 
@@ -268,31 +268,6 @@ fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<()
     Ok(())
 }
 
-/// Odometry pose at `t`, interpolated; the nearest end outside the stream.
-fn odometry_at(odo: &[(Time, Pose2)], t: Time) -> Option<Pose2> {
-    let k = odo.partition_point(|s| s.0 < t);
-    if odo.is_empty() {
-        return None;
-    }
-    if k == 0 {
-        return Some(odo[0].1);
-    }
-    if k == odo.len() {
-        return Some(odo[k - 1].1);
-    }
-    let ((t0, a), (t1, b)) = (odo[k - 1], odo[k]);
-    let f = if t1 > t0 {
-        (t - t0).secs() / (t1 - t0).secs()
-    } else {
-        0.0
-    };
-    Some(Pose2::new(
-        a.x + f * (b.x - a.x),
-        a.y + f * (b.y - a.y),
-        wrap_angle(a.theta + f * wrap_angle(b.theta - a.theta)),
-    ))
-}
-
 /// Reads a ROS 1 bag's laser scans and odometry. Scans without any odometry in the bag are
 /// an error; other message types are counted as skipped.
 pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
@@ -318,7 +293,8 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
         ..Default::default()
     };
     for scan in raw.scans {
-        let odometry = odometry_at(&raw.odometry, scan.stamp).unwrap_or(Pose2::IDENTITY);
+        let odometry = crate::pose_at(&raw.odometry, scan.stamp, crate::Outside::Clamp)
+            .unwrap_or(Pose2::IDENTITY);
         log.scans.push(LogScan {
             scan,
             odometry,

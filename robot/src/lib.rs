@@ -2,25 +2,20 @@
 //! ([`futago_msgs`]) and emits drive commands. It never depends on the simulator, so the same
 //! code runs in simulation and on logs of real robots.
 //!
-//! So far: odometry integration ([`odometry`]) and scripted drive plans ([`script`]); the
-//! mapping, localisation and navigation stack plugs in beside them.
+//! Grouped by concern, each group depending only on those listed before it:
+//!
+//! - [`config`]: range checks shared by every module's options;
+//! - [`geometry`]: distance transforms and plane fits;
+//! - [`perception`]: image features, floor levelling;
+//! - [`localization`]: odometry, Monte Carlo localisation;
+//! - [`mapping`]: occupancy grids, scan matching, graph SLAM, the RGB-D 3D map;
+//! - [`control`]: path following and scripted drive plans;
+//! - [`navigation`]: planning, exploration and the navigator that drives by them.
 
 pub mod config;
-pub mod correlative;
-pub mod exploration;
-pub mod features;
-pub mod floor;
-pub mod icp;
-pub mod mcl;
+pub mod control;
+pub mod geometry;
+pub mod localization;
+pub mod mapping;
 pub mod navigation;
-pub mod occupancy;
-pub mod odometry;
-pub mod plane;
-pub mod planner;
-pub mod polygons;
-pub mod pose_graph;
-pub mod pursuit;
-pub mod registration;
-pub mod rgbd_map;
-pub mod script;
-pub mod slam;
+pub mod perception;

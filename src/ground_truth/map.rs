@@ -16,10 +16,7 @@
 //! and Huttenlocher's transform).
 
 use futago_msgs::grid::OccupancyGrid;
-
-/// Occupancy at or above which a cell is an obstacle (map_server's 0.65 trinary threshold
-/// lies above it; the grids compared here are trinary 0/100/−1).
-const OCCUPIED: i8 = 50;
+use futago_robot::geometry::grid::{OCCUPIED, squared_edt};
 
 /// Distances beyond this count as this in the mean distances, m.
 pub const DISTANCE_CAP: f64 = 1.0;
@@ -37,65 +34,6 @@ pub struct MapScore {
     pub free_iou: f64,
     pub true_obstacle_cells: usize,
     pub map_obstacle_cells: usize,
-}
-
-/// Squared Euclidean distance transform of a `w × h` grid of sites, in cells².
-fn squared_edt(sites: &[bool], w: usize, h: usize) -> Vec<f64> {
-    const INF: f64 = 1e20;
-    let mut f: Vec<f64> = sites.iter().map(|&s| if s { 0.0 } else { INF }).collect();
-    // One dimension: the lower envelope of parabolas.
-    fn pass(f: &[f64]) -> Vec<f64> {
-        let n = f.len();
-        let mut d = vec![0.0; n];
-        let mut v = vec![0usize; n];
-        let mut z = vec![0.0f64; n + 1];
-        let mut k = 0usize;
-        z[0] = f64::NEG_INFINITY;
-        z[1] = f64::INFINITY;
-        for q in 1..n {
-            loop {
-                let p = v[k];
-                let s = ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64))
-                    / (2.0 * (q as f64 - p as f64));
-                if s <= z[k] && k > 0 {
-                    k -= 1;
-                    continue;
-                }
-                if s <= z[k] {
-                    // k == 0: replace the first parabola.
-                    v[0] = q;
-                    z[1] = f64::INFINITY;
-                    break;
-                }
-                k += 1;
-                v[k] = q;
-                z[k] = s;
-                z[k + 1] = f64::INFINITY;
-                break;
-            }
-        }
-        k = 0;
-        for (q, dq) in d.iter_mut().enumerate() {
-            while z[k + 1] < q as f64 {
-                k += 1;
-            }
-            let p = v[k];
-            *dq = (q as f64 - p as f64).powi(2) + f[p];
-        }
-        d
-    }
-    for y in 0..h {
-        let row = pass(&f[y * w..(y + 1) * w]);
-        f[y * w..(y + 1) * w].copy_from_slice(&row);
-    }
-    for x in 0..w {
-        let col: Vec<f64> = (0..h).map(|y| f[y * w + x]).collect();
-        let out = pass(&col);
-        for y in 0..h {
-            f[y * w + x] = out[y];
-        }
-    }
-    f
 }
 
 /// Distance (m) from world point `p` to the nearest site of a grid's transform; the cap
@@ -288,15 +226,6 @@ mod tests {
             }
         }
         g
-    }
-
-    #[test]
-    fn edt_is_exact_on_a_knight_move() {
-        let mut sites = vec![false; 25];
-        sites[0] = true;
-        let d = squared_edt(&sites, 5, 5);
-        assert_eq!(d[5 + 2], 5.0); // cell (2, 1) of a 5-wide grid: 2² + 1²
-        assert_eq!(d[4 * 5 + 4], 32.0);
     }
 
     #[test]

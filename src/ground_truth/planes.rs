@@ -4,8 +4,8 @@
 //! error the distance of the polygon's centroid from the true plane. Means are weighted by the
 //! polygons' areas, as large faces (walls, floor) matter more than small ones.
 
-use futago_robot::plane::Plane;
-use futago_robot::polygons::Polygon;
+use futago_robot::geometry::plane::Plane;
+use futago_robot::mapping::polygons::Polygon;
 
 /// True points farther than this from a polygon's plane are not its surface, m.
 pub const BAND_M: f64 = 0.10;

@@ -6,7 +6,7 @@
 //! as tf's `map → odom → base` chain does), 2D maps with their stamps, and the drive command.
 
 use futago_msgs::grid::OccupancyGrid;
-use futago_msgs::{BumpsAndDrops, DriveCommand, Duration, Pose2, Time, wrap_angle};
+use futago_msgs::{BumpsAndDrops, DriveCommand, Duration, Pose2, Time};
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 
@@ -82,12 +82,7 @@ impl Bus {
                 } else {
                     0.0
                 };
-                let dth = wrap_angle(p1.theta - p0.theta);
-                return Pose2::new(
-                    p0.x + a * (p1.x - p0.x),
-                    p0.y + a * (p1.y - p0.y),
-                    wrap_angle(p0.theta + a * dth),
-                );
+                return p0.lerp(&p1, a);
             }
         }
         self.history.front().map(|h| h.1).unwrap_or(p_last)

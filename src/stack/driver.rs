@@ -2,12 +2,14 @@
 //! `[controller]` names. It publishes the drive command at every control tick.
 
 use super::{Bus, Node, Report, Streams};
+use crate::scenario::ControllerConfig;
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
 use futago_msgs::{DriveCommand, Duration, LaserScan, Odometry, Pose2, Time};
+use futago_robot::control::PoseSource;
+use futago_robot::control::script::{ControlInput, ScriptedController};
+use futago_robot::localization::odometry::OdometryIntegrator;
 use futago_robot::navigation::{NavInput, Navigator, Task};
-use futago_robot::odometry::OdometryIntegrator;
-use futago_robot::script::{ControlInput, ControllerConfig, PoseSource, ScriptedController};
 use serde_json::{Value, json};
 use std::path::Path;
 
@@ -67,7 +69,11 @@ impl DriverNode {
                 odometry: OdometryIntegrator::new(s.start),
                 last: None,
             },
-            other => Driver::Scripted(ScriptedController::new(other.clone(), Time::ZERO, s.start)),
+            other => Driver::Scripted(ScriptedController::new(
+                other.script().context("a scripted controller")?,
+                Time::ZERO,
+                s.start,
+            )),
         };
         let navigates = matches!(driver, Driver::Navigator { .. });
         let laser = if navigates {

@@ -9,7 +9,7 @@ use crate::ground_truth::Metrics;
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, LaserScan, Pose2, Time, wrap_angle};
-use futago_robot::mcl::{Mcl, MclMap};
+use futago_robot::localization::mcl::{Mcl, MclMap};
 use futago_sim::noise::stream;
 use serde_json::{Value, json};
 use std::path::Path;

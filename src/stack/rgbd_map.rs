@@ -11,8 +11,8 @@ use anyhow::{Context, Result};
 use futago_msgs::camera::{DepthImage, Intrinsics};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{Pose2, Pose3};
-use futago_robot::registration::{EnvironmentMap, Method};
-use futago_robot::rgbd_map::{CameraMount, RgbdMap, RgbdMapper};
+use futago_robot::mapping::registration::{EnvironmentMap, Method};
+use futago_robot::mapping::rgbd_map::{CameraMount, RgbdMap, RgbdMapper};
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
@@ -147,7 +147,7 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     // The methods as typed; a table that does not type yet has the default.
     let methods: Vec<&'static str> = crate::scenario::rgbd_map_config(Path::new(""), table)
         .map(|m| m.config.methods)
-        .unwrap_or_else(|_| futago_robot::rgbd_map::RgbdMapConfig::default().methods)
+        .unwrap_or_else(|_| futago_robot::mapping::rgbd_map::RgbdMapConfig::default().methods)
         .iter()
         .map(|m| m.name())
         .collect();

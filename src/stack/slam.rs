@@ -9,7 +9,7 @@ use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2, Time, wrap_angle};
-use futago_robot::slam::Slam;
+use futago_robot::mapping::slam::Slam;
 use serde_json::json;
 use std::path::Path;
 

@@ -1,7 +1,7 @@
 //! Registration of RGB-D keyframes over (x, y, yaw) (seed 000 §3.1.2, written for futago):
 //! the extended RGBD-ICP, the variants of the thesis's Fig. 3.7, and a modern baseline.
 //!
-//! Every keyframe has been levelled by its floor ([`crate::floor`]), so its height, pitch and
+//! Every keyframe has been levelled by its floor ([`crate::perception::floor`]), so its height, pitch and
 //! roll are fixed and its points are in the robot's base frame; a robot pose (x, y, yaw)
 //! places them in the world. The methods differ in how they correct the robot's 2D pose:
 //!
@@ -17,14 +17,15 @@
 //! - [`Method::IcpGraph`] (a modern baseline, as in Open3D's reconstruction pipeline or
 //!   Choi et al. 2015): point-to-plane ICP between consecutive keyframes and between keyframes
 //!   that revisit a place, and a pose graph over these edges and the robot's poses (as priors),
-//!   solved by [`crate::pose_graph`].
+//!   solved by [`crate::mapping::pose_graph`].
 //!
 //! Each ICP iteration matches (k-d trees from `kiddo`), then takes Levenberg–Marquardt steps
 //! `x ← x − (JᵀJ + λI)⁻¹ Jᵀf` with the matches fixed, until the step is below `tolerance` or
 //! `max_iterations` is reached. Every term is started from the robot's pose, as in the thesis.
 
-use crate::features::{Descriptor, FeatureConfig};
-use crate::pose_graph::{Edge, OptimizeOptions, PoseGraph};
+use crate::geometry::plane::pca_normal;
+use crate::mapping::pose_graph::{Edge, OptimizeOptions, PoseGraph};
+use crate::perception::features::{Descriptor, FeatureConfig};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{Pose2, wrap_angle};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -286,48 +287,6 @@ impl<const K: usize> Index<K> {
             .map(|r| r.item as usize)
             .collect()
     }
-}
-
-/// The unit normal of the least-squares plane through `points` (the scatter's eigenvector
-/// of least eigenvalue), or `None` when they do not span a plane.
-pub fn pca_normal<const K: usize>(points: &[[f64; K]]) -> Option<[f64; K]> {
-    if points.len() < K {
-        return None;
-    }
-    let n = points.len() as f64;
-    let mut mean = [0.0; K];
-    for p in points {
-        for k in 0..K {
-            mean[k] += p[k] / n;
-        }
-    }
-    let mut m = nalgebra::DMatrix::<f64>::zeros(K, K);
-    for p in points {
-        for a in 0..K {
-            for b in 0..K {
-                m[(a, b)] += (p[a] - mean[a]) * (p[b] - mean[b]);
-            }
-        }
-    }
-    let e = m.symmetric_eigen();
-    let (mut lo, mut hi) = (0, 0);
-    for k in 1..K {
-        if e.eigenvalues[k] < e.eigenvalues[lo] {
-            lo = k;
-        }
-        if e.eigenvalues[k] > e.eigenvalues[hi] {
-            hi = k;
-        }
-    }
-    // A line or a blob: the smallest spread must be well below the others.
-    if e.eigenvalues[hi].is_nan() || e.eigenvalues[hi] <= 0.0 {
-        return None;
-    }
-    let mut out = [0.0; K];
-    for (k, o) in out.iter_mut().enumerate() {
-        *o = e.eigenvectors[(k, lo)];
-    }
-    Some(out)
 }
 
 /// The 2D map as the map term sees it: occupied cells' centres at the laser's height, with
@@ -611,14 +570,15 @@ fn feature_pairs(
 ) -> Vec<Pair> {
     let da: Vec<Descriptor> = input.features.iter().map(|f| f.1).collect();
     let db: Vec<Descriptor> = target.features.iter().map(|f| f.1).collect();
-    let pairs: Vec<Pair> = crate::features::match_nearest(&da, &db, config.features.max_hamming)
-        .into_iter()
-        .map(|(i, j)| Pair {
-            p: input.features[i].0,
-            q: place(at, target.features[j].0),
-            n: None,
-        })
-        .collect();
+    let pairs: Vec<Pair> =
+        crate::perception::features::match_nearest(&da, &db, config.features.max_hamming)
+            .into_iter()
+            .map(|(i, j)| Pair {
+                p: input.features[i].0,
+                q: place(at, target.features[j].0),
+                n: None,
+            })
+            .collect();
     if pairs.len() < 2 {
         return Vec::new();
     }
@@ -946,19 +906,6 @@ mod tests {
             g.cells[j * 120 + i] = if wall { 100 } else { 0 };
         }
         g
-    }
-
-    #[test]
-    fn pca_normal_of_a_plane_and_of_a_line() {
-        let pts: Vec<[f64; 3]> = (0..20)
-            .map(|k| [k as f64 * 0.1, (k % 5) as f64 * 0.1, 0.5])
-            .collect();
-        let n = pca_normal(&pts).unwrap();
-        assert!((n[2].abs() - 1.0).abs() < 1e-9, "{n:?}");
-        let line: Vec<[f64; 2]> = (0..5).map(|k| [1.0, k as f64]).collect();
-        let n = pca_normal(&line).unwrap();
-        assert!((n[0].abs() - 1.0).abs() < 1e-9, "{n:?}");
-        assert!(pca_normal(&[[0.0, 0.0, 0.0]; 2]).is_none());
     }
 
     #[test]

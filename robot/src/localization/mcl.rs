@@ -7,7 +7,7 @@
 //!
 //! Seed 000's configuration is the default: 500 particles, the beam model, one beam every 15°.
 
-use crate::planner::{OCCUPIED, obstacle_distance};
+use crate::geometry::grid::{OCCUPIED, obstacle_distance};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2, wrap_angle};
 use rand::{Rng, SeedableRng};

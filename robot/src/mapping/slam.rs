@@ -7,10 +7,10 @@
 //! - `method = "icp"` is seed 000's SLAM: the map is every keyframe so far, and there is no
 //!   loop closure. It is the baseline.
 //! - `method = "graph"` matches each scan against a local map of the last `graph.local_nodes`
-//!   keyframes only, and keeps the keyframes in a pose graph ([`crate::pose_graph`]) whose
+//!   keyframes only, and keeps the keyframes in a pose graph ([`crate::mapping::pose_graph`]) whose
 //!   edges are the front end's relative poses. Every `graph.submap_nodes` keyframes form a
 //!   submap, frozen in the frame of its first keyframe. Each new keyframe is searched for in
-//!   the finished submaps near its estimate by branch and bound ([`crate::correlative`]) and
+//!   the finished submaps near its estimate by branch and bound ([`crate::mapping::correlative`]) and
 //!   the match refined by ICP; a match is a loop-closure edge with a Huber kernel, and the
 //!   graph is re-optimised (Hess et al., ICRA 2016, with node-to-submap constraints expressed
 //!   between keyframes).
@@ -18,10 +18,10 @@
 //! Both report every scan's pose relative to its keyframe, so the trajectory follows the
 //! keyframes when the graph moves them.
 
-use crate::correlative::{LikelihoodGrid, SearchWindow, search};
-use crate::icp::{IcpConfig, Oriented, PointMap, align, fit_score, scan_points};
-use crate::occupancy::{OccupancyConfig, OccupancyMap};
-use crate::pose_graph::{Edge, OptimizeOptions, PoseGraph};
+use crate::mapping::correlative::{LikelihoodGrid, SearchWindow, search};
+use crate::mapping::icp::{IcpConfig, Oriented, PointMap, align, fit_score, scan_points};
+use crate::mapping::occupancy::{OccupancyConfig, OccupancyMap};
+use crate::mapping::pose_graph::{Edge, OptimizeOptions, PoseGraph};
 use futago_msgs::{LaserScan, Pose2, Time, wrap_angle};
 use serde::Deserialize;
 
@@ -578,7 +578,7 @@ impl Slam {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::icp::tests_support::{room_scan, scan_of};
+    use crate::mapping::icp::tests_support::{room_scan, scan_of};
 
     #[test]
     fn icp_slam_follows_a_drive_that_odometry_gets_wrong() {

@@ -4,9 +4,9 @@
 //! controller is updated with what the robot knows (its odometry, and the true pose only when
 //! a scenario asks for an oracle) and answers with Create drive commands.
 
-use crate::navigation::{ExploreConfig, NavigateConfig};
-use crate::odometry::OdometryIntegrator;
-use crate::pursuit::{FollowParams, PathFollower};
+use crate::control::PoseSource;
+use crate::control::pursuit::{FollowParams, PathFollower};
+use crate::localization::odometry::OdometryIntegrator;
 use futago_msgs::{BumpsAndDrops, DriveCommand, Odometry, Pose2, Radius, Time};
 use serde::Deserialize;
 
@@ -97,20 +97,6 @@ impl Segment {
     }
 }
 
-/// Where the waypoint follower takes its pose from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum PoseSource {
-    /// Dead reckoning from the robot's odometry reports, as a real robot without a localiser.
-    #[default]
-    Odometry,
-    /// The simulator's true pose (an oracle for tests and for driving exact routes).
-    GroundTruth,
-    /// The localiser's estimate (Monte Carlo localisation on the map), carried forward by
-    /// odometry between its updates.
-    Localization,
-}
-
 /// Follower settings.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -187,99 +173,82 @@ pub struct SegmentsConfig {
     pub repeat: u32,
 }
 
-/// A scripted controller as a scenario's `[controller]` table declares it, selected by its
-/// `type` key.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(tag = "type", rename_all = "snake_case")]
-pub enum ControllerConfig {
+/// A scripted drive plan, as [`ScriptedController`] runs it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Script {
     /// Stand still.
     Idle,
     Segments(SegmentsConfig),
     /// Follow waypoints.
     Waypoints(WaypointConfig),
-    /// Navigate to goals on the known map ([`crate::navigation`]).
-    Navigate(NavigateConfig),
-    /// Explore an unknown world with SLAM ([`crate::navigation`]).
-    Explore(ExploreConfig),
 }
 
-impl ControllerConfig {
-    /// The `type` names, in declaration order.
-    pub const TYPES: [&'static str; 5] = ["idle", "segments", "waypoints", "navigate", "explore"];
-}
-
-impl ControllerConfig {
-    /// Checks values a controller cannot run with; returns `(key, expectation)` on error.
+impl SegmentsConfig {
+    /// Checks values the plan cannot run with; returns `(key, expectation)` on error.
     pub fn validate(&self) -> Result<(), (String, String)> {
-        let bad = |k: &str, m: &str| Err((k.to_string(), m.to_string()));
-        match self {
-            ControllerConfig::Idle => Ok(()),
-            ControllerConfig::Segments(SegmentsConfig { segments, repeat }) => {
-                if segments.is_empty() || *repeat == 0 {
-                    return bad("segments", "expected at least one segment and repeat ≥ 1");
-                }
-                for (i, s) in segments.iter().enumerate() {
-                    if !(s.duration.is_finite() && s.duration > 0.0) {
-                        return Err((
-                            format!("segments[{i}].duration"),
-                            format!("expected a positive duration in s, found {}", s.duration),
-                        ));
-                    }
-                    if !s.velocity.is_finite()
-                        || s.wheels.is_some_and(|w| w.iter().any(|v| !v.is_finite()))
-                    {
-                        return Err((
-                            format!("segments[{i}]"),
-                            "expected finite velocities in m/s".into(),
-                        ));
-                    }
-                    if let RadiusSpec::Metres(r) = s.radius
-                        && !(r.is_finite() && r != 0.0)
-                    {
-                        return Err((
-                            format!("segments[{i}].radius"),
-                            "expected a non-zero radius in m, or \"straight\", \"ccw\", \"cw\""
-                                .into(),
-                        ));
-                    }
-                }
-                Ok(())
+        let SegmentsConfig { segments, repeat } = self;
+        if segments.is_empty() || *repeat == 0 {
+            return Err((
+                "segments".into(),
+                "expected at least one segment and repeat ≥ 1".into(),
+            ));
+        }
+        for (i, s) in segments.iter().enumerate() {
+            if !(s.duration.is_finite() && s.duration > 0.0) {
+                return Err((
+                    format!("segments[{i}].duration"),
+                    format!("expected a positive duration in s, found {}", s.duration),
+                ));
             }
-            ControllerConfig::Explore(_) => Ok(()),
-            ControllerConfig::Navigate(n) => {
-                if n.goals.is_empty() || n.goals.iter().flatten().any(|v| !v.is_finite()) {
-                    return bad("goals", "expected at least one finite [x, y] point");
-                }
-                if n.laps == 0 {
-                    return bad("laps", "expected at least one lap");
-                }
-                Ok(())
+            if !s.velocity.is_finite() || s.wheels.is_some_and(|w| w.iter().any(|v| !v.is_finite()))
+            {
+                return Err((
+                    format!("segments[{i}]"),
+                    "expected finite velocities in m/s".into(),
+                ));
             }
-            ControllerConfig::Waypoints(w) => {
-                if w.waypoints.is_empty() || w.waypoints.iter().flatten().any(|v| !v.is_finite()) {
-                    return bad("waypoints", "expected at least one finite [x, y] point");
-                }
-                for (k, v, lo, hi) in [
-                    ("speed", w.speed, 0.01, 0.5),
-                    ("lookahead", w.lookahead, 0.01, 10.0),
-                    ("tolerance", w.tolerance, 0.001, 10.0),
-                    ("turn_in_place_deg", w.turn_in_place_deg, 1.0, 180.0),
-                    ("turn_tolerance_deg", w.turn_tolerance_deg, 0.01, 90.0),
-                    ("turn_speed", w.turn_speed, 0.01, 0.5),
-                ] {
-                    if !(v.is_finite() && v >= lo && v <= hi) {
-                        return Err((
-                            k.to_string(),
-                            format!("expected a value in [{lo}, {hi}], found {v}"),
-                        ));
-                    }
-                }
-                if w.laps == 0 {
-                    return bad("laps", "expected at least one lap");
-                }
-                Ok(())
+            if let RadiusSpec::Metres(r) = s.radius
+                && !(r.is_finite() && r != 0.0)
+            {
+                return Err((
+                    format!("segments[{i}].radius"),
+                    "expected a non-zero radius in m, or \"straight\", \"ccw\", \"cw\"".into(),
+                ));
             }
         }
+        Ok(())
+    }
+}
+
+impl WaypointConfig {
+    /// Checks values the follower cannot run with; returns `(key, expectation)` on error.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let w = self;
+        if w.waypoints.is_empty() || w.waypoints.iter().flatten().any(|v| !v.is_finite()) {
+            return Err((
+                "waypoints".into(),
+                "expected at least one finite [x, y] point".into(),
+            ));
+        }
+        for (k, v, lo, hi) in [
+            ("speed", w.speed, 0.01, 0.5),
+            ("lookahead", w.lookahead, 0.01, 10.0),
+            ("tolerance", w.tolerance, 0.001, 10.0),
+            ("turn_in_place_deg", w.turn_in_place_deg, 1.0, 180.0),
+            ("turn_tolerance_deg", w.turn_tolerance_deg, 0.01, 90.0),
+            ("turn_speed", w.turn_speed, 0.01, 0.5),
+        ] {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err((
+                    k.to_string(),
+                    format!("expected a value in [{lo}, {hi}], found {v}"),
+                ));
+            }
+        }
+        if w.laps == 0 {
+            return Err(("laps".into(), "expected at least one lap".into()));
+        }
+        Ok(())
     }
 }
 
@@ -299,7 +268,7 @@ pub struct ControlInput<'a> {
 /// A running scripted controller.
 #[derive(Debug, Clone)]
 pub struct ScriptedController {
-    config: ControllerConfig,
+    config: Script,
     start: Time,
     odometry: OdometryIntegrator,
     /// Waypoint follower over the expanded route.
@@ -312,9 +281,9 @@ pub struct ScriptedController {
 
 impl ScriptedController {
     /// A controller starting at time `start` from `initial` (the pose dead reckoning starts from).
-    pub fn new(config: ControllerConfig, start: Time, initial: Pose2) -> ScriptedController {
+    pub fn new(config: Script, start: Time, initial: Pose2) -> ScriptedController {
         let follower = match &config {
-            ControllerConfig::Waypoints(w) => {
+            Script::Waypoints(w) => {
                 // The start is the first point of the route, so that the follower tracks the
                 // line to the first waypoint as it does the later ones.
                 let mut r = vec![[initial.x, initial.y]];
@@ -329,7 +298,7 @@ impl ScriptedController {
             _ => None,
         };
         let lap_len = match &config {
-            ControllerConfig::Waypoints(w) => w.waypoints.len(),
+            Script::Waypoints(w) => w.waypoints.len(),
             _ => 0,
         };
         ScriptedController {
@@ -379,13 +348,11 @@ impl ScriptedController {
         }
         let cmd = match &self.config {
             // The navigator drives these; as a script they stand still.
-            ControllerConfig::Idle
-            | ControllerConfig::Navigate(_)
-            | ControllerConfig::Explore(_) => {
+            Script::Idle => {
                 self.done = true;
                 DriveCommand::STOP
             }
-            ControllerConfig::Segments(SegmentsConfig { segments, repeat }) => {
+            Script::Segments(SegmentsConfig { segments, repeat }) => {
                 let mut t = (input.now - self.start).secs();
                 let period: f64 = segments.iter().map(|s| s.duration).sum();
                 if t >= period * *repeat as f64 {
@@ -404,7 +371,7 @@ impl ScriptedController {
                     cmd
                 }
             }
-            ControllerConfig::Waypoints(w) => {
+            Script::Waypoints(w) => {
                 let pose = match w.pose_source {
                     PoseSource::Odometry => self.odometry.pose,
                     PoseSource::GroundTruth => input.ground_truth.unwrap_or(self.odometry.pose),
@@ -445,7 +412,7 @@ mod tests {
 
     #[test]
     fn segments_play_in_order_then_stop() {
-        let cfg: ControllerConfig = ControllerConfig::Segments(SegmentsConfig {
+        let cfg = Script::Segments(SegmentsConfig {
             segments: vec![
                 Segment {
                     duration: 1.0,
@@ -500,11 +467,8 @@ mod tests {
             laps: 1,
             pose_source: PoseSource::GroundTruth,
         };
-        let mut c = ScriptedController::new(
-            ControllerConfig::Waypoints(w.clone()),
-            Time::ZERO,
-            Pose2::IDENTITY,
-        );
+        let mut c =
+            ScriptedController::new(Script::Waypoints(w.clone()), Time::ZERO, Pose2::IDENTITY);
         match tick(&mut c, 0.0, Pose2::new(0.0, 0.0, 0.1)) {
             Some(DriveCommand::Drive {
                 radius: Radius::InPlaceCcw,
@@ -514,8 +478,7 @@ mod tests {
         }
         let mut w2 = w.clone();
         w2.waypoints = vec![[1.0, 0.5]];
-        let mut c =
-            ScriptedController::new(ControllerConfig::Waypoints(w2), Time::ZERO, Pose2::IDENTITY);
+        let mut c = ScriptedController::new(Script::Waypoints(w2), Time::ZERO, Pose2::IDENTITY);
         match tick(&mut c, 0.0, Pose2::IDENTITY) {
             // The aim point is 0.4 m along the line to (1, 0.5), at bearing φ = atan(0.5); the
             // circle through it tangent to +x has R = 0.4 / (2 sin φ).
@@ -532,8 +495,7 @@ mod tests {
         // Gentler than the OI's 2 m limit: wheel speeds, the right one faster for a left arc.
         let mut w3 = w.clone();
         w3.waypoints = vec![[3.0, 0.1]];
-        let mut c3 =
-            ScriptedController::new(ControllerConfig::Waypoints(w3), Time::ZERO, Pose2::IDENTITY);
+        let mut c3 = ScriptedController::new(Script::Waypoints(w3), Time::ZERO, Pose2::IDENTITY);
         match tick(&mut c3, 0.0, Pose2::new(0.0, -0.005, 0.0)) {
             Some(DriveCommand::DriveDirect { left, right }) => {
                 assert!(right > left && left > 0.0, "{left} {right}")

@@ -10,7 +10,7 @@
 //! `merge_gap` (so that coplanar walls of different rooms stay apart). A merged plane's normal
 //! is the area-weighted mean of the two, as in the thesis, and its outline the hull of both.
 
-use crate::plane::{Plane, RansacConfig, ransac_all};
+use crate::geometry::plane::{Plane, RansacConfig, ransac_all};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 

@@ -1,22 +1,22 @@
 //! A 3D map from RGB-D keyframes (seed 000 §3.1): keyframes levelled by the floor, placed by
-//! a registration method ([`crate::registration`]: the variants of the thesis's Fig. 3.7 and
+//! a registration method ([`crate::mapping::registration`]: the variants of the thesis's Fig. 3.7 and
 //! a baseline) after the run, as the thesis does, and reduced to points and planes.
 //!
 //! A frame becomes a keyframe after the robot has travelled `keyframe_distance` or turned
 //! `keyframe_turn` since the last one. Its depth pixels (every `stride`-th in each direction)
 //! are back-projected in the camera's body frame, levelled by the floor found in them
-//! ([`crate::floor`]: height, pitch, roll), and moved to the robot's base frame by the
-//! camera's mount; its colour image gives features ([`crate::features`]). Frames without a
+//! ([`crate::perception::floor`]: height, pitch, roll), and moved to the robot's base frame by the
+//! camera's mount; its colour image gives features ([`crate::perception::features`]). Frames without a
 //! floor and pixels without valid depth are counted and skipped. [`RgbdMapper::build`] places
 //! the keyframes and keeps one point per voxel (the first point of a voxel keeps its colour;
 //! later ones add to its mean position).
 
-use crate::features::{Detector, grey};
-use crate::floor::{FloorConfig, Level, level, optical_to_body};
-use crate::polygons::{PolygonConfig, PolygonMap};
-use crate::registration::{
+use crate::mapping::polygons::{PolygonConfig, PolygonMap};
+use crate::mapping::registration::{
     EnvironmentMap, Keyframe, Method, RegistrationConfig, RegistrationCounts, place, register,
 };
+use crate::perception::features::{Detector, grey};
+use crate::perception::floor::{FloorConfig, Level, level, optical_to_body};
 use futago_msgs::Pose2;
 use futago_msgs::camera::RgbdFrame;
 use rand::SeedableRng;

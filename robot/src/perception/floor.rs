@@ -8,7 +8,7 @@
 //! correspondences; here it is computed in closed form from the floor's normal, which gives the
 //! same rotation (the one with no yaw that turns the normal onto z).
 
-use crate::plane::{Plane, RansacConfig, ransac};
+use crate::geometry::plane::{Plane, RansacConfig, ransac};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 

@@ -1,4 +1,5 @@
-//! Planes in point clouds: least-squares fits and RANSAC (Fischler & Bolles 1981), as seed 000
+//! Planes in point clouds: least-squares fits (a plane's Hesse form, and the normal of any
+//! dimension's best-fit hyperplane by PCA) and RANSAC (Fischler & Bolles 1981), as seed 000
 //! detects the floor (§3.1.1) and the planes it polygonises (§3.2.1).
 //!
 //! The thesis writes a plane as `a x + b y + c z = 1`, which cannot hold a plane through the
@@ -210,6 +211,48 @@ pub fn ransac_all(
     out
 }
 
+/// The unit normal of the least-squares plane through `points` (the scatter's eigenvector
+/// of least eigenvalue), or `None` when they do not span a plane.
+pub fn pca_normal<const K: usize>(points: &[[f64; K]]) -> Option<[f64; K]> {
+    if points.len() < K {
+        return None;
+    }
+    let n = points.len() as f64;
+    let mut mean = [0.0; K];
+    for p in points {
+        for k in 0..K {
+            mean[k] += p[k] / n;
+        }
+    }
+    let mut m = nalgebra::DMatrix::<f64>::zeros(K, K);
+    for p in points {
+        for a in 0..K {
+            for b in 0..K {
+                m[(a, b)] += (p[a] - mean[a]) * (p[b] - mean[b]);
+            }
+        }
+    }
+    let e = m.symmetric_eigen();
+    let (mut lo, mut hi) = (0, 0);
+    for k in 1..K {
+        if e.eigenvalues[k] < e.eigenvalues[lo] {
+            lo = k;
+        }
+        if e.eigenvalues[k] > e.eigenvalues[hi] {
+            hi = k;
+        }
+    }
+    // A line or a blob: the smallest spread must be well below the others.
+    if e.eigenvalues[hi].is_nan() || e.eigenvalues[hi] <= 0.0 {
+        return None;
+    }
+    let mut out = [0.0; K];
+    for (k, o) in out.iter_mut().enumerate() {
+        *o = e.eigenvectors[(k, lo)];
+    }
+    Some(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -306,5 +349,18 @@ mod tests {
         assert_eq!(axes, vec![0, 1, 2]);
         let total: usize = found.iter().map(|f| f.inliers.len()).sum();
         assert!((4400..=4500).contains(&total), "{total}");
+    }
+
+    #[test]
+    fn pca_normal_of_a_plane_and_of_a_line() {
+        let pts: Vec<[f64; 3]> = (0..20)
+            .map(|k| [k as f64 * 0.1, (k % 5) as f64 * 0.1, 0.5])
+            .collect();
+        let n = pca_normal(&pts).unwrap();
+        assert!((n[2].abs() - 1.0).abs() < 1e-9, "{n:?}");
+        let line: Vec<[f64; 2]> = (0..5).map(|k| [1.0, k as f64]).collect();
+        let n = pca_normal(&line).unwrap();
+        assert!((n[0].abs() - 1.0).abs() < 1e-9, "{n:?}");
+        assert!(pca_normal(&[[0.0, 0.0, 0.0]; 2]).is_none());
     }
 }

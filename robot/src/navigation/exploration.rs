@@ -3,7 +3,8 @@
 //! borders unknown space; connected frontier cells form a frontier, and the robot drives to the
 //! nearest cell of one long enough to matter, until none is left that it can reach.
 
-use crate::planner::{OCCUPIED, grid_path, obstacle_distance};
+use crate::geometry::grid::{OCCUPIED, obstacle_distance};
+use crate::navigation::planner::grid_path;
 use futago_msgs::grid::OccupancyGrid;
 
 /// The frontiers of `grid`: groups of 8-connected free cells with an unknown 4-neighbour,

@@ -1,7 +1,7 @@
 //! Autonomous navigation (written for futago): goals on a known map by seed 000's node graph
-//! and A* ([`crate::planner::RoadMap`]), or frontier exploration of the map SLAM is building
-//! ([`crate::exploration`]); either way the path is followed by seed 000's look-ahead arc
-//! controller ([`crate::pursuit`]), with two safety behaviours:
+//! and A* ([`planner::RoadMap`]), or frontier exploration of the map SLAM is building
+//! ([`exploration`]); either way the path is followed by seed 000's look-ahead arc
+//! controller ([`crate::control::pursuit`]), with two safety behaviours:
 //!
 //! - an obstacle in the laser scan inside the strip the robot is about to sweep stops it, and
 //!   it resumes when the strip is clear (seed 000 stops for people and resumes); after
@@ -9,12 +9,15 @@
 //! - a bumper press backs it off `backup_distance`, turning away from the pressed side, and it
 //!   plans again from where it ends up.
 
-use crate::exploration::path_to_frontier;
-use crate::planner::{PlannerConfig, RoadMap};
-use crate::pursuit::{FollowParams, PathFollower};
-use crate::script::PoseSource;
+pub mod exploration;
+pub mod planner;
+
+use crate::control::PoseSource;
+use crate::control::pursuit::{FollowParams, PathFollower};
+use exploration::path_to_frontier;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{BumpsAndDrops, DriveCommand, LaserScan, Pose2, Radius, Time};
+use planner::{PlannerConfig, RoadMap};
 use serde::Deserialize;
 
 /// Navigation parameters (`navigation.*`).
@@ -166,6 +169,22 @@ impl NavigateConfig {
 #[derive(Debug, Clone, PartialEq, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct ExploreConfig {}
+
+impl NavigateConfig {
+    /// Checks values the navigator cannot run with; returns `(key, expectation)` on error.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        if self.goals.is_empty() || self.goals.iter().flatten().any(|v| !v.is_finite()) {
+            return Err((
+                "goals".into(),
+                "expected at least one finite [x, y] point".into(),
+            ));
+        }
+        if self.laps == 0 {
+            return Err(("laps".into(), "expected at least one lap".into()));
+        }
+        Ok(())
+    }
+}
 
 /// What the navigator is asked to do.
 #[derive(Debug, Clone)]
@@ -384,7 +403,7 @@ impl Navigator {
     fn start_backing(&mut self, now: Time, away: f64) {
         let back = self.config.backup_distance / self.config.backup_speed;
         // A quarter-turn's worth of turning away: 30° at the turn speed.
-        let wheel_base = crate::pursuit::CREATE_WHEEL_BASE;
+        let wheel_base = crate::control::pursuit::CREATE_WHEEL_BASE;
         let turn = 30f64.to_radians() * wheel_base / 2.0 / self.config.turn_speed;
         self.mode = Mode::Backing(
             now + futago_msgs::Duration::from_secs(back),
@@ -490,7 +509,7 @@ fn mapped_obstacle_near(map: &OccupancyGrid, p: [f64; 2], cells: i64) -> bool {
         (i - cells..=i + cells).any(|a| {
             a >= 0 && b >= 0 && (a as usize) < map.width && (b as usize) < map.height && {
                 let c = map.get(a as usize, b as usize);
-                !(0..crate::planner::OCCUPIED).contains(&c)
+                !(0..crate::geometry::grid::OCCUPIED).contains(&c)
             }
         })
     })
@@ -601,7 +620,7 @@ mod tests {
 
     /// (v, ω) of a Create command.
     fn unicycle(cmd: &DriveCommand) -> (f64, f64) {
-        let b = crate::pursuit::CREATE_WHEEL_BASE;
+        let b = crate::control::pursuit::CREATE_WHEEL_BASE;
         match *cmd {
             DriveCommand::Drive { velocity, radius } => match radius {
                 Radius::Straight => (velocity, 0.0),

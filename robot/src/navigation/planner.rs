@@ -1,7 +1,5 @@
 //! Path planning on occupancy grids (written for futago).
 //!
-//! - [`obstacle_distance`]: each cell's distance to the nearest obstacle (chamfer transform),
-//!   which both planning and Monte Carlo localisation's likelihood field use.
 //! - [`RoadMap`]: seed 000's node graph (Ozaki 2012, §2.5): nodes at fixed intervals along the
 //!   boundary of the region within `wall_distance` of obstacles and along the boundary of the
 //!   region beyond `open_distance`, every node joined to the nodes within `connect_radius`
@@ -11,71 +9,11 @@
 //! - [`grid_path`]: Dijkstra over free cells with enough clearance to the nearest cell that a
 //!   predicate accepts, for goals that are regions (frontiers) rather than points.
 
+use crate::geometry::grid::{OCCUPIED, obstacle_distance};
 use futago_msgs::grid::OccupancyGrid;
 use serde::Deserialize;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
-
-/// Distance from each cell's centre to the nearest cell for which `obstacle` holds, m
-/// (two-pass chamfer transform with weights 1 and √2, within 8 % of Euclidean), capped at
-/// `cap`. Row-major like the grid.
-pub fn obstacle_distance(
-    grid: &OccupancyGrid,
-    obstacle: impl Fn(i8) -> bool,
-    cap: f64,
-) -> Vec<f32> {
-    let (w, h) = (grid.width, grid.height);
-    let big = 1e9f32;
-    let mut d: Vec<f32> = grid
-        .cells
-        .iter()
-        .map(|&c| if obstacle(c) { 0.0 } else { big })
-        .collect();
-    let (a, b) = (1.0f32, std::f32::consts::SQRT_2);
-    for j in 0..h {
-        for i in 0..w {
-            let k = j * w + i;
-            let mut v = d[k];
-            if i > 0 {
-                v = v.min(d[k - 1] + a);
-            }
-            if j > 0 {
-                v = v.min(d[k - w] + a);
-                if i > 0 {
-                    v = v.min(d[k - w - 1] + b);
-                }
-                if i + 1 < w {
-                    v = v.min(d[k - w + 1] + b);
-                }
-            }
-            d[k] = v;
-        }
-    }
-    for j in (0..h).rev() {
-        for i in (0..w).rev() {
-            let k = j * w + i;
-            let mut v = d[k];
-            if i + 1 < w {
-                v = v.min(d[k + 1] + a);
-            }
-            if j + 1 < h {
-                v = v.min(d[k + w] + a);
-                if i + 1 < w {
-                    v = v.min(d[k + w + 1] + b);
-                }
-                if i > 0 {
-                    v = v.min(d[k + w - 1] + b);
-                }
-            }
-            d[k] = v;
-        }
-    }
-    let r = grid.resolution as f32;
-    d.into_iter().map(|c| (c * r).min(cap as f32)).collect()
-}
-
-/// Occupancy at or above which a cell is an obstacle.
-pub const OCCUPIED: i8 = 50;
 
 /// Road-map parameters (`navigation.planner.*`).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -531,19 +469,6 @@ mod tests {
             }
         }
         g
-    }
-
-    #[test]
-    fn distance_transform_is_close_to_euclidean() {
-        let g = room();
-        let d = obstacle_distance(&g, |c| c >= OCCUPIED, 10.0);
-        // Cell (50, 60): centre (2.525, 3.025); nearest obstacle cell edge… the left wall's
-        // cell 0 centre is at 0.025: 2.5 m, the middle wall's cell 99 at 4.975: 2.45 m.
-        let v = d[60 * 200 + 50] as f64;
-        assert!((v - 2.45).abs() < 0.01, "{v}");
-        // Diagonal case: within the chamfer's 8 % of the Euclidean distance.
-        let v = d[20 * 200 + 20] as f64; // 1 m from both the left and the bottom border
-        assert!((v - 1.0).abs() < 0.08, "{v}");
     }
 
     #[test]

@@ -1,0 +1,6 @@
+//! Geometry the stack's modules share: distance transforms of occupancy grids ([`grid`]) and
+//! plane fits in point clouds ([`plane`]). Pose arithmetic and interpolation live with the pose
+//! type itself, in [`futago_msgs`], where the command's metrics and the log readers use them too.
+
+pub mod grid;
+pub mod plane;

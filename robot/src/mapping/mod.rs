@@ -1,0 +1,12 @@
+//! Building maps: 2D occupancy grids from laser scans ([`occupancy`]), scan matching
+//! ([`icp`], [`correlative`]), graph SLAM ([`slam`], [`pose_graph`]), and seed 000's 3D map
+//! from RGB-D keyframes ([`rgbd_map`], with [`registration`]'s RGBD-ICP and [`polygons`]).
+
+pub mod correlative;
+pub mod icp;
+pub mod occupancy;
+pub mod polygons;
+pub mod pose_graph;
+pub mod registration;
+pub mod rgbd_map;
+pub mod slam;
