@@ -8,7 +8,7 @@ use futago_msgs::Pose2;
 use futago_sim::create::CreateConfig;
 use futago_sim::lidar::LidarPreset;
 use futago_sim::render::{Intrinsics, Renderer};
-use futago_sim::{PhysicsConfig, Simulation, World};
+use futago_sim::{Movers, PhysicsConfig, Simulation, World};
 use glam::{Quat, Vec3};
 use rand::{Rng, SeedableRng};
 use rapier3d::math::Pose;
@@ -31,7 +31,15 @@ pub fn bench(s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> 
     bare.lidars.clear();
     let physics = run_in_memory(&bare, &opts)?;
 
-    let mut sim = Simulation::new(&s.world, &s.spec.physics, &s.spec.robot, &[], s.start, 0);
+    let mut sim = Simulation::new(
+        &s.world,
+        &s.spec.physics,
+        &s.spec.robot,
+        &[],
+        &Movers::default(),
+        s.start,
+        0,
+    );
     sim.step(None); // builds the query structure
     let origins: Vec<Vec3> = free_poses(&sim, &s.world, 256, 0.2)
         .iter()
@@ -170,6 +178,7 @@ pub fn bench_sensors(world: &World, poses: Option<Vec<Pose>>, b: &SensorBench) -
         &PhysicsConfig::default(),
         &CreateConfig::default(),
         &[],
+        &Movers::default(),
         Pose2::new(1e4, 1e4, 0.0),
         0,
     );
@@ -276,6 +285,7 @@ pub fn bench_mcl(world: &World, start: Pose2, particles: usize, updates: usize) 
         &PhysicsConfig::default(),
         &CreateConfig::default(),
         &[(lidar.clone(), spec)],
+        &Movers::default(),
         start,
         0,
     );

@@ -54,6 +54,10 @@ pub struct Outcome {
     pub distance_travelled: f64,
     pub final_truth: Pose2,
     pub final_odometry: Pose2,
+    /// Each joint's angle at the end, rad, in `movers.joints` order.
+    pub final_joints: Vec<f64>,
+    /// Each agent's pose at the end, in `movers.agents` order.
+    pub final_agents: Vec<Pose2>,
     /// Each node's entries of the summary, in node order.
     pub entries: Vec<(String, Value)>,
     /// The files the nodes wrote (relative to the run's folder).
@@ -162,6 +166,13 @@ fn simulate(
         })
         .collect();
     let mut bus = Bus::new(s.start, published("pose/"), subscriptions);
+    let (has_agents, has_joints) = (!s.movers.agents.is_empty(), !s.movers.joints.is_empty());
+    bus.joints = s
+        .movers
+        .joints
+        .iter()
+        .map(|j| (j.name.clone(), j.start_deg.to_radians()))
+        .collect();
     let truth_nodes = consumers(&streams, "truth");
     let odometry_nodes = consumers(&streams, "odometry");
     let laser_nodes: Vec<Vec<usize>> = s
@@ -180,6 +191,7 @@ fn simulate(
         &spec.physics,
         &spec.robot,
         &s.lidars,
+        &s.movers,
         s.start,
         seed,
     );
@@ -191,13 +203,22 @@ fn simulate(
         .collect();
     let mut renderer = if camera_nodes.iter().any(|c| !c.is_empty()) {
         Some(
-            Renderer::new(&scene(&s.world, &spec.robot, s.start))
+            Renderer::new(&scene(&s.world, &spec.robot, &s.movers.agents, s.start))
                 .context("starting the camera renderer")?,
         )
     } else {
         None
     };
     let mut camera_frames = vec![0u64; kinects.len()];
+    let camera_joints: Vec<Option<usize>> = s
+        .cameras
+        .iter()
+        .map(|c| {
+            c.joint
+                .as_ref()
+                .and_then(|j| s.movers.joints.iter().position(|k| &k.name == j))
+        })
+        .collect();
     let mut odo = OdometryIntegrator::new(s.start);
     let gt_period = Duration::from_secs(1.0 / spec.output.groundtruth_rate);
     let end = Time::from_secs(duration);
@@ -236,6 +257,13 @@ fn simulate(
         if now.nanos() >= next_gt * gt_period.0 {
             next_gt += 1;
             bus.truth = sim.robot_pose();
+            if has_agents {
+                bus.agents = sim
+                    .agent_poses()
+                    .into_iter()
+                    .map(|(n, p)| (n.to_string(), p))
+                    .collect();
+            }
             for &i in &truth_nodes {
                 nodes[i].call(|node| node.on_truth(&bus))?;
             }
@@ -263,6 +291,11 @@ fn simulate(
         bus.wheel_speeds = sim.wheel_speeds();
         bus.bumps = out.bumps.unwrap_or_default();
         if let Some(o) = out.odometry {
+            if has_joints {
+                for (slot, j) in bus.joints.iter_mut().zip(sim.joints()) {
+                    slot.1 = j.angle();
+                }
+            }
             odo.integrate(&o);
             bus.push_odometry(now, odo.pose);
             for &i in &odometry_nodes {
@@ -292,6 +325,11 @@ fn simulate(
                         r.set_poses(&poses)?;
                         *posed.insert(poses[poses.len() - 1])
                     }
+                };
+                // A camera on a joint: its mount is on the joint's frame.
+                let base = match camera_joints[c] {
+                    Some(j) => base * sim.joints()[j].transform(),
+                    None => base,
                 };
                 cam.take();
                 let frame = CameraFrame {
@@ -325,6 +363,10 @@ fn simulate(
                 n.call(|node| node.on_control(&mut bus))?;
             }
             cmd = bus.command.take();
+            for (name, angle) in bus.joint_commands.drain(..) {
+                sim.command_joint(&name, angle)
+                    .map_err(|e| anyhow::anyhow!("a node's joint/{name} command: {e}"))?;
+            }
         }
         if let Some(b) = &bar
             && sim.counters().steps.is_multiple_of(200)
@@ -373,6 +415,8 @@ fn simulate(
         distance_travelled: distance,
         final_truth: sim.robot_pose(),
         final_odometry: odo.pose,
+        final_joints: sim.joints().iter().map(|j| j.angle()).collect(),
+        final_agents: sim.agent_poses().into_iter().map(|(_, p)| p).collect(),
         entries,
         files,
         map,
@@ -447,6 +491,35 @@ pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
         "laser_rays": o.laser_rays,
         "files": files,
     });
+    // Only scenarios that have them carry these keys.
+    for (i, (c, _)) in s.lidars.iter().enumerate() {
+        if let Some(j) = &c.joint {
+            v["lidar"][i]["joint"] = json!(j);
+        }
+    }
+    for (i, c) in s.cameras.iter().enumerate() {
+        if let Some(j) = &c.joint {
+            v["camera"][i]["joint"] = json!(j);
+        }
+    }
+    if !s.movers.joints.is_empty() {
+        v["joints"] = s
+            .movers
+            .joints
+            .iter()
+            .zip(&o.final_joints)
+            .map(|(j, a)| json!({ "name": j.name, "mode": j.mode, "final_angle_deg": a.to_degrees() }))
+            .collect();
+    }
+    if !s.movers.agents.is_empty() {
+        v["agents"] = s
+            .movers
+            .agents
+            .iter()
+            .zip(&o.final_agents)
+            .map(|(a, p)| json!({ "name": a.name, "final_pose": [p.x, p.y, p.theta] }))
+            .collect();
+    }
     for (k, e) in &o.entries {
         v[k] = e.clone();
     }

@@ -14,11 +14,13 @@ use futago_robot::mapping::rgbd_map::RgbdMapConfig;
 use futago_robot::mapping::slam::SlamConfig;
 use futago_robot::navigation::NavigationConfig;
 use futago_robot::navigation::{ExploreConfig, NavigateConfig};
+use futago_sim::agent::AgentConfig;
 use futago_sim::config::{SpecError, check_name, check_positive, check_range, load_toml};
 use futago_sim::create::CreateConfig;
+use futago_sim::joint::JointConfig;
 use futago_sim::kinect::{KinectConfig, KinectSpec};
 use futago_sim::lidar::{LidarConfig, LidarSpec};
-use futago_sim::{PhysicsConfig, World};
+use futago_sim::{Movers, PhysicsConfig, World};
 use serde::Deserialize;
 use std::path::Path;
 
@@ -50,6 +52,12 @@ pub struct ScenarioSpec {
     /// RGB-D cameras (Kinect models); rendered only when something consumes their frames.
     #[serde(default)]
     pub camera: Vec<KinectConfig>,
+    /// Joints on the robot's base that sensors ride on (turntables, tilt units).
+    #[serde(default)]
+    pub joint: Vec<JointConfig>,
+    /// Bodies that walk the world besides the robot, seen by every sensor.
+    #[serde(default)]
+    pub agent: Vec<AgentConfig>,
     /// Monte Carlo localisation on the world's map, from its laser's scans.
     pub localization: Option<LocalizationSpec>,
     /// Laser SLAM in the loop, from its laser's scans; typed by [`slam_config`].
@@ -186,6 +194,8 @@ pub struct Scenario {
     pub lidars: Vec<(LidarConfig, LidarSpec)>,
     /// Resolved camera models, in `spec.camera` order.
     pub cameras: Vec<KinectSpec>,
+    /// The joints and agents, checked.
+    pub movers: Movers,
     /// The scenario as run: the file's table with its overlays laid over it.
     pub config: toml::Table,
     /// The overlays laid over the file, in order.
@@ -418,14 +428,31 @@ fn resolve_laser(
     lidars: &[(LidarConfig, LidarSpec)],
 ) -> Result<String, SpecError> {
     let names: Vec<&str> = lidars.iter().map(|(c, _)| c.name.as_str()).collect();
+    let planar = |n: &str| -> Result<String, SpecError> {
+        match lidars
+            .iter()
+            .find(|(c, _)| c.name == n)
+            .and_then(|(c, _)| c.joint.as_ref())
+        {
+            Some(j) => Err(SpecError::new(
+                path,
+                format!("{key}.laser"),
+                format!(
+                    "laser `{n}` rides on joint `{j}`, so its scans do not lie in one plane of the \
+                     base; `{key}` needs a laser fixed to the base"
+                ),
+            )),
+            None => Ok(n.to_string()),
+        }
+    };
     match name {
-        Some(n) if names.contains(&n.as_str()) => Ok(n.clone()),
+        Some(n) if names.contains(&n.as_str()) => planar(n),
         Some(n) => Err(SpecError::new(
             path,
             format!("{key}.laser"),
             format!("no laser is named `{n}`; the scenario's lasers are {names:?}"),
         )),
-        None if names.len() == 1 => Ok(names[0].to_string()),
+        None if names.len() == 1 => planar(names[0]),
         None => Err(SpecError::new(
             path,
             format!("{key}.laser"),
@@ -536,6 +563,52 @@ impl Scenario {
                 ));
             }
             cameras.push(s);
+        }
+        for (i, j) in spec.joint.iter().enumerate() {
+            j.validate(path, &format!("joint[{i}]"))?;
+            if spec.joint[..i].iter().any(|o| o.name == j.name) {
+                return Err(SpecError::new(
+                    path,
+                    format!("joint[{i}].name"),
+                    format!("joint name `{}` is used twice", j.name),
+                ));
+            }
+        }
+        let joint_names: Vec<&str> = spec.joint.iter().map(|j| j.name.as_str()).collect();
+        let mounted = spec
+            .lidar
+            .iter()
+            .enumerate()
+            .map(|(i, l)| (format!("lidar[{i}].joint"), &l.joint))
+            .chain(
+                spec.camera
+                    .iter()
+                    .enumerate()
+                    .map(|(i, c)| (format!("camera[{i}].joint"), &c.joint)),
+            );
+        for (key, j) in mounted {
+            if let Some(j) = j
+                && !joint_names.contains(&j.as_str())
+            {
+                return Err(SpecError::new(
+                    path,
+                    key,
+                    format!("no joint is named `{j}`; the scenario's joints are {joint_names:?}"),
+                ));
+            }
+        }
+        for (i, a) in spec.agent.iter().enumerate() {
+            a.validate(path, &format!("agent[{i}]"))?;
+            if spec.agent[..i].iter().any(|o| o.name == a.name) || a.name == "robot" {
+                return Err(SpecError::new(
+                    path,
+                    format!("agent[{i}].name"),
+                    format!(
+                        "agent name `{}` is used twice (or is `robot`, the robot's own)",
+                        a.name
+                    ),
+                ));
+            }
         }
         if spec.output.rgbd_dataset && cameras.is_empty() {
             return Err(SpecError::new(
@@ -827,6 +900,18 @@ impl Scenario {
                 format!("{bounds}; found {}", at(&start)),
             ));
         }
+        for (i, a) in spec.agent.iter().enumerate() {
+            for (k, p) in a.path.iter().enumerate() {
+                let p = Pose2::new(p[0], p[1], 0.0);
+                if !inside(&p) {
+                    return Err(SpecError::new(
+                        path,
+                        format!("agent[{i}].path[{k}]"),
+                        format!("{bounds}; found {}", at(&p)),
+                    ));
+                }
+            }
+        }
         for (i, e) in spec.event.iter().enumerate() {
             let p = e.teleport.pose();
             if !inside(&p) {
@@ -837,6 +922,10 @@ impl Scenario {
                 ));
             }
         }
+        let movers = Movers {
+            joints: spec.joint.clone(),
+            agents: spec.agent.clone(),
+        };
         Ok(Scenario {
             controller,
             spec,
@@ -844,6 +933,7 @@ impl Scenario {
             start,
             lidars,
             cameras,
+            movers,
             config: toml::Table::new(),
             overlays: Vec::new(),
             rgbd_map,

@@ -403,6 +403,35 @@ fn bad_input_names_the_file_and_key_and_writes_nothing() {
             "does not exist",
         ),
         (
+            good.clone() + "[[lidar]]\npreset = \"urg-04lx\"\njoint = \"table\"\n",
+            "lidar[0].joint",
+            "no joint is named `table`",
+        ),
+        (
+            good.clone()
+                + "[[lidar]]\npreset = \"urg-04lx\"\njoint = \"table\"\n[[joint]]\nname = \"table\"\nrate_deg = 30.0\n[slam]\n",
+            "slam.laser",
+            "rides on joint `table`",
+        ),
+        (
+            good.clone()
+                + "[[joint]]\nname = \"tilt\"\nmode = \"oscillate\"\nrate_deg = 30.0\nmin_deg = 10.0\nmax_deg = 5.0\n",
+            "joint[0].max_deg",
+            "above min_deg",
+        ),
+        (
+            good.clone()
+                + "[[agent]]\nname = \"p\"\npath = [[1.0, 1.0], [1e6, 1.0]]\nspeed = 1.0\n",
+            "agent[0].path[1]",
+            "world",
+        ),
+        (
+            good.clone()
+                + "[[agent]]\nname = \"robot\"\npath = [[1.0, 1.0], [2.0, 1.0]]\nspeed = 1.0\n",
+            "agent[0].name",
+            "robot",
+        ),
+        (
             good.clone() + "[robot]\nwheel_base = 2.0\n",
             "robot.wheel_base",
             "expected",
@@ -1889,4 +1918,59 @@ fn inputs_that_crashed_are_refused_by_name() {
             .unwrap()
             .contains("(laser `rear`)")
     );
+}
+
+#[test]
+fn agents_leave_their_ground_truth_and_sensors_ride_joints() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let world = root().join("worlds/lab.toml");
+    let scenario = write(
+        d,
+        "movers.toml",
+        &format!(
+            "name = \"movers\"\nworld = {world:?}\nduration = 3.0\nstart = \"centre\"\n\
+             [controller]\ntype = \"segments\"\nsegments = [{{ duration = 3.0, velocity = 0.0 }}]\n\
+             [[lidar]]\nname = \"front\"\npreset = \"urg-04lx\"\n\
+             [[lidar]]\nname = \"vertical\"\npreset = \"utm-30lx\"\nxyz = [0.0, 0.0, 0.5]\n\
+             rpy_deg = [90.0, 0.0, 0.0]\njoint = \"table\"\n\
+             [[joint]]\nname = \"table\"\nrate_deg = 36.0\n\
+             [[agent]]\nname = \"walker\"\npath = [[2.0, 1.0], [4.0, 1.0]]\nspeed = 1.0\n\
+             mode = \"back_and_forth\"\n"
+        ),
+    );
+    let out = d.join("run");
+    run_for(&scenario, &out, None);
+    let text = std::fs::read_to_string(out.join("agents/walker.txt")).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(' ').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    // 3 s at the 50 Hz ground-truth rate.
+    assert!(rows.len() >= 150, "{}", rows.len());
+    for r in &rows {
+        // 1 m/s from x = 2 to 4 and back, on y = 1.
+        let t = r[0];
+        let s = t % 4.0;
+        let x = if s <= 2.0 { 2.0 + s } else { 6.0 - s };
+        assert!(
+            (r[1] - x).abs() < 1e-6 && (r[2] - 1.0).abs() < 1e-9,
+            "{r:?}"
+        );
+    }
+    let sum = summary(&out);
+    assert!(
+        sum["files"]["agents/"]["sha256"].is_string(),
+        "{}",
+        sum["files"]
+    );
+    assert_eq!(sum["agents"][0]["name"], "walker");
+    // 36°/s for 3 s.
+    let angle = sum["joints"][0]["final_angle_deg"].as_f64().unwrap();
+    assert!((angle - 108.0).abs() < 1e-6, "{angle}");
+    // Both lasers scanned: the jointed one at the UTM-30LX's 40 Hz.
+    let lidars = sum["lidar"].as_array().unwrap();
+    assert_eq!(lidars.len(), 2);
+    assert!(lidars[1]["scans"].as_u64().unwrap() >= 115, "{}", lidars[1]);
 }

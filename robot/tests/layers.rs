@@ -30,7 +30,12 @@ fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
 /// The group a file under `src` belongs to: its folder, or its name for a top-level file.
 fn group_of(src: &Path, file: &Path) -> String {
     let rel = file.strip_prefix(src).unwrap();
-    let first = rel.components().next().unwrap().as_os_str().to_string_lossy();
+    let first = rel
+        .components()
+        .next()
+        .unwrap()
+        .as_os_str()
+        .to_string_lossy();
     first.trim_end_matches(".rs").to_string()
 }
 
@@ -70,14 +75,17 @@ fn groups_depend_only_on_groups_below_them() {
             }
         }
     }
-    assert!(seen > 20, "found only {seen} crate paths: is the scan broken?");
+    assert!(
+        seen > 20,
+        "found only {seen} crate paths: is the scan broken?"
+    );
     assert!(bad.is_empty(), "{}", bad.join("\n"));
 }
 
 #[test]
 fn lib_lists_the_groups_in_layer_order() {
-    let lib = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("src/lib.rs"))
-        .unwrap();
+    let lib =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("src/lib.rs")).unwrap();
     let mut order: Vec<&str> = lib
         .lines()
         .filter_map(|l| l.strip_prefix("//! - [`"))

@@ -101,6 +101,10 @@ pub struct KinectConfig {
     pub rate: Option<f64>,
     #[serde(default)]
     pub noise: NoiseConfig,
+    /// The joint (`[[joint]]` name) the camera rides on; none: fixed to the base. `xyz` and
+    /// `rpy_deg` are then its mount at the joint's zero angle.
+    #[serde(default)]
+    pub joint: Option<String>,
 }
 
 fn default_name() -> String {
@@ -124,8 +128,11 @@ pub struct KinectSpec {
     pub range_max: f64,
     pub rate: f64,
     pub noise: NoiseConfig,
-    /// Camera body frame (x forward, y left, z up) in the robot base frame.
+    /// Camera body frame (x forward, y left, z up) in the robot base frame (on a joint: in
+    /// the joint's frame, which is the base frame at the joint's zero angle).
     pub mount: Pose,
+    /// The joint it rides on, if any.
+    pub joint: Option<String>,
 }
 
 impl KinectConfig {
@@ -143,6 +150,7 @@ impl KinectConfig {
             range_max: None,
             rate: None,
             noise: NoiseConfig::default(),
+            joint: None,
         }
     }
 
@@ -200,6 +208,7 @@ impl KinectConfig {
             rate,
             noise: *n,
             mount,
+            joint: self.joint.clone(),
         })
     }
 }

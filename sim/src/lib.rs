@@ -4,6 +4,8 @@
 //!   textures, glTF import/export and ground-truth exports;
 //! - [`sim`]: the running [`Simulation`] (rapier state, clock, sensors);
 //! - [`create`]: the iRobot Create's drive, wheel traction and odometry;
+//! - [`joint`]: turntables and tilt units on the base that carry sensors;
+//! - [`agent`]: moving bodies besides the robot (people walking a path);
 //! - [`kinect`]: the Kinect v1 RGB-D camera model and its depth noise;
 //! - [`lidar`]: ray-cast laser range finders;
 //! - [`noise`]: seeded random streams per noise source;
@@ -13,8 +15,10 @@
 //! The simulator knows nothing of the robot stack: it takes [`futago_msgs::DriveCommand`]s and
 //! produces sensor messages.
 
+pub mod agent;
 pub mod config;
 pub mod create;
+pub mod joint;
 pub mod kinect;
 pub mod lidar;
 pub mod noise;
@@ -26,5 +30,5 @@ pub mod world;
 pub use futago_render as render;
 
 pub use config::SpecError;
-pub use sim::{PhysicsConfig, Simulation, StepOutput};
+pub use sim::{Movers, PhysicsConfig, Simulation, StepOutput};
 pub use world::World;

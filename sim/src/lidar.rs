@@ -143,6 +143,10 @@ pub struct LidarConfig {
     /// Cast each beam at its own time (true) or the whole scan at once (false).
     #[serde(default = "yes")]
     pub sweep: bool,
+    /// The joint (`[[joint]]` name) the laser rides on; none: fixed to the base. `xyz` and
+    /// `rpy_deg` are then its mount at the joint's zero angle.
+    #[serde(default)]
+    pub joint: Option<String>,
 }
 
 fn default_name() -> String {
@@ -180,6 +184,7 @@ impl LidarConfig {
             sigma_rel: None,
             dropout: 0.0,
             sweep: true,
+            joint: None,
         }
     }
 

@@ -5,8 +5,10 @@
 //! sensor messages fell due in it; sensors run at their own rates on the simulation clock, so
 //! a run depends only on the world, the configuration, the seed and the commands given.
 
+use crate::agent::AgentConfig;
 use crate::config::{SpecError, check_range};
 use crate::create::{CreateConfig, CreateDrive, GRAVITY, PlanarVelocity, wheel_traction};
+use crate::joint::{Joint, JointConfig};
 use crate::lidar::{Lidar, LidarConfig};
 use crate::noise::stream;
 use crate::render::Scene;
@@ -69,6 +71,14 @@ pub struct Counters {
     pub laser_rays: u64,
 }
 
+/// What moves besides the robot's wheels: joints on the robot's base that carry sensors, and
+/// agents walking in the world. Sensors name their joint (`LidarConfig::joint`).
+#[derive(Debug, Clone, Default)]
+pub struct Movers {
+    pub joints: Vec<JointConfig>,
+    pub agents: Vec<AgentConfig>,
+}
+
 /// The state of a simulation of one Create in a world.
 pub struct Simulation {
     physics: PhysicsWorld,
@@ -79,6 +89,11 @@ pub struct Simulation {
     drive: CreateDrive,
     yaw_inertia: f64,
     lidars: Vec<Lidar>,
+    /// The joint each laser rides on, if any (index into `joints`).
+    lidar_joints: Vec<Option<usize>>,
+    joints: Vec<Joint>,
+    /// Each agent and its kinematic body.
+    agents: Vec<(AgentConfig, RigidBodyHandle)>,
     /// Rigid body of each world object (fixed bodies for static ones).
     object_bodies: Vec<RigidBodyHandle>,
     stream_period: Duration,
@@ -99,13 +114,15 @@ const ROBOT_GROUP: Group = Group::GROUP_3;
 const ROBOT_SEGMENTS: u32 = 32;
 
 impl Simulation {
-    /// Builds the rapier state from `world`, places the robot at `start` and seeds every noise
-    /// stream from `seed`.
+    /// Builds the rapier state from `world` and `movers`, places the robot at `start` and seeds
+    /// every noise stream from `seed`. A laser whose `joint` names no joint of `movers` is
+    /// fixed to the base (the scenario loader refuses that case with the file and key).
     pub fn new(
         world: &World,
         physics: &PhysicsConfig,
         robot: &CreateConfig,
         lidars: &[(LidarConfig, crate::lidar::LidarSpec)],
+        movers: &Movers,
         start: Pose2,
         seed: u64,
     ) -> Simulation {
@@ -135,6 +152,28 @@ impl Simulation {
                 p.colliders.insert_with_parent(cb.build(), h, &mut p.bodies);
             }
             object_bodies.push(h);
+        }
+        // Agents: kinematic upright prisms, posed by their paths.
+        let mut agents = Vec::with_capacity(movers.agents.len());
+        for a in &movers.agents {
+            let at = a.pose_at(Time::ZERO);
+            let body = RigidBodyBuilder::kinematic_position_based()
+                .pose(agent_pose(a, at))
+                .build();
+            let h = p.bodies.insert(body);
+            let hh = (a.height / 2.0) as f32;
+            let hull = SharedShape::convex_hull(&TriMesh::prism_vertices(
+                a.radius as f32,
+                hh,
+                ROBOT_SEGMENTS,
+            ))
+            .expect("a prism has a hull");
+            let col = ColliderBuilder::new(hull)
+                .friction(0.3)
+                .translation(Vec3::new(0.0, 0.0, hh))
+                .build();
+            p.colliders.insert_with_parent(col, h, &mut p.bodies);
+            agents.push((a.clone(), h));
         }
         // The robot: planar (z, roll and pitch locked), moved by its wheels, not by gravity.
         let m = robot.mass as f32;
@@ -185,6 +224,15 @@ impl Simulation {
                 stream(seed, "robot.encoder.right"),
             ],
         );
+        let joints: Vec<Joint> = movers.joints.iter().map(Joint::new).collect();
+        let lidar_joints = lidars
+            .iter()
+            .map(|(c, _)| {
+                c.joint
+                    .as_ref()
+                    .and_then(|j| joints.iter().position(|k| &k.config.name == j))
+            })
+            .collect();
         let lidars = lidars
             .iter()
             .map(|(c, s)| Lidar::new(c, s.clone(), stream(seed, &format!("lidar.{}", c.name))))
@@ -200,6 +248,9 @@ impl Simulation {
             drive,
             yaw_inertia,
             lidars,
+            lidar_joints,
+            joints,
+            agents,
             object_bodies,
             stream_period: Duration::from_secs(robot.stream_period),
             next_stream: 1,
@@ -281,11 +332,47 @@ impl Simulation {
     }
 
     /// Current pose of every body a camera sees, in [`scene`] order: the world's objects,
-    /// then the robot.
+    /// the agents, then the robot.
     pub fn scene_poses(&self) -> Vec<Pose> {
         let mut poses = self.object_poses();
+        poses.extend(
+            self.agents
+                .iter()
+                .map(|(_, h)| *self.physics.bodies[*h].position()),
+        );
         poses.push(*self.physics.bodies[self.robot].position());
         poses
+    }
+
+    /// The joints, in [`Movers::joints`] order, at their current angles.
+    pub fn joints(&self) -> &[Joint] {
+        &self.joints
+    }
+
+    /// Asks joint `name` to turn to `angle` (rad). Errors when no joint has that name or the
+    /// joint does not take commands.
+    pub fn command_joint(&mut self, name: &str, angle: f64) -> Result<(), String> {
+        let j = self
+            .joints
+            .iter_mut()
+            .find(|j| j.config.name == name)
+            .ok_or_else(|| format!("no joint named `{name}`"))?;
+        if j.command(angle) {
+            Ok(())
+        } else {
+            Err(format!(
+                "joint `{name}` moves by itself ({:?}); only `command` joints take angles",
+                j.config.mode
+            ))
+        }
+    }
+
+    /// Every agent's true pose, in [`Movers::agents`] order.
+    pub fn agent_poses(&self) -> Vec<(&str, Pose2)> {
+        self.agents
+            .iter()
+            .map(|(a, _)| (a.name.as_str(), a.pose_at(self.time)))
+            .collect()
     }
 
     /// Latest bumper and wheel-drop state.
@@ -409,9 +496,16 @@ impl Simulation {
             true,
         );
         body.set_angvel(Vec3::new(0.0, 0.0, v.yaw_rate as f32), true);
+        let next = self.time + self.dt;
+        for (a, h) in &self.agents {
+            self.physics.bodies[*h].set_next_kinematic_position(agent_pose(a, a.pose_at(next)));
+        }
         self.physics.step();
-        self.time = self.time + self.dt;
+        self.time = next;
         self.counters.steps += 1;
+        for j in &mut self.joints {
+            j.advance(self.time, dt);
+        }
 
         let (bl, br) = self.bumpers();
         if (bl || br) && !self.bumps.bumped() {
@@ -441,7 +535,10 @@ impl Simulation {
             .query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
         let mut rays = 0u64;
         for (i, l) in self.lidars.iter_mut().enumerate() {
-            let laser_pose = base * l.mount;
+            let laser_pose = match self.lidar_joints[i] {
+                Some(j) => base * self.joints[j].transform() * l.mount,
+                None => base * l.mount,
+            };
             if let Some(scan) = l.update(self.time, &laser_pose, |o, d, max| {
                 rays += 1;
                 qp.cast_ray(&Ray::new(o, d), max, true).map(|(_, t)| t)
@@ -480,10 +577,43 @@ pub fn robot_parts(robot: &CreateConfig) -> Vec<(Material, TriMesh)> {
     )]
 }
 
-/// What a camera sees: the world's objects in order, then the robot (posed by
+/// An agent's body pose from its planar pose: upright, on the floor.
+fn agent_pose(_a: &AgentConfig, p: Pose2) -> Pose {
+    Pose::from_parts(
+        Vec3::new(p.x as f32, p.y as f32, 0.0),
+        Quat::from_rotation_z(p.theta as f32),
+    )
+}
+
+/// An agent's render mesh: the prism of its collider, in its colour.
+pub fn agent_parts(a: &AgentConfig) -> Vec<(Material, TriMesh)> {
+    let hh = (a.height / 2.0) as f32;
+    let body = TriMesh::prism(a.radius as f32, hh, ROBOT_SEGMENTS, UvMap::Fit).transformed(
+        Quat::IDENTITY,
+        Vec3::new(0.0, 0.0, hh),
+        1.0,
+    );
+    vec![(
+        Material {
+            name: format!("agent.{}", a.name),
+            color: a.color,
+            texture: None,
+        },
+        body,
+    )]
+}
+
+/// What a camera sees: the world's objects in order, the agents, then the robot (posed by
 /// [`Simulation::scene_poses`]).
-pub fn scene(world: &World, robot: &CreateConfig, start: Pose2) -> Scene {
+pub fn scene(world: &World, robot: &CreateConfig, agents: &[AgentConfig], start: Pose2) -> Scene {
     let mut scene = world.scene();
+    for a in agents {
+        scene.add_body(
+            &a.name,
+            agent_pose(a, a.pose_at(Time::ZERO)),
+            agent_parts(a),
+        );
+    }
     scene.add_body(
         "robot",
         Pose::from_parts(

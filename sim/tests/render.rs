@@ -350,6 +350,7 @@ fn seed000_kinect_gives_qvga_depth_registered_to_vga_colour_within_its_range() {
     let mut r = Renderer::new(&futago_sim::sim::scene(
         &world,
         &robot,
+        &[],
         Pose2::new(1.0, 2.0, 0.0),
     ))
     .unwrap();
@@ -388,4 +389,56 @@ fn seed000_kinect_gives_qvga_depth_registered_to_vga_colour_within_its_range() {
         view.data.iter().all(|&z| z == 0.0 || z > 0.3),
         "the camera sees the robot"
     );
+}
+
+#[test]
+fn cameras_see_walking_agents_where_the_lasers_do() {
+    use futago_sim::agent::{AgentConfig, PathMode};
+    let world = box_room(8.0, 6.0, "");
+    let agents = vec![AgentConfig {
+        name: "walker".into(),
+        path: vec![[5.0, 1.0], [5.0, 5.0]],
+        speed: 1.2,
+        mode: PathMode::BackAndForth,
+        start_time: 0.0,
+        radius: 0.25,
+        height: 1.7,
+        color: [0.6, 0.3, 0.3],
+    }];
+    let movers = futago_sim::Movers {
+        joints: vec![],
+        agents: agents.clone(),
+    };
+    let start = Pose2::new(1.0, 3.0, 0.0);
+    let mut s = futago_sim::Simulation::new(
+        &world,
+        &futago_sim::PhysicsConfig::default(),
+        &CreateConfig::default(),
+        &[],
+        &movers,
+        start,
+        1,
+    );
+    let mut r = Renderer::new(&futago_sim::sim::scene(
+        &world,
+        &CreateConfig::default(),
+        &agents,
+        start,
+    ))
+    .unwrap();
+    let intr = kinect(160, 120);
+    let p = cam(1.5, 3.0, 0.8, 0.0, 0.0);
+    for _ in 0..3 {
+        for _ in 0..200 {
+            s.step(None);
+        }
+        r.set_poses(&s.scene_poses()).unwrap();
+        let depth = r.render_depth(&intr, &p).unwrap();
+        let cast = ray_cast_depth(&s, &intr, &p);
+        let (frac, valid) = agreement(&depth, &cast);
+        assert!(frac >= 0.995, "{:.3} % of {valid} agree", frac * 100.0);
+        // The agent is in view: some pixels are nearer than the far wall (6.5 m ahead).
+        let near = depth.data.iter().filter(|&&d| d > 0.0 && d < 4.0).count();
+        assert!(near > 100, "the agent covers only {near} pixels");
+    }
 }

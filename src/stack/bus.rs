@@ -28,6 +28,13 @@ pub struct Bus {
     pub bumps: BumpsAndDrops,
     /// The drive command published at the last control tick, until the loop takes it.
     pub command: Option<DriveCommand>,
+    /// Each agent's true pose, at the ground-truth rate: for recorders and scorers only.
+    pub agents: Vec<(String, Pose2)>,
+    /// Each joint's angle, rad, as its encoder reports it with the Create's sensor stream.
+    pub joints: Vec<(String, f64)>,
+    /// Angles (rad) asked of `command` joints at the last control tick (`joint/NAME`), until
+    /// the loop takes them.
+    pub joint_commands: Vec<(String, f64)>,
     history: VecDeque<(Time, Pose2)>,
     estimates: BTreeMap<String, Option<(Pose2, Pose2)>>,
     maps: BTreeMap<String, (Time, Arc<OccupancyGrid>)>,
@@ -50,6 +57,9 @@ impl Bus {
             wheel_speeds: (0.0, 0.0),
             bumps: BumpsAndDrops::default(),
             command: None,
+            agents: Vec::new(),
+            joints: Vec::new(),
+            joint_commands: Vec::new(),
             history: VecDeque::from([(Time::ZERO, start)]),
             estimates: estimates.into_iter().map(|t| (t, None)).collect(),
             maps: BTreeMap::new(),

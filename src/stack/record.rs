@@ -18,6 +18,9 @@ pub const GROUNDTRUTH_FILE: &str = "groundtruth.txt";
 pub const ODOMETRY_FILE: &str = "odometry.txt";
 /// The CARMEN log of odometry, scans and true poses.
 pub const CARMEN_FILE: &str = "scans.clf";
+/// The folder of the agents' true trajectories (TUM), one `NAME.txt` each, at the
+/// ground-truth rate.
+pub const AGENTS_DIR: &str = "agents";
 
 fn create(dir: &Path, name: &str) -> Result<BufWriter<File>> {
     Ok(BufWriter::new(
@@ -41,6 +44,22 @@ pub fn recorders(s: &Scenario, dir: &Path) -> Result<Vec<Box<dyn Node>>> {
             line: String::new(),
         }),
     ];
+    if !s.movers.agents.is_empty() {
+        std::fs::create_dir_all(dir.join(AGENTS_DIR))
+            .with_context(|| format!("creating {AGENTS_DIR}/"))?;
+        let files = s
+            .movers
+            .agents
+            .iter()
+            .map(|a| create(dir, &format!("{AGENTS_DIR}/{}.txt", a.name)))
+            .collect::<Result<Vec<_>>>()?;
+        out.push(Box::new(AgentRecorder {
+            names: s.movers.agents.iter().map(|a| a.name.clone()).collect(),
+            files,
+            scenario: s.spec.name.clone(),
+            line: String::new(),
+        }));
+    }
     if s.spec.output.carmen {
         out.push(Box::new(CarmenRecorder {
             file: create(dir, CARMEN_FILE)?,
@@ -184,6 +203,60 @@ impl Node for TumRecorder {
             }
             Source::Truth => Ok(Metrics::default()),
         }
+    }
+}
+
+/// `agents/NAME.txt`: each agent's true pose, with the robot's ground truth.
+struct AgentRecorder {
+    names: Vec<String>,
+    /// One file per agent, in the bus's agent order.
+    files: Vec<BufWriter<File>>,
+    scenario: String,
+    line: String,
+}
+
+impl Node for AgentRecorder {
+    fn name(&self) -> &'static str {
+        "record.agents"
+    }
+
+    fn streams(&self) -> Streams {
+        Streams {
+            consumes: vec!["truth".into()],
+            ..Streams::default()
+        }
+    }
+
+    fn start(&mut self, _bus: &mut Bus) -> Result<()> {
+        for (f, name) in self.files.iter_mut().zip(&self.names) {
+            writeln!(
+                f,
+                "# futago ground truth of agent `{name}` in {}: its body frame in the world \
+                 frame\n# timestamp tx ty tz qx qy qz qw",
+                self.scenario
+            )?;
+        }
+        Ok(())
+    }
+
+    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
+        for (f, (_, pose)) in self.files.iter_mut().zip(&bus.agents) {
+            self.line.clear();
+            tum_line(&mut self.line, bus.now, pose);
+            f.write_all(self.line.as_bytes())?;
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self, _bus: &mut Bus, _out: Option<&Path>) -> Result<Report> {
+        for f in &mut self.files {
+            f.flush()
+                .with_context(|| format!("writing {AGENTS_DIR}/"))?;
+        }
+        Ok(Report {
+            files: vec![format!("{AGENTS_DIR}/")],
+            ..Report::default()
+        })
     }
 }
 

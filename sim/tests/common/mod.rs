@@ -53,6 +53,7 @@ pub fn sim(
         &PhysicsConfig::default(),
         robot,
         &resolved,
+        &futago_sim::Movers::default(),
         start,
         seed,
     )
