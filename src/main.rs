@@ -122,6 +122,14 @@ enum Command {
         #[command(flatten)]
         overlays: OverlayArgs,
     },
+    /// Print the scenario as it would run: every key of every module with its value, defaults
+    /// included (every parameter `--set` can reach, by its dotted path).
+    Config {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        #[command(flatten)]
+        overlays: OverlayArgs,
+    },
     Merge {
         /// The shards' output folders.
         #[arg(required = true)]
@@ -466,6 +474,10 @@ fn real_main() -> Result<()> {
             for name in s.spec.metric_names() {
                 println!("{name}");
             }
+        }
+        Command::Config { scenario, overlays } => {
+            let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
+            print!("{}", toml::to_string(&s.effective_config())?);
         }
         Command::Merge { shards, out } => {
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));

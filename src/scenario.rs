@@ -25,7 +25,7 @@ use serde::Deserialize;
 use std::path::Path;
 
 /// A scenario file as written.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScenarioSpec {
     pub name: String,
@@ -91,7 +91,7 @@ impl ScenarioSpec {
 
 /// An event: at `time`, the robot is picked up and put down at `teleport` (a kidnapping;
 /// its odometry does not notice).
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct EventSpec {
     /// Simulated time, s.
@@ -100,7 +100,7 @@ pub struct EventSpec {
 }
 
 /// A pose as written: metres and degrees.
-#[derive(Debug, Clone, Copy, Deserialize)]
+#[derive(Debug, Clone, Copy, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct PoseSpec {
     pub x: f64,
@@ -117,7 +117,7 @@ impl PoseSpec {
 
 /// The localiser of a run: MCL on the world's ground-truth occupancy grid at the first laser's
 /// height (the map a perfect SLAM run would give).
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct LocalizationSpec {
     /// The laser it localises with (by name; may be left out when the scenario has one).
@@ -149,7 +149,7 @@ fn default_initial_sigma() -> [f64; 3] {
     [0.2, 0.2, 0.1]
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
 #[serde(untagged)]
 pub enum StartSpec {
     Spawn(String),
@@ -162,7 +162,7 @@ pub enum StartSpec {
 }
 
 /// What `futago run` writes.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputConfig {
     /// Rate of the ground-truth trajectory, Hz.
@@ -267,7 +267,7 @@ pub fn slam_config(path: &Path, table: &toml::Table) -> Result<SlamSpec, SpecErr
 }
 
 /// Which 2D pose places the RGB-D keyframes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MapPose {
     GroundTruth,
@@ -468,7 +468,57 @@ fn resolve_laser(
 /// The most lasers a CARMEN log has channels for (ROBOTLASER1, ROBOTLASER2).
 pub const MAX_LIDARS: usize = 2;
 
+impl ControllerConfig {
+    /// The `[controller]` table with every key, defaults included.
+    pub fn table(&self) -> toml::Table {
+        let typed = match self {
+            ControllerConfig::Idle => Ok(toml::Table::new()),
+            ControllerConfig::Segments(c) => toml::Table::try_from(c),
+            ControllerConfig::Waypoints(c) => toml::Table::try_from(c),
+            ControllerConfig::Navigate(c) => toml::Table::try_from(c),
+            ControllerConfig::Explore(c) => toml::Table::try_from(c),
+        };
+        let mut t = typed.unwrap_or_default();
+        let names = ControllerConfig::TYPES;
+        let ty = match self {
+            ControllerConfig::Idle => names[0],
+            ControllerConfig::Segments(_) => names[1],
+            ControllerConfig::Waypoints(_) => names[2],
+            ControllerConfig::Navigate(_) => names[3],
+            ControllerConfig::Explore(_) => names[4],
+        };
+        t.insert("type".into(), toml::Value::String(ty.into()));
+        t
+    }
+}
+
 impl Scenario {
+    /// The scenario as it runs, with every key of every module, defaults included: what
+    /// `futago config` prints, and the list of every parameter a `--set` can reach.
+    pub fn effective_config(&self) -> toml::Table {
+        let mut t = toml::Table::try_from(&self.spec).unwrap_or_default();
+        let name = |n: &Option<String>| n.clone().map(toml::Value::String);
+        if let Some(slam) = &self.slam {
+            let mut m = toml::Table::try_from(&slam.config).unwrap_or_default();
+            m.extend(name(&slam.laser).map(|v| ("laser".to_string(), v)));
+            t.insert("slam".into(), toml::Value::Table(m));
+        }
+        if let Some(r) = &self.rgbd_map {
+            let mut m = toml::Table::try_from(&r.config).unwrap_or_default();
+            m.extend(name(&r.laser).map(|v| ("laser".to_string(), v)));
+            m.insert("camera".into(), toml::Value::String(r.camera.clone()));
+            if let Ok(v) = toml::Value::try_from(r.pose_source) {
+                m.insert("pose_source".into(), v);
+            }
+            t.insert("rgbd_map".into(), toml::Value::Table(m));
+        }
+        t.insert(
+            "controller".into(),
+            toml::Value::Table(self.controller.table()),
+        );
+        t
+    }
+
     /// Loads and checks a scenario and the world it names. Nothing runs before this succeeds.
     pub fn load(path: &Path) -> Result<Scenario, SpecError> {
         Scenario::load_with(path, &[])

@@ -168,14 +168,14 @@ mod tests {
     use super::*;
     use serde::Deserialize;
 
-    #[derive(Deserialize, Debug)]
+    #[derive(Deserialize, serde::Serialize, Debug)]
     #[serde(deny_unknown_fields)]
     #[allow(dead_code)]
     struct Inner {
         range_max: f64,
     }
 
-    #[derive(Deserialize, Debug)]
+    #[derive(Deserialize, serde::Serialize, Debug)]
     #[serde(deny_unknown_fields)]
     #[allow(dead_code)]
     struct Outer {

@@ -29,7 +29,7 @@ use std::path::Path;
 pub const GRAVITY: f64 = 9.81;
 
 /// Physical and firmware parameters of the Create.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct CreateConfig {
     /// Total mass, kg.
@@ -81,7 +81,7 @@ impl Default for CreateConfig {
 }
 
 /// The error model of the wheel odometry.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct OdometryModel {
     /// `E_d`: actual right wheel diameter over actual left wheel diameter.

@@ -26,7 +26,7 @@ use serde::Deserialize;
 use std::path::Path;
 
 /// Named parameter sets.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum KinectPreset {
     /// Kinect v1 as OpenNI drivers deliver it: 640×480 depth, 0.8–4.0 m.
@@ -36,7 +36,7 @@ pub enum KinectPreset {
 }
 
 /// Depth noise model.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum NoiseModel {
     /// Exact depth (still cut to the valid range).
@@ -49,7 +49,7 @@ pub enum NoiseModel {
 }
 
 /// Noise parameters (the ICL-NUIM ones; Nguyen's are fixed by the paper).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NoiseConfig {
     pub model: NoiseModel,
@@ -76,7 +76,7 @@ impl Default for NoiseConfig {
 }
 
 /// A Kinect as a scenario configures it: `[[camera]]` tables.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct KinectConfig {
     #[serde(default = "default_name")]

@@ -18,7 +18,7 @@ use serde::Deserialize;
 use std::path::Path;
 
 /// Known scanner models.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
 pub enum LidarPreset {
     /// Hokuyo URG-04LX: 682 beams of 360°/1024 (239.8°), 0.02–5.6 m, 10 Hz (SCIP 2.0 spec;
     /// reference §4.1). Noise: ±10 mm below 1 m, ±1 % beyond, taken as 1σ.
@@ -115,7 +115,7 @@ impl LidarPreset {
 }
 
 /// A laser scanner as a scenario configures it: a preset, its mounting and overrides.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct LidarConfig {
     /// Name of the laser (its frame and output channel).

@@ -22,7 +22,7 @@ use serde::Deserialize;
 use std::path::Path;
 
 /// Physics settings.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct PhysicsConfig {
     /// Fixed physics rate, Hz (at least 200). The step is the nearest whole number of

@@ -65,7 +65,7 @@ impl Stats {
 }
 
 /// How the estimate is aligned to the reference before ATE.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum Alignment {
     /// None: in simulation the map frame is known (the default).

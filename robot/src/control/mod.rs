@@ -8,7 +8,7 @@ pub mod script;
 use serde::Deserialize;
 
 /// Where the waypoint follower takes its pose from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum PoseSource {
     /// Dead reckoning from the robot's odometry reports, as a real robot without a localiser.

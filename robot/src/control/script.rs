@@ -55,6 +55,17 @@ impl<'de> Deserialize<'de> for RadiusSpec {
     }
 }
 
+impl serde::Serialize for RadiusSpec {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            RadiusSpec::Metres(m) => s.serialize_f64(*m),
+            RadiusSpec::Named(NamedRadius::Straight) => s.serialize_str("straight"),
+            RadiusSpec::Named(NamedRadius::Ccw) => s.serialize_str("ccw"),
+            RadiusSpec::Named(NamedRadius::Cw) => s.serialize_str("cw"),
+        }
+    }
+}
+
 impl RadiusSpec {
     pub fn radius(self) -> Radius {
         match self {
@@ -67,7 +78,7 @@ impl RadiusSpec {
 }
 
 /// One timed drive command.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Segment {
     /// How long to hold it, s.
@@ -98,7 +109,7 @@ impl Segment {
 }
 
 /// Follower settings.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct WaypointConfig {
     /// `[[x, y], …]` in the world frame, m.
@@ -165,7 +176,7 @@ impl WaypointConfig {
 }
 
 /// Timed commands, in order, `repeat` times.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SegmentsConfig {
     pub segments: Vec<Segment>,

@@ -16,7 +16,7 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
 /// Measurement model.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SensorModel {
     Beam,
@@ -24,7 +24,7 @@ pub enum SensorModel {
 }
 
 /// MCL parameters (`mcl.*`).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MclConfig {
     /// Particle count (the starting count, and the fixed count without KLD-sampling).

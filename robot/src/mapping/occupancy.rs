@@ -7,7 +7,7 @@ use futago_msgs::{LaserScan, Pose2};
 use serde::Deserialize;
 
 /// Parameters of the grid (`mapping.grid.*` in a scenario).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OccupancyConfig {
     /// Cell side, m (seed 000: 50 mm).

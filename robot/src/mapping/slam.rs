@@ -26,7 +26,7 @@ use futago_msgs::{LaserScan, Pose2, Time, wrap_angle};
 use serde::Deserialize;
 
 /// Which SLAM runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum SlamMethod {
     /// Seed 000: ICP to the map of all keyframes, no loop closure.
@@ -37,7 +37,7 @@ pub enum SlamMethod {
 }
 
 /// Parameters of the laser SLAM (`slam.*`).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SlamConfig {
     pub method: SlamMethod,
@@ -85,7 +85,7 @@ impl Default for SlamConfig {
 /// Parameters of the graph back end (`slam.graph.*`). The local map size and the Huber
 /// threshold were chosen on the MIT CSAIL log (issue 4's closing note has the sweep); the rest
 /// follow from the laser (cells of 5 cm) and the front end's drift between revisits.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct GraphConfig {
     /// Keyframes in the front end's local map.

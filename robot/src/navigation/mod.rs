@@ -21,7 +21,7 @@ use planner::{PlannerConfig, RoadMap};
 use serde::Deserialize;
 
 /// Navigation parameters (`navigation.*`).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NavigationConfig {
     pub planner: PlannerConfig,
@@ -132,7 +132,7 @@ impl NavigationConfig {
 
 /// `[controller] type = "navigate"`: drive to goals on the known map, planning with the node
 /// graph.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct NavigateConfig {
     /// `[[x, y], …]` in the map (world) frame, m.
@@ -166,7 +166,7 @@ impl NavigateConfig {
 
 /// `[controller] type = "explore"`: frontier exploration on the map SLAM builds, on SLAM's
 /// pose (the scenario needs a `[slam]` table).
-#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct ExploreConfig {}
 
