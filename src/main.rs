@@ -5,6 +5,8 @@ const GATE_FAILED: i32 = 3;
 
 mod bench;
 mod cmaes;
+#[cfg(test)]
+mod config_walk;
 mod ground_truth;
 mod overlay;
 mod relations;

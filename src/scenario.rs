@@ -15,7 +15,7 @@ use futago_robot::mapping::slam::SlamConfig;
 use futago_robot::navigation::NavigationConfig;
 use futago_robot::navigation::{ExploreConfig, NavigateConfig};
 use futago_sim::agent::AgentConfig;
-use futago_sim::config::{SpecError, check_name, check_positive, check_range, load_toml};
+use futago_sim::config::{SpecError, check_name, check_range, load_toml};
 use futago_sim::create::CreateConfig;
 use futago_sim::joint::JointConfig;
 use futago_sim::kinect::{KinectConfig, KinectSpec};
@@ -113,6 +113,41 @@ impl PoseSpec {
     pub fn pose(&self) -> Pose2 {
         Pose2::new(self.x, self.y, self.yaw_deg.to_radians())
     }
+}
+
+/// The largest magnitude a gate's value may have.
+pub const MAX_GATE_VALUE: f64 = 1e12;
+
+/// Checks a pose written in a scenario: `x` and `y` inside the world's bounds and `yaw_deg`
+/// within ±360°, each error naming `KEY.x`, `KEY.y` or `KEY.yaw_deg`.
+fn check_pose(path: &Path, key: &str, p: &PoseSpec, world: &World) -> Result<Pose2, SpecError> {
+    let (lo, hi) = world.bounds();
+    let unit = "m, inside the world's bounds";
+    check_range(
+        path,
+        &format!("{key}.x"),
+        p.x,
+        lo.x as f64,
+        hi.x as f64,
+        unit,
+    )?;
+    check_range(
+        path,
+        &format!("{key}.y"),
+        p.y,
+        lo.y as f64,
+        hi.y as f64,
+        unit,
+    )?;
+    check_range(
+        path,
+        &format!("{key}.yaw_deg"),
+        p.yaw_deg,
+        -360.0,
+        360.0,
+        "degrees",
+    )?;
+    Ok(p.pose())
 }
 
 /// The localiser of a run: MCL on the world's ground-truth occupancy grid at the first laser's
@@ -497,9 +532,50 @@ impl Scenario {
     /// `futago config` prints, and the list of every parameter a `--set` can reach.
     pub fn effective_config(&self) -> toml::Table {
         let mut t = toml::Table::try_from(&self.spec).unwrap_or_default();
+        // The sensors' optional overrides, filled with what their presets resolved to.
+        let lidars: Vec<LidarConfig> = self
+            .lidars
+            .iter()
+            .map(|(c, s)| LidarConfig {
+                beams: Some(s.beams),
+                fov_deg: Some(
+                    c.fov_deg
+                        .unwrap_or((s.angle_increment * (s.beams - 1) as f64).to_degrees()),
+                ),
+                range_min: Some(s.range_min),
+                range_max: Some(s.range_max),
+                rate: Some(s.rate),
+                sigma: Some(s.sigma),
+                sigma_rel: Some(s.sigma_rel),
+                ..c.clone()
+            })
+            .collect();
+        let cameras: Vec<KinectConfig> = self
+            .spec
+            .camera
+            .iter()
+            .zip(&self.cameras)
+            .map(|(c, s)| KinectConfig {
+                rgb_size: Some([s.rgb.width, s.rgb.height]),
+                depth_size: Some([s.depth.width, s.depth.height]),
+                fov_deg: Some(c.fov_deg.unwrap_or([57.0, 43.0])),
+                range_min: Some(s.range_min),
+                range_max: Some(s.range_max),
+                rate: Some(s.rate),
+                ..c.clone()
+            })
+            .collect();
+        for (key, v) in [
+            ("lidar", toml::Value::try_from(lidars)),
+            ("camera", toml::Value::try_from(cameras)),
+        ] {
+            if let Ok(v) = v {
+                t.insert(key.into(), v);
+            }
+        }
         let name = |n: &Option<String>| n.clone().map(toml::Value::String);
         if let Some(slam) = &self.slam {
-            let mut m = toml::Table::try_from(&slam.config).unwrap_or_default();
+            let mut m = toml::Table::try_from(slam.config).unwrap_or_default();
             m.extend(name(&slam.laser).map(|v| ("laser".to_string(), v)));
             t.insert("slam".into(), toml::Value::Table(m));
         }
@@ -512,10 +588,11 @@ impl Scenario {
             }
             t.insert("rgbd_map".into(), toml::Value::Table(m));
         }
-        t.insert(
-            "controller".into(),
-            toml::Value::Table(self.controller.table()),
-        );
+        let mut controller = self.controller.table();
+        if let Some(l) = &self.driver_laser {
+            controller.insert("laser".into(), toml::Value::String(l.clone()));
+        }
+        t.insert("controller".into(), toml::Value::Table(controller));
         t
     }
 
@@ -573,11 +650,13 @@ impl Scenario {
         check_range(path, "duration", spec.duration, 1e-3, 1e7, "s")?;
         spec.physics.validate(path, "physics")?;
         spec.robot.validate(path, "robot")?;
-        check_positive(
+        check_range(
             path,
             "output.groundtruth_rate",
             spec.output.groundtruth_rate,
-            "Hz",
+            1e-3,
+            spec.physics.rate,
+            "Hz, at most the physics rate",
         )?;
         if spec.lidar.len() > MAX_LIDARS {
             return Err(SpecError::new(
@@ -731,14 +810,6 @@ impl Scenario {
                 spec.duration,
                 "s",
             )?;
-            let t = e.teleport;
-            if ![t.x, t.y, t.yaw_deg].iter().all(|v| v.is_finite()) {
-                return Err(SpecError::new(
-                    path,
-                    format!("event[{i}].teleport"),
-                    "expected finite x, y (m) and yaw_deg",
-                ));
-            }
         }
         let names = spec.metric_names();
         for (i, g) in spec.gate.iter().enumerate() {
@@ -773,11 +844,13 @@ impl Scenario {
                         "expected a number (or `than`, a metric to compare with)",
                     ));
                 }
-                (Some(v), _) if !v.is_finite() => {
+                (Some(v), _) if !(v.is_finite() && v.abs() <= MAX_GATE_VALUE) => {
                     return Err(SpecError::new(
                         path,
                         format!("gate[{i}].value"),
-                        "expected a finite number",
+                        format!(
+                            "expected a number within ±{MAX_GATE_VALUE:e} (metrics are SI values of one run), found {v}"
+                        ),
                     ));
                 }
                 _ => {}
@@ -922,17 +995,20 @@ impl Scenario {
                     ),
                 )
             })?,
-            StartSpec::Pose { x, y, yaw_deg } => {
-                if ![x, y, yaw_deg].iter().all(|v| v.is_finite()) {
-                    return Err(SpecError::new(
-                        path,
-                        "start",
-                        "expected finite x, y and yaw_deg",
-                    ));
-                }
-                Pose2::new(*x, *y, yaw_deg.to_radians())
-            }
+            StartSpec::Pose { x, y, yaw_deg } => check_pose(
+                path,
+                "start",
+                &PoseSpec {
+                    x: *x,
+                    y: *y,
+                    yaw_deg: *yaw_deg,
+                },
+                &world,
+            )?,
         };
+        for (i, e) in spec.event.iter().enumerate() {
+            check_pose(path, &format!("event[{i}].teleport"), &e.teleport, &world)?;
+        }
         // The robot starts, and is put down, inside the world's bounds.
         let (lo, hi) = world.bounds();
         let inside = |p: &Pose2| {
@@ -960,16 +1036,6 @@ impl Scenario {
                         format!("{bounds}; found {}", at(&p)),
                     ));
                 }
-            }
-        }
-        for (i, e) in spec.event.iter().enumerate() {
-            let p = e.teleport.pose();
-            if !inside(&p) {
-                return Err(SpecError::new(
-                    path,
-                    format!("event[{i}].teleport"),
-                    format!("{bounds}; found {}", at(&p)),
-                ));
             }
         }
         let movers = Movers {

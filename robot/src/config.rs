@@ -4,13 +4,22 @@
 /// A `(key, expectation)` error of an options struct.
 pub type ConfigError = (String, String);
 
+/// `key` below `prefix`, or `key` alone when the prefix is empty.
+pub fn below(prefix: &str, key: &str) -> String {
+    if prefix.is_empty() {
+        key.to_string()
+    } else {
+        format!("{prefix}.{key}")
+    }
+}
+
 /// Checks that each `(key, value, lo, hi)` is finite and within `[lo, hi]`; keys are named
 /// below `prefix` (`localization.mcl` gives `localization.mcl.z_hit`).
 pub fn check_ranges(prefix: &str, checks: &[(&str, f64, f64, f64)]) -> Result<(), ConfigError> {
     for &(k, v, lo, hi) in checks {
         if !(v.is_finite() && v >= lo && v <= hi) {
             return Err((
-                format!("{prefix}.{k}"),
+                below(prefix, k),
                 format!("expected a value in [{lo}, {hi}], found {v}"),
             ));
         }
@@ -26,7 +35,7 @@ pub fn check_counts(
     for &(k, v, lo, hi) in checks {
         if !(lo..=hi).contains(&v) {
             return Err((
-                format!("{prefix}.{k}"),
+                below(prefix, k),
                 format!("expected a whole number in [{lo}, {hi}], found {v}"),
             ));
         }

@@ -125,17 +125,25 @@ pub fn check_mount(
     xyz: [f64; 3],
     rpy_deg: [f64; 3],
 ) -> Result<(), SpecError> {
-    for (i, v) in xyz.iter().chain(&rpy_deg).enumerate() {
-        if !v.is_finite() {
-            return Err(SpecError::new(
-                file,
-                format!("{key}.{}", if i < 3 { "xyz" } else { "rpy_deg" }),
-                "expected finite numbers",
-            ));
-        }
+    for v in xyz {
+        check_range(
+            file,
+            &format!("{key}.xyz"),
+            v,
+            -MAX_MOUNT,
+            MAX_MOUNT,
+            "m from the base frame",
+        )?;
+    }
+    for v in rpy_deg {
+        check_range(file, &format!("{key}.rpy_deg"), v, -360.0, 360.0, "degrees")?;
     }
     Ok(())
 }
+
+/// The farthest a sensor may sit from the robot's base frame, m: a small indoor robot's mast
+/// is well inside it, and a mount beyond it is a typo.
+pub const MAX_MOUNT: f64 = 10.0;
 
 /// A sensor's mounting pose on the robot base frame from `xyz` (m) and `rpy_deg` (roll, pitch,
 /// yaw in degrees; rotation = yaw · pitch · roll).

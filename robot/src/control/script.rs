@@ -184,6 +184,21 @@ pub struct SegmentsConfig {
     pub repeat: u32,
 }
 
+/// Checks a list of `[x, y]` points: at least one, each coordinate within
+/// [`futago_msgs::MAX_COORDINATE`]; the error names `KEY[i]`.
+pub fn check_points(key: &str, points: &[[f64; 2]]) -> Result<(), (String, String)> {
+    if points.is_empty() {
+        return Err((key.into(), "expected at least one [x, y] point".into()));
+    }
+    let m = futago_msgs::MAX_COORDINATE;
+    for (i, p) in points.iter().enumerate() {
+        for v in p {
+            crate::config::check_ranges("", &[(&format!("{key}[{i}]"), *v, -m, m)])?;
+        }
+    }
+    Ok(())
+}
+
 /// A scripted drive plan, as [`ScriptedController`] runs it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Script {
@@ -195,35 +210,35 @@ pub enum Script {
 }
 
 impl SegmentsConfig {
-    /// Checks values the plan cannot run with; returns `(key, expectation)` on error.
+    /// Checks values the plan cannot run with; returns `(key, expectation)` on error. Speeds
+    /// and radii are those the Create's Open Interface accepts: ±0.5 m/s, radii up to 2 m.
     pub fn validate(&self) -> Result<(), (String, String)> {
+        use crate::config::{check_counts, check_ranges};
         let SegmentsConfig { segments, repeat } = self;
-        if segments.is_empty() || *repeat == 0 {
-            return Err((
-                "segments".into(),
-                "expected at least one segment and repeat ≥ 1".into(),
-            ));
+        if segments.is_empty() {
+            return Err(("segments".into(), "expected at least one segment".into()));
         }
+        check_counts("", &[("repeat", *repeat as usize, 1, 1_000_000)])?;
         for (i, s) in segments.iter().enumerate() {
-            if !(s.duration.is_finite() && s.duration > 0.0) {
-                return Err((
-                    format!("segments[{i}].duration"),
-                    format!("expected a positive duration in s, found {}", s.duration),
-                ));
-            }
-            if !s.velocity.is_finite() || s.wheels.is_some_and(|w| w.iter().any(|v| !v.is_finite()))
-            {
-                return Err((
-                    format!("segments[{i}]"),
-                    "expected finite velocities in m/s".into(),
-                ));
+            let k = format!("segments[{i}]");
+            check_ranges(
+                &k,
+                &[
+                    ("duration", s.duration, 1e-3, 1e6),
+                    ("velocity", s.velocity, -0.5, 0.5),
+                ],
+            )?;
+            for (j, w) in s.wheels.iter().flatten().enumerate() {
+                check_ranges(&k, &[(&format!("wheels[{j}]"), *w, -0.5, 0.5)])?;
             }
             if let RadiusSpec::Metres(r) = s.radius
-                && !(r.is_finite() && r != 0.0)
+                && !(r.is_finite() && r != 0.0 && r.abs() <= 2.0)
             {
                 return Err((
-                    format!("segments[{i}].radius"),
-                    "expected a non-zero radius in m, or \"straight\", \"ccw\", \"cw\"".into(),
+                    format!("{k}.radius"),
+                    format!(
+                        "expected a radius within ±2 m and not 0, or \"straight\", \"ccw\", \"cw\"; found {r}"
+                    ),
                 ));
             }
         }
@@ -235,12 +250,7 @@ impl WaypointConfig {
     /// Checks values the follower cannot run with; returns `(key, expectation)` on error.
     pub fn validate(&self) -> Result<(), (String, String)> {
         let w = self;
-        if w.waypoints.is_empty() || w.waypoints.iter().flatten().any(|v| !v.is_finite()) {
-            return Err((
-                "waypoints".into(),
-                "expected at least one finite [x, y] point".into(),
-            ));
-        }
+        check_points("waypoints", &w.waypoints)?;
         for (k, v, lo, hi) in [
             ("speed", w.speed, 0.01, 0.5),
             ("lookahead", w.lookahead, 0.01, 10.0),

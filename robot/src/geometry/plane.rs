@@ -104,6 +104,24 @@ pub struct RansacConfig {
     pub min_inliers: usize,
 }
 
+impl RansacConfig {
+    /// Checks every field; the error names the key below `prefix`.
+    pub fn validate(&self, prefix: &str) -> Result<(), crate::config::ConfigError> {
+        crate::config::check_counts(
+            prefix,
+            &[
+                ("samples", self.samples, 3, 1_000_000),
+                ("iterations", self.iterations, 1, 1_000_000),
+                ("min_inliers", self.min_inliers, 3, 1_000_000),
+            ],
+        )?;
+        crate::config::check_ranges(
+            prefix,
+            &[("inlier_distance", self.inlier_distance, 1e-5, 10.0)],
+        )
+    }
+}
+
 impl Default for RansacConfig {
     fn default() -> Self {
         RansacConfig {

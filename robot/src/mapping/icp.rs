@@ -67,6 +67,34 @@ impl Default for IcpConfig {
     }
 }
 
+impl IcpConfig {
+    /// Checks every field; the error names the key below `prefix`.
+    pub fn validate(&self, prefix: &str) -> Result<(), crate::config::ConfigError> {
+        use std::f64::consts::PI;
+        crate::config::check_counts(
+            prefix,
+            &[("max_iterations", self.max_iterations, 1, 10_000)],
+        )?;
+        crate::config::check_ranges(
+            prefix,
+            &[
+                ("max_distance_start", self.max_distance_start, 1e-3, 100.0),
+                ("max_distance_end", self.max_distance_end, 1e-3, 100.0),
+                ("huber", self.huber, 1e-4, 100.0),
+                ("min_overlap", self.min_overlap, 0.0, 1.0),
+                ("voxel", self.voxel, 1e-3, 10.0),
+                ("normal_radius", self.normal_radius, 1e-3, 100.0),
+                ("planarity", self.planarity, 0.0, 1.0),
+                ("translation_weight", self.translation_weight, 0.0, 1e6),
+                ("rotation_weight", self.rotation_weight, 0.0, 1e6),
+                ("rotation_search", self.rotation_search, 0.0, PI),
+                ("rotation_search_step", self.rotation_search_step, 1e-4, PI),
+                ("scan_voxel", self.scan_voxel, 0.0, 10.0),
+            ],
+        )
+    }
+}
+
 /// A point and the unit normal of its surface.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Oriented {

@@ -39,20 +39,17 @@ impl Default for OccupancyConfig {
 impl OccupancyConfig {
     /// Checks ranges; the error names the key below `key`.
     pub fn validate(&self, key: &str) -> Result<(), (String, String)> {
-        let bad = |k: &str, m: &str| Err((format!("{key}.{k}"), m.to_string()));
-        if !(self.resolution > 0.001 && self.resolution <= 1.0) {
-            return bad("resolution", "expected 0.001 to 1 m");
-        }
-        if !(self.hit > 0.0 && self.miss < 0.0) {
-            return bad("hit", "expected hit > 0 and miss < 0 (log-odds)");
-        }
-        if !(self.min < 0.0 && self.max > 0.0) {
-            return bad("min", "expected min < 0 < max");
-        }
-        if !(self.max_range > 0.0 && self.max_range.is_finite()) {
-            return bad("max_range", "expected a positive range in m");
-        }
-        Ok(())
+        crate::config::check_ranges(
+            key,
+            &[
+                ("resolution", self.resolution, 0.001, 1.0),
+                ("hit", self.hit as f64, 1e-3, 100.0),
+                ("miss", self.miss as f64, -100.0, -1e-3),
+                ("min", self.min as f64, -1000.0, -1e-3),
+                ("max", self.max as f64, 1e-3, 1000.0),
+                ("max_range", self.max_range, 0.01, 1000.0),
+            ],
+        )
     }
 }
 

@@ -32,6 +32,24 @@ pub struct PolygonConfig {
     pub merge_gap: f64,
 }
 
+impl PolygonConfig {
+    /// Checks every field; the error names the key below `prefix`.
+    pub fn validate(&self, prefix: &str) -> Result<(), crate::config::ConfigError> {
+        use crate::config::{below, check_counts, check_ranges};
+        self.ransac.validate(&below(prefix, "ransac"))?;
+        check_counts(prefix, &[("max_planes", self.max_planes, 1, 1000)])?;
+        check_ranges(
+            prefix,
+            &[
+                ("min_area", self.min_area, 0.0, 1e4),
+                ("merge_angle", self.merge_angle, 0.0, std::f64::consts::PI),
+                ("merge_distance", self.merge_distance, 0.0, 100.0),
+                ("merge_gap", self.merge_gap, 0.0, 100.0),
+            ],
+        )
+    }
+}
+
 impl Default for PolygonConfig {
     fn default() -> Self {
         PolygonConfig {

@@ -155,72 +155,65 @@ impl Default for RegistrationConfig {
 impl RegistrationConfig {
     /// Checks ranges; `Err((key, message))` with the key below `registration`.
     pub fn validate(&self) -> Result<(), (String, String)> {
-        let bad = |k: &str, m: String| Err((k.to_string(), m));
-        for (k, v) in [
-            ("alpha", self.alpha),
-            ("beta", self.beta),
-            ("gamma", self.gamma),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return bad(k, format!("expected a weight ≥ 0, found {v}"));
-            }
-        }
+        use crate::config::{check_counts, check_ranges};
+        use std::f64::consts::PI;
+        check_ranges(
+            "",
+            &[
+                ("alpha", self.alpha, 0.0, 1000.0),
+                ("beta", self.beta, 0.0, 1000.0),
+                ("gamma", self.gamma, 0.0, 1000.0),
+            ],
+        )?;
         if self.alpha + self.beta + self.gamma <= 0.0 {
-            return bad("gamma", "expected at least one weight above 0".into());
+            return Err((
+                "gamma".into(),
+                "expected at least one weight above 0".into(),
+            ));
         }
-        for (k, v) in [
-            ("map_band", self.map_band),
-            ("max_cloud_pair", self.max_cloud_pair),
-            ("max_map_pair", self.max_map_pair),
-            ("feature_inlier", self.feature_inlier),
-            ("tolerance", self.tolerance),
-            ("max_correction", self.max_correction),
-            ("max_correction_turn", self.max_correction_turn),
-            ("loop_radius", self.loop_radius),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return bad(k, format!("expected a positive distance in m, found {v}"));
-            }
-        }
-        for (k, v) in [
-            ("cloud_step", self.cloud_step),
-            ("target_frames", self.target_frames),
-            ("max_iterations", self.max_iterations),
-        ] {
-            if v == 0 {
-                return bad(k, "expected at least 1".into());
-            }
-        }
-        if self.normal_neighbours < 3 {
-            return bad(
-                "normal_neighbours",
-                format!(
-                    "expected at least 3 points for a plane, found {}",
-                    self.normal_neighbours
+        check_counts(
+            "",
+            &[
+                ("cloud_step", self.cloud_step, 1, 1_000_000),
+                ("target_frames", self.target_frames, 1, 1000),
+                ("normal_neighbours", self.normal_neighbours, 3, 1000),
+                (
+                    "feature_ransac_iterations",
+                    self.feature_ransac_iterations,
+                    1,
+                    1_000_000,
                 ),
-            );
-        }
-        if !(self.degenerate.is_finite() && self.degenerate >= 0.0) {
-            return bad(
-                "degenerate",
-                format!("expected an eigenvalue ≥ 0, found {}", self.degenerate),
-            );
-        }
-        if !(0.0..=1.0).contains(&self.min_fitness) {
-            return bad(
-                "min_fitness",
-                format!("expected a share from 0 to 1, found {}", self.min_fitness),
-            );
-        }
+                (
+                    "min_feature_inliers",
+                    self.min_feature_inliers,
+                    0,
+                    1_000_000,
+                ),
+                ("max_iterations", self.max_iterations, 1, 10_000),
+            ],
+        )?;
+        self.features.validate("features")?;
+        check_ranges(
+            "",
+            &[
+                ("map_band", self.map_band, 1e-4, 10.0),
+                ("max_cloud_pair", self.max_cloud_pair, 1e-4, 100.0),
+                ("max_map_pair", self.max_map_pair, 1e-4, 100.0),
+                ("feature_inlier", self.feature_inlier, 1e-5, 10.0),
+                ("tolerance", self.tolerance, 1e-12, 1.0),
+                ("degenerate", self.degenerate, 0.0, 1e6),
+                ("max_correction", self.max_correction, 1e-4, 100.0),
+                ("max_correction_turn", self.max_correction_turn, 1e-4, PI),
+                ("loop_radius", self.loop_radius, 1e-3, 1000.0),
+                ("min_fitness", self.min_fitness, 0.0, 1.0),
+            ],
+        )?;
         for (k, s) in [
             ("icp_sigma", self.icp_sigma),
             ("prior_sigma", self.prior_sigma),
         ] {
-            if s.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-                return bad(
-                    k,
-                    format!("expected three positive deviations, found {s:?}"),
-                );
+            for (i, v) in s.iter().enumerate() {
+                check_ranges("", &[(&format!("{k}[{i}]"), *v, 1e-6, 10.0)])?;
             }
         }
         Ok(())

@@ -67,45 +67,32 @@ impl Default for RgbdMapConfig {
 impl RgbdMapConfig {
     /// Checks ranges; `Err((key, message))`.
     pub fn validate(&self) -> Result<(), (String, String)> {
-        let bad = |k: &str, m: String| Err((k.to_string(), m));
-        if !(self.keyframe_distance.is_finite() && self.keyframe_distance >= 0.0) {
-            return bad(
-                "keyframe_distance",
-                format!(
-                    "expected a distance ≥ 0 m, found {}",
-                    self.keyframe_distance
+        use crate::config::{check_counts, check_ranges};
+        check_ranges(
+            "",
+            &[
+                ("keyframe_distance", self.keyframe_distance, 0.0, 100.0),
+                (
+                    "keyframe_turn",
+                    self.keyframe_turn,
+                    0.0,
+                    std::f64::consts::TAU,
                 ),
-            );
-        }
-        if !(self.keyframe_turn.is_finite() && self.keyframe_turn >= 0.0) {
-            return bad(
-                "keyframe_turn",
-                format!("expected an angle ≥ 0 rad, found {}", self.keyframe_turn),
-            );
-        }
-        if self.stride == 0 {
-            return bad("stride", "expected at least 1 pixel".into());
-        }
-        if !(self.max_depth.is_finite() && self.max_depth > 0.0) {
-            return bad(
-                "max_depth",
-                format!("expected a positive depth, found {}", self.max_depth),
-            );
-        }
-        if !(self.voxel.is_finite() && self.voxel >= 1e-4) {
-            return bad(
-                "voxel",
-                format!("expected a voxel of at least 0.1 mm, found {}", self.voxel),
-            );
-        }
+                ("max_depth", self.max_depth, 0.01, 100.0),
+                ("voxel", self.voxel, 1e-4, 10.0),
+            ],
+        )?;
+        check_counts("", &[("stride", self.stride as usize, 1, 1000)])?;
         if self.methods.is_empty() {
-            return bad("methods", "expected at least one method".into());
+            return Err(("methods".into(), "expected at least one method".into()));
         }
         for (i, m) in self.methods.iter().enumerate() {
             if self.methods[..i].contains(m) {
-                return bad("methods", format!("{} is listed twice", m.name()));
+                return Err(("methods".into(), format!("{} is listed twice", m.name())));
             }
         }
+        self.floor.validate("floor")?;
+        self.polygons.validate("polygons")?;
         self.registration
             .validate()
             .map_err(|(k, m)| (format!("registration.{k}"), m))

@@ -18,6 +18,7 @@
 //! Both report every scan's pose relative to its keyframe, so the trajectory follows the
 //! keyframes when the graph moves them.
 
+use crate::config::{check_counts, check_ranges};
 use crate::mapping::correlative::{LikelihoodGrid, SearchWindow, search};
 use crate::mapping::icp::{IcpConfig, Oriented, PointMap, align, fit_score, scan_points};
 use crate::mapping::occupancy::{OccupancyConfig, OccupancyMap};
@@ -146,37 +147,52 @@ impl Default for GraphConfig {
 }
 
 impl SlamConfig {
-    /// Checks values SLAM cannot run with; returns `(key, expectation)` on error.
+    /// Checks every field against the range SLAM can run with; returns `(key, expectation)`
+    /// on error.
     pub fn validate(&self) -> Result<(), (String, String)> {
-        let bad = |k: &str, m: &str| Err((format!("slam.{k}"), m.to_string()));
-        let positive = [
-            ("keyframe_distance", self.keyframe_distance),
-            ("keyframe_angle", self.keyframe_angle),
-            ("max_range", self.max_range),
-            ("icp.voxel", self.icp.voxel),
-            ("graph.loop_resolution", self.graph.loop_resolution),
-            ("graph.loop_sigma", self.graph.loop_sigma),
-            ("graph.loop_max_range", self.graph.loop_max_range),
-            ("graph.sequential_sigma", self.graph.sequential_sigma),
-            (
-                "graph.sequential_sigma_angle",
-                self.graph.sequential_sigma_angle,
-            ),
-            ("graph.loop_sigma_xy", self.graph.loop_sigma_xy),
-            ("graph.loop_sigma_angle", self.graph.loop_sigma_angle),
-            ("graph.loop_huber", self.graph.loop_huber),
-        ];
-        for (k, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return bad(k, "expected a positive number");
-            }
-        }
-        if self.graph.local_nodes == 0 || self.graph.submap_nodes == 0 {
-            return bad(
-                "graph.submap_nodes",
-                "expected local_nodes and submap_nodes ≥ 1",
-            );
-        }
+        use std::f64::consts::{PI, TAU};
+        check_ranges(
+            "slam",
+            &[
+                ("keyframe_distance", self.keyframe_distance, 1e-3, 100.0),
+                ("keyframe_angle", self.keyframe_angle, 1e-3, TAU),
+                ("max_range", self.max_range, 0.1, 1000.0),
+                ("max_correction", self.max_correction, 1e-3, 100.0),
+                ("max_correction_angle", self.max_correction_angle, 1e-3, TAU),
+                ("min_travel", self.min_travel, 0.0, 100.0),
+                ("min_turn", self.min_turn, 0.0, TAU),
+                ("max_interval", self.max_interval, 0.0, 3600.0),
+            ],
+        )?;
+        self.icp.validate("slam.icp")?;
+        let g = &self.graph;
+        check_counts(
+            "slam.graph",
+            &[
+                ("local_nodes", g.local_nodes, 1, 10_000),
+                ("submap_nodes", g.submap_nodes, 1, 10_000),
+                ("loop_min_age", g.loop_min_age, 0, 1_000_000),
+                ("optimize_every", g.optimize_every, 1, 1_000_000),
+            ],
+        )?;
+        check_ranges(
+            "slam.graph",
+            &[
+                ("loop_search_radius", g.loop_search_radius, 0.0, 1000.0),
+                ("loop_linear_window", g.loop_linear_window, 0.0, 100.0),
+                ("loop_angular_window", g.loop_angular_window, 0.0, PI),
+                ("loop_min_score", g.loop_min_score, 0.0, 1.0),
+                ("loop_min_overlap", g.loop_min_overlap, 0.0, 1.0),
+                ("loop_max_range", g.loop_max_range, 0.1, 1000.0),
+                ("loop_resolution", g.loop_resolution, 0.005, 1.0),
+                ("loop_sigma", g.loop_sigma, 1e-4, 10.0),
+                ("sequential_sigma", g.sequential_sigma, 1e-6, 10.0),
+                ("sequential_sigma_angle", g.sequential_sigma_angle, 1e-6, PI),
+                ("loop_sigma_xy", g.loop_sigma_xy, 1e-6, 10.0),
+                ("loop_sigma_angle", g.loop_sigma_angle, 1e-6, PI),
+                ("loop_huber", g.loop_huber, 1e-3, 1000.0),
+            ],
+        )?;
         self.grid.validate("slam.grid")
     }
 }

@@ -173,12 +173,7 @@ pub struct ExploreConfig {}
 impl NavigateConfig {
     /// Checks values the navigator cannot run with; returns `(key, expectation)` on error.
     pub fn validate(&self) -> Result<(), (String, String)> {
-        if self.goals.is_empty() || self.goals.iter().flatten().any(|v| !v.is_finite()) {
-            return Err((
-                "goals".into(),
-                "expected at least one finite [x, y] point".into(),
-            ));
-        }
+        crate::control::script::check_points("goals", &self.goals)?;
         if self.laps == 0 {
             return Err(("laps".into(), "expected at least one lap".into()));
         }

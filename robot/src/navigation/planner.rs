@@ -48,20 +48,16 @@ impl Default for PlannerConfig {
 impl PlannerConfig {
     /// Checks values the planner cannot work with; `(key, expectation)` on error.
     pub fn validate(&self, key: &str) -> Result<(), (String, String)> {
-        for (k, v) in [
-            ("wall_distance", self.wall_distance),
-            ("open_distance", self.open_distance),
-            ("node_spacing", self.node_spacing),
-            ("connect_radius", self.connect_radius),
-            ("clearance", self.clearance),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err((
-                    format!("{key}.{k}"),
-                    "expected a positive distance in m".into(),
-                ));
-            }
-        }
+        crate::config::check_ranges(
+            key,
+            &[
+                ("wall_distance", self.wall_distance, 1e-3, 100.0),
+                ("open_distance", self.open_distance, 1e-3, 100.0),
+                ("node_spacing", self.node_spacing, 1e-3, 100.0),
+                ("connect_radius", self.connect_radius, 1e-3, 1000.0),
+                ("clearance", self.clearance, 1e-3, 100.0),
+            ],
+        )?;
         if self.clearance > self.wall_distance || self.wall_distance >= self.open_distance {
             return Err((
                 format!("{key}.wall_distance"),

@@ -37,6 +37,20 @@ pub struct FeatureConfig {
     pub max_hamming: u32,
 }
 
+impl FeatureConfig {
+    /// Checks every field; the error names the key below `prefix`.
+    pub fn validate(&self, prefix: &str) -> Result<(), crate::config::ConfigError> {
+        crate::config::check_counts(
+            prefix,
+            &[
+                ("max_features", self.max_features, 1, 100_000),
+                ("cell", self.cell as usize, 1, 4096),
+                ("max_hamming", self.max_hamming as usize, 0, 256),
+            ],
+        )
+    }
+}
+
 impl Default for FeatureConfig {
     fn default() -> Self {
         FeatureConfig {

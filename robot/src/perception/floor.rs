@@ -32,6 +32,21 @@ pub struct FloorConfig {
     pub min_height: f64,
 }
 
+impl FloorConfig {
+    /// Checks every field; the error names the key below `prefix`.
+    pub fn validate(&self, prefix: &str) -> Result<(), crate::config::ConfigError> {
+        use crate::config::{below, check_ranges};
+        self.ransac.validate(&below(prefix, "ransac"))?;
+        check_ranges(
+            prefix,
+            &[
+                ("max_tilt", self.max_tilt, 0.0, std::f64::consts::FRAC_PI_2),
+                ("min_height", self.min_height, 0.0, 10.0),
+            ],
+        )
+    }
+}
+
 impl Default for FloorConfig {
     fn default() -> Self {
         FloorConfig {
