@@ -7,6 +7,7 @@ mod bench;
 mod cmaes;
 #[cfg(test)]
 mod config_walk;
+mod fuzz;
 mod ground_truth;
 mod overlay;
 mod relations;
@@ -123,6 +124,26 @@ enum Command {
         scenario: PathBuf,
         #[command(flatten)]
         overlays: OverlayArgs,
+    },
+    /// Fuzz every parser (scenario, overlay, world, glTF, CARMEN, ROS bag, TUM, relations) with
+    /// mutated inputs from the project's own files; exits 1 if any input makes one panic, and
+    /// writes those inputs to OUT/.
+    Fuzz {
+        /// Inputs in all, spread over the parsers.
+        #[arg(long, default_value_t = 100_000)]
+        inputs: u64,
+        /// Worker threads.
+        #[arg(long, default_value_t = 2)]
+        jobs: usize,
+        /// Seed of the mutations.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Where findings go [default: out/fuzz].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// The project folder whose scenarios/ and worlds/ give the seeds.
+        #[arg(long, default_value = ".")]
+        root: PathBuf,
     },
     /// Print the scenario as it would run: every key of every module with its value, defaults
     /// included (every parameter `--set` can reach, by its dotted path).
@@ -475,6 +496,35 @@ fn real_main() -> Result<()> {
             let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
             for name in s.spec.metric_names() {
                 println!("{name}");
+            }
+        }
+        Command::Fuzz {
+            inputs,
+            jobs,
+            seed,
+            out,
+            root,
+        } => {
+            let targets = fuzz::targets(&root)?;
+            let r = fuzz::run(&targets, inputs, jobs, seed, 100);
+            for (name, n) in &r.counts {
+                println!("{name:>10}: {n} inputs");
+            }
+            let total: u64 = r.counts.iter().map(|c| c.1).sum();
+            println!(
+                "fuzz: {total} inputs in {:.1} s ({:.0} per second, {jobs} jobs, seed {seed}), {} panics",
+                r.seconds,
+                total as f64 / r.seconds.max(1e-9),
+                r.findings.len()
+            );
+            if !r.findings.is_empty() {
+                let out = out.unwrap_or_else(|| PathBuf::from("out/fuzz"));
+                fuzz::write_findings(&r.findings, &out)?;
+                for f in &r.findings {
+                    eprintln!("{}: {}", f.target, f.message);
+                }
+                eprintln!("inputs written to {}", out.display());
+                std::process::exit(1);
             }
         }
         Command::Config { scenario, overlays } => {

@@ -629,7 +629,17 @@ impl Scenario {
     }
 
     /// Checks a parsed scenario and compiles its world.
-    pub fn from_spec(path: &Path, mut spec: ScenarioSpec) -> Result<Scenario, SpecError> {
+    pub fn from_spec(path: &Path, spec: ScenarioSpec) -> Result<Scenario, SpecError> {
+        Scenario::from_spec_with(path, spec, &mut World::load)
+    }
+
+    /// As [`Scenario::from_spec`], with the world compiled by `load_world` (which may reuse
+    /// worlds it compiled before: the fuzzer does).
+    pub fn from_spec_with(
+        path: &Path,
+        mut spec: ScenarioSpec,
+        load_world: &mut dyn FnMut(&Path) -> Result<World, SpecError>,
+    ) -> Result<Scenario, SpecError> {
         check_name(path, "name", &spec.name)?;
         if spec.seeds.len() > 1000 {
             return Err(SpecError::new(
@@ -982,7 +992,7 @@ impl Scenario {
                 format!("world file {} does not exist", world_path.display()),
             ));
         }
-        let world = World::load(&world_path)?;
+        let world = load_world(&world_path)?;
         let start = match &spec.start {
             StartSpec::Spawn(name) => world.spawn(name).ok_or_else(|| {
                 SpecError::new(

@@ -332,7 +332,7 @@ fn bad_input_names_the_file_and_key_and_writes_nothing() {
         (
             good.clone() + "[[lidar]]\npreset = \"urg-04lx\"\n[slam.graph]\nloop_sigma = -0.1\n",
             "slam.graph.loop_sigma",
-            "positive",
+            "expected a value in [0.0001, 10], found -0.1",
         ),
         (
             good.clone() + "[[lidar]]\npreset = \"urg-04lx\"\n[slam]\nmethod = \"fastslam\"\n",
@@ -447,7 +447,7 @@ fn bad_input_names_the_file_and_key_and_writes_nothing() {
                 "type = \"segments\"\nsegments = [{ duration = -1.0 }]",
             ),
             "controller.segments[0].duration",
-            "positive",
+            "expected a value in [0.001, 1000000], found -1",
         ),
     ];
     for (i, (text, key, expect)) in cases.iter().enumerate() {
@@ -1298,7 +1298,7 @@ fn an_rgbd_map_is_scored_against_the_surfaces_it_saw_and_a_worse_pose_scores_wor
         ("rgbd_map.pose_source=compass", "rgbd_map.pose_source"),
         (
             "rgbd_map.stride=0",
-            "key `rgbd_map.stride`: expected at least 1 pixel",
+            "key `rgbd_map.stride`: expected a whole number in [1, 1000], found 0",
         ),
         ("camera=[]", "an RGB-D map needs a [[camera]]"),
     ] {
@@ -1837,7 +1837,7 @@ fn inputs_that_crashed_are_refused_by_name() {
             "start={ x = 1e300, y = 0 }",
         ],
         &fresh,
-        "key `start`: expected a pose inside the world's bounds",
+        "key `start.x`: expected a value in [-0.375, 30.375] m, inside the world's bounds, found 1e300",
         Some(1),
     );
     // A world reaching 1e9 m would need an 800 GB grid.

@@ -98,6 +98,16 @@ pub fn bounded_stamp(v: f64) -> Option<f64> {
     (v.is_finite() && v.abs() <= MAX_STAMP).then_some(v)
 }
 
+/// A number as an error message shows it: plainly, or in scientific notation when it is huge
+/// or tiny (`1e300`, not three hundred digits).
+pub fn shown(v: f64) -> String {
+    if v != 0.0 && v.is_finite() && !(1e-6..1e9).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 /// Wraps an angle to (-π, π].
 pub fn wrap_angle(a: f64) -> f64 {
     let mut a = a % (2.0 * PI);

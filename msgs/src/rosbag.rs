@@ -305,112 +305,118 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
     Ok(log)
 }
 
+fn field(name: &str, value: &[u8]) -> Vec<u8> {
+    let mut f = name.as_bytes().to_vec();
+    f.push(b'=');
+    f.extend_from_slice(value);
+    let mut out = (f.len() as u32).to_le_bytes().to_vec();
+    out.extend(f);
+    out
+}
+
+fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
+    let h: Vec<u8> = header.concat();
+    let mut out = (h.len() as u32).to_le_bytes().to_vec();
+    out.extend(&h);
+    out.extend((data.len() as u32).to_le_bytes());
+    out.extend(data);
+    out
+}
+
+fn header_msg(stamp: u32) -> Vec<u8> {
+    let mut m = 7u32.to_le_bytes().to_vec();
+    m.extend(stamp.to_le_bytes());
+    m.extend(0u32.to_le_bytes());
+    m.extend(4u32.to_le_bytes());
+    m.extend(b"base");
+    m
+}
+
+/// A small valid bag: one connection per type (a laser scan, odometry, and a type the reader
+/// skips), a scan at t = 2 s and odometry at 1 s and 3 s, the messages inside one chunk,
+/// bz2-compressed or not. A fixture for tests and a seed for the fuzzer.
+pub fn example(bz2: bool) -> Vec<u8> {
+    let conn = |id: u32, topic: &str, ty: &str| {
+        record(
+            &[
+                field("op", &[0x07]),
+                field("conn", &id.to_le_bytes()),
+                field("topic", topic.as_bytes()),
+            ],
+            &[
+                field("topic", topic.as_bytes()),
+                field("type", ty.as_bytes()),
+            ]
+            .concat(),
+        )
+    };
+    let mut scan = header_msg(2);
+    for v in [-1.0f32, 1.0, 0.5, 0.0, 0.1, 0.02, 10.0] {
+        scan.extend(v.to_bits().to_le_bytes());
+    }
+    scan.extend(5u32.to_le_bytes());
+    for r in [1.0f32, 2.0, f32::INFINITY, 12.0, 3.0] {
+        scan.extend(r.to_bits().to_le_bytes());
+    }
+    scan.extend(0u32.to_le_bytes());
+    let odo = |t: u32, x: f64| {
+        let mut m = header_msg(t);
+        m.extend(0u32.to_le_bytes());
+        for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
+            m.extend(v.to_le_bytes());
+        }
+        m.extend(vec![0u8; 36 * 8 + 6 * 8 + 36 * 8]);
+        m
+    };
+    let msg = |id: u32, body: &[u8]| {
+        record(
+            &[
+                field("op", &[0x02]),
+                field("conn", &id.to_le_bytes()),
+                field("time", &[0; 8]),
+            ],
+            body,
+        )
+    };
+    let inner = [
+        conn(0, "/scan", "sensor_msgs/LaserScan"),
+        conn(1, "/odom", "nav_msgs/Odometry"),
+        conn(2, "/tf", "tf2_msgs/TFMessage"),
+        msg(1, &odo(1, 0.0)),
+        msg(0, &scan),
+        msg(1, &odo(3, 1.0)),
+        msg(2, b"xx"),
+    ]
+    .concat();
+    let (compression, data): (&[u8], Vec<u8>) = if bz2 {
+        let mut z = Vec::new();
+        bzip2::read::BzEncoder::new(&inner[..], bzip2::Compression::default())
+            .read_to_end(&mut z)
+            .expect("bz2 compression in memory cannot fail");
+        (b"bz2", z)
+    } else {
+        (b"none", inner.clone())
+    };
+    let mut out = b"#ROSBAG V2.0\n".to_vec();
+    out.extend(record(&[field("op", &[0x03])], &[]));
+    out.extend(record(
+        &[
+            field("op", &[0x05]),
+            field("compression", compression),
+            field("size", &(inner.len() as u32).to_le_bytes()),
+        ],
+        &data,
+    ));
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn field(name: &str, value: &[u8]) -> Vec<u8> {
-        let mut f = name.as_bytes().to_vec();
-        f.push(b'=');
-        f.extend_from_slice(value);
-        let mut out = (f.len() as u32).to_le_bytes().to_vec();
-        out.extend(f);
-        out
-    }
-
-    fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
-        let h: Vec<u8> = header.concat();
-        let mut out = (h.len() as u32).to_le_bytes().to_vec();
-        out.extend(&h);
-        out.extend((data.len() as u32).to_le_bytes());
-        out.extend(data);
-        out
-    }
-
-    fn header_msg(stamp: u32) -> Vec<u8> {
-        let mut m = 7u32.to_le_bytes().to_vec();
-        m.extend(stamp.to_le_bytes());
-        m.extend(0u32.to_le_bytes());
-        m.extend(4u32.to_le_bytes());
-        m.extend(b"base");
-        m
-    }
-
-    /// A bag with one connection per type, a scan at t = 2 s and odometry at 1 s and 3 s,
-    /// the messages inside a bz2 chunk.
-    fn bag() -> Vec<u8> {
-        let conn = |id: u32, topic: &str, ty: &str| {
-            record(
-                &[
-                    field("op", &[0x07]),
-                    field("conn", &id.to_le_bytes()),
-                    field("topic", topic.as_bytes()),
-                ],
-                &[
-                    field("topic", topic.as_bytes()),
-                    field("type", ty.as_bytes()),
-                ]
-                .concat(),
-            )
-        };
-        let mut scan = header_msg(2);
-        for v in [-1.0f32, 1.0, 0.5, 0.0, 0.1, 0.02, 10.0] {
-            scan.extend(v.to_bits().to_le_bytes());
-        }
-        scan.extend(5u32.to_le_bytes());
-        for r in [1.0f32, 2.0, f32::INFINITY, 12.0, 3.0] {
-            scan.extend(r.to_bits().to_le_bytes());
-        }
-        scan.extend(0u32.to_le_bytes());
-        let odo = |t: u32, x: f64| {
-            let mut m = header_msg(t);
-            m.extend(0u32.to_le_bytes());
-            for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
-                m.extend(v.to_le_bytes());
-            }
-            m.extend(vec![0u8; 36 * 8 + 6 * 8 + 36 * 8]);
-            m
-        };
-        let msg = |id: u32, body: &[u8]| {
-            record(
-                &[
-                    field("op", &[0x02]),
-                    field("conn", &id.to_le_bytes()),
-                    field("time", &[0; 8]),
-                ],
-                body,
-            )
-        };
-        let inner = [
-            conn(0, "/scan", "sensor_msgs/LaserScan"),
-            conn(1, "/odom", "nav_msgs/Odometry"),
-            conn(2, "/tf", "tf2_msgs/TFMessage"),
-            msg(1, &odo(1, 0.0)),
-            msg(0, &scan),
-            msg(1, &odo(3, 1.0)),
-            msg(2, b"xx"),
-        ]
-        .concat();
-        let mut z = Vec::new();
-        bzip2::read::BzEncoder::new(&inner[..], bzip2::Compression::default())
-            .read_to_end(&mut z)
-            .unwrap();
-        let mut out = b"#ROSBAG V2.0\n".to_vec();
-        out.extend(record(&[field("op", &[0x03])], &[]));
-        out.extend(record(
-            &[
-                field("op", &[0x05]),
-                field("compression", b"bz2"),
-                field("size", &(inner.len() as u32).to_le_bytes()),
-            ],
-            &z,
-        ));
-        out
-    }
-
     #[test]
     fn scans_and_odometry_come_out_of_a_bz2_chunk() {
-        let log = read(&bag()).unwrap();
+        let log = read(&example(true)).unwrap();
         assert_eq!(log.scans.len(), 1);
         let s = &log.scans[0];
         assert_eq!(s.scan.stamp, Time::from_secs(2.0));
@@ -427,7 +433,7 @@ mod tests {
 
     #[test]
     fn truncated_and_foreign_files_are_errors_not_panics() {
-        let b = bag();
+        let b = example(true);
         for cut in [20, b.len() / 2, b.len() - 3] {
             let e = read(&b[..cut]).unwrap_err();
             assert!(
@@ -446,7 +452,7 @@ mod tests {
     #[test]
     fn a_chunk_bigger_than_its_header_or_inside_a_chunk_is_an_error() {
         // The header promises 10 bytes fewer than the chunk holds.
-        let mut b = bag();
+        let mut b = example(true);
         let at = b.windows(5).position(|w| w == b"size=").unwrap() + 5;
         let size = u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
         b[at..at + 4].copy_from_slice(&(size - 10).to_le_bytes());

@@ -20,7 +20,10 @@ pub fn check_ranges(prefix: &str, checks: &[(&str, f64, f64, f64)]) -> Result<()
         if !(v.is_finite() && v >= lo && v <= hi) {
             return Err((
                 below(prefix, k),
-                format!("expected a value in [{lo}, {hi}], found {v}"),
+                format!(
+                    "expected a value in [{lo}, {hi}], found {}",
+                    futago_msgs::shown(v)
+                ),
             ));
         }
     }

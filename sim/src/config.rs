@@ -99,7 +99,10 @@ pub fn check_range(
         Err(SpecError::new(
             file,
             key,
-            format!("expected a value in [{lo}, {hi}] {unit}, found {value}"),
+            format!(
+                "expected a value in [{lo}, {hi}] {unit}, found {}",
+                futago_msgs::shown(value)
+            ),
         ))
     }
 }

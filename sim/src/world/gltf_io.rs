@@ -89,10 +89,95 @@ fn to_rgba8(img: &gltf::image::Data) -> Result<Vec<u8>, String> {
     Ok(out)
 }
 
+/// Checks the references that the gltf crate (1.4) follows without a bounds check, so that a
+/// malformed file is an error naming it instead of a panic inside the crate (found by
+/// `futago fuzz`): a primitive's accessor indices, which the crate's validation indexes
+/// before checking, and an image in a buffer view without a MIME type, which its
+/// `Image::source` unwraps.
+fn precheck(name: &Path, bytes: &[u8]) -> Result<(), String> {
+    let bad = |m: String| Err(format!("{}: {m}", name.display()));
+    let glb;
+    let json: &[u8] = if bytes.starts_with(b"glTF") {
+        glb = gltf::Glb::from_slice(bytes)
+            .map_err(|e| format!("cannot load glTF file {}: {e}", name.display()))?;
+        &glb.json
+    } else {
+        bytes
+    };
+    // What does not parse here is left to the crate's own error.
+    let Ok(root) = gltf::json::Root::from_slice(json) else {
+        return Ok(());
+    };
+    let accessors = root.accessors.len();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (k, p) in mesh.primitives.iter().enumerate() {
+            let targets = p.targets.iter().flatten().flat_map(|t| {
+                [t.positions, t.normals, t.tangents]
+                    .into_iter()
+                    .flatten()
+                    .collect::<Vec<_>>()
+            });
+            let used = p
+                .attributes
+                .values()
+                .copied()
+                .chain(p.indices)
+                .chain(targets);
+            for a in used {
+                if a.value() >= accessors {
+                    return bad(format!(
+                        "mesh {m} primitive {k} refers to accessor {}, but the file has {accessors}",
+                        a.value()
+                    ));
+                }
+            }
+        }
+    }
+    for (i, img) in root.images.iter().enumerate() {
+        match (&img.buffer_view, &img.mime_type, &img.uri) {
+            (Some(v), Some(_), _) if v.value() < root.buffer_views.len() => {}
+            (Some(_), None, _) => {
+                return bad(format!("image {i} is in a buffer view but has no mimeType"));
+            }
+            (Some(v), _, _) => {
+                return bad(format!(
+                    "image {i} refers to buffer view {}, but the file has {}",
+                    v.value(),
+                    root.buffer_views.len()
+                ));
+            }
+            (None, _, None) => return bad(format!("image {i} has neither a uri nor a bufferView")),
+            (None, _, Some(_)) => {}
+        }
+    }
+    Ok(())
+}
+
 /// Loads every triangle primitive of the default (or first) scene of a glTF file.
 pub fn load(path: &Path) -> Result<Loaded, String> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| format!("cannot read glTF file {}: {e}", path.display()))?;
+    precheck(path, &bytes)?;
     let (doc, buffers, images) =
         gltf::import(path).map_err(|e| format!("cannot load glTF file {}: {e}", path.display()))?;
+    convert(path, doc, buffers, images)
+}
+
+/// As [`load`], from the bytes of a self-contained file (a GLB, or glTF with data URIs);
+/// `name` stands for the file in errors.
+pub fn load_slice(name: &Path, bytes: &[u8]) -> Result<Loaded, String> {
+    precheck(name, bytes)?;
+    let (doc, buffers, images) = gltf::import_slice(bytes)
+        .map_err(|e| format!("cannot load glTF file {}: {e}", name.display()))?;
+    convert(name, doc, buffers, images)
+}
+
+fn convert(
+    path: &Path,
+    doc: gltf::Document,
+    buffers: Vec<gltf::buffer::Data>,
+    images: Vec<gltf::image::Data>,
+) -> Result<Loaded, String> {
     let mut textures = Vec::new();
     let mut materials = Vec::new();
     // Materials, with factor baked into the texture (see module docs).
