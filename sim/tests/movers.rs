@@ -10,23 +10,10 @@ use futago_sim::agent::{AgentConfig, PathMode};
 use futago_sim::create::CreateConfig;
 use futago_sim::joint::{JointConfig, JointMode};
 use futago_sim::lidar::{LidarConfig, LidarPreset};
-use futago_sim::{Movers, PhysicsConfig, Simulation, World};
-use std::path::Path;
+use futago_sim::{Movers, Simulation, World};
 
 fn with_movers(world: &World, lidars: &[LidarConfig], movers: &Movers, start: Pose2) -> Simulation {
-    let resolved: Vec<_> = lidars
-        .iter()
-        .map(|l| (l.clone(), l.resolve(Path::new("test"), "lidar").unwrap()))
-        .collect();
-    Simulation::new(
-        world,
-        &PhysicsConfig::default(),
-        &CreateConfig::default(),
-        &resolved,
-        movers,
-        start,
-        1,
-    )
+    sim_with(world, &CreateConfig::default(), lidars, movers, start, 1)
 }
 
 fn joint(name: &str, mode: JointMode, axis: [f64; 3], rate: f64) -> JointConfig {

@@ -129,22 +129,25 @@ pub fn squared_edt(sites: &[bool], w: usize, h: usize) -> Vec<f64> {
     f
 }
 
+/// A 10 × 6 m room (5 cm cells) with a wall across the middle from y = 0 to 4.5, so that
+/// the way from the left half to the right half goes round its end: the grid the transforms'
+/// and the planners' tests share.
+#[cfg(test)]
+pub(crate) fn room() -> OccupancyGrid {
+    let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 200, 120);
+    for j in 0..120 {
+        for i in 0..200 {
+            let border = i == 0 || j == 0 || i == 199 || j == 119;
+            let wall = (99..=101).contains(&i) && j < 90;
+            g.set(i, j, if border || wall { 100 } else { 0 });
+        }
+    }
+    g
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A 10 × 6 m room (5 cm cells) with a wall across the middle from y = 0 to 4.5.
-    fn room() -> OccupancyGrid {
-        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 200, 120);
-        for j in 0..120 {
-            for i in 0..200 {
-                let border = i == 0 || j == 0 || i == 199 || j == 119;
-                let wall = (99..=101).contains(&i) && j < 90;
-                g.set(i, j, if border || wall { 100 } else { 0 });
-            }
-        }
-        g
-    }
 
     #[test]
     fn distance_transform_is_close_to_euclidean() {

@@ -453,19 +453,7 @@ fn distance_at(grid: &OccupancyGrid, distance: &[f32], p: [f64; 2]) -> f64 {
 mod tests {
     use super::*;
 
-    /// A 10 × 6 m room (5 cm cells) with a wall across the middle from y = 0 to 4.5, so that
-    /// the way from the left half to the right half goes round its end.
-    fn room() -> OccupancyGrid {
-        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 200, 120);
-        for j in 0..120 {
-            for i in 0..200 {
-                let border = i == 0 || j == 0 || i == 199 || j == 119;
-                let wall = (99..=101).contains(&i) && j < 90;
-                g.set(i, j, if border || wall { 100 } else { 0 });
-            }
-        }
-        g
-    }
+    use crate::geometry::grid::room;
 
     #[test]
     fn roadmap_path_goes_round_the_wall_and_keeps_clear() {

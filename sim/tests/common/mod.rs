@@ -44,6 +44,25 @@ pub fn sim(
     start: Pose2,
     seed: u64,
 ) -> Simulation {
+    sim_with(
+        world,
+        robot,
+        lidars,
+        &futago_sim::Movers::default(),
+        start,
+        seed,
+    )
+}
+
+/// A simulation with the given lasers, joints and agents.
+pub fn sim_with(
+    world: &World,
+    robot: &CreateConfig,
+    lidars: &[LidarConfig],
+    movers: &futago_sim::Movers,
+    start: Pose2,
+    seed: u64,
+) -> Simulation {
     let resolved: Vec<_> = lidars
         .iter()
         .map(|l| (l.clone(), l.resolve(Path::new("test"), "lidar").unwrap()))
@@ -53,7 +72,7 @@ pub fn sim(
         &PhysicsConfig::default(),
         robot,
         &resolved,
-        &futago_sim::Movers::default(),
+        movers,
         start,
         seed,
     )
