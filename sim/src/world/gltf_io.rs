@@ -133,6 +133,64 @@ fn precheck(name: &Path, bytes: &[u8]) -> Result<(), String> {
             }
         }
     }
+    for (i, v) in root.buffer_views.iter().enumerate() {
+        let Some(b) = root.buffers.get(v.buffer.value()) else {
+            return bad(format!("buffer view {i} refers to a missing buffer"));
+        };
+        let end = v
+            .byte_offset
+            .map_or(0, |o| o.0)
+            .checked_add(v.byte_length.0);
+        if end.is_none_or(|e| e > b.byte_length.0) {
+            return bad(format!(
+                "buffer view {i} reaches past the end of its buffer"
+            ));
+        }
+    }
+    // The attributes this loader reads, with the component types and shapes the crate's
+    // readers take (any other reaches an `unreachable!` there).
+    use gltf::json::accessor::{ComponentType as C, Type as T};
+    use gltf::json::mesh::Semantic;
+    use gltf::json::validation::Checked;
+    let kind = |a: gltf::json::Index<gltf::json::Accessor>| {
+        let acc = &root.accessors[a.value()];
+        match (&acc.component_type, &acc.type_) {
+            (Checked::Valid(c), Checked::Valid(t)) => Some((c.0, *t)),
+            _ => None,
+        }
+    };
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (k, p) in mesh.primitives.iter().enumerate() {
+            let what = |attr: &str| {
+                format!("mesh {m} primitive {k}: {attr} has a type this loader does not read")
+            };
+            for (sem, a) in &p.attributes {
+                let name = match sem {
+                    Checked::Valid(Semantic::Positions) => "POSITION".to_string(),
+                    Checked::Valid(Semantic::Normals) => "NORMAL".to_string(),
+                    Checked::Valid(Semantic::TexCoords(n)) => format!("TEXCOORD_{n}"),
+                    _ => "another attribute".to_string(),
+                };
+                let ok = match sem {
+                    Checked::Valid(Semantic::Positions | Semantic::Normals) => {
+                        kind(*a) == Some((C::F32, T::Vec3))
+                    }
+                    Checked::Valid(Semantic::TexCoords(_)) => {
+                        matches!(kind(*a), Some((C::U8 | C::U16 | C::F32, T::Vec2)))
+                    }
+                    _ => true,
+                };
+                if !ok {
+                    return bad(what(&format!("attribute {name}")));
+                }
+            }
+            if let Some(a) = p.indices
+                && !matches!(kind(a), Some((C::U8 | C::U16 | C::U32, T::Scalar)))
+            {
+                return bad(what("its index accessor"));
+            }
+        }
+    }
     for (i, img) in root.images.iter().enumerate() {
         match (&img.buffer_view, &img.mime_type, &img.uri) {
             (Some(v), Some(_), _) if v.value() < root.buffer_views.len() => {}
@@ -483,4 +541,50 @@ pub fn export_glb(world: &World, poses: &[rapier3d::math::Pose]) -> Vec<u8> {
         bin: Some(bin.into()),
     };
     glb.to_vec().expect("writing a GLB to memory cannot fail")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A one-triangle glTF (JSON, no binary: the buffer is never read because every check
+    /// below fails before it is) with `edit` applied to its JSON text.
+    fn gltf(edit: impl Fn(String) -> String) -> Vec<u8> {
+        let json = r#"{"asset":{"version":"2.0"},
+"buffers":[{"byteLength":42}],
+"bufferViews":[{"buffer":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":6}],
+"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]},
+{"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}],
+"meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],
+"images":[]}"#;
+        edit(json.to_string()).into_bytes()
+    }
+
+    #[test]
+    fn references_the_gltf_crate_would_panic_on_are_errors() {
+        let name = Path::new("bad.gltf");
+        assert!(precheck(name, &gltf(|j| j)).is_ok());
+        for (edit, expect) in [
+            (
+                (|j: String| j.replace(r#""POSITION":0"#, r#""POSITION":7"#))
+                    as fn(String) -> String,
+                "refers to accessor 7, but the file has 2",
+            ),
+            (
+                |j| j.replace(r#""byteOffset":36"#, r#""byteOffset":40"#),
+                "buffer view 1 reaches past the end of its buffer",
+            ),
+            (
+                |j| j.replace(r#""componentType":5123"#, r#""componentType":5126"#),
+                "its index accessor has a type this loader does not read",
+            ),
+            (
+                |j| j.replace(r#""images":[]"#, r#""images":[{"bufferView":0}]"#),
+                "image 0 is in a buffer view but has no mimeType",
+            ),
+        ] {
+            let e = precheck(name, &gltf(edit)).unwrap_err();
+            assert!(e.contains(expect) && e.contains("bad.gltf"), "{e}");
+        }
+    }
 }
