@@ -207,6 +207,7 @@ fn every_numeric_key_refuses_absurd_values_by_name() {
             }
         }
     }
+    eprintln!("walked {} numeric keys", walked.len());
     assert!(walked.len() > 200, "walked only {} keys", walked.len());
     assert!(
         failures.is_empty(),

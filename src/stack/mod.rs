@@ -187,27 +187,58 @@ pub fn laser<'a>(
         .ok_or_else(|| anyhow::anyhow!("no laser is named {name:?}"))
 }
 
-/// The stack of a scenario, in the order of every phase: the recorders of the run's files
-/// (when it writes them), the driver, the localiser, SLAM, the RGB-D mapper. Each factory
-/// returns `None` where the scenario does not run its module.
+/// A kind of stack module: how it makes its nodes for a scenario (none where the scenario
+/// does not run it) and the metric names its scorer declares for a scenario.
+pub struct Module {
+    pub build: fn(&Scenario, u64, Option<&Path>) -> Result<Vec<Box<dyn Node>>>,
+    pub metric_names: fn(&crate::scenario::ScenarioSpec) -> Vec<String>,
+}
+
+fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Result<Vec<Box<dyn Node>>> {
+    Ok(n?
+        .map(|n| Box::new(n) as Box<dyn Node>)
+        .into_iter()
+        .collect())
+}
+
+/// The stack's modules, in the order their nodes run in every phase: the recorders of the
+/// run's files (when it writes them), the driver, the localiser, SLAM, the RGB-D mapper. A
+/// new module is one line here; the loop and the metric checks read this table.
+pub const MODULES: &[Module] = &[
+    Module {
+        build: |s, _, out| out.map_or(Ok(Vec::new()), |dir| record::recorders(s, dir)),
+        metric_names: record::metric_names,
+    },
+    Module {
+        build: |s, _, _| Ok(vec![Box::new(driver::DriverNode::new(s)?) as Box<dyn Node>]),
+        metric_names: |_| Vec::new(),
+    },
+    Module {
+        build: |s, seed, _| boxed(localization::node(s, seed)),
+        metric_names: localization::metric_names,
+    },
+    Module {
+        build: |s, _, _| boxed(slam::node(s)),
+        metric_names: slam::metric_names,
+    },
+    Module {
+        build: |s, seed, _| boxed(rgbd_map::node(s, seed)),
+        metric_names: rgbd_map::metric_names,
+    },
+];
+
+/// The stack of a scenario: every module's nodes, in [`MODULES`] order.
 pub fn build(s: &Scenario, seed: u64, out: Option<&Path>) -> Result<Vec<Box<dyn Node>>> {
-    let mut nodes: Vec<Box<dyn Node>> = Vec::new();
-    if let Some(dir) = out {
-        nodes.extend(record::recorders(s, dir)?);
+    let mut nodes = Vec::new();
+    for m in MODULES {
+        nodes.extend((m.build)(s, seed, out)?);
     }
-    nodes.push(Box::new(driver::DriverNode::new(s)?));
-    nodes.extend(localization::node(s, seed)?.map(|n| Box::new(n) as Box<dyn Node>));
-    nodes.extend(slam::node(s)?.map(|n| Box::new(n) as Box<dyn Node>));
-    nodes.extend(rgbd_map::node(s, seed)?.map(|n| Box::new(n) as Box<dyn Node>));
     Ok(nodes)
 }
 
 /// Every metric name a run of `s` produces: each module's scorer declares its own.
 pub fn metric_names(s: &crate::scenario::ScenarioSpec) -> Vec<String> {
-    let mut names = record::metric_names(s);
-    names.extend(localization::metric_names(s));
-    names.extend(slam::metric_names(s));
-    names.extend(rgbd_map::metric_names(s));
+    let mut names: Vec<String> = MODULES.iter().flat_map(|m| (m.metric_names)(s)).collect();
     names.sort();
     names.dedup();
     names
