@@ -187,14 +187,17 @@ pub fn laser<'a>(
         .ok_or_else(|| anyhow::anyhow!("no laser is named {name:?}"))
 }
 
+/// A scenario's nodes of one module, in their order.
+pub type Nodes = Result<Vec<Box<dyn Node>>>;
+
 /// A kind of stack module: how it makes its nodes for a scenario (none where the scenario
 /// does not run it) and the metric names its scorer declares for a scenario.
 pub struct Module {
-    pub build: fn(&Scenario, u64, Option<&Path>) -> Result<Vec<Box<dyn Node>>>,
+    pub build: fn(&Scenario, u64, Option<&Path>) -> Nodes,
     pub metric_names: fn(&crate::scenario::ScenarioSpec) -> Vec<String>,
 }
 
-fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Result<Vec<Box<dyn Node>>> {
+fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
     Ok(n?
         .map(|n| Box::new(n) as Box<dyn Node>)
         .into_iter()
