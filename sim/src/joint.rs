@@ -21,7 +21,6 @@ use futago_msgs::Time;
 use glam::{Quat, Vec3};
 use rapier3d::math::Pose;
 use serde::{Deserialize, Serialize};
-use std::f64::consts::TAU;
 use std::path::Path;
 
 /// How a joint moves.
@@ -208,7 +207,6 @@ impl Joint {
                 }
             }
         };
-        debug_assert!(self.angle.is_finite() && self.angle.abs() <= 8.0 * TAU);
     }
 
     /// `J(θ)`: the motion of the joint's frame on the base at the current angle.
