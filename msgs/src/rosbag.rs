@@ -7,7 +7,14 @@
 //! header, 0x05 chunk (holding connection and message records, compressed), 0x07 connection,
 //! 0x02 message data, 0x04 index data, 0x06 chunk info. Messages are read in file order; each
 //! scan takes the odometry pose interpolated at its stamp (header stamps, not bag times).
-//! The laser's mount on the robot is taken as the base frame (tf is not read yet).
+//!
+//! The laser's mount on the robot comes from tf: the `tf2_msgs/TFMessage` (or `tf/tfMessage`)
+//! transforms on `/tf` and `/tf_static` are chained from the scan's frame up to the odometry's
+//! child frame (the base), each taken at its last value in the bag (mounts are static; the
+//! base's own odometry transform is never on that chain). The chain is projected onto the
+//! floor plane; a laser mounted upside down (roll π) has its scan mirrored back, and one tilted
+//! otherwise is an error. Without a chain the laser is taken at the base, and the scans are
+//! counted under `skipped` as `no tf from BASE to FRAME`.
 
 use crate::carmen::{Log, LogScan};
 use crate::{LaserScan, Pose2, Time};
@@ -106,7 +113,113 @@ struct Raw {
     types: HashMap<u32, String>,
     scans: Vec<LaserScan>,
     odometry: Vec<(Time, Pose2)>,
+    /// The odometry's child frame: the robot's base.
+    base: Option<String>,
+    /// tf: child frame → (parent frame, transform), the last one seen.
+    tf: HashMap<String, (String, Transform)>,
     skipped: std::collections::BTreeMap<String, usize>,
+}
+
+/// A tf transform: translation and unit quaternion `[x, y, z, w]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Transform {
+    t: [f64; 3],
+    q: [f64; 4],
+}
+
+impl Transform {
+    /// Roll, pitch and yaw (ZYX), rad.
+    fn rpy(&self) -> [f64; 3] {
+        let [x, y, z, w] = self.q;
+        let roll = (2.0 * (w * x + y * z)).atan2(1.0 - 2.0 * (x * x + y * y));
+        let pitch = (2.0 * (w * y - z * x)).clamp(-1.0, 1.0).asin();
+        let yaw = (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z));
+        [roll, pitch, yaw]
+    }
+
+    /// `self ∘ other` (other expressed in self's child frame).
+    fn compose(&self, o: &Transform) -> Transform {
+        let [ax, ay, az, aw] = self.q;
+        let [bx, by, bz, bw] = o.q;
+        let q = [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ];
+        // Rotate o.t by self.q: v' = v + 2w(u×v) + 2u×(u×v).
+        let u = [ax, ay, az];
+        let v = o.t;
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ]
+        };
+        let uv = cross(u, v);
+        let uuv = cross(u, uv);
+        let t = [0, 1, 2].map(|i| self.t[i] + v[i] + 2.0 * (aw * uv[i] + uuv[i]));
+        Transform { t, q }
+    }
+}
+
+/// The transforms of a `tf2_msgs/TFMessage`: (parent, child, transform).
+fn tf_message(data: &[u8]) -> Result<Vec<(String, String, Transform)>, String> {
+    let mut c = Cursor { data, at: 0 };
+    let n = c.u32("transforms length")? as usize;
+    // Each transform takes at least 84 bytes: what the message holds bounds the count.
+    if n > data.len() / 84 {
+        return Err(format!("{n} transforms in a {}-byte message", data.len()));
+    }
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        c.u32("header seq")?;
+        c.time("header stamp")?;
+        let parent = c.string("header frame_id")?;
+        let child = c.string("child_frame_id")?;
+        let mut v = [0.0; 7];
+        for x in &mut v {
+            *x = c.f64("transform")?;
+        }
+        let norm = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]).sqrt();
+        if !(v.iter().all(|x| x.is_finite()) && (norm - 1.0).abs() < 1e-3)
+            || v[..3].iter().any(|x| x.abs() > crate::MAX_COORDINATE)
+        {
+            return Err(format!(
+                "transform {parent} → {child}: expected a finite translation within ±{} m and a unit quaternion, found {v:?}",
+                crate::MAX_COORDINATE
+            ));
+        }
+        out.push((
+            parent,
+            child,
+            Transform {
+                t: [v[0], v[1], v[2]],
+                q: [v[3], v[4], v[5], v[6]],
+            },
+        ));
+    }
+    Ok(out)
+}
+
+/// The transform from `base` to `frame` through the tf tree, if they are linked.
+fn chain(tf: &HashMap<String, (String, Transform)>, base: &str, frame: &str) -> Option<Transform> {
+    let mut at = frame;
+    let mut t = Transform {
+        t: [0.0; 3],
+        q: [0.0, 0.0, 0.0, 1.0],
+    };
+    // A tree deeper than this is a loop.
+    for _ in 0..64 {
+        if at == base {
+            return Some(t);
+        }
+        let (parent, p) = tf.get(at)?;
+        t = p.compose(&t);
+        at = parent;
+    }
+    None
 }
 
 fn laser_scan(data: &[u8]) -> Result<LaserScan, String> {
@@ -148,12 +261,12 @@ fn laser_scan(data: &[u8]) -> Result<LaserScan, String> {
     })
 }
 
-fn odometry(data: &[u8]) -> Result<(Time, Pose2), String> {
+fn odometry(data: &[u8]) -> Result<(Time, Pose2, String), String> {
     let mut c = Cursor { data, at: 0 };
     c.u32("header seq")?;
     let stamp = c.time("header stamp")?;
     c.string("header frame_id")?;
-    c.string("child_frame_id")?;
+    let child = c.string("child_frame_id")?;
     let (x, y) = (c.f64("position x")?, c.f64("position y")?);
     if crate::bounded_coordinate(x).is_none() || crate::bounded_coordinate(y).is_none() {
         return Err(format!(
@@ -170,7 +283,7 @@ fn odometry(data: &[u8]) -> Result<(Time, Pose2), String> {
     ];
     // Yaw of a general quaternion (z-axis rotation of the body's x axis).
     let yaw = (2.0 * (q[3] * q[2] + q[0] * q[1])).atan2(1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]));
-    Ok((stamp, Pose2::new(x, y, yaw)))
+    Ok((stamp, Pose2::new(x, y, yaw), child))
 }
 
 /// Walks the records of `data` (the file after its magic line, or a chunk's contents).
@@ -242,9 +355,19 @@ fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<()
                     Some("sensor_msgs/LaserScan") => raw
                         .scans
                         .push(laser_scan(body).map_err(|m| err(format!("LaserScan: {m}")))?),
-                    Some("nav_msgs/Odometry") => raw
-                        .odometry
-                        .push(odometry(body).map_err(|m| err(format!("Odometry: {m}")))?),
+                    Some("nav_msgs/Odometry") => {
+                        let (t, pose, child) =
+                            odometry(body).map_err(|m| err(format!("Odometry: {m}")))?;
+                        raw.odometry.push((t, pose));
+                        raw.base.get_or_insert(child);
+                    }
+                    Some("tf2_msgs/TFMessage" | "tf/tfMessage") => {
+                        for (parent, child, t) in
+                            tf_message(body).map_err(|m| err(format!("TFMessage: {m}")))?
+                        {
+                            raw.tf.insert(child, (parent, t));
+                        }
+                    }
                     Some(other) => {
                         *raw.skipped
                             .entry(format!("message type {other}"))
@@ -292,13 +415,63 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
         skipped: raw.skipped,
         ..Default::default()
     };
-    for scan in raw.scans {
+    let base = raw.base.clone().unwrap_or_else(|| "base_link".into());
+    // Each frame's mount, found once.
+    let mut mounts: HashMap<String, Option<(Pose2, bool)>> = HashMap::new();
+    for mut scan in raw.scans {
         let odometry = crate::pose_at(&raw.odometry, scan.stamp, crate::Outside::Clamp)
             .unwrap_or(Pose2::IDENTITY);
+        let mount = match mounts.get(&scan.frame) {
+            Some(m) => *m,
+            None => {
+                let m = match chain(&raw.tf, &base, &scan.frame) {
+                    None => None,
+                    Some(t) => {
+                        let [roll, pitch, yaw] = t.rpy();
+                        let flipped = roll.abs() > std::f64::consts::FRAC_PI_2;
+                        let tilt = if flipped {
+                            std::f64::consts::PI - roll.abs()
+                        } else {
+                            roll.abs()
+                        };
+                        if tilt > 0.1 || pitch.abs() > 0.1 {
+                            return Err(BagError {
+                                offset: 0,
+                                message: format!(
+                                    "laser frame `{}` is tilted on `{base}` (roll {roll:.3}, pitch {pitch:.3} rad): futago reads lasers that scan parallel to the floor",
+                                    scan.frame
+                                ),
+                            });
+                        }
+                        // Upside down, its yaw is measured about the flipped z axis.
+                        Some((Pose2::new(t.t[0], t.t[1], yaw), flipped))
+                    }
+                };
+                mounts.insert(scan.frame.clone(), m);
+                m
+            }
+        };
+        let mount = match mount {
+            Some((m, flipped)) => {
+                if flipped {
+                    // Upside down, a beam at angle a in the laser frame lies at −a.
+                    let n = scan.ranges.len().saturating_sub(1) as f64;
+                    scan.angle_min = -(scan.angle_min + n * scan.angle_increment);
+                    scan.ranges.reverse();
+                }
+                m
+            }
+            None => {
+                *log.skipped
+                    .entry(format!("no tf from {base} to {}", scan.frame))
+                    .or_insert(0) += 1;
+                Pose2::IDENTITY
+            }
+        };
         log.scans.push(LogScan {
             scan,
             odometry,
-            mount: Pose2::IDENTITY,
+            mount,
         });
     }
     log.odometry = raw.odometry;
@@ -323,19 +496,42 @@ fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
     out
 }
 
-fn header_msg(stamp: u32) -> Vec<u8> {
+fn header_msg(stamp: u32, frame: &str) -> Vec<u8> {
     let mut m = 7u32.to_le_bytes().to_vec();
     m.extend(stamp.to_le_bytes());
     m.extend(0u32.to_le_bytes());
-    m.extend(4u32.to_le_bytes());
-    m.extend(b"base");
+    m.extend((frame.len() as u32).to_le_bytes());
+    m.extend(frame.as_bytes());
     m
 }
 
-/// A small valid bag: one connection per type (a laser scan, odometry, and a type the reader
-/// skips), a scan at t = 2 s and odometry at 1 s and 3 s, the messages inside one chunk,
-/// bz2-compressed or not. A fixture for tests and a seed for the fuzzer.
+fn ros_string(s: &str) -> Vec<u8> {
+    let mut m = (s.len() as u32).to_le_bytes().to_vec();
+    m.extend(s.as_bytes());
+    m
+}
+
+/// A `tf2_msgs/TFMessage` of one transform `parent → child`: translation and quaternion.
+fn tf_bytes(parent: &str, child: &str, t: [f64; 3], q: [f64; 4]) -> Vec<u8> {
+    let mut m = 1u32.to_le_bytes().to_vec();
+    m.extend(header_msg(0, parent));
+    m.extend(ros_string(child));
+    for v in t.iter().chain(&q) {
+        m.extend(v.to_le_bytes());
+    }
+    m
+}
+
+/// A small valid bag: one connection per type (a laser scan, odometry, tf, and a type the
+/// reader skips), a scan at t = 2 s in frame `laser`, odometry of `base_link` at 1 s and 3 s,
+/// and the laser mounted 0.22 m ahead of the base on `/tf_static` (`laser_q` its rotation),
+/// the messages inside one chunk, bz2-compressed or not. A fixture for tests and a seed for
+/// the fuzzer.
 pub fn example(bz2: bool) -> Vec<u8> {
+    example_mounted(bz2, [0.0, 0.0, 0.0, 1.0])
+}
+
+fn example_mounted(bz2: bool, laser_q: [f64; 4]) -> Vec<u8> {
     let conn = |id: u32, topic: &str, ty: &str| {
         record(
             &[
@@ -350,7 +546,7 @@ pub fn example(bz2: bool) -> Vec<u8> {
             .concat(),
         )
     };
-    let mut scan = header_msg(2);
+    let mut scan = header_msg(2, "laser");
     for v in [-1.0f32, 1.0, 0.5, 0.0, 0.1, 0.02, 10.0] {
         scan.extend(v.to_bits().to_le_bytes());
     }
@@ -360,8 +556,8 @@ pub fn example(bz2: bool) -> Vec<u8> {
     }
     scan.extend(0u32.to_le_bytes());
     let odo = |t: u32, x: f64| {
-        let mut m = header_msg(t);
-        m.extend(0u32.to_le_bytes());
+        let mut m = header_msg(t, "odom");
+        m.extend(ros_string("base_link"));
         for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
             m.extend(v.to_le_bytes());
         }
@@ -381,11 +577,16 @@ pub fn example(bz2: bool) -> Vec<u8> {
     let inner = [
         conn(0, "/scan", "sensor_msgs/LaserScan"),
         conn(1, "/odom", "nav_msgs/Odometry"),
-        conn(2, "/tf", "tf2_msgs/TFMessage"),
+        conn(2, "/tf_static", "tf2_msgs/TFMessage"),
+        conn(3, "/imu", "sensor_msgs/Imu"),
+        msg(
+            2,
+            &tf_bytes("base_link", "laser", [0.22, 0.0, 0.3], laser_q),
+        ),
         msg(1, &odo(1, 0.0)),
         msg(0, &scan),
         msg(1, &odo(3, 1.0)),
-        msg(2, b"xx"),
+        msg(3, b"xx"),
     ]
     .concat();
     let (compression, data): (&[u8], Vec<u8>) = if bz2 {
@@ -424,11 +625,46 @@ mod tests {
             s.scan.ranges,
             vec![1.0, 2.0, f32::INFINITY, f32::INFINITY, 3.0]
         );
-        assert_eq!(s.scan.frame, "base");
+        assert_eq!(s.scan.frame, "laser");
         // Odometry interpolated half way between x = 0 at 1 s and x = 1 at 3 s.
         assert!((s.odometry.x - 0.5).abs() < 1e-12);
         assert_eq!(log.odometry.len(), 2);
-        assert_eq!(log.skipped["message type tf2_msgs/TFMessage"], 1);
+        assert_eq!(log.skipped["message type sensor_msgs/Imu"], 1);
+        // The mount from /tf_static, on the floor plane.
+        assert_eq!(s.mount, Pose2::new(0.22, 0.0, 0.0));
+        assert_eq!(read(&example(false)).unwrap(), log);
+    }
+
+    #[test]
+    fn the_laser_is_placed_by_tf_turned_or_upside_down() {
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        // Turned 90° left about z: (0, 0, sin 45°, cos 45°).
+        let log = read(&example_mounted(true, [0.0, 0.0, h, h])).unwrap();
+        let m = log.scans[0].mount;
+        assert!((m.x - 0.22).abs() < 1e-12 && m.y.abs() < 1e-12, "{m:?}");
+        assert!(
+            (m.theta - std::f64::consts::FRAC_PI_2).abs() < 1e-9,
+            "{m:?}"
+        );
+        assert_eq!(log.scans[0].scan.angle_min, -1.0);
+        // Upside down (roll π: (1, 0, 0, 0)): the scan is mirrored, beam order and angles.
+        let log = read(&example_mounted(true, [1.0, 0.0, 0.0, 0.0])).unwrap();
+        let s = &log.scans[0];
+        assert!(s.mount.theta.abs() < 1e-9, "{:?}", s.mount);
+        // Five beams from −1 rad by 0.5: mirrored, from −1 again, in reverse order.
+        assert!(
+            (s.scan.angle_min + 1.0).abs() < 1e-6,
+            "{}",
+            s.scan.angle_min
+        );
+        assert_eq!(
+            s.scan.ranges,
+            vec![3.0, f32::INFINITY, f32::INFINITY, 2.0, 1.0]
+        );
+        // Tilted 30° about y: refused.
+        let (sn, cs) = (15f64.to_radians().sin(), 15f64.to_radians().cos());
+        let e = read(&example_mounted(true, [0.0, sn, 0.0, cs])).unwrap_err();
+        assert!(e.message.contains("tilted"), "{e}");
     }
 
     #[test]
