@@ -3,7 +3,7 @@
 //!
 //! Each target starts from seeds the project itself provides: the shipped scenarios and
 //! worlds, the chair's GLB, and logs written by the project's own writers (a CARMEN log, a
-//! TUM trajectory, a relations file, an example ROS bag with and without bz2). An input is a
+//! TUM trajectory, a relations file, an example ROS bag uncompressed, bz2 and lz4). An input is a
 //! seed with 1 to 8 stacked mutations: bit flips, random bytes, insertions, deletions,
 //! duplicated or spliced ranges, and, for text, numbers replaced by values at the edges of
 //! their types (0, −1, ±10³⁰⁰, NaN, 2³², 2⁶⁴ …), lines dropped, doubled or swapped. Every
@@ -251,6 +251,10 @@ pub fn targets(root: &Path) -> Result<Vec<Target>> {
             seeds: vec![
                 made("fuzz.bag", rosbag::example(true)),
                 made("fuzz-none.bag", rosbag::example(false)),
+                made(
+                    "fuzz-lz4.bag",
+                    rosbag::example_mounted("lz4", [0.0, 0.0, 0.0, 1.0]),
+                ),
             ],
             parse: parse_bag,
         },
@@ -533,8 +537,9 @@ mod tests {
                 .len(),
             2
         );
-        for bz2 in [true, false] {
-            assert_eq!(rosbag::read(&rosbag::example(bz2)).unwrap().scans.len(), 1);
+        for c in ["none", "bz2", "lz4"] {
+            let bag = rosbag::example_mounted(c, [0.0, 0.0, 0.0, 1.0]);
+            assert_eq!(rosbag::read(&bag).unwrap().scans.len(), 1);
         }
     }
 

@@ -1,6 +1,7 @@
 //! ROS 1 bags (format 2.0; written for futago from the ROS wiki's "Bags/Format/2.0"): the
-//! `sensor_msgs/LaserScan` and `nav_msgs/Odometry` messages of a bag, uncompressed or in bz2
-//! chunks, read into the same [`Log`] a CARMEN log gives.
+//! `sensor_msgs/LaserScan` and `nav_msgs/Odometry` messages of a bag, in chunks uncompressed,
+//! bz2 or lz4 (the LZ4 frame format, ROS's default for large bags; decoded by `lz4_flex`), read
+//! into the same [`Log`] a CARMEN log gives.
 //!
 //! A bag is the magic line `#ROSBAG V2.0\n` and records of `header_len, header, data_len, data`;
 //! a header is `field_len, name=value` fields, with `op` giving the record type: 0x03 bag
@@ -286,6 +287,24 @@ fn odometry(data: &[u8]) -> Result<(Time, Pose2, String), String> {
     Ok((stamp, Pose2::new(x, y, yaw), child))
 }
 
+/// A compressed chunk's contents, decompressed no further than the header's `size` (a
+/// decompression bomb stops there), into memory that grows only with what is read.
+fn inflate(reader: impl Read, size: usize, what: &str) -> Result<Vec<u8>, String> {
+    let mut out = Vec::new();
+    reader
+        .take(size as u64 + 1)
+        .read_to_end(&mut out)
+        .map_err(|e| format!("{what} chunk: {e}"))?;
+    if out.len() != size {
+        return Err(format!(
+            "{what} chunk decompresses to {}{} bytes, but its header says {size}",
+            if out.len() > size { "more than " } else { "" },
+            out.len().min(size)
+        ));
+    }
+    Ok(out)
+}
+
 /// Walks the records of `data` (the file after its magic line, or a chunk's contents).
 fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<(), BagError> {
     let mut c = Cursor { data, at: 0 };
@@ -316,25 +335,13 @@ fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<()
                 let inner = match compression.as_str() {
                     "none" => body.to_vec(),
                     "bz2" => {
-                        // Decompressed no further than the header's size (a bz2 bomb stops
-                        // there), into memory that grows only with what is read.
-                        let mut out = Vec::new();
-                        bzip2::read::BzDecoder::new(body)
-                            .take(size as u64 + 1)
-                            .read_to_end(&mut out)
-                            .map_err(|e| err(format!("bz2 chunk: {e}")))?;
-                        if out.len() != size {
-                            return Err(err(format!(
-                                "bz2 chunk decompresses to {}{} bytes, but its header says {size}",
-                                if out.len() > size { "more than " } else { "" },
-                                out.len().min(size)
-                            )));
-                        }
-                        out
+                        inflate(bzip2::read::BzDecoder::new(body), size, "bz2").map_err(err)?
                     }
+                    "lz4" => inflate(lz4_flex::frame::FrameDecoder::new(body), size, "lz4")
+                        .map_err(err)?,
                     other => {
                         return Err(err(format!(
-                            "chunk compression `{other}` is not supported (expected none or bz2)"
+                            "chunk compression `{other}` is not supported (expected none, bz2 or lz4)"
                         )));
                     }
                 };
@@ -528,10 +535,12 @@ fn tf_bytes(parent: &str, child: &str, t: [f64; 3], q: [f64; 4]) -> Vec<u8> {
 /// the messages inside one chunk, bz2-compressed or not. A fixture for tests and a seed for
 /// the fuzzer.
 pub fn example(bz2: bool) -> Vec<u8> {
-    example_mounted(bz2, [0.0, 0.0, 0.0, 1.0])
+    example_mounted(if bz2 { "bz2" } else { "none" }, [0.0, 0.0, 0.0, 1.0])
 }
 
-fn example_mounted(bz2: bool, laser_q: [f64; 4]) -> Vec<u8> {
+/// [`example`] with its chunk compressed by `compression` (`none`, `bz2` or `lz4`) and the
+/// laser turned by the quaternion `laser_q` on the base.
+pub fn example_mounted(compression: &str, laser_q: [f64; 4]) -> Vec<u8> {
     let conn = |id: u32, topic: &str, ty: &str| {
         record(
             &[
@@ -589,21 +598,29 @@ fn example_mounted(bz2: bool, laser_q: [f64; 4]) -> Vec<u8> {
         msg(3, b"xx"),
     ]
     .concat();
-    let (compression, data): (&[u8], Vec<u8>) = if bz2 {
-        let mut z = Vec::new();
-        bzip2::read::BzEncoder::new(&inner[..], bzip2::Compression::default())
-            .read_to_end(&mut z)
-            .expect("bz2 compression in memory cannot fail");
-        (b"bz2", z)
-    } else {
-        (b"none", inner.clone())
+    let data = match compression {
+        "bz2" => {
+            let mut z = Vec::new();
+            bzip2::read::BzEncoder::new(&inner[..], bzip2::Compression::default())
+                .read_to_end(&mut z)
+                .expect("bz2 compression in memory cannot fail");
+            z
+        }
+        "lz4" => {
+            use std::io::Write;
+            let mut e = lz4_flex::frame::FrameEncoder::new(Vec::new());
+            e.write_all(&inner)
+                .expect("lz4 compression in memory cannot fail");
+            e.finish().expect("lz4 compression in memory cannot fail")
+        }
+        _ => inner.clone(),
     };
     let mut out = b"#ROSBAG V2.0\n".to_vec();
     out.extend(record(&[field("op", &[0x03])], &[]));
     out.extend(record(
         &[
             field("op", &[0x05]),
-            field("compression", compression),
+            field("compression", compression.as_bytes()),
             field("size", &(inner.len() as u32).to_le_bytes()),
         ],
         &data,
@@ -633,13 +650,17 @@ mod tests {
         // The mount from /tf_static, on the floor plane.
         assert_eq!(s.mount, Pose2::new(0.22, 0.0, 0.0));
         assert_eq!(read(&example(false)).unwrap(), log);
+        assert_eq!(
+            read(&example_mounted("lz4", [0.0, 0.0, 0.0, 1.0])).unwrap(),
+            log
+        );
     }
 
     #[test]
     fn the_laser_is_placed_by_tf_turned_or_upside_down() {
         let h = std::f64::consts::FRAC_1_SQRT_2;
         // Turned 90° left about z: (0, 0, sin 45°, cos 45°).
-        let log = read(&example_mounted(true, [0.0, 0.0, h, h])).unwrap();
+        let log = read(&example_mounted("bz2", [0.0, 0.0, h, h])).unwrap();
         let m = log.scans[0].mount;
         assert!((m.x - 0.22).abs() < 1e-12 && m.y.abs() < 1e-12, "{m:?}");
         assert!(
@@ -648,7 +669,7 @@ mod tests {
         );
         assert_eq!(log.scans[0].scan.angle_min, -1.0);
         // Upside down (roll π: (1, 0, 0, 0)): the scan is mirrored, beam order and angles.
-        let log = read(&example_mounted(true, [1.0, 0.0, 0.0, 0.0])).unwrap();
+        let log = read(&example_mounted("bz2", [1.0, 0.0, 0.0, 0.0])).unwrap();
         let s = &log.scans[0];
         assert!(s.mount.theta.abs() < 1e-9, "{:?}", s.mount);
         // Five beams from −1 rad by 0.5: mirrored, from −1 again, in reverse order.
@@ -663,7 +684,7 @@ mod tests {
         );
         // Tilted 30° about y: refused.
         let (sn, cs) = (15f64.to_radians().sin(), 15f64.to_radians().cos());
-        let e = read(&example_mounted(true, [0.0, sn, 0.0, cs])).unwrap_err();
+        let e = read(&example_mounted("bz2", [0.0, sn, 0.0, cs])).unwrap_err();
         assert!(e.message.contains("tilted"), "{e}");
     }
 
@@ -688,12 +709,15 @@ mod tests {
     #[test]
     fn a_chunk_bigger_than_its_header_or_inside_a_chunk_is_an_error() {
         // The header promises 10 bytes fewer than the chunk holds.
-        let mut b = example(true);
-        let at = b.windows(5).position(|w| w == b"size=").unwrap() + 5;
-        let size = u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
-        b[at..at + 4].copy_from_slice(&(size - 10).to_le_bytes());
-        let e = read(&b).unwrap_err();
-        assert!(e.message.contains("decompresses to more than"), "{e}");
+        for compression in ["bz2", "lz4"] {
+            let mut b = example_mounted(compression, [0.0, 0.0, 0.0, 1.0]);
+            let at = b.windows(5).position(|w| w == b"size=").unwrap() + 5;
+            let size = u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+            b[at..at + 4].copy_from_slice(&(size - 10).to_le_bytes());
+            let e = read(&b).unwrap_err();
+            assert!(e.message.contains("decompresses to more than"), "{e}");
+            assert!(e.message.contains(compression), "{e}");
+        }
         // A chunk whose content is another chunk.
         let inner = record(
             &[
