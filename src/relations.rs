@@ -159,18 +159,26 @@ pub fn interpolate(traj: &[(Time, Pose2)], t: Time) -> Option<Pose2> {
     futago_msgs::pose_at(traj, t, futago_msgs::Outside::None)
 }
 
+/// One relation's error: translational (m) and rotational (degrees), `None` when its times
+/// fall outside the estimated trajectory.
+pub fn error(traj: &[(Time, Pose2)], r: &Relation) -> Option<(f64, f64)> {
+    let (p1, p2) = (interpolate(traj, r.t1)?, interpolate(traj, r.t2)?);
+    let e = p1.between(&p2).compose(&r.delta.inverse());
+    Some((e.x.hypot(e.y), wrap_angle(e.theta).abs().to_degrees()))
+}
+
 /// Scores an estimated trajectory (sorted by time) against relations.
 pub fn evaluate(traj: &[(Time, Pose2)], relations: &[Relation]) -> Metrics {
     let (mut trans, mut rot) = (Vec::new(), Vec::new());
     let mut unmatched = 0;
     for r in relations {
-        let (Some(p1), Some(p2)) = (interpolate(traj, r.t1), interpolate(traj, r.t2)) else {
-            unmatched += 1;
-            continue;
-        };
-        let e = p1.between(&p2).compose(&r.delta.inverse());
-        trans.push(e.x.hypot(e.y));
-        rot.push(wrap_angle(e.theta).abs().to_degrees());
+        match error(traj, r) {
+            Some((t, a)) => {
+                trans.push(t);
+                rot.push(a);
+            }
+            None => unmatched += 1,
+        }
     }
     let sq = |v: &[f64]| v.iter().map(|x| x * x).collect::<Vec<_>>();
     Metrics {

@@ -148,6 +148,31 @@ pub fn replay(
             serde_json::to_string_pretty(&summary)? + "\n",
         )
         .context("writing summary.json")?;
+        // Each relation's error, by the time of its first pose, and the worst placed on the map.
+        let mut errors = Vec::new();
+        let mut scored = Vec::new();
+        for r in rels.iter().flatten() {
+            if let Some((e, _)) = relations::error(&trajectory, r) {
+                errors.push((r.t1.secs(), e));
+                scored.push((r, e));
+            }
+        }
+        scored.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let at = |t| relations::interpolate(&trajectory, t).map(|p| [p.x, p.y]);
+        let worst: Vec<([f64; 2], [f64; 2], f64)> = scored
+            .iter()
+            .take(crate::report::WORST_RELATIONS)
+            .filter_map(|(r, e)| Some((at(r.t1)?, at(r.t2)?, *e)))
+            .collect();
+        let html = crate::report::replay_report(
+            &summary,
+            &slam.grid().to_grid(),
+            &trajectory,
+            &odometry,
+            &errors,
+            &worst,
+        );
+        std::fs::write(tmp.join("report.html"), html).context("writing report.html")?;
         Ok(summary)
     })
 }

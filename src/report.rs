@@ -419,6 +419,158 @@ fn read_tum(dir: &Path, file: &str) -> Option<Vec<Stamped>> {
     tum::parse(&text).ok()
 }
 
+/// How many of a replay's worst relations are marked on its map.
+pub const WORST_RELATIONS: usize = 10;
+
+/// The report of a replay of a real log (deterministic: no wall times): its facts and relation
+/// scores, the SLAM map with
+/// the SLAM trajectory and odometry over it and the worst relations marked (a circle at each
+/// end, numbered by rank), and each relation's error over time. `worst` lists the marked
+/// relations, worst first: (rank label, SLAM poses at both ends, translational error m).
+pub fn replay_report(
+    summary: &Value,
+    map: &OccupancyGrid,
+    slam: &[(futago_msgs::Time, futago_msgs::Pose2)],
+    odometry: &[(futago_msgs::Time, futago_msgs::Pose2)],
+    errors: &[(f64, f64)],
+    worst: &[([f64; 2], [f64; 2], f64)],
+) -> String {
+    let log = summary["log"].as_str().unwrap_or("log");
+    let mut body = format!("<h1>futago replay: {}</h1>\n", escape(log));
+    body += &table(
+        "facts",
+        &[
+            "SLAM",
+            "scans",
+            "log",
+            "keyframes",
+            "loop closures",
+            "unmatched scans",
+        ],
+        &[vec![
+            escape(summary["slam"].as_str().unwrap_or("")),
+            number(&summary["scans"]),
+            format!("{:.0} s", summary["log_duration_s"].as_f64().unwrap_or(0.0)),
+            number(&summary["keyframes"]),
+            number(&summary["loop_closures"]),
+            number(&summary["unmatched_scans"]),
+        ]],
+    );
+    let rel = &summary["relations"];
+    if rel.is_object() {
+        let row = |name: &str| {
+            let m = &rel[name];
+            let f = |k: &str, d: usize| {
+                format!(
+                    "{:.d$} ± {:.d$}",
+                    m[k]["mean"].as_f64().unwrap_or(f64::NAN),
+                    m[k]["std"].as_f64().unwrap_or(f64::NAN)
+                )
+            };
+            vec![
+                name.to_string(),
+                f("abs_trans_m", 4),
+                f("abs_rot_deg", 3),
+                number(&m["relations"]),
+                number(&m["unmatched"]),
+            ]
+        };
+        body += "<h2>Relations (Kümmerle et al. 2009)</h2>\n";
+        body += &table(
+            "relations",
+            &[
+                "trajectory",
+                "abs trans (m)",
+                "abs rot (°)",
+                "scored",
+                "unmatched",
+            ],
+            &[row("slam"), row("odometry")],
+        );
+    }
+    let path =
+        |name: &str, colour: &'static str, t: &[(futago_msgs::Time, futago_msgs::Pose2)]| Series {
+            name: name.into(),
+            colour,
+            points: thin(t.iter().map(|(_, p)| [p.x, p.y]).collect(), 4000),
+            markers: false,
+        };
+    let mut svg = map_figure(
+        map,
+        None,
+        &[
+            path("slam", colour("slam"), slam),
+            path("odometry", colour("odometry"), odometry),
+        ],
+    );
+    // The worst relations: a circle at each end, and a line between them.
+    let mut marks = String::new();
+    for (k, (a, b, e)) in worst.iter().enumerate() {
+        let _ = writeln!(
+            marks,
+            "<g class=\"worst\"><title>relation {}: {e:.3} m</title><line x1=\"{:.3}\" y1=\"{:.3}\" x2=\"{:.3}\" y2=\"{:.3}\" stroke=\"#c62828\" stroke-width=\"2\" vector-effect=\"non-scaling-stroke\"/><circle cx=\"{:.3}\" cy=\"{:.3}\" r=\"0.6\" fill=\"none\" stroke=\"#c62828\" stroke-width=\"2\" vector-effect=\"non-scaling-stroke\"/><circle cx=\"{:.3}\" cy=\"{:.3}\" r=\"0.6\" fill=\"none\" stroke=\"#c62828\" stroke-width=\"2\" vector-effect=\"non-scaling-stroke\"/><text x=\"{:.3}\" y=\"{:.3}\" font-size=\"1.2\" fill=\"#c62828\">{}</text></g>",
+            k + 1,
+            a[0],
+            -a[1],
+            b[0],
+            -b[1],
+            a[0],
+            -a[1],
+            b[0],
+            -b[1],
+            a[0] + 0.7,
+            -a[1],
+            k + 1
+        );
+    }
+    if let Some(end) = svg.rfind("</svg>") {
+        svg.insert_str(end, &marks);
+    }
+    body += "<h2>Map</h2>\n<figure>";
+    body += &svg;
+    body += &format!(
+        "<figcaption>The SLAM map with its trajectory (blue, dashed) and odometry from the same start (red). In red circles, numbered by rank: the ends of the {} relations with the largest translational error, placed by SLAM.</figcaption></figure>\n",
+        worst.len()
+    );
+    if !errors.is_empty() {
+        let t0 = errors.iter().map(|e| e.0).fold(f64::INFINITY, f64::min);
+        let points = errors.iter().map(|e| [e.0 - t0, e.1]).collect();
+        let chart = line_chart_scaled(
+            "Relation error over time",
+            "time of the relation's first pose (s from the first)",
+            "translational error (m)",
+            &[Series {
+                name: "slam".into(),
+                colour: colour("slam"),
+                points,
+                markers: true,
+            }],
+            [false, true],
+        );
+        body += "<h2>Where it went wrong</h2>\n<figure>";
+        body += &chart;
+        body += "<figcaption>Each relation's translational error (log scale) at the time of its first pose.</figcaption></figure>\n";
+        let rows: Vec<Vec<String>> = worst
+            .iter()
+            .enumerate()
+            .map(|(k, (a, b, e))| {
+                vec![
+                    (k + 1).to_string(),
+                    format!("{e:.3}"),
+                    format!("({:.2}, {:.2})", a[0], a[1]),
+                    format!("({:.2}, {:.2})", b[0], b[1]),
+                ]
+            })
+            .collect();
+        body += &table("worst", &["rank", "error (m)", "from (m)", "to (m)"], &rows);
+    }
+    body += &format!(
+        "<h2>Configuration</h2>\n<pre>{}</pre>\n",
+        escape(summary["config"].as_str().unwrap_or(""))
+    );
+    page(&format!("futago replay: {log}"), &body)
+}
+
 /// The report of a run whose results are in `dir`: `summary` is its summary.json, `config`
 /// the scenario text as run, `truth` the ground-truth grid and `estimate` SLAM's map.
 pub fn run_report(

@@ -1721,6 +1721,21 @@ fn replay_of_a_simulated_log_beats_its_odometry_on_ground_truth_relations() {
             > 0
     );
     assert!(out.join("map.pgm").exists() && out.join("trajectory.txt").exists());
+    // The report marks the ten worst relations on the map, worst first, the worst at least
+    // as bad as the mean.
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("Relations (Kümmerle"), "no relations table");
+    let marked: Vec<f64> = html
+        .split("<g class=\"worst\"><title>relation ")
+        .skip(1)
+        .map(|g| {
+            let e = g.split(": ").nth(1).unwrap().split(" m<").next().unwrap();
+            e.parse().unwrap()
+        })
+        .collect();
+    assert_eq!(marked.len(), 10, "{marked:?}");
+    assert!(marked.windows(2).all(|w| w[0] >= w[1]), "{marked:?}");
+    assert!(marked[0] >= m("slam", "abs_trans_m"), "{marked:?}");
 }
 
 /// The published benchmark: both SLAM methods on the MIT CSAIL log, scored with its
