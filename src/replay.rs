@@ -114,9 +114,8 @@ pub fn replay(
             &format!("# odometry of {}, from its first scan", log_path.display()),
             &odometry,
         )?;
-        slam.grid()
-            .to_grid()
-            .write_map_server(tmp, "map")
+        let grid = slam.grid().to_grid();
+        grid.write_map_server(tmp, "map")
             .context("writing map.pgm and map.yaml")?;
         let mut summary = json!({
             "log": log_path.display().to_string(),
@@ -164,14 +163,8 @@ pub fn replay(
             .take(crate::report::WORST_RELATIONS)
             .filter_map(|(r, e)| Some((at(r.t1)?, at(r.t2)?, *e)))
             .collect();
-        let html = crate::report::replay_report(
-            &summary,
-            &slam.grid().to_grid(),
-            &trajectory,
-            &odometry,
-            &errors,
-            &worst,
-        );
+        let html =
+            crate::report::replay_report(&summary, &grid, &trajectory, &odometry, &errors, &worst);
         std::fs::write(tmp.join("report.html"), html).context("writing report.html")?;
         Ok(summary)
     })

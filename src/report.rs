@@ -419,6 +419,31 @@ fn read_tum(dir: &Path, file: &str) -> Option<Vec<Stamped>> {
     tum::parse(&text).ok()
 }
 
+/// A grid reduced so that neither side exceeds `max_side` cells: each new cell is occupied if
+/// any cell it covers is, else free if any is, else unknown. A drifted SLAM map can span
+/// hundreds of metres; drawn at one pixel a cell its picture would take gigabytes.
+pub fn downsample(grid: &OccupancyGrid, max_side: usize) -> std::borrow::Cow<'_, OccupancyGrid> {
+    let f = grid.width.max(grid.height).div_ceil(max_side.max(1));
+    if f <= 1 {
+        return std::borrow::Cow::Borrowed(grid);
+    }
+    let (w, h) = (grid.width.div_ceil(f), grid.height.div_ceil(f));
+    let mut out = OccupancyGrid::new(grid.resolution * f as f64, grid.origin, w, h);
+    out.cells.iter_mut().for_each(|c| *c = -1);
+    for j in 0..grid.height {
+        for i in 0..grid.width {
+            let c = grid.get(i, j);
+            let o = &mut out.cells[(j / f) * w + i / f];
+            if c >= 50 {
+                *o = 100;
+            } else if c == 0 && *o != 100 {
+                *o = 0;
+            }
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
 /// How many of a replay's worst relations are marked on its map.
 pub const WORST_RELATIONS: usize = 10;
 
@@ -496,7 +521,7 @@ pub fn replay_report(
             markers: false,
         };
     let mut svg = map_figure(
-        map,
+        &downsample(map, 2000),
         None,
         &[
             path("slam", colour("slam"), slam),
@@ -962,6 +987,24 @@ fn headroom_chart(bars: &[(String, f64, bool)]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_large_map_is_drawn_coarser_keeping_its_walls() {
+        // 6 × 4 cells: free except one wall cell and an unknown corner block.
+        let mut g = OccupancyGrid::new(0.05, [1.0, 2.0], 6, 4);
+        g.cells.iter_mut().for_each(|c| *c = 0);
+        g.set(5, 0, 100);
+        for (i, j) in [(0, 2), (1, 2), (0, 3), (1, 3)] {
+            g.set(i, j, -1);
+        }
+        let d = downsample(&g, 3);
+        assert_eq!(
+            (d.width, d.height, d.resolution, d.origin),
+            (3, 2, 0.1, [1.0, 2.0])
+        );
+        assert_eq!(d.cells, vec![0, 0, 100, -1, 0, 0]);
+        assert!(matches!(downsample(&g, 6), std::borrow::Cow::Borrowed(_)));
+    }
 
     #[test]
     fn ticks_are_round_and_cover_the_range() {

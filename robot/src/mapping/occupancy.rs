@@ -57,15 +57,27 @@ impl OccupancyConfig {
 /// would grow the grid beyond it is refused and counted (see [`OccupancyMap::refused`]).
 pub const MAX_CELLS: usize = 1 << 28;
 
-/// A growing log-odds grid.
+/// Side of a tile of the grid, cells.
+const TILE: i64 = 64;
+
+/// A growing log-odds grid, stored in tiles of 64 × 64 cells that exist only where a beam
+/// has passed: memory grows with the mapped area, not with its bounding box (a map that
+/// drifted into an L spans a box many times its area). The bounding box is kept as a dense
+/// grid would keep it (grown with a 64-cell margin), so the grid [`OccupancyMap::to_grid`]
+/// gives has the same extent, and the [`MAX_CELLS`] cap applies to it.
 #[derive(Debug, Clone)]
 pub struct OccupancyMap {
     config: OccupancyConfig,
-    /// Cell index (i, j) of the first stored cell.
+    /// Cell index (i, j) of the bounding box's first cell.
     offset: [i64; 2],
     width: usize,
     height: usize,
-    logodds: Vec<f32>,
+    /// The tiles' cells' log-odds, row-major, in the order they were made.
+    tiles: Vec<Box<[f32]>>,
+    /// Each tile's index (i, j) in tiles, in `tiles` order.
+    keys: Vec<[i64; 2]>,
+    /// Tile index (i, j) → position in `tiles`.
+    index: rustc_hash::FxHashMap<[i64; 2], usize>,
     refused: usize,
 }
 
@@ -76,7 +88,9 @@ impl OccupancyMap {
             offset: [0, 0],
             width: 0,
             height: 0,
-            logodds: Vec::new(),
+            tiles: Vec::new(),
+            keys: Vec::new(),
+            index: Default::default(),
             refused: 0,
         }
     }
@@ -86,13 +100,18 @@ impl OccupancyMap {
         self.refused
     }
 
+    /// Tiles allocated (each 64 × 64 cells).
+    pub fn tiles(&self) -> usize {
+        self.tiles.len()
+    }
+
     fn cell(&self, x: f64, y: f64) -> [i64; 2] {
         let r = self.config.resolution;
         [(x / r).floor() as i64, (y / r).floor() as i64]
     }
 
-    /// Grows the storage to hold cells `lo..=hi` (with a margin, to grow rarely); `false`
-    /// when that would pass [`MAX_CELLS`].
+    /// Grows the bounding box to hold cells `lo..=hi` (with a margin); false when it would
+    /// exceed [`MAX_CELLS`].
     fn reserve(&mut self, lo: [i64; 2], hi: [i64; 2]) -> bool {
         let have_lo = self.offset;
         let have_hi = [
@@ -132,39 +151,61 @@ impl OccupancyMap {
         if w <= 0 || h <= 0 || w.saturating_mul(h) > MAX_CELLS as i64 {
             return false;
         }
-        let (w, h) = (w as usize, h as usize);
-        let mut grid = vec![0f32; w * h];
-        for j in 0..self.height {
-            let src = &self.logodds[j * self.width..(j + 1) * self.width];
-            let dj = (self.offset[1] + j as i64 - nlo[1]) as usize;
-            let di = (self.offset[0] - nlo[0]) as usize;
-            grid[dj * w + di..dj * w + di + self.width].copy_from_slice(src);
-        }
         self.offset = nlo;
-        self.width = w;
-        self.height = h;
-        self.logodds = grid;
+        self.width = w as usize;
+        self.height = h as usize;
         true
     }
 
-    fn add(&mut self, c: [i64; 2], delta: f32) {
-        let i = (c[0] - self.offset[0]) as usize;
-        let j = (c[1] - self.offset[1]) as usize;
-        let v = &mut self.logodds[j * self.width + i];
+    /// The tile of cell `c` and the cell's index in it.
+    fn tile_of(c: [i64; 2]) -> ([i64; 2], usize) {
+        let (t, r) = (
+            [c[0].div_euclid(TILE), c[1].div_euclid(TILE)],
+            [c[0].rem_euclid(TILE), c[1].rem_euclid(TILE)],
+        );
+        (t, (r[1] * TILE + r[0]) as usize)
+    }
+
+    /// Adds `delta` to cell `c`, clamped. `last` remembers the tile of the previous call, so
+    /// that a beam's run of cells in one tile looks the tile up once.
+    fn add(&mut self, c: [i64; 2], delta: f32, last: &mut Option<([i64; 2], usize)>) {
+        let (t, k) = Self::tile_of(c);
+        let at = match *last {
+            Some((key, at)) if key == t => at,
+            _ => {
+                let at = match self.index.get(&t) {
+                    Some(&at) => at,
+                    None => {
+                        self.tiles
+                            .push(vec![0f32; (TILE * TILE) as usize].into_boxed_slice());
+                        self.keys.push(t);
+                        self.index.insert(t, self.tiles.len() - 1);
+                        self.tiles.len() - 1
+                    }
+                };
+                *last = Some((t, at));
+                at
+            }
+        };
+        let v = &mut self.tiles[at][k];
         *v = (*v + delta).clamp(self.config.min, self.config.max);
     }
 
-    /// Log-odds of the cell containing `(x, y)` (0 where never observed).
+    /// Log-odds at a world point (0 outside the grid).
     pub fn logodds_at(&self, x: f64, y: f64) -> f32 {
         let c = self.cell(x, y);
         let (i, j) = (c[0] - self.offset[0], c[1] - self.offset[1]);
         if i < 0 || j < 0 || i >= self.width as i64 || j >= self.height as i64 {
             return 0.0;
         }
-        self.logodds[j as usize * self.width + i as usize]
+        let (t, k) = Self::tile_of(c);
+        self.index.get(&t).map_or(0.0, |&at| self.tiles[at][k])
     }
 
-    /// Inserts a scan taken by a laser at `laser` (world frame).
+    /// Integrates one scan taken from `laser` (the laser's pose in the map frame): the cells
+    /// each beam crosses become freer, the cell it ends in more occupied. Beams without a
+    /// return (+∞ or beyond `max_range`) are skipped. A scan that would grow the grid beyond
+    /// [`MAX_CELLS`] is refused and counted.
     pub fn insert(&mut self, laser: &Pose2, scan: &LaserScan) {
         let max = self.config.max_range.min(scan.range_max);
         let start = self.cell(laser.x, laser.y);
@@ -191,38 +232,51 @@ impl OccupancyMap {
             return;
         }
         let (hit, miss) = (self.config.hit, self.config.miss);
+        let mut last = None;
         for e in ends {
             for c in line(start, e) {
-                self.add(c, miss);
+                self.add(c, miss, &mut last);
             }
-            self.add(e, hit);
+            self.add(e, hit, &mut last);
         }
     }
 
-    /// The map as occupancy values: occupied above p = 0.65, free below p = 0.35, else unknown.
+    /// The trinary map (map_server's thresholds: occupied above p = 0.65, free below 0.35,
+    /// unknown between) over the bounding box.
     pub fn to_grid(&self) -> OccupancyGrid {
         let r = self.config.resolution;
+        let (w, h) = (self.width.max(1), self.height.max(1));
         let mut g = OccupancyGrid::new(
             r,
             [self.offset[0] as f64 * r, self.offset[1] as f64 * r],
-            self.width.max(1),
-            self.height.max(1),
+            w,
+            h,
         );
         let (occ, free) = ((0.65f32 / 0.35).ln(), (0.35f32 / 0.65).ln());
-        for (k, &l) in self.logodds.iter().enumerate() {
-            g.cells[k] = if l > occ {
-                100
-            } else if l < free {
-                0
-            } else {
-                -1
-            };
+        g.cells.iter_mut().for_each(|c| *c = -1);
+        for (t, tile) in self.keys.iter().zip(&self.tiles) {
+            for (k, &l) in tile.iter().enumerate() {
+                let (ti, tj) = (k as i64 % TILE, k as i64 / TILE);
+                let (i, j) = (
+                    t[0] * TILE + ti - self.offset[0],
+                    t[1] * TILE + tj - self.offset[1],
+                );
+                if i < 0 || j < 0 || i >= self.width as i64 || j >= self.height as i64 {
+                    continue;
+                }
+                g.cells[j as usize * w + i as usize] = if l > occ {
+                    100
+                } else if l < free {
+                    0
+                } else {
+                    -1
+                };
+            }
         }
         g
     }
 }
 
-/// Cells from `a` towards `b`, excluding `b` (Bresenham).
 fn line(a: [i64; 2], b: [i64; 2]) -> impl Iterator<Item = [i64; 2]> {
     let (dx, dy) = ((b[0] - a[0]).abs(), -(b[1] - a[1]).abs());
     let (sx, sy) = ((b[0] - a[0]).signum(), (b[1] - a[1]).signum());
@@ -262,6 +316,43 @@ mod tests {
             range_max: 30.0,
             ranges,
         }
+    }
+
+    #[test]
+    fn memory_grows_with_the_mapped_area_not_its_bounding_box() {
+        let mut m = OccupancyMap::new(OccupancyConfig::default());
+        // Two 4 m scans, 500 m apart: a 10 000 × 6 000-cell box (240 MB of dense log-odds).
+        let s = scan(
+            vec![4.0; 181],
+            -std::f64::consts::FRAC_PI_2,
+            1f64.to_radians(),
+        );
+        // Each twice: one pass of a beam leaves a cell unknown (−0.4 is above ln 0.35/0.65).
+        for _ in 0..2 {
+            m.insert(&Pose2::new(0.0, 0.0, 0.0), &s);
+            m.insert(&Pose2::new(400.0, 300.0, 0.0), &s);
+        }
+        let g = m.to_grid();
+        assert!(
+            g.width >= 8000 && g.height >= 6000,
+            "{}×{}",
+            g.width,
+            g.height
+        );
+        // Each scan sweeps a 4 m half-disc: a few 3.2 m tiles, not the box's 11 000.
+        assert!(m.tiles() <= 20, "{} tiles", m.tiles());
+        assert!(m.logodds_at(2.0, 0.0) < 0.0 && m.logodds_at(4.02, 0.0) > 0.0);
+        assert!(m.logodds_at(402.0, 300.0) < 0.0 && m.logodds_at(404.02, 300.0) > 0.0);
+        assert_eq!(m.logodds_at(200.0, 150.0), 0.0);
+        // The trinary grid agrees with the log-odds where it was written.
+        let at = |x: f64, y: f64| {
+            let (i, j) = g.cell_of(x, y).unwrap();
+            g.get(i, j)
+        };
+        assert_eq!(
+            (at(2.0, 0.0), at(4.02, 0.0), at(200.0, 150.0)),
+            (0, 100, -1)
+        );
     }
 
     #[test]
