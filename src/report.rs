@@ -7,6 +7,7 @@ use crate::ground_truth::trajectory;
 use base64::Engine;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::tum::{self, Stamped};
+use futago_robot::geometry::grid::OCCUPIED;
 use serde_json::Value;
 use std::fmt::Write;
 use std::path::Path;
@@ -261,7 +262,7 @@ fn grid_image(grid: &OccupancyGrid, scale: u32) -> image::RgbImage {
     for j in 0..grid.height {
         for i in 0..grid.width {
             let c = match grid.get(i, j) {
-                v if v >= 50 => [120, 120, 120],
+                v if v >= OCCUPIED => [120, 120, 120],
                 v if v >= 0 => [255, 255, 255],
                 _ => [220, 220, 220],
             };
@@ -296,7 +297,7 @@ pub fn map_figure(
     if let Some(est) = estimate {
         for j in 0..est.height {
             for i in 0..est.width {
-                if est.get(i, j) >= 50 {
+                if est.get(i, j) >= OCCUPIED {
                     let [x, y] = est.cell_center(i, j);
                     if let Some((ti, tj)) = truth.cell_of(x, y) {
                         img.put_pixel(
@@ -434,7 +435,7 @@ pub fn downsample(grid: &OccupancyGrid, max_side: usize) -> std::borrow::Cow<'_,
         for i in 0..grid.width {
             let c = grid.get(i, j);
             let o = &mut out.cells[(j / f) * w + i / f];
-            if c >= 50 {
+            if c >= OCCUPIED {
                 *o = 100;
             } else if c == 0 && *o != 100 {
                 *o = 0;

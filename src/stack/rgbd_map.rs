@@ -31,8 +31,6 @@ const SLICE_MAP_RESOLUTION: f64 = 0.05;
 const SLICE_HALF_WIDTH: f64 = 0.05;
 /// The slice's height without a laser, m.
 const DEFAULT_SLICE_Z: f64 = 0.2;
-/// Cells of the 2D map at least this occupied (0–100) are walls for the map term.
-const MAP_OCCUPIED: i8 = 50;
 
 /// The RGB-D mapper in the loop.
 pub struct RgbdMapNode {
@@ -263,7 +261,7 @@ impl Node for RgbdMapNode {
             .map(|(_, g)| g.clone());
         let env = grid
             .as_ref()
-            .map(|g| EnvironmentMap::new(g, self.slice_z, MAP_OCCUPIED));
+            .map(|g| EnvironmentMap::new(g, self.slice_z, futago_robot::geometry::grid::OCCUPIED));
         let mut build_seconds = serde_json::Map::new();
         let maps: Vec<RgbdMap> = self
             .methods

@@ -172,7 +172,7 @@ impl MclMap {
 
     fn occupied_or_outside(&self, x: f64, y: f64) -> bool {
         match self.grid.cell_of(x, y) {
-            Some((i, j)) => self.grid.get(i, j) >= 50,
+            Some((i, j)) => self.grid.get(i, j) >= OCCUPIED,
             None => true,
         }
     }
