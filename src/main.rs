@@ -571,8 +571,25 @@ fn real_main() -> Result<()> {
             let s = replay::replay(&log, relations.as_deref(), slam_config, &out)?;
             let line = |k: &str| -> String {
                 let m = &s["relations"][k];
+                let spans = s["relations"]["by_span"]
+                    .as_array()
+                    .map(|groups| {
+                        groups
+                            .iter()
+                            .filter(|g| g[k]["relations"].as_u64().unwrap_or(0) > 0)
+                            .map(|g| {
+                                format!(
+                                    "{} {:.4}",
+                                    g["span"].as_str().unwrap_or("?"),
+                                    g[k]["abs_trans_m"]["mean"].as_f64().unwrap_or(f64::NAN)
+                                )
+                            })
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    })
+                    .unwrap_or_default();
                 format!(
-                    "{k:>9}: abs trans {:.4} ± {:.4} m, abs rot {:.3} ± {:.3}° over {} relations",
+                    "{k:>9}: abs trans {:.4} ± {:.4} m, abs rot {:.3} ± {:.3}° over {} relations (by span: {spans} m)",
                     m["abs_trans_m"]["mean"].as_f64().unwrap_or(f64::NAN),
                     m["abs_trans_m"]["std"].as_f64().unwrap_or(f64::NAN),
                     m["abs_rot_deg"]["mean"].as_f64().unwrap_or(f64::NAN),

@@ -191,9 +191,55 @@ pub fn evaluate(traj: &[(Time, Pose2)], relations: &[Relation]) -> Metrics {
     }
 }
 
+/// Upper ends of the time spans (s) relations are grouped by: relations between poses a few
+/// seconds apart measure local accuracy (the hospital's "local" set, Kümmerle et al. 2009),
+/// those spanning minutes measure the map's global consistency after a loop.
+pub const SPAN_BOUNDS_S: [f64; 2] = [10.0, 100.0];
+
+/// The relations split by `|t2 − t1|` at [`SPAN_BOUNDS_S`]: each group's label and members,
+/// shortest first.
+pub fn by_span(relations: &[Relation]) -> Vec<(String, Vec<Relation>)> {
+    let [a, b] = SPAN_BOUNDS_S;
+    let mut groups = vec![
+        (format!("under_{a}s"), Vec::new()),
+        (format!("{a}_to_{b}s"), Vec::new()),
+        (format!("over_{b}s"), Vec::new()),
+    ];
+    for r in relations {
+        let span = (r.t2 - r.t1).secs().abs();
+        let k = SPAN_BOUNDS_S.iter().filter(|&&bound| span >= bound).count();
+        groups[k].1.push(*r);
+    }
+    groups
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn relations_split_by_span_at_the_bounds_whichever_way_round() {
+        let r = |t1: f64, t2: f64| Relation {
+            t1: Time::from_secs(t1),
+            t2: Time::from_secs(t2),
+            delta: Pose2::IDENTITY,
+        };
+        let all = [
+            r(0.0, 3.0),
+            r(5.0, 0.0),
+            r(0.0, 10.0),
+            r(20.0, 119.9),
+            r(0.0, 100.0),
+            r(4000.0, 10.0),
+        ];
+        let groups = by_span(&all);
+        let labels: Vec<&str> = groups.iter().map(|(l, _)| l.as_str()).collect();
+        assert_eq!(labels, ["under_10s", "10_to_100s", "over_100s"]);
+        let sizes: Vec<usize> = groups.iter().map(|(_, g)| g.len()).collect();
+        assert_eq!(sizes, [2, 2, 2]);
+        assert_eq!(groups[0].1, [all[0], all[1]]);
+        assert_eq!(groups[2].1, [all[4], all[5]]);
+    }
 
     #[test]
     fn a_perfect_trajectory_scores_zero_and_a_known_error_scores_by_hand() {

@@ -132,10 +132,21 @@ pub fn replay(
             "config": format!("{config:?}"),
         });
         if let Some(rels) = &rels {
+            let by_span: Vec<Value> = relations::by_span(rels)
+                .into_iter()
+                .map(|(label, group)| {
+                    json!({
+                        "span": label,
+                        "slam": metrics_json(&relations::evaluate(&trajectory, &group)),
+                        "odometry": metrics_json(&relations::evaluate(&odometry, &group)),
+                    })
+                })
+                .collect();
             summary["relations"] = json!({
                 "file": relations.map(|p| p.display().to_string()),
                 "slam": metrics_json(&relations::evaluate(&trajectory, rels)),
                 "odometry": metrics_json(&relations::evaluate(&odometry, rels)),
+                "by_span": by_span,
             });
         }
         summary["performance"] = json!({

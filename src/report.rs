@@ -513,6 +513,42 @@ pub fn replay_report(
             ],
             &[row("slam"), row("odometry")],
         );
+        if let Some(groups) = rel["by_span"].as_array() {
+            let mut rows = Vec::new();
+            for g in groups {
+                for name in ["slam", "odometry"] {
+                    let m = &g[name];
+                    rows.push(vec![
+                        g["span"].as_str().unwrap_or("?").replace('_', " "),
+                        name.to_string(),
+                        format!(
+                            "{:.4} ± {:.4}",
+                            m["abs_trans_m"]["mean"].as_f64().unwrap_or(f64::NAN),
+                            m["abs_trans_m"]["std"].as_f64().unwrap_or(f64::NAN)
+                        ),
+                        format!(
+                            "{:.3} ± {:.3}",
+                            m["abs_rot_deg"]["mean"].as_f64().unwrap_or(f64::NAN),
+                            m["abs_rot_deg"]["std"].as_f64().unwrap_or(f64::NAN)
+                        ),
+                        number(&m["relations"]),
+                    ]);
+                }
+            }
+            body += "<p>By the time between a relation's two poses: short spans measure local \
+                     accuracy, long ones the map's consistency after loops.</p>\n";
+            body += &table(
+                "relations by span",
+                &[
+                    "span",
+                    "trajectory",
+                    "abs trans (m)",
+                    "abs rot (°)",
+                    "scored",
+                ],
+                &rows,
+            );
+        }
     }
     let path =
         |name: &str, colour: &'static str, t: &[(futago_msgs::Time, futago_msgs::Pose2)]| Series {

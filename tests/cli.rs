@@ -1772,6 +1772,78 @@ fn replay_of_mit_csail_beats_the_published_figures() {
     }
 }
 
+/// The relations metric of a replay's summary: `group` is `None` for all relations, or a
+/// time-span group (`under_10s`, …).
+fn relation_mean(s: &serde_json::Value, group: Option<&str>, key: &str) -> f64 {
+    let m = match group {
+        None => &s["relations"]["slam"],
+        Some(g) => s["relations"]["by_span"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["span"] == g)
+            .map(|x| &x["slam"])
+            .unwrap(),
+    };
+    m[key]["mean"].as_f64().unwrap()
+}
+
+/// The Intel lab log (bag, as recorded), with the same default configuration as MIT CSAIL:
+/// graph SLAM must beat the RBPF (GMapping)'s 0.070 m and 1.3° of Graph Mapping's rotation
+/// (Kümmerle et al. 2009; Hess et al. 2016, Table II). Cartographer's 0.0229 m is issue 14's
+/// target and not yet met.
+#[test]
+fn replay_of_intel_beats_gmapping() {
+    let data = root().join("../shared/datasets/slam-benchmark");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("intel");
+    ok(&futago(&[
+        "replay",
+        data.join("intel.orig.bag").to_str().unwrap(),
+        "--relations",
+        data.join("intel.relations").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    let s = summary(&out);
+    assert_eq!(s["relations"]["slam"]["relations"], 2984);
+    let trans = relation_mean(&s, None, "abs_trans_m");
+    let rot = relation_mean(&s, None, "abs_rot_deg");
+    assert!(trans < 0.070, "{trans} m");
+    assert!(rot < 1.3, "{rot}°");
+    // The loops hold the map together: relations minutes apart are as good as GMapping's too.
+    let global = relation_mean(&s, Some("over_100s"), "abs_trans_m");
+    assert!(global < 0.070, "{global} m over relations spanning minutes");
+}
+
+/// The Freiburg hospital log: its relations a few seconds apart (the "local" set) must beat
+/// Graph Mapping's local 0.143 m (Kümmerle et al. 2009). Its long relations are not gated:
+/// SLAM does not yet hold the hospital's loops (issue 14).
+#[test]
+fn replay_of_the_hospital_beats_graph_mapping_locally() {
+    let data = root().join("../shared/datasets/slam-benchmark");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("clinic");
+    ok(&futago(&[
+        "replay",
+        data.join("fr-clinic_robotlaser.orig.bag").to_str().unwrap(),
+        "--relations",
+        data.join("fr-clinic.relations").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    let s = summary(&out);
+    let spans: Vec<&str> = s["relations"]["by_span"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| g["span"].as_str().unwrap())
+        .collect();
+    assert_eq!(spans, ["under_10s", "10_to_100s", "over_100s"]);
+    let local = relation_mean(&s, Some("under_10s"), "abs_trans_m");
+    assert!(local < 0.143, "{local} m");
+}
+
 #[test]
 fn replay_refuses_bad_logs_with_their_line() {
     let tmp = tempfile::tempdir().unwrap();

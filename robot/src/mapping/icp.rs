@@ -39,7 +39,8 @@ pub struct IcpConfig {
     /// Half-width of the heading search before ICP, rad (0: none). Odometry headings can be
     /// off by more than ICP's basin of convergence after a fast turn; the search tries
     /// headings around the guess in `rotation_search_step` steps and starts ICP from the one
-    /// whose points land closest to the map.
+    /// whose points land closest to the map. The step is `rotation_search_step` at most, and
+    /// finer where the scan's farthest point would move more than `max_distance_end` in one.
     pub rotation_search: f64,
     pub rotation_search_step: f64,
     /// Scan points are thinned to one per cell of this size, m (0: all kept), as
@@ -105,6 +106,10 @@ pub struct Oriented {
 /// Most neighbours taken on each side of a beam.
 const MAX_NEIGHBOURS: usize = 40;
 
+/// The normal's neighbourhood spans at least this many beam spacings at the point's range:
+/// two neighbours on each side of a wall seen at up to 48° from square on (`2/cos φ < 3`).
+const NEIGHBOUR_SPACINGS: f64 = 3.0;
+
 /// Points of `scan` in the frame of the robot whose laser sits at `mount`, with normals;
 /// readings outside `[range_min, max_range]` and points without close neighbours are dropped.
 pub fn scan_points(
@@ -125,13 +130,19 @@ pub fn scan_points(
             })
         })
         .collect();
+    let increment = scan.angle_increment.abs();
     let mut out = Vec::with_capacity(raw.len());
     for k in 0..raw.len() {
         let Some(p) = raw[k] else { continue };
-        // Neighbours along the scan within `normal_radius`: fit a line through them (2×2 PCA).
-        // A radius, not a beam count, so that range noise stays small against the extent.
-        let close =
-            |j: usize| raw[j].filter(|q| (q[0] - p[0]).hypot(q[1] - p[1]) < config.normal_radius);
+        // Neighbours along the scan within a radius: fit a line through them (2×2 PCA). A
+        // radius, not a beam count, so that range noise stays small against the extent; it
+        // grows with range to span `NEIGHBOUR_SPACINGS` beam spacings, so that a far wall,
+        // whose returns lie further apart than `normal_radius`, keeps its points.
+        let range = (p[0] - mount.x).hypot(p[1] - mount.y);
+        let radius = config
+            .normal_radius
+            .max(NEIGHBOUR_SPACINGS * range * increment);
+        let close = |j: usize| raw[j].filter(|q| (q[0] - p[0]).hypot(q[1] - p[1]) < radius);
         let mut near = vec![p];
         for j in (k.saturating_sub(MAX_NEIGHBOURS)..k).rev() {
             match close(j) {
@@ -391,9 +402,12 @@ fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) 
     }
     let sigma = c.max_distance_end.max(1e-3);
     let reach = 2.0 * sigma;
+    // Every 4th point of a dense scan; all of a sparse one, whose few points would otherwise
+    // let a chance alignment win.
+    let stride = (scan.len() / HEADING_POINTS).clamp(1, 4);
     let score = |pose: &Pose2| -> f64 {
         scan.iter()
-            .step_by(4)
+            .step_by(stride)
             .filter_map(|o| {
                 let q = pose.transform_point(o.p);
                 map.nearest(q, reach).map(|m| {
@@ -403,17 +417,22 @@ fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) 
             })
             .sum()
     };
-    let steps = (c.rotation_search / c.rotation_search_step).round() as i64;
+    // A step turns the farthest point by at most the final correspondence distance, so that
+    // no heading between two steps is missed however far the points reach.
+    let reach_m = scan
+        .iter()
+        .map(|o| o.p[0].hypot(o.p[1]))
+        .fold(0.0, f64::max);
+    let step = c
+        .rotation_search_step
+        .min(c.max_distance_end / reach_m.max(1e-3));
+    let steps = (c.rotation_search / step).round() as i64;
     let mut best = (score(&guess), guess);
     for k in -steps..=steps {
         if k == 0 {
             continue;
         }
-        let p = Pose2::new(
-            guess.x,
-            guess.y,
-            wrap_angle(guess.theta + k as f64 * c.rotation_search_step),
-        );
+        let p = Pose2::new(guess.x, guess.y, wrap_angle(guess.theta + k as f64 * step));
         let sc = score(&p);
         // Prefer the guess on ties: a heading must score clearly better to replace it.
         if sc > best.0 * 1.05 {
@@ -422,6 +441,9 @@ fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) 
     }
     best.1
 }
+
+/// Points scored per heading in the search, at least (where the scan has them).
+const HEADING_POINTS: usize = 64;
 
 /// Solves the 3×3 system `h x = g` (Cramer's rule); `None` if singular.
 fn solve3(h: [[f64; 3]; 3], g: [f64; 3]) -> Option<[f64; 3]> {
@@ -619,6 +641,45 @@ mod tests {
         assert_eq!(map.len(), n, "the same points twice add nothing");
         assert!(map.nearest([4.0, 0.0], 0.05).is_some());
         assert!(map.nearest([3.0, 0.0], 0.2).is_none());
+    }
+
+    /// A laser with 1° beams (as the SICK LMS of the benchmark logs) sees a wall 15 m away:
+    /// its returns lie 26 cm apart, so that a point's second neighbour is further than
+    /// `normal_radius`; yet each keeps its point and a normal facing the sensor.
+    #[test]
+    fn a_far_wall_seen_by_a_sparse_laser_keeps_its_points() {
+        let step = 1f64.to_radians();
+        let ranges: Vec<f32> = (-90..=90)
+            .map(|k| {
+                let a = k as f64 * step;
+                let r = 15.0 / a.cos();
+                if (r * a.sin()).abs() <= 10.0 {
+                    r as f32
+                } else {
+                    f32::INFINITY
+                }
+            })
+            .collect();
+        let scan = LaserScan {
+            frame: "laser".into(),
+            stamp: futago_msgs::Time::ZERO,
+            angle_min: -90.0 * step,
+            angle_increment: step,
+            time_increment: 0.0,
+            range_min: 0.02,
+            range_max: 80.0,
+            ranges,
+        };
+        let c = IcpConfig::default();
+        assert!(2.0 * 15.0 * step > c.normal_radius);
+        let pts = scan_points(&scan, &Pose2::IDENTITY, 30.0, &c);
+        // The wall spans atan(10/15) = ±33.7°: 67 beams, the two at each end with fewer
+        // neighbours on one side.
+        assert!(pts.len() >= 60, "{} points", pts.len());
+        for o in &pts {
+            assert!((o.p[0] - 15.0).abs() < 1e-4, "{o:?}");
+            assert!(o.n[0] < -0.99, "{o:?}");
+        }
     }
 
     #[test]
