@@ -120,8 +120,7 @@ pub struct GraphConfig {
     pub loop_huber: f64,
     /// Re-optimise after this many new loop closures.
     pub optimize_every: usize,
-    /// Drift allowed for, per metre travelled since loop closures last corrected the graph
-    /// (the last optimisation): the search radius
+    /// Drift allowed for, per metre travelled since the last loop closure: the search radius
     /// and the linear window grow by this much (m/m) and the angular window by
     /// `loop_angular_growth` (rad/m), so that a loop is still found after a long stretch
     /// without one, up to `loop_max_window` (m) and `loop_max_angular_window` (rad).
@@ -286,7 +285,7 @@ pub struct Slam {
     loop_closures: usize,
     pending_loops: usize,
     optimizations: usize,
-    /// Distance travelled along the keyframes since loop closures last moved the graph, m.
+    /// Distance travelled along the keyframes since the last loop closure, m.
     travel_since_loop: f64,
     /// Recent loop-closure matches, waiting for (or already given) a second that agrees.
     candidates: Vec<Candidate>,
@@ -445,8 +444,10 @@ impl Slam {
                 if (id + 1).is_multiple_of(self.config.graph.submap_nodes) {
                     self.finish_submap(id + 1 - self.config.graph.submap_nodes, id);
                 }
-                self.close_loops(id);
-                let optimized = self.pending_loops >= self.config.graph.optimize_every;
+                // Loops found in a widened window correct a large drift: they are applied at
+                // once, so that the next searches start from the corrected estimate.
+                let widened = self.close_loops(id);
+                let optimized = self.pending_loops >= self.config.graph.optimize_every || widened;
                 if optimized {
                     self.optimize();
                 }
@@ -491,8 +492,9 @@ impl Slam {
         });
     }
 
-    /// Searches the finished submaps near keyframe `id` and adds an edge for each match.
-    fn close_loops(&mut self, id: usize) {
+    /// Searches the finished submaps near keyframe `id` and adds an edge for each confirmed
+    /// match; returns whether any was found in a window wider than the base one.
+    fn close_loops(&mut self, id: usize) -> bool {
         let g = self.config.graph;
         let pose = self.graph.nodes[id];
         // The scan for branch and bound: points within range, thinned to one per cell.
@@ -510,7 +512,7 @@ impl Slam {
             .map(|o| o.p)
             .collect();
         if cloud.len() < 20 {
-            return;
+            return false;
         }
         let linear = (g.loop_linear_window + g.loop_growth * self.travel_since_loop)
             .min(g.loop_max_window.max(g.loop_linear_window));
@@ -563,9 +565,14 @@ impl Slam {
             new_edges.push(edge);
         }
         let new_edges = self.confirm(id, new_edges);
+        let found = !new_edges.is_empty();
+        if found {
+            self.travel_since_loop = 0.0;
+        }
         self.loop_closures += new_edges.len();
         self.pending_loops += new_edges.len();
         self.graph.edges.extend(new_edges);
+        found && linear > g.loop_linear_window
     }
 
     /// Of keyframe `id`'s loop-closure matches, those that agree with another recent match
@@ -626,8 +633,6 @@ impl Slam {
         self.pose = self.graph.nodes[last].compose(&rel);
         self.pending_loops = 0;
         self.grid_stale = true;
-        // The loops just applied fixed the drift so far; the search narrows again.
-        self.travel_since_loop = 0.0;
     }
 
     /// Optimises once more if loop closures arrived since the last optimisation; call at the
