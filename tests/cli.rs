@@ -1772,6 +1772,23 @@ fn replay_of_mit_csail_beats_the_published_figures() {
     }
 }
 
+/// Replays a log of the SLAM benchmark with its relations and the default configuration;
+/// returns the summary.
+fn replay_benchmark(log: &str, relations: &str) -> serde_json::Value {
+    let data = root().join("../shared/datasets/slam-benchmark");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("replay");
+    ok(&futago(&[
+        "replay",
+        data.join(log).to_str().unwrap(),
+        "--relations",
+        data.join(relations).to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    summary(&out)
+}
+
 /// The relations metric of a replay's summary: `group` is `None` for all relations, or a
 /// time-span group (`under_10s`, …).
 fn relation_mean(s: &serde_json::Value, group: Option<&str>, key: &str) -> f64 {
@@ -1794,18 +1811,7 @@ fn relation_mean(s: &serde_json::Value, group: Option<&str>, key: &str) -> f64 {
 /// target and not yet met.
 #[test]
 fn replay_of_intel_beats_gmapping() {
-    let data = root().join("../shared/datasets/slam-benchmark");
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("intel");
-    ok(&futago(&[
-        "replay",
-        data.join("intel.orig.bag").to_str().unwrap(),
-        "--relations",
-        data.join("intel.relations").to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]));
-    let s = summary(&out);
+    let s = replay_benchmark("intel.orig.bag", "intel.relations");
     assert_eq!(s["relations"]["slam"]["relations"], 2984);
     let trans = relation_mean(&s, None, "abs_trans_m");
     let rot = relation_mean(&s, None, "abs_rot_deg");
@@ -1821,18 +1827,7 @@ fn replay_of_intel_beats_gmapping() {
 /// SLAM does not yet hold the hospital's loops (issue 14).
 #[test]
 fn replay_of_the_hospital_beats_graph_mapping_locally() {
-    let data = root().join("../shared/datasets/slam-benchmark");
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("clinic");
-    ok(&futago(&[
-        "replay",
-        data.join("fr-clinic_robotlaser.orig.bag").to_str().unwrap(),
-        "--relations",
-        data.join("fr-clinic.relations").to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]));
-    let s = summary(&out);
+    let s = replay_benchmark("fr-clinic_robotlaser.orig.bag", "fr-clinic.relations");
     let spans: Vec<&str> = s["relations"]["by_span"]
         .as_array()
         .unwrap()
