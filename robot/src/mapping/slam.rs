@@ -333,10 +333,10 @@ impl Slam {
     /// Processes one scan with the odometry pose of the robot at its time and the laser's
     /// mount on the robot.
     pub fn update(&mut self, scan: &LaserScan, odometry: &Pose2, mount: &Pose2) -> SlamUpdate {
-        let odometry_step = self
-            .last_odometry
-            .map_or(Pose2::IDENTITY, |prev| prev.between(odometry));
-        let guess = self.pose.compose(&odometry_step);
+        let guess = match self.last_odometry {
+            Some(prev) => self.pose.compose(&prev.between(odometry)),
+            None => self.pose,
+        };
         self.last_odometry = Some(*odometry);
         // Motion filter: a scan taken where the last matched one was, and soon after it, adds
         // nothing but time (a 40 Hz laser on a robot at rest); it is dead-reckoned.
