@@ -61,21 +61,32 @@ impl OccupancyGrid {
 
     /// The trinary PGM (P5) image: occupied (≥ 65) black 0, free (≤ 19) white 254, other 205.
     pub fn to_pgm(&self) -> Vec<u8> {
-        let mut out = format!(
+        let mut out = Vec::new();
+        // Writing to memory cannot fail.
+        let _ = self.write_pgm(&mut out);
+        out
+    }
+
+    /// Writes the image of [`OccupancyGrid::to_pgm`] row by row, so that a building-size map
+    /// is not held twice in memory.
+    pub fn write_pgm(&self, out: &mut impl io::Write) -> io::Result<()> {
+        write!(
+            out,
             "P5\n# futago occupancy grid, resolution {} m\n{} {}\n255\n",
             self.resolution, self.width, self.height
-        )
-        .into_bytes();
+        )?;
+        let mut row = vec![0u8; self.width];
         for j in (0..self.height).rev() {
-            for i in 0..self.width {
-                out.push(match self.get(i, j) {
+            for (i, px) in row.iter_mut().enumerate() {
+                *px = match self.get(i, j) {
                     v if v >= 65 => 0,
                     v if (0..=19).contains(&v) => 254,
                     _ => 205,
-                });
+                };
             }
+            out.write_all(&row)?;
         }
-        out
+        Ok(())
     }
 
     /// The map_server YAML naming `image` (a path relative to the YAML file).
@@ -90,7 +101,9 @@ impl OccupancyGrid {
 
     /// Writes `stem.pgm` and `stem.yaml` into `dir`.
     pub fn write_map_server(&self, dir: &Path, stem: &str) -> io::Result<()> {
-        std::fs::write(dir.join(format!("{stem}.pgm")), self.to_pgm())?;
+        let mut pgm = io::BufWriter::new(std::fs::File::create(dir.join(format!("{stem}.pgm")))?);
+        self.write_pgm(&mut pgm)?;
+        pgm.into_inner().map_err(io::IntoInnerError::into_error)?;
         std::fs::write(
             dir.join(format!("{stem}.yaml")),
             self.to_yaml(&format!("{stem}.pgm")),
