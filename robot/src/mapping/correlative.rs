@@ -119,11 +119,6 @@ impl LikelihoodGrid {
         f32::from(self.raw(0, x, y)) / 255.0
     }
 
-    /// Bytes held by the grid and its levels.
-    pub fn bytes(&self) -> usize {
-        self.levels.iter().map(Vec::len).sum()
-    }
-
     fn cell(&self, p: [f64; 2]) -> (i64, i64) {
         (
             ((p[0] - self.origin[0]) / self.resolution).floor() as i64,

@@ -147,14 +147,13 @@ impl PoseGraph {
                 iterations,
             });
         }
-        // The sparsity pattern is the graph's: analysed once, on the first linearisation.
-        let mut symbolic = None;
+        // The sparsity pattern is the graph's: analysed once, on the first linearisation
+        // (`Some(None)`: faer refused it, and conjugate gradients solve every step).
+        let mut symbolic: Option<Option<SymbolicLlt<usize>>> = None;
         for _ in 0..options.max_iterations {
             iterations += 1;
             let normal = self.linearise();
-            if symbolic.is_none() {
-                symbolic = analyse(&normal);
-            }
+            let symbolic = symbolic.get_or_insert_with(|| analyse(&normal));
             let mut accepted = false;
             for _ in 0..10 {
                 let dx = symbolic
