@@ -125,6 +125,20 @@ impl PoseGraph {
             .sum()
     }
 
+    /// Removes the robust edges (those with a Huber kernel: loop closures) whose whitened
+    /// error √(eᵀΩe) at the current node poses exceeds `threshold`, and returns how many went.
+    /// Called after an optimisation: an edge that far from what the other edges agree on is an
+    /// outlier, and the Huber kernel only bounds its pull, it does not remove it (a 1 m wrong
+    /// loop still bends a chain by 0.45 m in the test below).
+    pub fn remove_outliers(&mut self, threshold: f64) -> usize {
+        let before = self.edges.len();
+        let nodes = &self.nodes;
+        self.edges.retain(|e| {
+            e.huber.is_none() || e.chi2(&nodes[e.from], &nodes[e.to]).sqrt() <= threshold
+        });
+        before - self.edges.len()
+    }
+
     /// Minimises the cost over every node but the first; `Err` names a bad edge.
     pub fn optimize(&mut self, options: &OptimizeOptions) -> Result<OptimizeReport, String> {
         let n = self.nodes.len();
@@ -597,9 +611,8 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_huber_kernel_limits_a_wrong_loop_edge() {
-        // A straight chain with exact odometry and one loop edge that is 1 m wrong.
+    /// Ten nodes 1 m apart along x, joined by exact edges (σ 5 cm, 0.01 rad).
+    fn straight_chain() -> PoseGraph {
         let mut g = PoseGraph::default();
         for k in 0..10 {
             g.nodes.push(Pose2::new(k as f64, 0.0, 0.0));
@@ -612,6 +625,13 @@ mod tests {
                 ));
             }
         }
+        g
+    }
+
+    #[test]
+    fn a_huber_kernel_limits_a_wrong_loop_edge() {
+        // A straight chain with exact odometry and one loop edge that is 1 m wrong.
+        let mut g = straight_chain();
         let mut wrong = Edge::with_sigmas(0, 9, Pose2::new(8.0, 0.0, 0.0), [0.05, 0.05, 0.01]);
         let mut plain = g.clone();
         plain.edges.push(wrong);
@@ -632,5 +652,29 @@ mod tests {
             (robust_err - 0.45).abs() < 0.01,
             "Huber loss pulled by {robust_err}"
         );
+    }
+
+    #[test]
+    fn an_outlier_loop_edge_is_removed_and_the_chain_straightens() {
+        // The chain above with a right loop edge (0 → 5) beside the 1 m wrong one (0 → 9).
+        let mut g = straight_chain();
+        let sigma = [0.05, 0.05, 0.01];
+        for (to, x) in [(5, 5.0), (9, 8.0)] {
+            let mut e = Edge::with_sigmas(0, to, Pose2::new(x, 0.0, 0.0), sigma);
+            e.huber = Some(1.0);
+            g.edges.push(e);
+        }
+        g.optimize(&OptimizeOptions::default()).unwrap();
+        // The wrong edge is left ~0.5 m (10 σ) from its measurement; the right one is within a
+        // few σ (the bent chain strains it), so 5 σ tells them apart.
+        assert_eq!(g.remove_outliers(5.0), 1);
+        assert!(g.edges.iter().all(|e| !(e.from == 0 && e.to == 9)));
+        g.optimize(&OptimizeOptions::default()).unwrap();
+        let p = g.nodes[9];
+        assert!(
+            (p.x - 9.0).abs() < 1e-6 && p.y.abs() < 1e-9,
+            "node 9 at {p:?} once the outlier is gone"
+        );
+        assert_eq!(g.remove_outliers(5.0), 0);
     }
 }
