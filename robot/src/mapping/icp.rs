@@ -332,10 +332,6 @@ pub struct Alignment {
     /// RMS point-to-line residual of the partners, m.
     pub rms: f64,
     pub iterations: usize,
-    /// Mean Hessian of the point-to-line cost (prior left out) at the last iteration, in
-    /// `(x, y, θ)`: how sharply the scan alone pins each direction. `ΔᵀHΔ` is the mean squared
-    /// residual a move `Δ` would add; a corridor's length gives almost none.
-    pub hessian: [[f64; 3]; 3],
 }
 
 /// Aligns `scan` (robot frame) to `map` starting from `guess`; `None` when too few points
@@ -397,7 +393,6 @@ pub fn align(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> 
             *ga *= inv;
             ha.iter_mut().for_each(|x| *x *= inv);
         }
-        let hessian = h;
         let prior = [
             (c.translation_weight, pose.x - guess.x),
             (c.translation_weight, pose.y - guess.y),
@@ -414,7 +409,6 @@ pub fn align(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> 
             overlap,
             rms: (sq / pairs as f64).sqrt(),
             iterations: it + 1,
-            hessian,
         });
         if f >= 1.0 && d[0].hypot(d[1]) < 1e-5 && d[2].abs() < 1e-5 {
             break;
@@ -694,10 +688,6 @@ mod tests {
             (a.pose.x - guess.x).abs() < 0.005,
             "x stays at the guess: {a:?}"
         );
-        // The Hessian says so: walls along x pin y (each point's normal is ±y, so
-        // H_yy = 1) and give x nothing.
-        assert!((a.hessian[1][1] - 1.0).abs() < 0.05, "{:?}", a.hessian);
-        assert!(a.hessian[0][0] < 1e-6, "{:?}", a.hessian);
     }
 
     /// A 181-beam scan from −90° to 90° in 1° steps, as the SICK LMS of the benchmark logs.
