@@ -350,6 +350,8 @@ pub fn align(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> 
         return None;
     }
     let mut pose = best_heading(map, scan, guess, c);
+    // The prior's weight against the mean point term (see `IcpConfig::prior_points`).
+    let scale = (c.prior_points / scan.len() as f64).max(1.0);
     let mut result = None;
     for it in 0..c.max_iterations {
         // The correspondence distance shrinks over the first iterations, then holds.
@@ -402,7 +404,6 @@ pub fn align(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> 
             *ga *= inv;
             ha.iter_mut().for_each(|x| *x *= inv);
         }
-        let scale = (c.prior_points / scan.len() as f64).max(1.0);
         let prior = [
             (scale * c.translation_weight, pose.x - guess.x),
             (scale * c.translation_weight, pose.y - guess.y),
