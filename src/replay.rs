@@ -93,10 +93,20 @@ pub fn replay(
     let mut odometry = Vec::with_capacity(log.scans.len());
     for s in &log.scans {
         slam.update(&s.scan, &s.odometry, &s.mount);
-        odometry.push((s.scan.stamp, first_odometry.between(&s.odometry)));
+        odometry.push((s.logged, first_odometry.between(&s.odometry)));
     }
     slam.finish();
-    let trajectory = slam.trajectory();
+    // The trajectory as the map was built: a pose per scan, in the order the scans were taken.
+    let path = slam.trajectory();
+    // Each pose under the stamp the log gave its scan, by which relations name it.
+    let mut trajectory: Vec<(Time, Pose2)> = path
+        .iter()
+        .zip(&log.scans)
+        .map(|((_, p), s)| (s.logged, *p))
+        .collect();
+    trajectory.sort_by_key(|p| p.0);
+    let drawn_odometry = odometry.clone();
+    odometry.sort_by_key(|p| p.0);
     let wall = started.elapsed().as_secs_f64();
     let span = (log.scans[log.scans.len() - 1].scan.stamp - log.scans[0].scan.stamp).secs();
     write_atomically(out, |tmp| {
@@ -175,7 +185,7 @@ pub fn replay(
             .filter_map(|(r, e)| Some((at(r.t1)?, at(r.t2)?, *e)))
             .collect();
         let html =
-            crate::report::replay_report(&summary, &grid, &trajectory, &odometry, &errors, &worst);
+            crate::report::replay_report(&summary, &grid, &path, &drawn_odometry, &errors, &worst);
         std::fs::write(tmp.join("report.html"), html).context("writing report.html")?;
         Ok(summary)
     })

@@ -84,7 +84,10 @@ pub fn robotlaser(
 /// One laser scan of a log with the robot's odometry pose at that time.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LogScan {
+    /// The scan, stamped when it was taken (which [`crate::rosbag`] may have corrected).
     pub scan: LaserScan,
+    /// The stamp the log gave the scan: the name by which benchmarks' relations refer to it.
+    pub logged: Time,
     /// Odometry pose of the robot base when the scan was taken.
     pub odometry: Pose2,
     /// Pose of the laser on the robot base (ROBOTLASER gives it; FLASER means the origin).
@@ -247,6 +250,7 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
                             range_max: FLASER_NO_RETURN as f64,
                             ranges,
                         },
+                        logged: Time::from_secs(t),
                         odometry,
                         mount: Pose2::IDENTITY,
                     },
@@ -296,6 +300,7 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
                             range_max: max,
                             ranges,
                         },
+                        logged: Time::from_secs(t),
                         odometry: robot,
                         mount: robot.between(&laser),
                     },

@@ -7,7 +7,11 @@
 //! a header is `field_len, name=value` fields, with `op` giving the record type: 0x03 bag
 //! header, 0x05 chunk (holding connection and message records, compressed), 0x07 connection,
 //! 0x02 message data, 0x04 index data, 0x06 chunk info. Messages are read in file order; each
-//! scan takes the odometry pose interpolated at its stamp (header stamps, not bag times).
+//! scan takes the odometry pose interpolated at its stamp (header stamps, not bag times). A
+//! stamp that contradicts the header `seq` numbering of its stream (a message stamped late,
+//! after messages published behind it) is replaced by one interpolated between its neighbours
+//! by `seq` (`acquisition_times`); the scan keeps the stamp it was logged with as
+//! [`LogScan::logged`], the name relation files know it by.
 //!
 //! The laser's mount on the robot comes from tf: the `tf2_msgs/TFMessage` (or `tf/tfMessage`)
 //! transforms on `/tf` and `/tf_static` are chained from the scan's frame up to the odometry's
@@ -112,8 +116,10 @@ fn field_u32(f: &HashMap<String, Vec<u8>>, name: &str) -> Result<u32, String> {
 struct Raw {
     /// Connection id → message type.
     types: HashMap<u32, String>,
-    scans: Vec<LaserScan>,
-    odometry: Vec<(Time, Pose2)>,
+    /// Each scan with its header's `seq`.
+    scans: Vec<(u32, LaserScan)>,
+    /// Each odometry message's header `seq`, stamp and pose.
+    odometry: Vec<(u32, Time, Pose2)>,
     /// The odometry's child frame: the robot's base.
     base: Option<String>,
     /// tf: child frame → (parent frame, transform), the last one seen.
@@ -223,9 +229,9 @@ fn chain(tf: &HashMap<String, (String, Transform)>, base: &str, frame: &str) -> 
     None
 }
 
-fn laser_scan(data: &[u8]) -> Result<LaserScan, String> {
+fn laser_scan(data: &[u8]) -> Result<(u32, LaserScan), String> {
     let mut c = Cursor { data, at: 0 };
-    c.u32("header seq")?;
+    let seq = c.u32("header seq")?;
     let stamp = c.time("header stamp")?;
     let frame = c.string("header frame_id")?;
     let angle_min = c.f32("angle_min")? as f64;
@@ -250,21 +256,24 @@ fn laser_scan(data: &[u8]) -> Result<LaserScan, String> {
             f32::INFINITY
         });
     }
-    Ok(LaserScan {
-        frame,
-        stamp,
-        angle_min,
-        angle_increment,
-        time_increment,
-        range_min,
-        range_max,
-        ranges,
-    })
+    Ok((
+        seq,
+        LaserScan {
+            frame,
+            stamp,
+            angle_min,
+            angle_increment,
+            time_increment,
+            range_min,
+            range_max,
+            ranges,
+        },
+    ))
 }
 
-fn odometry(data: &[u8]) -> Result<(Time, Pose2, String), String> {
+fn odometry(data: &[u8]) -> Result<(u32, Time, Pose2, String), String> {
     let mut c = Cursor { data, at: 0 };
-    c.u32("header seq")?;
+    let seq = c.u32("header seq")?;
     let stamp = c.time("header stamp")?;
     c.string("header frame_id")?;
     let child = c.string("child_frame_id")?;
@@ -284,7 +293,7 @@ fn odometry(data: &[u8]) -> Result<(Time, Pose2, String), String> {
     ];
     // Yaw of a general quaternion (z-axis rotation of the body's x axis).
     let yaw = (2.0 * (q[3] * q[2] + q[0] * q[1])).atan2(1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]));
-    Ok((stamp, Pose2::new(x, y, yaw), child))
+    Ok((seq, stamp, Pose2::new(x, y, yaw), child))
 }
 
 /// A compressed chunk's contents, decompressed no further than the header's `size` (a
@@ -363,9 +372,9 @@ fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<()
                         .scans
                         .push(laser_scan(body).map_err(|m| err(format!("LaserScan: {m}")))?),
                     Some("nav_msgs/Odometry") => {
-                        let (t, pose, child) =
+                        let (seq, t, pose, child) =
                             odometry(body).map_err(|m| err(format!("Odometry: {m}")))?;
-                        raw.odometry.push((t, pose));
+                        raw.odometry.push((seq, t, pose));
                         raw.base.get_or_insert(child);
                     }
                     Some("tf2_msgs/TFMessage" | "tf/tfMessage") => {
@@ -410,9 +419,34 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
     }
     let mut raw = Raw::default();
     records(&bytes[MAGIC.len()..], MAGIC.len(), &mut raw, false)?;
-    raw.odometry.sort_by_key(|o| o.0);
-    raw.scans.sort_by_key(|s| s.stamp);
-    if !raw.scans.is_empty() && raw.odometry.is_empty() {
+    // Each stream in the order it was published, restamped where its stamps contradict it.
+    let odometry = {
+        let times = acquisition_times(&raw.odometry.iter().map(|o| (o.0, o.1)).collect::<Vec<_>>());
+        let mut o: Vec<(Time, u32, Pose2)> = raw
+            .odometry
+            .iter()
+            .zip(times)
+            .map(|(&(seq, _, pose), t)| (t, seq, pose))
+            .collect();
+        o.sort_by_key(|o| (o.0, o.1));
+        o.into_iter().map(|(t, _, p)| (t, p)).collect::<Vec<_>>()
+    };
+    let scans = {
+        let times = acquisition_times(
+            &raw.scans
+                .iter()
+                .map(|s| (s.0, s.1.stamp))
+                .collect::<Vec<_>>(),
+        );
+        let mut s: Vec<(Time, u32, LaserScan)> = std::mem::take(&mut raw.scans)
+            .into_iter()
+            .zip(times)
+            .map(|((seq, scan), t)| (t, seq, scan))
+            .collect();
+        s.sort_by_key(|s| (s.0, s.1));
+        s
+    };
+    if !scans.is_empty() && odometry.is_empty() {
         return Err(BagError {
             offset: 0,
             message: "the bag has laser scans but no nav_msgs/Odometry".into(),
@@ -425,9 +459,11 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
     let base = raw.base.clone().unwrap_or_else(|| "base_link".into());
     // Each frame's mount, found once.
     let mut mounts: HashMap<String, Option<(Pose2, bool)>> = HashMap::new();
-    for mut scan in raw.scans {
-        let odometry = crate::pose_at(&raw.odometry, scan.stamp, crate::Outside::Clamp)
-            .unwrap_or(Pose2::IDENTITY);
+    for (taken, _, mut scan) in scans {
+        let logged = scan.stamp;
+        scan.stamp = taken;
+        let pose =
+            crate::pose_at(&odometry, taken, crate::Outside::Clamp).unwrap_or(Pose2::IDENTITY);
         let mount = match mounts.get(&scan.frame) {
             Some(m) => *m,
             None => {
@@ -477,12 +513,83 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
         };
         log.scans.push(LogScan {
             scan,
-            odometry,
+            logged,
+            odometry: pose,
             mount,
         });
     }
-    log.odometry = raw.odometry;
+    log.odometry = odometry;
     Ok(log)
+}
+
+/// When each message of one stream was taken, given its header `seq` and stamp.
+///
+/// A publisher numbers its messages in order, but a stamp can be wrong: the Intel Research Lab
+/// log, as converted to a bag, holds scans and odometry stamped up to 0.9 s late, out of
+/// order with the messages numbered around them (scan 1131 stamped after scans 1132–1135),
+/// while the scan itself was taken between its neighbours by number (the benchmark's relations
+/// place it there). The stamps that agree with the numbering are the longest run of them that
+/// never goes back in time, taken in `seq` order; each other message is given the time
+/// interpolated by `seq` between the nearest of those before and after it. A stream whose
+/// `seq`s are not all distinct (a recorder that leaves them 0) keeps its stamps.
+fn acquisition_times(stream: &[(u32, Time)]) -> Vec<Time> {
+    let mut order: Vec<usize> = (0..stream.len()).collect();
+    order.sort_by_key(|&i| stream[i].0);
+    if order.windows(2).any(|w| stream[w[0]].0 == stream[w[1]].0) {
+        return stream.iter().map(|s| s.1).collect();
+    }
+    // The longest non-decreasing run of stamps in seq order (patience sorting): `tails[k]` is
+    // the position in `order` ending the best run of length k + 1 found so far.
+    let stamp = |k: usize| stream[order[k]].1;
+    let mut tails: Vec<usize> = Vec::new();
+    // The run's element before each one, for walking the best run back from its end.
+    let before: Vec<Option<usize>> = (0..order.len())
+        .map(|k| {
+            let at = tails.partition_point(|&j| stamp(j) <= stamp(k));
+            let b = at.checked_sub(1).map(|a| tails[a]);
+            if at == tails.len() {
+                tails.push(k);
+            } else {
+                tails[at] = k;
+            }
+            b
+        })
+        .collect();
+    let mut anchor = vec![false; order.len()];
+    let mut k = tails.last().copied();
+    while let Some(j) = k {
+        anchor[j] = true;
+        k = before[j];
+    }
+    let mut times = vec![Time::ZERO; stream.len()];
+    let mut last: Option<usize> = None;
+    for k in (0..order.len()).filter(|&k| anchor[k]) {
+        // The messages between two anchors, interpolated by seq.
+        let from = last.map_or(0, |l| l + 1);
+        for m in from..k {
+            times[order[m]] = match last {
+                None => stamp(k),
+                Some(l) => {
+                    let (sa, sb, s) = (
+                        stream[order[l]].0 as f64,
+                        stream[order[k]].0 as f64,
+                        stream[order[m]].0 as f64,
+                    );
+                    let (ta, tb) = (stamp(l).nanos(), stamp(k).nanos());
+                    Time(ta + ((tb - ta) as f64 * (s - sa) / (sb - sa)).round() as i64)
+                }
+            };
+        }
+        times[order[k]] = stamp(k);
+        last = Some(k);
+    }
+    // Messages after the last anchor (stamped before it) take its time.
+    if let Some(l) = last {
+        for m in l + 1..order.len() {
+            times[order[m]] = stamp(l);
+        }
+    }
+    times
 }
 
 fn field(name: &str, value: &[u8]) -> Vec<u8> {
@@ -504,7 +611,12 @@ fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
 }
 
 fn header_msg(stamp: u32, frame: &str) -> Vec<u8> {
-    let mut m = 7u32.to_le_bytes().to_vec();
+    header_seq(7, stamp, frame)
+}
+
+/// A `std_msgs/Header`: `seq`, a stamp of whole seconds and a frame.
+fn header_seq(seq: u32, stamp: u32, frame: &str) -> Vec<u8> {
+    let mut m = seq.to_le_bytes().to_vec();
     m.extend(stamp.to_le_bytes());
     m.extend(0u32.to_le_bytes());
     m.extend((frame.len() as u32).to_le_bytes());
@@ -686,6 +798,105 @@ mod tests {
         let (sn, cs) = (15f64.to_radians().sin(), 15f64.to_radians().cos());
         let e = read(&example_mounted("bz2", [0.0, sn, 0.0, cs])).unwrap_err();
         assert!(e.message.contains("tilted"), "{e}");
+    }
+
+    #[test]
+    fn a_message_stamped_out_of_its_seq_order_is_restamped_between_its_neighbours() {
+        let t = |s: &[(u32, f64)]| -> Vec<f64> {
+            let stream: Vec<(u32, Time)> =
+                s.iter().map(|&(q, x)| (q, Time::from_secs(x))).collect();
+            acquisition_times(&stream)
+                .into_iter()
+                .map(Time::secs)
+                .collect()
+        };
+        // In order: kept.
+        assert_eq!(t(&[(0, 1.0), (1, 2.0), (2, 2.0)]), [1.0, 2.0, 2.0]);
+        // Seq 12 stamped late (after 13 and 14), given in file order: half way from 11 to 13.
+        assert_eq!(
+            t(&[(10, 1.0), (11, 2.0), (13, 3.0), (14, 4.0), (12, 4.5)]),
+            [1.0, 2.0, 3.0, 4.0, 2.5]
+        );
+        // Stamped early: the rest keep theirs; the seq gap from 1 to 5 weighs the
+        // interpolation (a quarter of the way).
+        assert_eq!(
+            t(&[(0, 1.0), (1, 2.0), (2, 0.1), (5, 5.0), (6, 6.0)]),
+            [1.0, 2.0, 2.75, 5.0, 6.0]
+        );
+        // Seqs that number nothing (all 0): stamps kept, out of order as they are.
+        assert_eq!(t(&[(0, 2.0), (0, 1.0)]), [2.0, 1.0]);
+    }
+
+    #[test]
+    fn a_scan_logged_late_takes_the_odometry_of_its_place_in_the_sequence() {
+        let scan = |seq: u32, stamp: u32| {
+            let mut m = header_seq(seq, stamp, "laser");
+            for v in [-1.0f32, 1.0, 1.0, 0.0, 0.0, 0.02, 10.0] {
+                m.extend(v.to_bits().to_le_bytes());
+            }
+            m.extend(3u32.to_le_bytes());
+            for r in [1.0f32, 2.0, 3.0] {
+                m.extend(r.to_bits().to_le_bytes());
+            }
+            m.extend(0u32.to_le_bytes());
+            m
+        };
+        let odo = |seq: u32, stamp: u32, x: f64| {
+            let mut m = header_seq(seq, stamp, "odom");
+            m.extend(ros_string("base_link"));
+            for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
+                m.extend(v.to_le_bytes());
+            }
+            m.extend(vec![0u8; 36 * 8 + 6 * 8 + 36 * 8]);
+            m
+        };
+        let conn = |id: u32, ty: &str| {
+            record(
+                &[field("op", &[0x07]), field("conn", &id.to_le_bytes())],
+                &field("type", ty.as_bytes()),
+            )
+        };
+        let msg = |id: u32, body: Vec<u8>| {
+            record(
+                &[field("op", &[0x02]), field("conn", &id.to_le_bytes())],
+                &body,
+            )
+        };
+        let mut bag = b"#ROSBAG V2.0\n".to_vec();
+        for r in [
+            record(&[field("op", &[0x03])], &[]),
+            conn(0, "sensor_msgs/LaserScan"),
+            conn(1, "nav_msgs/Odometry"),
+            msg(1, odo(0, 1, 0.0)),
+            msg(1, odo(1, 2, 1.0)),
+            msg(0, scan(0, 1)),
+            msg(1, odo(3, 4, 3.0)),
+            msg(0, scan(2, 3)),
+            msg(1, odo(4, 5, 4.0)),
+            msg(0, scan(3, 4)),
+            // Scan 1 and odometry 2 arrive last, stamped after everything else.
+            msg(0, scan(1, 5)),
+            msg(1, odo(2, 6, 2.5)),
+        ] {
+            bag.extend(r);
+        }
+        let log = read(&bag).unwrap();
+        let got: Vec<(f64, f64, f64)> = log
+            .scans
+            .iter()
+            .map(|s| (s.scan.stamp.secs(), s.logged.secs(), s.odometry.x))
+            .collect();
+        // Scan 1 was taken between scans 0 and 2 (at 2 s, where odometry read 1 m); scan 2
+        // at 3 s, where odometry 2 (its stamp 6 s put right) read 2.5 m.
+        assert_eq!(
+            got,
+            [
+                (1.0, 1.0, 0.0),
+                (2.0, 5.0, 1.0),
+                (3.0, 3.0, 2.5),
+                (4.0, 4.0, 3.0)
+            ]
+        );
     }
 
     #[test]
