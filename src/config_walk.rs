@@ -8,7 +8,7 @@ use crate::scenario::Scenario;
 use std::path::Path;
 
 /// Scenarios that between them use every table: sensors on the base and on a joint, agents,
-/// localisation, SLAM, the RGB-D map, each controller, events, gates and outputs.
+/// people and flows, localisation, SLAM, the RGB-D map, each controller, events, gates and outputs.
 fn scenarios() -> Vec<String> {
     let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/lab.toml");
     let common = format!(
@@ -44,6 +44,21 @@ max_deg = 20.0
 name = "walker"
 path = [[2.0, 2.0], [4.0, 2.0]]
 speed = 1.0
+
+[[person]]
+name = "ann"
+route = [[2.0, 3.0], [4.0, 3.0]]
+speed = 1.2
+start_time = 1.0
+heading_deg = 90.0
+
+[[flow]]
+name = "visitors"
+from = [2.0, 4.0]
+to = [5.0, 4.0]
+via = [[3.0, 4.5]]
+rate = 2.0
+max = 3
 
 [[event]]
 time = 5.0

@@ -167,6 +167,7 @@ fn simulate(
         .collect();
     let mut bus = Bus::new(s.start, published("pose/"), subscriptions);
     let (has_agents, has_joints) = (!s.movers.agents.is_empty(), !s.movers.joints.is_empty());
+    let has_people = !s.movers.people.is_empty() || !s.movers.flows.is_empty();
     bus.joints = s
         .movers
         .joints
@@ -203,7 +204,7 @@ fn simulate(
         .collect();
     let mut renderer = if camera_nodes.iter().any(|c| !c.is_empty()) {
         Some(
-            Renderer::new(&scene(&s.world, &spec.robot, &s.movers.agents, s.start))
+            Renderer::new(&scene(&s.world, &spec.robot, &s.movers, s.start))
                 .context("starting the camera renderer")?,
         )
     } else {
@@ -263,6 +264,10 @@ fn simulate(
                     .into_iter()
                     .map(|(n, p)| (n.to_string(), p))
                     .collect();
+            }
+            if has_people {
+                bus.people = sim.people();
+                bus.person_collisions = sim.counters().person_contact_events;
             }
             for &i in &truth_nodes {
                 nodes[i].call(|node| node.on_truth(&bus))?;
@@ -378,6 +383,7 @@ fn simulate(
         b.finish_and_clear();
     }
     bus.now = sim.time();
+    bus.person_collisions = sim.counters().person_contact_events;
     let mut entries = Vec::new();
     let mut files = Vec::new();
     let mut map = None;

@@ -20,6 +20,7 @@ use futago_sim::create::CreateConfig;
 use futago_sim::joint::JointConfig;
 use futago_sim::kinect::{KinectConfig, KinectSpec};
 use futago_sim::lidar::{LidarConfig, LidarSpec};
+use futago_sim::people::{CrowdConfig, FlowConfig, PersonConfig};
 use futago_sim::{Movers, PhysicsConfig, World};
 use serde::Deserialize;
 use std::path::Path;
@@ -58,6 +59,15 @@ pub struct ScenarioSpec {
     /// Bodies that walk the world besides the robot, seen by every sensor.
     #[serde(default)]
     pub agent: Vec<AgentConfig>,
+    /// People walking routes or standing, on two legs, seen by every sensor.
+    #[serde(default)]
+    pub person: Vec<PersonConfig>,
+    /// Streams of people arriving at a place and walking to another.
+    #[serde(default)]
+    pub flow: Vec<FlowConfig>,
+    /// The people's motion model (social forces) and body.
+    #[serde(default)]
+    pub crowd: CrowdConfig,
     /// Monte Carlo localisation on the world's map, from its laser's scans.
     pub localization: Option<LocalizationSpec>,
     /// Laser SLAM in the loop, from its laser's scans; typed by [`slam_config`].
@@ -749,6 +759,37 @@ impl Scenario {
                 ));
             }
         }
+        spec.crowd.validate(path)?;
+        let mut walker_names: Vec<&str> = spec.agent.iter().map(|a| a.name.as_str()).collect();
+        walker_names.push("robot");
+        for (i, p) in spec.person.iter().enumerate() {
+            p.validate(path, &format!("person[{i}]"))?;
+            if walker_names.contains(&p.name.as_str()) {
+                return Err(SpecError::new(
+                    path,
+                    format!("person[{i}].name"),
+                    format!(
+                        "name `{}` is taken (by another person, an agent or the robot)",
+                        p.name
+                    ),
+                ));
+            }
+            walker_names.push(&p.name);
+        }
+        for (i, f) in spec.flow.iter().enumerate() {
+            f.validate(path, &format!("flow[{i}]"))?;
+            if walker_names.contains(&f.name.as_str()) {
+                return Err(SpecError::new(
+                    path,
+                    format!("flow[{i}].name"),
+                    format!(
+                        "name `{}` is taken (by another flow, a person, an agent or the robot)",
+                        f.name
+                    ),
+                ));
+            }
+            walker_names.push(&f.name);
+        }
         if spec.output.rgbd_dataset && cameras.is_empty() {
             return Err(SpecError::new(
                 path,
@@ -1048,9 +1089,35 @@ impl Scenario {
                 }
             }
         }
+        let mut places: Vec<(String, [f64; 2])> = Vec::new();
+        for (i, p) in spec.person.iter().enumerate() {
+            for (k, q) in p.route.iter().enumerate() {
+                places.push((format!("person[{i}].route[{k}]"), *q));
+            }
+        }
+        for (i, f) in spec.flow.iter().enumerate() {
+            places.push((format!("flow[{i}].from"), f.from));
+            places.push((format!("flow[{i}].to"), f.to));
+            for (k, q) in f.via.iter().enumerate() {
+                places.push((format!("flow[{i}].via[{k}]"), *q));
+            }
+        }
+        for (key, q) in places {
+            let p = Pose2::new(q[0], q[1], 0.0);
+            if !inside(&p) {
+                return Err(SpecError::new(
+                    path,
+                    key,
+                    format!("{bounds}; found {}", at(&p)),
+                ));
+            }
+        }
         let movers = Movers {
             joints: spec.joint.clone(),
             agents: spec.agent.clone(),
+            people: spec.person.clone(),
+            flows: spec.flow.clone(),
+            crowd: spec.crowd,
         };
         Ok(Scenario {
             controller,

@@ -432,6 +432,28 @@ fn bad_input_names_the_file_and_key_and_writes_nothing() {
             "robot",
         ),
         (
+            good.clone() + "[[person]]\nname = \"p\"\nroute = [[1.0, 1.0], [1.0, 1e6]]\n",
+            "person[0].route[1]",
+            "world",
+        ),
+        (
+            good.clone()
+                + "[[agent]]\nname = \"p\"\npath = [[1.0, 1.0], [2.0, 1.0]]\nspeed = 1.0\n[[person]]\nname = \"p\"\nroute = [[1.0, 1.0]]\n",
+            "person[0].name",
+            "taken",
+        ),
+        (
+            good.clone()
+                + "[[flow]]\nname = \"f\"\nfrom = [1.0, 1.0]\nto = [2.0, 1.0]\nrate = 1.0\nmax = 0\n",
+            "flow[0].max",
+            "expected 1 to 1000",
+        ),
+        (
+            good.clone() + "[crowd]\nleg_radius = -0.05\n",
+            "crowd.leg_radius",
+            "expected",
+        ),
+        (
             good.clone() + "[robot]\nwheel_base = 2.0\n",
             "robot.wheel_base",
             "expected",

@@ -5,7 +5,8 @@
 //! - [`sim`]: the running [`Simulation`] (rapier state, clock, sensors);
 //! - [`create`]: the iRobot Create's drive, wheel traction and odometry;
 //! - [`joint`]: turntables and tilt units on the base that carry sensors;
-//! - [`agent`]: moving bodies besides the robot (people walking a path);
+//! - [`agent`]: moving bodies besides the robot (carts, cylinders walking a path);
+//! - [`people`]: pedestrians on two legs, moved by a social-force model;
 //! - [`kinect`]: the Kinect v1 RGB-D camera model and its depth noise;
 //! - [`lidar`]: ray-cast laser range finders;
 //! - [`noise`]: seeded random streams per noise source;
@@ -22,6 +23,7 @@ pub mod joint;
 pub mod kinect;
 pub mod lidar;
 pub mod noise;
+pub mod people;
 pub mod sim;
 pub mod world;
 

@@ -11,6 +11,9 @@ use crate::create::{CreateConfig, CreateDrive, GRAVITY, PlanarVelocity, wheel_tr
 use crate::joint::{Joint, JointConfig};
 use crate::lidar::{Lidar, LidarConfig};
 use crate::noise::stream;
+use crate::people::{
+    Crowd, CrowdConfig, FlowConfig, PARKED_Z, PersonConfig, PersonTruth, Surroundings,
+};
 use crate::render::Scene;
 use crate::world::mesh::{TriMesh, UvMap};
 use crate::world::{Material, Motion, World};
@@ -69,6 +72,10 @@ pub struct Counters {
     /// Steps with some wheel off the ground.
     pub wheel_drop_steps: u64,
     pub laser_rays: u64,
+    /// Steps that began a contact between the robot and a person (a collision with a person).
+    pub person_contact_events: u64,
+    /// Steps with the robot touching a person.
+    pub person_contact_steps: u64,
 }
 
 /// What moves besides the robot's wheels: joints on the robot's base that carry sensors, and
@@ -77,6 +84,12 @@ pub struct Counters {
 pub struct Movers {
     pub joints: Vec<JointConfig>,
     pub agents: Vec<AgentConfig>,
+    /// People on routes or standing ([`crate::people`]).
+    pub people: Vec<PersonConfig>,
+    /// Streams of people between places.
+    pub flows: Vec<FlowConfig>,
+    /// The people's motion model and body.
+    pub crowd: CrowdConfig,
 }
 
 /// The state of a simulation of one Create in a world.
@@ -94,6 +107,11 @@ pub struct Simulation {
     joints: Vec<Joint>,
     /// Each agent and its kinematic body.
     agents: Vec<(AgentConfig, RigidBodyHandle)>,
+    /// The people, and each slot's bodies: torso with head, left leg, right leg.
+    crowd: Crowd,
+    people_bodies: Vec<[RigidBodyHandle; 3]>,
+    /// Whether the robot touched a person in the last step.
+    touching_person: bool,
     /// Rigid body of each world object (fixed bodies for static ones).
     object_bodies: Vec<RigidBodyHandle>,
     stream_period: Duration,
@@ -109,6 +127,21 @@ pub const BUMPER_FORCE: f64 = 0.5;
 const SLAB_GROUP: Group = Group::GROUP_2;
 /// Collision group of the robot body.
 const ROBOT_GROUP: Group = Group::GROUP_3;
+/// Collision group of people's bodies.
+const PEOPLE_GROUP: Group = Group::GROUP_4;
+/// What people steer around: everything but the floor and ceiling, the robot (which they
+/// treat as a walker) and each other.
+const PEOPLE_OBSTACLES: InteractionGroups = InteractionGroups::new(
+    Group::GROUP_5,
+    Group::ALL
+        .difference(SLAB_GROUP)
+        .difference(ROBOT_GROUP)
+        .difference(PEOPLE_GROUP),
+    InteractionTestMode::And,
+);
+/// The height at which people look for the nearest obstacle, m (between knee and hip: walls,
+/// furniture and boxes, not a table top above).
+const PEOPLE_OBSTACLE_HEIGHT: f32 = 0.5;
 
 /// Robot body shape: a prism of this many sides (the render mesh uses the same vertices).
 const ROBOT_SEGMENTS: u32 = 32;
@@ -174,6 +207,34 @@ impl Simulation {
                 .build();
             p.colliders.insert_with_parent(col, h, &mut p.bodies);
             agents.push((a.clone(), h));
+        }
+        // People: three kinematic bodies per slot of the crowd, parked below the floor while
+        // the slot is empty.
+        let crowd = Crowd::new(&movers.people, &movers.flows, movers.crowd, seed);
+        let mut people_bodies = Vec::with_capacity(crowd.slots());
+        for i in 0..crowd.slots() {
+            let poses = person_poses(&crowd, i);
+            let mut handles = [RigidBodyHandle::invalid(); 3];
+            for (k, (shape, offset)) in person_colliders(&movers.crowd).into_iter().enumerate() {
+                let body = RigidBodyBuilder::kinematic_position_based()
+                    .pose(poses[k])
+                    .build();
+                let h = p.bodies.insert(body);
+                for (s, o) in shape.into_iter().zip(offset) {
+                    let col = ColliderBuilder::new(s)
+                        .friction(0.3)
+                        .translation(o)
+                        .collision_groups(InteractionGroups::new(
+                            PEOPLE_GROUP,
+                            Group::ALL,
+                            InteractionTestMode::And,
+                        ))
+                        .build();
+                    p.colliders.insert_with_parent(col, h, &mut p.bodies);
+                }
+                handles[k] = h;
+            }
+            people_bodies.push(handles);
         }
         // The robot: planar (z, roll and pitch locked), moved by its wheels, not by gravity.
         let m = robot.mass as f32;
@@ -251,6 +312,9 @@ impl Simulation {
             lidar_joints,
             joints,
             agents,
+            crowd,
+            people_bodies,
+            touching_person: false,
             object_bodies,
             stream_period: Duration::from_secs(robot.stream_period),
             next_stream: 1,
@@ -340,6 +404,12 @@ impl Simulation {
                 .iter()
                 .map(|(_, h)| *self.physics.bodies[*h].position()),
         );
+        poses.extend(
+            self.people_bodies
+                .iter()
+                .flatten()
+                .map(|h| *self.physics.bodies[*h].position()),
+        );
         poses.push(*self.physics.bodies[self.robot].position());
         poses
     }
@@ -373,6 +443,16 @@ impl Simulation {
             .iter()
             .map(|(a, _)| (a.name.as_str(), a.pose_at(self.time)))
             .collect()
+    }
+
+    /// Every person in the world now: id, name, pose and velocity.
+    pub fn people(&self) -> Vec<PersonTruth> {
+        self.crowd.truth()
+    }
+
+    /// The crowd (slots, colours, flows' counts).
+    pub fn crowd(&self) -> &Crowd {
+        &self.crowd
     }
 
     /// Latest bumper and wheel-drop state.
@@ -456,6 +536,62 @@ impl Simulation {
         (left, right)
     }
 
+    /// Moves the people on by `dt` (their social forces from the state now) and sets their
+    /// bodies' next kinematic poses.
+    fn step_people(&mut self, dt: f64) {
+        let robot = {
+            let b = &self.physics.bodies[self.robot];
+            let (t, v) = (b.translation(), b.linvel());
+            (
+                [t.x as f64, t.y as f64],
+                [v.x as f64, v.y as f64],
+                self.drive.config.radius,
+            )
+        };
+        let qp = self
+            .physics
+            .query_pipeline_with_filter(QueryFilter::default().groups(PEOPLE_OBSTACLES));
+        let nearest = |p: [f64; 2], range: f64| -> Option<[f64; 2]> {
+            let at = Vec3::new(p[0] as f32, p[1] as f32, PEOPLE_OBSTACLE_HEIGHT);
+            qp.project_point(at, range as f32, true)
+                .and_then(|(_, proj)| {
+                    let q = proj.point;
+                    // Only what stands beside the person at this height pushes them.
+                    ((q.z - at.z).abs() < 0.05).then_some([q.x as f64, q.y as f64])
+                })
+        };
+        let around = Surroundings {
+            robot: Some(robot),
+            nearest_obstacle: &nearest,
+        };
+        self.crowd.step(self.time.secs(), dt, &around);
+        for (i, handles) in self.people_bodies.iter().enumerate() {
+            for (h, pose) in handles.iter().zip(person_poses(&self.crowd, i)) {
+                self.physics.bodies[*h].set_next_kinematic_position(pose);
+            }
+        }
+    }
+
+    /// Whether the robot's collider touches any person's in the narrow phase now.
+    fn touching_person(&self) -> bool {
+        self.physics
+            .narrow_phase
+            .contact_pairs_with(self.robot_collider)
+            .any(|pair| {
+                let other = if pair.collider1 == self.robot_collider {
+                    pair.collider2
+                } else {
+                    pair.collider1
+                };
+                pair.has_any_active_contact()
+                    && self
+                        .physics
+                        .colliders
+                        .get(other)
+                        .is_some_and(|c| c.collision_groups().memberships.contains(PEOPLE_GROUP))
+            })
+    }
+
     /// Advances one physics step. `command`, if given, replaces the drive command (it holds
     /// until the next one, as on the Create).
     pub fn step(&mut self, command: Option<&DriveCommand>) -> StepOutput {
@@ -500,6 +636,9 @@ impl Simulation {
         for (a, h) in &self.agents {
             self.physics.bodies[*h].set_next_kinematic_position(agent_pose(a, a.pose_at(next)));
         }
+        if self.crowd.slots() > 0 {
+            self.step_people(dt);
+        }
         self.physics.step();
         self.time = next;
         self.counters.steps += 1;
@@ -507,6 +646,14 @@ impl Simulation {
             j.advance(self.time, dt);
         }
 
+        let touching = self.touching_person();
+        if touching {
+            self.counters.person_contact_steps += 1;
+            if !self.touching_person {
+                self.counters.person_contact_events += 1;
+            }
+        }
+        self.touching_person = touching;
         let (bl, br) = self.bumpers();
         if (bl || br) && !self.bumps.bumped() {
             self.counters.bump_events += 1;
@@ -577,6 +724,120 @@ pub fn robot_parts(robot: &CreateConfig) -> Vec<(Material, TriMesh)> {
     )]
 }
 
+/// Slot `i`'s three body poses: torso (on the floor, facing the heading), left and right leg
+/// (hinged at the hip, swung by the gait); all parked below the floor for an empty slot.
+fn person_poses(crowd: &Crowd, i: usize) -> [Pose; 3] {
+    let c = crowd.config();
+    let Some((body, feet)) = crowd.body(i) else {
+        let parked = Pose::from_translation(Vec3::new(0.0, 0.0, PARKED_Z as f32));
+        return [parked; 3];
+    };
+    let yaw = Quat::from_rotation_z(body.theta as f32);
+    let torso = Pose::from_parts(Vec3::new(body.x as f32, body.y as f32, 0.0), yaw);
+    let leg = |side: f64, forward: f64| {
+        let hip = body.transform_point([0.0, side * c.hip_width / 2.0]);
+        // The foot `forward` of the hip along the heading: the leg turned about the body's y.
+        let pitch = -(forward / c.hip_height).clamp(-1.0, 1.0).asin();
+        Pose::from_parts(
+            Vec3::new(hip[0] as f32, hip[1] as f32, c.hip_height as f32),
+            yaw * Quat::from_rotation_y(pitch as f32),
+        )
+    };
+    [torso, leg(1.0, feet[0]), leg(-1.0, feet[1])]
+}
+
+/// Sides of a person's prisms (torso, head, legs).
+const PERSON_SEGMENTS: u32 = 16;
+
+/// A prism's vertices stretched to an ellipse of half axes `a` (x) and `b` (y).
+fn elliptic_prism_vertices(a: f32, b: f32, half_height: f32) -> Vec<Vec3> {
+    TriMesh::prism_vertices(1.0, half_height, PERSON_SEGMENTS)
+        .into_iter()
+        .map(|v| Vec3::new(v.x * a, v.y * b, v.z))
+        .collect()
+}
+
+/// The colliders of a person's three bodies, each as shapes and their offsets in the body's
+/// frame: the torso (an elliptic prism from hips to shoulders) and the head on it; each leg a
+/// prism hanging from the hip. The render meshes ([`person_parts`]) share the vertices.
+fn person_colliders(c: &CrowdConfig) -> [(Vec<SharedShape>, Vec<Vec3>); 3] {
+    let hull = |v: Vec<Vec3>| SharedShape::convex_hull(&v).expect("a prism has a hull");
+    let th = ((c.shoulder_height - c.hip_height) / 2.0) as f32;
+    let torso = hull(elliptic_prism_vertices(
+        c.torso[0] as f32,
+        c.torso[1] as f32,
+        th,
+    ));
+    let hr = c.head_radius as f32;
+    let head = hull(TriMesh::prism_vertices(hr, hr, PERSON_SEGMENTS));
+    let lh = (c.hip_height / 2.0) as f32;
+    let leg = || {
+        (
+            vec![hull(TriMesh::prism_vertices(
+                c.leg_radius as f32,
+                lh,
+                PERSON_SEGMENTS,
+            ))],
+            vec![Vec3::new(0.0, 0.0, -lh)],
+        )
+    };
+    [
+        (
+            vec![torso, head],
+            vec![
+                Vec3::new(0.0, 0.0, c.hip_height as f32 + th),
+                Vec3::new(0.0, 0.0, (c.height - c.head_radius) as f32),
+            ],
+        ),
+        leg(),
+        leg(),
+    ]
+}
+
+/// Slot `i`'s render meshes, body by body (torso with head, left leg, right leg), each named.
+fn person_parts(crowd: &Crowd, i: usize) -> [(&'static str, Vec<(Material, TriMesh)>); 3] {
+    let c = crowd.config();
+    let (shirt, trousers) = crowd.colours(i);
+    let material = |name: &str, color: [f64; 3]| Material {
+        name: format!("person.{i}.{name}"),
+        color,
+        texture: None,
+    };
+    let th = ((c.shoulder_height - c.hip_height) / 2.0) as f32;
+    let (a, b) = (c.torso[0] as f32, c.torso[1] as f32);
+    let mut torso = TriMesh::prism(1.0, th, PERSON_SEGMENTS, UvMap::Fit);
+    for p in &mut torso.positions {
+        *p = Vec3::new(p.x * a, p.y * b, p.z + c.hip_height as f32 + th);
+    }
+    // An ellipse's normal at (a·cos t, b·sin t) is along (cos t / a, sin t / b).
+    for n in &mut torso.normals {
+        *n = Vec3::new(n.x / a, n.y / b, n.z).normalize_or(Vec3::Z);
+    }
+    let hr = c.head_radius as f32;
+    let head = TriMesh::prism(hr, hr, PERSON_SEGMENTS, UvMap::Fit).transformed(
+        Quat::IDENTITY,
+        Vec3::new(0.0, 0.0, (c.height - c.head_radius) as f32),
+        1.0,
+    );
+    let lh = (c.hip_height / 2.0) as f32;
+    let leg = TriMesh::prism(c.leg_radius as f32, lh, PERSON_SEGMENTS, UvMap::Fit).transformed(
+        Quat::IDENTITY,
+        Vec3::new(0.0, 0.0, -lh),
+        1.0,
+    );
+    [
+        (
+            "torso",
+            vec![
+                (material("shirt", shirt), torso),
+                (material("skin", [0.85, 0.65, 0.5]), head),
+            ],
+        ),
+        ("leg_l", vec![(material("leg_l", trousers), leg.clone())]),
+        ("leg_r", vec![(material("leg_r", trousers), leg)]),
+    ]
+}
+
 /// An agent's body pose from its planar pose: upright, on the floor.
 fn agent_pose(_a: &AgentConfig, p: Pose2) -> Pose {
     Pose::from_parts(
@@ -603,16 +864,25 @@ pub fn agent_parts(a: &AgentConfig) -> Vec<(Material, TriMesh)> {
     )]
 }
 
-/// What a camera sees: the world's objects in order, the agents, then the robot (posed by
-/// [`Simulation::scene_poses`]).
-pub fn scene(world: &World, robot: &CreateConfig, agents: &[AgentConfig], start: Pose2) -> Scene {
+/// What a camera sees: the world's objects in order, the agents, each person's three
+/// bodies, then the robot (posed by [`Simulation::scene_poses`]).
+pub fn scene(world: &World, robot: &CreateConfig, movers: &Movers, start: Pose2) -> Scene {
     let mut scene = world.scene();
-    for a in agents {
+    for a in &movers.agents {
         scene.add_body(
             &a.name,
             agent_pose(a, a.pose_at(Time::ZERO)),
             agent_parts(a),
         );
+    }
+    // The crowd at time zero, as the simulation builds it (the seed only draws speeds and
+    // arrivals, not what a body looks like or where it starts).
+    let crowd = Crowd::new(&movers.people, &movers.flows, movers.crowd, 0);
+    for i in 0..crowd.slots() {
+        let poses = person_poses(&crowd, i);
+        for (k, (part, mesh)) in person_parts(&crowd, i).into_iter().enumerate() {
+            scene.add_body(&format!("person.{i}.{part}"), poses[k], mesh);
+        }
     }
     scene.add_body(
         "robot",

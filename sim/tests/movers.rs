@@ -63,6 +63,7 @@ fn a_turntable_turns_the_scan_plane_by_its_angle() {
     let movers = Movers {
         joints: vec![joint("table", JointMode::Continuous, [0.0, 0.0, 1.0], 90.0)],
         agents: vec![],
+        ..Default::default()
     };
     let start = Pose2::new(2.0, 1.5, 0.3);
     let mut s = with_movers(&world, &[laser], &movers, start);
@@ -99,6 +100,7 @@ fn a_tilt_unit_points_the_laser_at_the_floor() {
     let movers = Movers {
         joints: vec![tilt],
         agents: vec![],
+        ..Default::default()
     };
     let mut s = with_movers(&world, &[laser], &movers, Pose2::new(1.0, 4.0, 0.0));
     for _ in 0..8 {
@@ -134,6 +136,7 @@ fn an_agent_walks_its_path_and_blocks_the_laser() {
     let movers = Movers {
         joints: vec![],
         agents: vec![agent.clone()],
+        ..Default::default()
     };
     let start = Pose2::new(1.0, 3.0, 0.0);
     let mut s = with_movers(&world, &[ideal(LidarPreset::Urg04lx)], &movers, start);
@@ -178,6 +181,7 @@ fn an_agent_pushes_the_robot_and_presses_its_bumper() {
     let movers = Movers {
         joints: vec![],
         agents: vec![agent],
+        ..Default::default()
     };
     let start = Pose2::new(3.0, 3.0, 0.0);
     let mut s = with_movers(&world, &[], &movers, start);

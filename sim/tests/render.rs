@@ -350,7 +350,7 @@ fn seed000_kinect_gives_qvga_depth_registered_to_vga_colour_within_its_range() {
     let mut r = Renderer::new(&futago_sim::sim::scene(
         &world,
         &robot,
-        &[],
+        &futago_sim::Movers::default(),
         Pose2::new(1.0, 2.0, 0.0),
     ))
     .unwrap();
@@ -408,6 +408,7 @@ fn cameras_see_walking_agents_where_the_lasers_do() {
     let movers = futago_sim::Movers {
         joints: vec![],
         agents: agents.clone(),
+        ..Default::default()
     };
     let start = Pose2::new(1.0, 3.0, 0.0);
     let mut s = futago_sim::Simulation::new(
@@ -422,7 +423,7 @@ fn cameras_see_walking_agents_where_the_lasers_do() {
     let mut r = Renderer::new(&futago_sim::sim::scene(
         &world,
         &CreateConfig::default(),
-        &agents,
+        &movers,
         start,
     ))
     .unwrap();
@@ -440,5 +441,63 @@ fn cameras_see_walking_agents_where_the_lasers_do() {
         // The agent is in view: some pixels are nearer than the far wall (6.5 m ahead).
         let near = depth.data.iter().filter(|&&d| d > 0.0 && d < 4.0).count();
         assert!(near > 100, "the agent covers only {near} pixels");
+    }
+}
+
+#[test]
+fn cameras_see_people_where_the_lasers_do() {
+    use futago_sim::agent::PathMode;
+    use futago_sim::people::PersonConfig;
+    let world = box_room(8.0, 6.0, "");
+    // One walks across the view, legs swinging; one stands nearer, turned sideways.
+    let person = |name: &str, route: Vec<[f64; 2]>, heading_deg: f64| PersonConfig {
+        name: name.into(),
+        route,
+        mode: PathMode::BackAndForth,
+        speed: Some(1.3),
+        start_time: 0.0,
+        heading_deg,
+        yields: false,
+        shirt: [0.2, 0.3, 0.6],
+        trousers: [0.1, 0.1, 0.15],
+    };
+    let movers = futago_sim::Movers {
+        people: vec![
+            person("walker", vec![[5.0, 1.0], [5.0, 5.0]], 0.0),
+            person("stander", vec![[3.5, 3.6]], 90.0),
+        ],
+        ..Default::default()
+    };
+    let start = Pose2::new(1.0, 3.0, 0.0);
+    let mut s = futago_sim::Simulation::new(
+        &world,
+        &futago_sim::PhysicsConfig::default(),
+        &CreateConfig::default(),
+        &[],
+        &movers,
+        start,
+        1,
+    );
+    let mut r = Renderer::new(&futago_sim::sim::scene(
+        &world,
+        &CreateConfig::default(),
+        &movers,
+        start,
+    ))
+    .unwrap();
+    let intr = kinect(160, 120);
+    // Low enough to see the legs and the torsos.
+    let p = cam(1.2, 3.0, 0.6, 0.0, 0.0);
+    for _ in 0..3 {
+        for _ in 0..150 {
+            s.step(None);
+        }
+        r.set_poses(&s.scene_poses()).unwrap();
+        let depth = r.render_depth(&intr, &p).unwrap();
+        let cast = ray_cast_depth(&s, &intr, &p);
+        let (frac, valid) = agreement(&depth, &cast);
+        assert!(frac >= 0.995, "{:.3} % of {valid} agree", frac * 100.0);
+        let near = depth.data.iter().filter(|&&d| d > 0.0 && d < 4.2).count();
+        assert!(near > 200, "the people cover only {near} pixels");
     }
 }

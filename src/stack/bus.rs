@@ -30,6 +30,10 @@ pub struct Bus {
     pub command: Option<DriveCommand>,
     /// Each agent's true pose, at the ground-truth rate: for recorders and scorers only.
     pub agents: Vec<(String, Pose2)>,
+    /// Every person in the world, at the ground-truth rate: for recorders and scorers only.
+    pub people: Vec<futago_sim::people::PersonTruth>,
+    /// Contacts begun between the robot and a person so far (the physics' count).
+    pub person_collisions: u64,
     /// Each joint's angle, rad, as its encoder reports it with the Create's sensor stream.
     pub joints: Vec<(String, f64)>,
     /// Angles (rad) asked of `command` joints at the last control tick (`joint/NAME`), until
@@ -58,6 +62,8 @@ impl Bus {
             bumps: BumpsAndDrops::default(),
             command: None,
             agents: Vec::new(),
+            people: Vec::new(),
+            person_collisions: 0,
             joints: Vec::new(),
             joint_commands: Vec::new(),
             history: VecDeque::from([(Time::ZERO, start)]),

@@ -26,6 +26,7 @@
 pub mod bus;
 pub mod driver;
 pub mod localization;
+pub mod people;
 pub mod record;
 pub mod rgbd_map;
 pub mod slam;
@@ -205,12 +206,16 @@ fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
 }
 
 /// The stack's modules, in the order their nodes run in every phase: the recorders of the
-/// run's files (when it writes them), the driver, the localiser, SLAM, the RGB-D mapper. A
+/// run's files (when it writes them), the people's truth and safety scores, the driver, the localiser, SLAM, the RGB-D mapper. A
 /// new module is one line here; the loop and the metric checks read this table.
 pub const MODULES: &[Module] = &[
     Module {
         build: |s, _, out| out.map_or(Ok(Vec::new()), |dir| record::recorders(s, dir)),
         metric_names: record::metric_names,
+    },
+    Module {
+        build: |s, _, out| boxed(people::node(s, out)),
+        metric_names: people::metric_names,
     },
     Module {
         build: |s, _, _| Ok(vec![Box::new(driver::DriverNode::new(s)?) as Box<dyn Node>]),

@@ -1,0 +1,1123 @@
+//! People: pedestrians that walk routes, stand, or stream between places, avoiding each other,
+//! the walls and the robot by a social-force model, on two legs that swing with their gait.
+//!
+//! A scenario declares them:
+//! - `[[person]]`: one person on a route of waypoints (`loop`, `back_and_forth` or `once`),
+//!   or standing where a route of one point puts them;
+//! - `[[flow]]`: people arriving at `rate` per minute (exponential gaps, a Poisson stream) at
+//!   a place, walking to another and leaving there;
+//! - `[crowd]`: the motion model and the body, shared by all ([`CrowdConfig`]).
+//!
+//! **Motion.** Each person is a point of velocity **v** driven by three accelerations, as in
+//! pedsim (Gloor's pedestrian simulator, whose default parameters these are):
+//! - towards the next waypoint at the person's own speed v₀, relaxing with time τ:
+//!   (v₀·**e** − **v**)/τ (Helbing & Molnár 1995);
+//! - away from each other person and the robot, by the social force of Moussaïd, Helbing et
+//!   al. (2009), fitted to people passing each other: it weighs the neighbour's direction and
+//!   the two velocities' difference (λ = 2, γ = 0.35) and turns the walker aside (n = 2,
+//!   n′ = 3). People see the robot as a walker of radius `robot_radius` (0.5 m, pedsim_ros's
+//!   r_r): its distance counts as that much less the person's own radius. A person declared
+//!   with `yields = false` ignores the robot (someone absorbed in a phone in a doorway);
+//! - away from the nearest obstacle, exp(−d/σ) with d the gap to it and σ = 0.8 m.
+//!
+//! The sum is integrated at the physics step, the speed capped at 1.3·v₀. A person never
+//! passes through a wall, another person or the robot: a step that would bring the body
+//! closer than its radius to the nearest obstacle (two radii to another person, its radius
+//! and the robot's to the robot) is pushed back out, and the velocity into it is dropped.
+//!
+//! **Body.** A person is three bodies that every laser, camera and the physics see: a torso
+//! with a head, and two legs (shins of radius 5 cm) hinged at the hip. The legs swing in
+//! opposite phase: a stride (two steps) takes `stride_period` (1 s), and a step is
+//! v·period/2 long, capped at `max_step` (0.8 m), so at 1.3 m/s the feet are up to 0.65 m
+//! apart; at rest the legs hang straight.
+//!
+//! Everything is deterministic per seed: speeds not given and flow arrivals come from seeded
+//! streams.
+
+use crate::agent::PathMode;
+use crate::config::{SpecError, check_name, check_range};
+use crate::noise::stream;
+use crate::world::MAX_EXTENT;
+use futago_msgs::Pose2;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Exp, Normal};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// One person, as a scenario's `[[person]]` table declares them.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PersonConfig {
+    pub name: String,
+    /// Waypoints `[[x, y], …]` in the world frame, m. One point: the person stands there.
+    pub route: Vec<[f64; 2]>,
+    #[serde(default)]
+    pub mode: PathMode,
+    /// Walking speed, m/s; left out, drawn from N(1.2, 0.2²) (pedsim's crowd).
+    #[serde(default)]
+    pub speed: Option<f64>,
+    /// Stands at the first waypoint until this time, s.
+    #[serde(default)]
+    pub start_time: f64,
+    /// Which way a standing person faces, degrees from the world's x axis.
+    #[serde(default)]
+    pub heading_deg: f64,
+    /// Whether they step aside for the robot (its social force); a flow's people do.
+    #[serde(default = "yes")]
+    pub yields: bool,
+    /// sRGB colour of the clothes on the torso.
+    #[serde(default = "shirt")]
+    pub shirt: [f64; 3],
+    /// sRGB colour of the legs.
+    #[serde(default = "trousers")]
+    pub trousers: [f64; 3],
+}
+
+/// People arriving at a place and walking to another, as a `[[flow]]` table declares them.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FlowConfig {
+    pub name: String,
+    /// Where people appear, m; each within `spread` of it.
+    pub from: [f64; 2],
+    /// Where they go and leave, m; each to a point within `spread` of it.
+    pub to: [f64; 2],
+    /// Waypoints between, m.
+    #[serde(default)]
+    pub via: Vec<[f64; 2]>,
+    /// Arrivals per minute, on average (a Poisson stream).
+    pub rate: f64,
+    /// Radius of the places, m.
+    #[serde(default = "spread")]
+    pub spread: f64,
+    /// First and last time an arrival may come, s.
+    #[serde(default)]
+    pub start_time: f64,
+    #[serde(default = "forever")]
+    pub end_time: f64,
+    /// At most this many of the flow's people in the world at once; an arrival beyond it
+    /// does not come.
+    #[serde(default = "max_people")]
+    pub max: usize,
+    /// Walking speed, m/s: mean and standard deviation.
+    #[serde(default = "speed_mean")]
+    pub speed: f64,
+    #[serde(default = "speed_std")]
+    pub speed_std: f64,
+}
+
+fn yes() -> bool {
+    true
+}
+fn shirt() -> [f64; 3] {
+    [0.2, 0.35, 0.6]
+}
+fn trousers() -> [f64; 3] {
+    [0.15, 0.15, 0.2]
+}
+fn spread() -> f64 {
+    0.5
+}
+fn forever() -> f64 {
+    1e9
+}
+fn max_people() -> usize {
+    10
+}
+fn speed_mean() -> f64 {
+    1.2
+}
+fn speed_std() -> f64 {
+    0.2
+}
+
+/// The motion model and the body of every person (`[crowd]`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CrowdConfig {
+    /// τ: how fast a person takes up the velocity they want, s (pedsim 0.5).
+    pub relaxation_time: f64,
+    /// Weight of the social force between people, m/s² (pedsim 2.1).
+    pub social_force: f64,
+    /// Weight of the obstacle force, m/s² (pedsim 1.0).
+    pub obstacle_force: f64,
+    /// Range of the obstacle force, m (pedsim 0.8).
+    pub obstacle_sigma: f64,
+    /// Moussaïd et al. 2009: weight of the velocity difference against the direction (λ),
+    /// range per unit of interaction (γ), and the angular falloffs (n for turning aside, n′
+    /// for slowing down).
+    pub lambda: f64,
+    pub gamma: f64,
+    pub n: f64,
+    pub n_prime: f64,
+    /// The radius people see the robot as when they avoid it, m (pedsim_ros's r_r).
+    pub robot_radius: f64,
+    /// The speed is capped at this multiple of the person's own.
+    pub max_speed_factor: f64,
+    /// A waypoint counts as reached this close, m.
+    pub waypoint_radius: f64,
+    /// The body's radius for walls, m (pedsim 0.2).
+    pub radius: f64,
+    /// Shin radius, m.
+    pub leg_radius: f64,
+    /// Hip height: the legs' length, m.
+    pub hip_height: f64,
+    /// Distance between the legs' axes, side to side, m.
+    pub hip_width: f64,
+    /// Time of a stride (two steps), s.
+    pub stride_period: f64,
+    /// The longest step, m.
+    pub max_step: f64,
+    /// Torso half-depth (x) and half-width (y), m; from the hips to `shoulder_height`.
+    pub torso: [f64; 2],
+    pub shoulder_height: f64,
+    /// Head radius, m (its top is at `height`).
+    pub head_radius: f64,
+    pub height: f64,
+}
+
+impl Default for CrowdConfig {
+    fn default() -> Self {
+        CrowdConfig {
+            relaxation_time: 0.5,
+            social_force: 2.1,
+            obstacle_force: 1.0,
+            obstacle_sigma: 0.8,
+            lambda: 2.0,
+            gamma: 0.35,
+            n: 2.0,
+            n_prime: 3.0,
+            robot_radius: 0.5,
+            max_speed_factor: 1.3,
+            waypoint_radius: 0.3,
+            radius: 0.2,
+            leg_radius: 0.05,
+            hip_height: 0.85,
+            hip_width: 0.2,
+            stride_period: 1.0,
+            max_step: 0.8,
+            torso: [0.12, 0.2],
+            shoulder_height: 1.45,
+            head_radius: 0.1,
+            height: 1.72,
+        }
+    }
+}
+
+fn check_point(file: &Path, key: &str, p: &[f64; 2]) -> Result<(), SpecError> {
+    for v in p {
+        check_range(
+            file,
+            key,
+            *v,
+            -(MAX_EXTENT as f64),
+            MAX_EXTENT as f64,
+            "m, within the world's extent",
+        )?;
+    }
+    Ok(())
+}
+
+fn check_colour(file: &Path, key: &str, c: &[f64; 3]) -> Result<(), SpecError> {
+    for v in c {
+        check_range(file, key, *v, 0.0, 1.0, "(sRGB in [0, 1])")?;
+    }
+    Ok(())
+}
+
+impl PersonConfig {
+    /// Checks every field; errors name `KEY.field`.
+    pub fn validate(&self, file: &Path, key: &str) -> Result<(), SpecError> {
+        let k = |s: &str| format!("{key}.{s}");
+        check_name(file, &k("name"), &self.name)?;
+        if self.route.is_empty() || self.route.len() > 10_000 {
+            return Err(SpecError::new(
+                file,
+                k("route"),
+                format!(
+                    "expected 1 to 10000 [x, y] waypoints, found {}",
+                    self.route.len()
+                ),
+            ));
+        }
+        for (i, p) in self.route.iter().enumerate() {
+            check_point(file, &format!("{key}.route[{i}]"), p)?;
+        }
+        if let Some(s) = self.speed {
+            check_range(file, &k("speed"), s, 0.0, 3.0, "m/s")?;
+        }
+        check_range(file, &k("start_time"), self.start_time, 0.0, 1e6, "s")?;
+        check_range(
+            file,
+            &k("heading_deg"),
+            self.heading_deg,
+            -360.0,
+            360.0,
+            "°",
+        )?;
+        check_colour(file, &k("shirt"), &self.shirt)?;
+        check_colour(file, &k("trousers"), &self.trousers)
+    }
+}
+
+impl FlowConfig {
+    /// Checks every field; errors name `KEY.field`.
+    pub fn validate(&self, file: &Path, key: &str) -> Result<(), SpecError> {
+        let k = |s: &str| format!("{key}.{s}");
+        check_name(file, &k("name"), &self.name)?;
+        check_point(file, &k("from"), &self.from)?;
+        check_point(file, &k("to"), &self.to)?;
+        if self.via.len() > 10_000 {
+            return Err(SpecError::new(
+                file,
+                k("via"),
+                "expected at most 10000 waypoints",
+            ));
+        }
+        for (i, p) in self.via.iter().enumerate() {
+            check_point(file, &format!("{key}.via[{i}]"), p)?;
+        }
+        check_range(
+            file,
+            &k("rate"),
+            self.rate,
+            1e-6,
+            600.0,
+            "arrivals per minute",
+        )?;
+        check_range(file, &k("spread"), self.spread, 0.0, 100.0, "m")?;
+        check_range(file, &k("start_time"), self.start_time, 0.0, 1e9, "s")?;
+        check_range(
+            file,
+            &k("end_time"),
+            self.end_time,
+            self.start_time,
+            1e9,
+            "s, no earlier than start_time",
+        )?;
+        if self.max == 0 || self.max > 1000 {
+            return Err(SpecError::new(
+                file,
+                k("max"),
+                format!("expected 1 to 1000 people, found {}", self.max),
+            ));
+        }
+        check_range(file, &k("speed"), self.speed, 0.1, 3.0, "m/s")?;
+        check_range(file, &k("speed_std"), self.speed_std, 0.0, 1.0, "m/s")
+    }
+}
+
+impl CrowdConfig {
+    /// Checks every field; errors name `crowd.field`.
+    pub fn validate(&self, file: &Path) -> Result<(), SpecError> {
+        let k = |s: &str| format!("crowd.{s}");
+        for (name, v, lo, hi, unit) in [
+            ("relaxation_time", self.relaxation_time, 0.01, 10.0, "s"),
+            ("social_force", self.social_force, 0.0, 100.0, "m/s²"),
+            ("obstacle_force", self.obstacle_force, 0.0, 100.0, "m/s²"),
+            ("obstacle_sigma", self.obstacle_sigma, 0.01, 10.0, "m"),
+            ("lambda", self.lambda, 0.0, 100.0, ""),
+            ("gamma", self.gamma, 0.01, 10.0, ""),
+            ("n", self.n, 0.0, 100.0, ""),
+            ("n_prime", self.n_prime, 0.0, 100.0, ""),
+            ("robot_radius", self.robot_radius, 0.0, 5.0, "m"),
+            ("max_speed_factor", self.max_speed_factor, 1.0, 10.0, ""),
+            ("waypoint_radius", self.waypoint_radius, 0.01, 10.0, "m"),
+            ("radius", self.radius, 0.05, 1.0, "m"),
+            ("leg_radius", self.leg_radius, 0.01, 0.2, "m"),
+            ("hip_height", self.hip_height, 0.2, 1.5, "m"),
+            ("hip_width", self.hip_width, 0.0, 0.6, "m"),
+            ("stride_period", self.stride_period, 0.2, 5.0, "s"),
+            ("max_step", self.max_step, 0.05, 2.0, "m"),
+            ("torso[0]", self.torso[0], 0.02, 0.6, "m"),
+            ("torso[1]", self.torso[1], 0.02, 0.6, "m"),
+            ("head_radius", self.head_radius, 0.02, 0.3, "m"),
+        ] {
+            check_range(file, &k(name), v, lo, hi, unit)?;
+        }
+        check_range(
+            file,
+            &k("shoulder_height"),
+            self.shoulder_height,
+            self.hip_height + 0.05,
+            3.0,
+            "m, above the hips",
+        )?;
+        check_range(
+            file,
+            &k("height"),
+            self.height,
+            self.shoulder_height + 2.0 * self.head_radius,
+            3.5,
+            "m, room for the head above the shoulders",
+        )
+    }
+}
+
+/// What the people react to besides each other: the robot and the nearest obstacle.
+pub struct Surroundings<'a> {
+    /// The robot's position, velocity and body radius, m, m/s and m.
+    pub robot: Option<([f64; 2], [f64; 2], f64)>,
+    /// The nearest obstacle's point to a position, if one lies within the range asked (m).
+    pub nearest_obstacle: &'a dyn Fn([f64; 2], f64) -> Option<[f64; 2]>,
+}
+
+/// One person's state. A slot of the pool holds a person while they are in the world.
+#[derive(Debug, Clone, PartialEq)]
+struct Walker {
+    /// Unique over the run: declared people first, then flow arrivals in the order they came.
+    id: u32,
+    name: String,
+    /// Which `[[person]]` or `[[flow]]` it comes from.
+    source: Source,
+    active: bool,
+    yields: bool,
+    p: [f64; 2],
+    v: [f64; 2],
+    heading: f64,
+    speed: f64,
+    route: Vec<[f64; 2]>,
+    mode: PathMode,
+    /// Index of the waypoint walked to, and the direction along the route (±1).
+    target: usize,
+    forward: bool,
+    start_time: f64,
+    /// Gait phase in strides, and the current step length.
+    phase: f64,
+    step: f64,
+    shirt: [f64; 3],
+    trousers: [f64; 3],
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Source {
+    Person,
+    Flow(usize),
+}
+
+/// One person's ground truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PersonTruth {
+    pub id: u32,
+    pub name: String,
+    /// Position between the feet and heading (the way they face), world frame.
+    pub pose: Pose2,
+    /// Velocity, m/s, world frame.
+    pub velocity: [f64; 2],
+}
+
+/// A flow's arrivals: the next one's time and its random stream, and one who has arrived
+/// but waits for room to step in (where they start, where they go, their speed).
+#[derive(Debug, Clone)]
+struct Arrivals {
+    next: f64,
+    rng: ChaCha8Rng,
+    waiting: Option<([f64; 2], [f64; 2], f64)>,
+}
+
+/// The people of a run: the pool of slots (declared people, then each flow's `max`), their
+/// states, and the flows' arrivals. The slots and their order never change, so that the
+/// bodies built for them can be posed by index.
+#[derive(Debug, Clone)]
+pub struct Crowd {
+    config: CrowdConfig,
+    flows: Vec<FlowConfig>,
+    walkers: Vec<Walker>,
+    arrivals: Vec<Arrivals>,
+    next_id: u32,
+    /// Arrivals that found their flow full.
+    turned_away: u64,
+}
+
+/// Where an empty slot's bodies wait: far below the floor, out of every sensor's sight.
+pub const PARKED_Z: f64 = -100.0;
+
+impl Crowd {
+    /// The crowd at time zero: declared people at their first waypoints, flows empty.
+    pub fn new(
+        people: &[PersonConfig],
+        flows: &[FlowConfig],
+        config: CrowdConfig,
+        seed: u64,
+    ) -> Crowd {
+        let mut walkers = Vec::new();
+        for (i, p) in people.iter().enumerate() {
+            let speed = p.speed.unwrap_or_else(|| {
+                draw_speed(
+                    &mut stream(seed, &format!("people.{}.speed", p.name)),
+                    1.2,
+                    0.2,
+                )
+            });
+            walkers.push(Walker {
+                id: i as u32,
+                name: p.name.clone(),
+                source: Source::Person,
+                active: true,
+                yields: p.yields,
+                p: p.route[0],
+                v: [0.0; 2],
+                heading: p.heading_deg.to_radians(),
+                speed,
+                route: p.route.clone(),
+                mode: p.mode,
+                target: usize::from(p.route.len() > 1),
+                forward: true,
+                start_time: p.start_time,
+                phase: 0.0,
+                step: 0.0,
+                shirt: p.shirt,
+                trousers: p.trousers,
+            });
+        }
+        let mut arrivals = Vec::new();
+        for (f, flow) in flows.iter().enumerate() {
+            for k in 0..flow.max {
+                walkers.push(Walker {
+                    id: u32::MAX,
+                    name: format!("{}.{k}", flow.name),
+                    source: Source::Flow(f),
+                    active: false,
+                    yields: true,
+                    p: flow.from,
+                    v: [0.0; 2],
+                    heading: 0.0,
+                    speed: flow.speed,
+                    route: Vec::new(),
+                    mode: PathMode::Once,
+                    target: 0,
+                    forward: true,
+                    start_time: 0.0,
+                    phase: 0.0,
+                    step: 0.0,
+                    shirt: shirt_of(f, k),
+                    trousers: trousers(),
+                });
+            }
+            let mut rng = stream(seed, &format!("people.flow.{}", flow.name));
+            let gap = Exp::new(flow.rate / 60.0)
+                .map(|e| e.sample(&mut rng))
+                .unwrap_or(f64::INFINITY);
+            arrivals.push(Arrivals {
+                next: flow.start_time + gap,
+                rng,
+                waiting: None,
+            });
+        }
+        Crowd {
+            config,
+            flows: flows.to_vec(),
+            next_id: people.len() as u32,
+            walkers,
+            arrivals,
+            turned_away: 0,
+        }
+    }
+
+    /// The motion model and body.
+    pub fn config(&self) -> &CrowdConfig {
+        &self.config
+    }
+
+    /// Number of slots (people who can be in the world at once).
+    pub fn slots(&self) -> usize {
+        self.walkers.len()
+    }
+
+    /// Whether slot `i` holds a person now.
+    pub fn active(&self, i: usize) -> bool {
+        self.walkers[i].active
+    }
+
+    /// The colours of slot `i`'s clothes: torso, legs.
+    pub fn colours(&self, i: usize) -> ([f64; 3], [f64; 3]) {
+        (self.walkers[i].shirt, self.walkers[i].trousers)
+    }
+
+    /// Arrivals that found their flow full so far.
+    pub fn turned_away(&self) -> u64 {
+        self.turned_away
+    }
+
+    /// Every person in the world now, by slot.
+    pub fn truth(&self) -> Vec<PersonTruth> {
+        self.walkers
+            .iter()
+            .filter(|w| w.active)
+            .map(|w| PersonTruth {
+                id: w.id,
+                name: w.name.clone(),
+                pose: Pose2::new(w.p[0], w.p[1], w.heading),
+                velocity: w.v,
+            })
+            .collect()
+    }
+
+    /// Slot `i`'s body frame (between the feet, facing its heading) and the offsets of its
+    /// left and right feet along the heading, m; `None` for an empty slot.
+    pub fn body(&self, i: usize) -> Option<(Pose2, [f64; 2])> {
+        let w = &self.walkers[i];
+        if !w.active {
+            return None;
+        }
+        let swing = 0.5 * w.step * (std::f64::consts::TAU * w.phase).sin();
+        Some((Pose2::new(w.p[0], w.p[1], w.heading), [swing, -swing]))
+    }
+
+    /// Advances the crowd from `t` by `dt` seconds.
+    pub fn step(&mut self, t: f64, dt: f64, around: &Surroundings) {
+        self.arrive(t + dt);
+        let c = self.config;
+        let n = self.walkers.len();
+        // Forces from the state at t for everyone, then every move (the order of the slots
+        // does not matter).
+        let accel: Vec<[f64; 2]> = (0..n).map(|i| self.acceleration(i, t, around)).collect();
+        for (w, a) in self.walkers.iter_mut().zip(&accel) {
+            if !w.active {
+                continue;
+            }
+            let mut v = [w.v[0] + a[0] * dt, w.v[1] + a[1] * dt];
+            let cap = c.max_speed_factor * w.speed;
+            let s = v[0].hypot(v[1]);
+            if s > cap {
+                v = [v[0] * cap / s, v[1] * cap / s];
+            }
+            w.v = v;
+            w.p = [w.p[0] + v[0] * dt, w.p[1] + v[1] * dt];
+        }
+        self.separate();
+        for w in self.walkers.iter_mut() {
+            if !w.active {
+                continue;
+            }
+            let (mut p, mut v) = (w.p, w.v);
+            // Nor through the robot: a person who walks into it stops against it (their
+            // swinging feet may still touch it) rather than shove it along.
+            if let Some((rp, _, rr)) = around.robot {
+                let (dx, dy) = (p[0] - rp[0], p[1] - rp[1]);
+                let d = dx.hypot(dy);
+                let min = rr + c.radius;
+                if d > 1e-9 && d < min {
+                    let (nx, ny) = (dx / d, dy / d);
+                    p = [rp[0] + nx * min, rp[1] + ny * min];
+                    let into = v[0] * nx + v[1] * ny;
+                    if into < 0.0 {
+                        v = [v[0] - into * nx, v[1] - into * ny];
+                    }
+                }
+            }
+            // Never through a wall: back out to the radius, and no velocity into it.
+            if let Some(q) = (around.nearest_obstacle)(p, c.radius) {
+                let (dx, dy) = (p[0] - q[0], p[1] - q[1]);
+                let d = dx.hypot(dy);
+                if d > 1e-9 && d < c.radius {
+                    let (nx, ny) = (dx / d, dy / d);
+                    p = [q[0] + nx * c.radius, q[1] + ny * c.radius];
+                    let into = v[0] * nx + v[1] * ny;
+                    if into < 0.0 {
+                        v = [v[0] - into * nx, v[1] - into * ny];
+                    }
+                }
+            }
+            w.p = p;
+            w.v = v;
+            let speed = v[0].hypot(v[1]);
+            if speed > 0.1 {
+                w.heading = v[1].atan2(v[0]);
+            }
+            // The gait: steps grow with speed up to max_step; the phase advances a stride per
+            // two steps walked.
+            w.step = (speed * c.stride_period / 2.0).min(c.max_step);
+            if w.step > 1e-6 {
+                w.phase = (w.phase + speed * dt / (2.0 * w.step)).fract();
+            }
+        }
+        self.advance_routes(t + dt);
+    }
+
+    /// Person `i`'s acceleration at `t`: towards their waypoint, away from the others, the
+    /// robot and the nearest obstacle; zero for an empty slot.
+    fn acceleration(&self, i: usize, t: f64, around: &Surroundings) -> [f64; 2] {
+        let c = self.config;
+        let w = &self.walkers[i];
+        if !w.active {
+            return [0.0; 2];
+        }
+        let mut a = [0.0; 2];
+        let want = self.desired_velocity(i, t);
+        a[0] += (want[0] - w.v[0]) / c.relaxation_time;
+        a[1] += (want[1] - w.v[1]) / c.relaxation_time;
+        let mut push = |pj: [f64; 2], vj: [f64; 2], nearer: f64| {
+            let f = social_force(&c, w.p, w.v, pj, vj, nearer);
+            a[0] += c.social_force * f[0];
+            a[1] += c.social_force * f[1];
+        };
+        for (j, o) in self.walkers.iter().enumerate() {
+            if j != i && o.active {
+                push(o.p, o.v, 0.0);
+            }
+        }
+        if let Some((rp, rv, _)) = around.robot.filter(|_| w.yields) {
+            push(rp, rv, (c.robot_radius - c.radius).max(0.0));
+        }
+        if let Some(q) = (around.nearest_obstacle)(w.p, c.radius + 5.0 * c.obstacle_sigma) {
+            let (dx, dy) = (w.p[0] - q[0], w.p[1] - q[1]);
+            let d = dx.hypot(dy);
+            if d > 1e-9 {
+                let f = c.obstacle_force * (-(d - c.radius).max(0.0) / c.obstacle_sigma).exp();
+                a[0] += f * dx / d;
+                a[1] += f * dy / d;
+            }
+        }
+        a
+    }
+
+    /// Bodies do not pass through each other: two people closer than two radii are moved
+    /// apart, each by half the overlap along the line between them, and lose the velocity
+    /// with which they approach each other (one pass over the pairs, in slot order).
+    fn separate(&mut self) {
+        let min = 2.0 * self.config.radius;
+        let n = self.walkers.len();
+        for i in 0..n {
+            if !self.walkers[i].active {
+                continue;
+            }
+            for j in i + 1..n {
+                if !self.walkers[j].active {
+                    continue;
+                }
+                let (a, b) = (self.walkers[i].p, self.walkers[j].p);
+                let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                let d = dx.hypot(dy);
+                if d >= min || d < 1e-9 {
+                    continue;
+                }
+                let (nx, ny) = (dx / d, dy / d);
+                let push = 0.5 * (min - d);
+                let (vi, vj) = (self.walkers[i].v, self.walkers[j].v);
+                let closing = (vi[0] - vj[0]) * nx + (vi[1] - vj[1]) * ny;
+                let wi = &mut self.walkers[i];
+                wi.p = [a[0] - nx * push, a[1] - ny * push];
+                if closing > 0.0 {
+                    wi.v = [vi[0] - 0.5 * closing * nx, vi[1] - 0.5 * closing * ny];
+                }
+                let wj = &mut self.walkers[j];
+                wj.p = [b[0] + nx * push, b[1] + ny * push];
+                if closing > 0.0 {
+                    wj.v = [vj[0] + 0.5 * closing * nx, vj[1] + 0.5 * closing * ny];
+                }
+            }
+        }
+    }
+
+    /// The velocity person `i` wants: towards their waypoint at their speed, slowing within
+    /// a metre of where they will stop.
+    fn desired_velocity(&self, i: usize, t: f64) -> [f64; 2] {
+        let w = &self.walkers[i];
+        if t < w.start_time || w.route.is_empty() {
+            return [0.0; 2];
+        }
+        let goal = w.route[w.target];
+        let (dx, dy) = (goal[0] - w.p[0], goal[1] - w.p[1]);
+        let d = dx.hypot(dy);
+        if d < 1e-9 {
+            return [0.0; 2];
+        }
+        let last = match w.mode {
+            PathMode::Loop => w.route.len() == 1,
+            PathMode::BackAndForth => w.route.len() == 1,
+            PathMode::Once => w.target + 1 == w.route.len(),
+        };
+        let s = if last { w.speed * d.min(1.0) } else { w.speed };
+        [s * dx / d, s * dy / d]
+    }
+
+    /// Moves each walker's target on when it is reached; a flow's people leave at the end.
+    fn advance_routes(&mut self, t: f64) {
+        let r = self.config.waypoint_radius;
+        for w in self.walkers.iter_mut().filter(|w| w.active) {
+            if w.route.len() < 2 || t < w.start_time {
+                continue;
+            }
+            let g = w.route[w.target];
+            if (g[0] - w.p[0]).hypot(g[1] - w.p[1]) > r {
+                continue;
+            }
+            let n = w.route.len();
+            match (w.mode, w.source) {
+                (_, Source::Flow(_)) if w.target + 1 == n => w.active = false,
+                (PathMode::Once, _) => w.target = (w.target + 1).min(n - 1),
+                (PathMode::Loop, _) => w.target = (w.target + 1) % n,
+                (PathMode::BackAndForth, _) => {
+                    if w.forward && w.target + 1 == n {
+                        w.forward = false;
+                    } else if !w.forward && w.target == 0 {
+                        w.forward = true;
+                    }
+                    w.target = if w.forward {
+                        w.target + 1
+                    } else {
+                        w.target - 1
+                    };
+                }
+            }
+        }
+    }
+
+    /// Lets in the arrivals due by `t`. An arrival steps in only where nobody stands within
+    /// two body radii of their start; until then they wait, and the arrivals behind them too.
+    fn arrive(&mut self, t: f64) {
+        for f in 0..self.flows.len() {
+            loop {
+                let flow = &self.flows[f];
+                let a = &mut self.arrivals[f];
+                if a.waiting.is_none() {
+                    if a.next > t.min(flow.end_time) {
+                        break;
+                    }
+                    let rng = &mut a.rng;
+                    let from = in_disc(rng, flow.from, flow.spread);
+                    let to = in_disc(rng, flow.to, flow.spread);
+                    let speed = draw_speed(rng, flow.speed, flow.speed_std);
+                    a.next += Exp::new(flow.rate / 60.0)
+                        .map(|e| e.sample(rng))
+                        .unwrap_or(f64::INFINITY);
+                    a.waiting = Some((from, to, speed));
+                }
+                let Some((from, to, speed)) = a.waiting else {
+                    break;
+                };
+                let room = 2.0 * self.config.radius;
+                if self
+                    .walkers
+                    .iter()
+                    .any(|w| w.active && (w.p[0] - from[0]).hypot(w.p[1] - from[1]) < room)
+                {
+                    break;
+                }
+                self.arrivals[f].waiting = None;
+                let slot = self
+                    .walkers
+                    .iter()
+                    .position(|w| w.source == Source::Flow(f) && !w.active);
+                let Some(slot) = slot else {
+                    self.turned_away += 1;
+                    continue;
+                };
+                let mut route = vec![from];
+                route.extend(flow.via.iter().copied());
+                route.push(to);
+                let w = &mut self.walkers[slot];
+                w.id = self.next_id;
+                self.next_id += 1;
+                w.active = true;
+                w.p = from;
+                w.v = [0.0; 2];
+                let (dx, dy) = (route[1][0] - from[0], route[1][1] - from[1]);
+                w.heading = dy.atan2(dx);
+                w.speed = speed;
+                w.route = route;
+                w.target = 1;
+                w.start_time = 0.0;
+                w.phase = 0.0;
+                w.step = 0.0;
+            }
+        }
+    }
+}
+
+/// A walking speed from N(mean, std²), kept within [0.3, 2.5] m/s.
+fn draw_speed(rng: &mut ChaCha8Rng, mean: f64, std: f64) -> f64 {
+    let s = Normal::new(mean, std.max(0.0))
+        .map(|n| n.sample(rng))
+        .unwrap_or(mean);
+    s.clamp(0.3, 2.5)
+}
+
+/// A point uniformly within `r` of `c`.
+fn in_disc(rng: &mut ChaCha8Rng, c: [f64; 2], r: f64) -> [f64; 2] {
+    let rho = r * rng.random::<f64>().sqrt();
+    let a = std::f64::consts::TAU * rng.random::<f64>();
+    [c[0] + rho * a.cos(), c[1] + rho * a.sin()]
+}
+
+/// A shirt colour per flow and person, so that a camera tells them apart.
+fn shirt_of(flow: usize, k: usize) -> [f64; 3] {
+    const PALETTE: [[f64; 3]; 6] = [
+        [0.6, 0.15, 0.15],
+        [0.15, 0.45, 0.2],
+        [0.2, 0.3, 0.6],
+        [0.7, 0.55, 0.1],
+        [0.45, 0.2, 0.5],
+        [0.8, 0.8, 0.78],
+    ];
+    PALETTE[(flow * 3 + k) % PALETTE.len()]
+}
+
+/// The social force on a person at `pi` moving at `vi` from one at `pj` moving at `vj`, whose
+/// distance counts as `nearer` metres less than it is (a walker bigger than a person)
+/// (Moussaïd, Helbing, Garnier, Johansson, Combe & Theraulaz 2009, as pedsim uses it): an
+/// acceleration of at most 1 in units of the force's weight. It slows the person down along
+/// the interaction direction (velocity difference weighted by λ, plus the direction to the
+/// other) and turns them aside, both falling off with distance over B = γ·|interaction| and
+/// with the angle θ between the interaction and the direction to the other. Head on (θ = 0)
+/// the person turns right, so two people meeting pass on their right.
+pub fn social_force(
+    c: &CrowdConfig,
+    pi: [f64; 2],
+    vi: [f64; 2],
+    pj: [f64; 2],
+    vj: [f64; 2],
+    nearer: f64,
+) -> [f64; 2] {
+    let d = [pj[0] - pi[0], pj[1] - pi[1]];
+    let centres = d[0].hypot(d[1]);
+    if centres < 1e-9 {
+        return [0.0; 2];
+    }
+    let e = [d[0] / centres, d[1] / centres];
+    let dist = (centres - nearer).max(0.0);
+    let iv = [
+        c.lambda * (vi[0] - vj[0]) + e[0],
+        c.lambda * (vi[1] - vj[1]) + e[1],
+    ];
+    let il = iv[0].hypot(iv[1]);
+    if il < 1e-9 {
+        return [0.0; 2];
+    }
+    let t = [iv[0] / il, iv[1] / il];
+    // Signed angle from the interaction direction to the direction to the other.
+    let theta = (t[0] * e[1] - t[1] * e[0]).atan2(t[0] * e[0] + t[1] * e[1]);
+    let b = c.gamma * il;
+    let slow = -(-dist / b - (c.n_prime * b * theta).powi(2)).exp();
+    let sign = if theta < 0.0 { -1.0 } else { 1.0 };
+    let aside = -sign * (-dist / b - (c.n * b * theta).powi(2)).exp();
+    // The interaction direction's left normal.
+    let left = [-t[1], t[0]];
+    [slow * t[0] + aside * left[0], slow * t[1] + aside * left[1]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn open(_: [f64; 2], _: f64) -> Option<[f64; 2]> {
+        None
+    }
+
+    fn person(name: &str, route: Vec<[f64; 2]>, speed: f64) -> PersonConfig {
+        PersonConfig {
+            name: name.into(),
+            route,
+            mode: PathMode::Once,
+            speed: Some(speed),
+            start_time: 0.0,
+            heading_deg: 0.0,
+            yields: true,
+            shirt: shirt(),
+            trousers: trousers(),
+        }
+    }
+
+    fn run(crowd: &mut Crowd, seconds: f64, around: &Surroundings, mut each: impl FnMut(&Crowd)) {
+        let dt = 0.005;
+        let steps = (seconds / dt).round() as usize;
+        for k in 0..steps {
+            crowd.step(k as f64 * dt, dt, around);
+            each(crowd);
+        }
+    }
+
+    #[test]
+    fn a_person_alone_takes_up_their_speed_with_the_relaxation_time() {
+        let mut c = Crowd::new(
+            &[person("a", vec![[0.0, 0.0], [100.0, 0.0]], 1.2)],
+            &[],
+            CrowdConfig::default(),
+            1,
+        );
+        let around = Surroundings {
+            robot: None,
+            nearest_obstacle: &open,
+        };
+        // dv/dt = (v0 − v)/τ from rest: v(τ) = v0·(1 − 1/e) (to the step's Euler error).
+        run(&mut c, 0.5, &around, |_| {});
+        let v = c.truth()[0].velocity[0];
+        let want = 1.2 * (1.0 - (-1.0f64).exp());
+        assert!((v - want).abs() < 0.005, "{v} vs {want}");
+        run(&mut c, 5.0, &around, |_| {});
+        let v = c.truth()[0].velocity;
+        assert!((v[0] - 1.2).abs() < 1e-3 && v[1].abs() < 1e-9, "{v:?}");
+    }
+
+    #[test]
+    fn two_people_meeting_head_on_pass_each_other_on_their_right() {
+        let mut c = Crowd::new(
+            &[
+                person("a", vec![[0.0, 0.0], [10.0, 0.0]], 1.3),
+                person("b", vec![[10.0, 0.0], [0.0, 0.0]], 1.3),
+            ],
+            &[],
+            CrowdConfig::default(),
+            1,
+        );
+        let around = Surroundings {
+            robot: None,
+            nearest_obstacle: &open,
+        };
+        let mut closest = f64::INFINITY;
+        let mut side_a = 0.0;
+        run(&mut c, 12.0, &around, |c| {
+            let t = c.truth();
+            let d = t[0].pose.distance(&t[1].pose);
+            if d < closest {
+                closest = d;
+                side_a = t[0].pose.y;
+            }
+        });
+        // Shoulders (0.2 m each side) never touch, and a walking east steps to its right (−y).
+        assert!(closest > 2.0 * 0.2, "closest {closest} m");
+        assert!(side_a < -0.05, "a passed at y = {side_a}");
+        let t = c.truth();
+        assert!(t[0].pose.x > 9.5 && t[1].pose.x < 0.5, "{t:?}");
+    }
+
+    #[test]
+    fn a_wall_keeps_its_distance_and_is_never_crossed() {
+        // A wall along y = 0.5; the person walks a route that hugs it.
+        let wall = |p: [f64; 2], range: f64| -> Option<[f64; 2]> {
+            (0.5 - p[1] <= range).then_some([p[0], 0.5])
+        };
+        let mut c = Crowd::new(
+            &[person("a", vec![[0.0, 0.3], [10.0, 0.6]], 1.2)],
+            &[],
+            CrowdConfig::default(),
+            1,
+        );
+        let around = Surroundings {
+            robot: None,
+            nearest_obstacle: &wall,
+        };
+        let mut highest = f64::NEG_INFINITY;
+        run(&mut c, 12.0, &around, |c| {
+            highest = highest.max(c.truth()[0].pose.y)
+        });
+        // The body's edge (0.2 m) stays off the wall.
+        assert!(highest <= 0.5 - 0.2 + 1e-9, "reached y = {highest}");
+    }
+
+    #[test]
+    fn legs_swing_a_step_apart_at_a_stride_a_second() {
+        let mut c = Crowd::new(
+            &[person("a", vec![[0.0, 0.0], [1000.0, 0.0]], 1.3)],
+            &[],
+            CrowdConfig::default(),
+            1,
+        );
+        let around = Surroundings {
+            robot: None,
+            nearest_obstacle: &open,
+        };
+        run(&mut c, 10.0, &around, |_| {});
+        // At 1.3 m/s a step is 1.3 · 1 s / 2 = 0.65 m: the feet are up to that far apart,
+        // and a full stride (one swing period) takes 1 s.
+        let mut widest: f64 = 0.0;
+        let mut crossings = 0;
+        let mut last = c.body(0).unwrap().1[0];
+        run(&mut c, 4.0, &around, |c| {
+            let f = c.body(0).unwrap().1;
+            widest = widest.max(f[0] - f[1]);
+            if last < 0.0 && f[0] >= 0.0 {
+                crossings += 1;
+            }
+            last = f[0];
+        });
+        assert!((widest - 0.65).abs() < 0.01, "{widest}");
+        assert_eq!(crossings, 4, "four strides in 4 s");
+    }
+
+    #[test]
+    fn a_flow_lets_people_in_at_its_rate_and_they_leave_at_the_end() {
+        let flow = FlowConfig {
+            name: "f".into(),
+            from: [0.0, 0.0],
+            to: [8.0, 0.0],
+            via: vec![],
+            rate: 30.0,
+            spread: 0.5,
+            start_time: 0.0,
+            end_time: 200.0,
+            max: 40,
+            speed: 1.2,
+            speed_std: 0.2,
+        };
+        let mut c = Crowd::new(&[], std::slice::from_ref(&flow), CrowdConfig::default(), 3);
+        let around = Surroundings {
+            robot: None,
+            nearest_obstacle: &open,
+        };
+        let mut most = 0;
+        let mut ids = std::collections::BTreeSet::new();
+        run(&mut c, 230.0, &around, |c| {
+            let t = c.truth();
+            most = most.max(t.len());
+            ids.extend(t.iter().map(|p| p.id));
+        });
+        // 30 a minute for 200 s: 100 expected, Poisson: ±3σ = ±30.
+        assert!((70..=130).contains(&ids.len()), "{} arrivals", ids.len());
+        // 8 m at ~1.2 m/s: about 7 s each, so about 3.5 at a time; never beyond max.
+        assert!((3..=40).contains(&most), "{most}");
+        assert_eq!(c.turned_away(), 0);
+        // Long after the last arrival, all have left.
+        assert!(c.truth().is_empty(), "{:?}", c.truth());
+        // The same seed, the same arrivals.
+        let mut again = Crowd::new(&[], &[flow], CrowdConfig::default(), 3);
+        let mut ids2 = std::collections::BTreeSet::new();
+        run(&mut again, 230.0, &around, |c| {
+            ids2.extend(c.truth().iter().map(|p| p.id))
+        });
+        assert_eq!(ids, ids2);
+    }
+
+    #[test]
+    fn bad_people_and_flows_are_refused_by_key() {
+        let p = Path::new("s.toml");
+        let mut a = person("a", vec![[0.0, 0.0]], 1.0);
+        a.validate(p, "person[0]").unwrap();
+        a.route.clear();
+        assert_eq!(
+            a.validate(p, "person[0]").unwrap_err().key,
+            "person[0].route"
+        );
+        let mut a = person("a", vec![[0.0, 1e300]], 1.0);
+        assert_eq!(
+            a.validate(p, "person[0]").unwrap_err().key,
+            "person[0].route[0]"
+        );
+        a.route[0][1] = 0.0;
+        a.speed = Some(f64::NAN);
+        assert_eq!(
+            a.validate(p, "person[0]").unwrap_err().key,
+            "person[0].speed"
+        );
+        let f = FlowConfig {
+            name: "f".into(),
+            from: [0.0, 0.0],
+            to: [1.0, 0.0],
+            via: vec![],
+            rate: 0.0,
+            spread: 0.5,
+            start_time: 0.0,
+            end_time: 1.0,
+            max: 1,
+            speed: 1.2,
+            speed_std: 0.2,
+        };
+        assert_eq!(f.validate(p, "flow[0]").unwrap_err().key, "flow[0].rate");
+        let mut c = CrowdConfig::default();
+        c.validate(p).unwrap();
+        c.height = 1.0;
+        assert_eq!(c.validate(p).unwrap_err().key, "crowd.height");
+    }
+}
