@@ -9,6 +9,7 @@ mod cmaes;
 mod config_walk;
 mod fuzz;
 mod ground_truth;
+mod legs_train;
 mod overlay;
 mod relations;
 mod replay;
@@ -79,6 +80,24 @@ enum Command {
         /// (seed 000's baseline).
         #[arg(long)]
         method: Option<String>,
+    },
+    /// Train the laser leg classifier on a scenario's simulated scans (its people give the
+    /// labels): AdaBoost on every seed but the last, scored on the last. Writes the model
+    /// (JSON) that people tracking reads.
+    TrainLegs {
+        /// Scenario file (TOML) with people and a laser.
+        scenario: PathBuf,
+        /// Seeds to run; the last is held out [default: the scenario's `seeds`].
+        #[arg(long, value_delimiter = ',')]
+        seeds: Vec<u64>,
+        /// Boosting rounds (stumps).
+        #[arg(long, default_value_t = 100)]
+        rounds: usize,
+        /// Where to write the model.
+        #[arg(long, default_value = "models/legs.json")]
+        out: PathBuf,
+        #[command(flatten)]
+        overlays: OverlayArgs,
     },
     /// Run many scenarios in parallel and collect their gates: writes each run into
     /// OUT/<scenario file name>/, and OUT/suite.json and OUT/junit.xml (JUnit XML: a test case
@@ -491,6 +510,26 @@ fn real_main() -> Result<()> {
                 s["budget"],
                 out.join("best.toml").display()
             );
+        }
+        Command::TrainLegs {
+            scenario,
+            seeds,
+            rounds,
+            out,
+            overlays,
+        } => {
+            let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
+            let seeds = if seeds.is_empty() {
+                s.spec.seeds.clone()
+            } else {
+                seeds
+            };
+            if !(1..=100_000).contains(&rounds) {
+                anyhow::bail!("--rounds {rounds}: expected 1 to 100000");
+            }
+            let summary = legs_train::train(&s, &seeds, rounds, &out)?;
+            println!("{}", serde_json::to_string_pretty(&summary)?);
+            println!("model written to {}", out.display());
         }
         Command::Metrics { scenario, overlays } => {
             let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;

@@ -1,5 +1,6 @@
 //! `futago replay`: the robot stack's SLAM on a real robot's log, scored against ground-truth
-//! relations when given.
+//! relations when given; and, on a log with annotated people (`leg_tracker/Person`), its people
+//! tracking scored by CLEAR-MOT as the leg_tracker benchmark scores it.
 
 use crate::relations::{self, Metrics};
 use crate::run::write_atomically;
@@ -107,6 +108,11 @@ pub fn replay(
     trajectory.sort_by_key(|p| p.0);
     let drawn_odometry = odometry.clone();
     odometry.sort_by_key(|p| p.0);
+    let people = if log.people.is_empty() {
+        None
+    } else {
+        Some(track_people(&log)?)
+    };
     let wall = started.elapsed().as_secs_f64();
     let span = (log.scans[log.scans.len() - 1].scan.stamp - log.scans[0].scan.stamp).secs();
     write_atomically(out, |tmp| {
@@ -141,6 +147,23 @@ pub fn replay(
             "skipped_scans": slam.skipped(),
             "config": format!("{config:?}"),
         });
+        if let Some((mot, tracks)) = &people {
+            summary["people"] = json!({
+                "annotations": log.people.len(),
+                "gate_m": MOT_GATE,
+                "all_frames": mot[0].summary(),
+                "annotated_frames": mot[1].summary(),
+            });
+            let mut text = format!(
+                "# people tracked by futago on {}: timestamp id x y (odometry frame, m)\n",
+                log_path.display()
+            );
+            for (t, id, p) in tracks {
+                text += &format!("{:.6} {id} {:.4} {:.4}\n", t.secs(), p[0], p[1]);
+            }
+            std::fs::write(tmp.join("people_tracks.txt"), text)
+                .context("writing people_tracks.txt")?;
+        }
         if let Some(rels) = &rels {
             let by_span: Vec<Value> = relations::by_span(rels)
                 .into_iter()
@@ -189,4 +212,58 @@ pub fn replay(
         std::fs::write(tmp.join("report.html"), html).context("writing report.html")?;
         Ok(summary)
     })
+}
+
+/// The leg_tracker benchmark's match gate, m.
+pub const MOT_GATE: f64 = 0.75;
+
+/// CLEAR-MOT over every scan and over the annotated ones, and every track at every scan
+/// (logged stamp, id, position in the odometry frame).
+type PeopleReplay = (
+    [crate::ground_truth::mot::Mot; 2],
+    Vec<(Time, u32, [f64; 2])>,
+);
+
+/// Detects and tracks people in every scan of `log` (the shipped leg classifier and the
+/// default tracker, in the odometry frame), and scores the tracks against the log's
+/// annotations frame by frame in each scan's laser frame (CLEAR-MOT within [`MOT_GATE`]).
+/// Returns the score over every scan (the benchmark's protocol: a track where nobody is
+/// annotated is a false positive) and over the annotated scans alone, and every confirmed
+/// track at every scan (logged stamp, id, position).
+fn track_people(log: &carmen::Log) -> Result<PeopleReplay> {
+    use futago_robot::perception::legs::{LegConfig, detect};
+    use futago_robot::tracking::people::{PeopleTracker, TrackerConfig};
+    let model = crate::legs_train::default_model()?;
+    let legs = LegConfig::default();
+    let mut tracker = PeopleTracker::new(TrackerConfig::default());
+    let mut frames = vec![crate::ground_truth::mot::Frame::default(); log.scans.len()];
+    for m in &log.people {
+        frames[m.scan].truth.push((m.id, m.position));
+    }
+    let mut tracks = Vec::new();
+    for (s, frame) in log.scans.iter().zip(frames.iter_mut()) {
+        let laser = s.odometry.compose(&s.mount);
+        let seen: Vec<[f64; 2]> = detect(&s.scan, &legs, &model)
+            .iter()
+            .map(|l| laser.transform_point(l.position))
+            .collect();
+        tracker.update(s.scan.stamp, &seen);
+        let back = laser.inverse();
+        for p in tracker.people() {
+            frame.tracks.push((p.id, back.transform_point(p.position)));
+            tracks.push((s.logged, p.id, p.position));
+        }
+    }
+    let annotated: Vec<crate::ground_truth::mot::Frame> = frames
+        .iter()
+        .filter(|f| !f.truth.is_empty())
+        .cloned()
+        .collect();
+    Ok((
+        [
+            crate::ground_truth::mot::clear_mot(&frames, MOT_GATE),
+            crate::ground_truth::mot::clear_mot(&annotated, MOT_GATE),
+        ],
+        tracks,
+    ))
 }

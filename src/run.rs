@@ -117,11 +117,22 @@ fn simulate(
     opts: &RunOptions,
     out: Option<&Path>,
 ) -> Result<(Outcome, Vec<Box<dyn Node>>)> {
+    simulate_with(s, opts, out, Vec::new())
+}
+
+/// [`simulate`] with `extra` nodes after the stack's (a collector of training data, say).
+pub fn simulate_with(
+    s: &Scenario,
+    opts: &RunOptions,
+    out: Option<&Path>,
+    extra: Vec<Box<dyn Node>>,
+) -> Result<(Outcome, Vec<Box<dyn Node>>)> {
     let seed = opts.seed.unwrap_or(s.spec.seed);
     let duration = opts.duration.unwrap_or(s.spec.duration);
     let spec = &s.spec;
     let mut nodes: Vec<Scheduled> = stack::build(s, seed, out)?
         .into_iter()
+        .chain(extra)
         .map(|node| Scheduled { node, seconds: 0.0 })
         .collect();
     let streams: Vec<stack::Streams> = nodes.iter().map(|n| n.node.streams()).collect();

@@ -1864,6 +1864,55 @@ fn replay_of_the_hospital_beats_cartographer_locally_and_globally() {
     assert!(all < 5.2242, "{all} m");
 }
 
+/// The annotated people log (leg_tracker's benchmark): people are tracked from its `/scan`,
+/// the laser placed by `/tf` and moved by `/odom`, and scored by CLEAR-MOT over every scan
+/// against its 153 `leg_tracker/Person` annotations, in the laser's frame.
+#[test]
+fn replay_of_an_annotated_people_log_scores_its_tracks() {
+    let bag = root().join("../shared/datasets/people/general_tracking_moving_1.bag");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("replay");
+    ok(&futago(&[
+        "replay",
+        bag.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    let s = summary(&out);
+    let p = &s["people"];
+    assert_eq!(p["annotations"], 153);
+    let all = &p["all_frames"];
+    assert_eq!(all["frames"], 873);
+    assert_eq!(all["objects"], 153);
+    let n = |k: &str| all[k].as_u64().unwrap();
+    // Every annotation is matched or missed, and MOTA counts what went wrong.
+    assert_eq!(n("matches") + n("misses"), 153);
+    let mota = 1.0 - (n("misses") + n("false_positives") + n("id_switches")) as f64 / 153.0;
+    assert!((all["mota"].as_f64().unwrap() - mota).abs() < 1e-12);
+    // The scored frames are the annotated ones in the second count.
+    assert!(p["annotated_frames"]["frames"].as_u64().unwrap() < 873);
+    let tracks = std::fs::read_to_string(out.join("people_tracks.txt")).unwrap();
+    assert!(tracks.lines().count() > 1);
+}
+
+/// The shipped leg classifier is what `futago train-legs` makes of its scenario, byte for
+/// byte: training is deterministic, and a change to the simulator, the features or the
+/// booster that moves the model fails here until the model is retrained.
+#[test]
+fn train_legs_reproduces_the_shipped_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("legs.json");
+    ok(&futago(&[
+        "train-legs",
+        root().join("scenarios/train-legs.toml").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    let made = std::fs::read_to_string(&out).unwrap();
+    let shipped = std::fs::read_to_string(root().join("models/legs.json")).unwrap();
+    assert!(made == shipped, "models/legs.json is stale: retrain it");
+}
+
 #[test]
 fn replay_refuses_bad_logs_with_their_line() {
     let tmp = tempfile::tempdir().unwrap();

@@ -102,6 +102,18 @@ pub struct Log {
     pub odometry: Vec<(Time, Pose2)>,
     /// Records not used, by reason (`unknown type PARAM`, `time went backwards`, …) and count.
     pub skipped: std::collections::BTreeMap<String, usize>,
+    /// Annotated people (a bag's `leg_tracker/Person` messages), in file order.
+    pub people: Vec<PersonMark>,
+}
+
+/// One annotated person: after which scan it came (an index into [`Log::scans`]), its id
+/// and its position in that scan's laser frame, m (the leg_tracker benchmark's convention:
+/// each annotation follows the scan it marks).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PersonMark {
+    pub scan: usize,
+    pub id: u32,
+    pub position: [f64; 2],
 }
 
 /// An error reading a log: the 1-based line and what was wrong (the same as a TUM file's).

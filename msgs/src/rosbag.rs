@@ -21,7 +21,7 @@
 //! otherwise is an error. Without a chain the laser is taken at the base, and the scans are
 //! counted under `skipped` as `no tf from BASE to FRAME`.
 
-use crate::carmen::{Log, LogScan};
+use crate::carmen::{Log, LogScan, PersonMark};
 use crate::{LaserScan, Pose2, Time};
 use std::collections::HashMap;
 use std::io::Read;
@@ -118,6 +118,8 @@ struct Raw {
     types: HashMap<u32, String>,
     /// Each scan with its header's `seq`.
     scans: Vec<(u32, LaserScan)>,
+    /// Annotated people: how many scans came before each in the file, its id and position.
+    people: Vec<(usize, u32, [f64; 2])>,
     /// Each odometry message's header `seq`, stamp and pose.
     odometry: Vec<(u32, Time, Pose2)>,
     /// The odometry's child frame: the robot's base.
@@ -183,8 +185,8 @@ fn tf_message(data: &[u8]) -> Result<Vec<(String, String, Transform)>, String> {
     for _ in 0..n {
         c.u32("header seq")?;
         c.time("header stamp")?;
-        let parent = c.string("header frame_id")?;
-        let child = c.string("child_frame_id")?;
+        let parent = frame_name(c.string("header frame_id")?);
+        let child = frame_name(c.string("child_frame_id")?);
         let mut v = [0.0; 7];
         for x in &mut v {
             *x = c.f64("transform")?;
@@ -210,6 +212,15 @@ fn tf_message(data: &[u8]) -> Result<Vec<(String, String, Transform)>, String> {
     Ok(out)
 }
 
+/// A frame's name as tf2 knows it: without the leading `/` that ROS 1 tf allowed
+/// (`/base_link` and `base_link` are one frame).
+fn frame_name(s: String) -> String {
+    match s.strip_prefix('/') {
+        Some(rest) => rest.to_string(),
+        None => s,
+    }
+}
+
 /// The transform from `base` to `frame` through the tf tree, if they are linked.
 fn chain(tf: &HashMap<String, (String, Transform)>, base: &str, frame: &str) -> Option<Transform> {
     let mut at = frame;
@@ -233,7 +244,7 @@ fn laser_scan(data: &[u8]) -> Result<(u32, LaserScan), String> {
     let mut c = Cursor { data, at: 0 };
     let seq = c.u32("header seq")?;
     let stamp = c.time("header stamp")?;
-    let frame = c.string("header frame_id")?;
+    let frame = frame_name(c.string("header frame_id")?);
     let angle_min = c.f32("angle_min")? as f64;
     let _angle_max = c.f32("angle_max")?;
     let angle_increment = c.f32("angle_increment")? as f64;
@@ -271,12 +282,35 @@ fn laser_scan(data: &[u8]) -> Result<(u32, LaserScan), String> {
     ))
 }
 
+/// A `leg_tracker/Person`: a `geometry_msgs/Pose` and an id (no header).
+fn person(data: &[u8]) -> Result<(u32, [f64; 2]), String> {
+    let mut c = Cursor { data, at: 0 };
+    let (x, y) = (c.f64("position x")?, c.f64("position y")?);
+    for what in [
+        "position z",
+        "orientation x",
+        "orientation y",
+        "orientation z",
+        "orientation w",
+    ] {
+        c.f64(what)?;
+    }
+    let id = c.u32("id")?;
+    if crate::bounded_coordinate(x).is_none() || crate::bounded_coordinate(y).is_none() {
+        return Err(format!(
+            "position ({x}, {y}) is beyond ±{} m",
+            crate::MAX_COORDINATE
+        ));
+    }
+    Ok((id, [x, y]))
+}
+
 fn odometry(data: &[u8]) -> Result<(u32, Time, Pose2, String), String> {
     let mut c = Cursor { data, at: 0 };
     let seq = c.u32("header seq")?;
     let stamp = c.time("header stamp")?;
     c.string("header frame_id")?;
-    let child = c.string("child_frame_id")?;
+    let child = frame_name(c.string("child_frame_id")?);
     let (x, y) = (c.f64("position x")?, c.f64("position y")?);
     if crate::bounded_coordinate(x).is_none() || crate::bounded_coordinate(y).is_none() {
         return Err(format!(
@@ -371,6 +405,11 @@ fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<()
                     Some("sensor_msgs/LaserScan") => raw
                         .scans
                         .push(laser_scan(body).map_err(|m| err(format!("LaserScan: {m}")))?),
+                    Some("leg_tracker/Person") => {
+                        let (id, p) =
+                            person(body).map_err(|m| err(format!("leg_tracker/Person: {m}")))?;
+                        raw.people.push((raw.scans.len(), id, p));
+                    }
                     Some("nav_msgs/Odometry") => {
                         let (seq, t, pose, child) =
                             odometry(body).map_err(|m| err(format!("Odometry: {m}")))?;
@@ -438,14 +477,20 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
                 .map(|s| (s.0, s.1.stamp))
                 .collect::<Vec<_>>(),
         );
-        let mut s: Vec<(Time, u32, LaserScan)> = std::mem::take(&mut raw.scans)
+        // With each scan's place in the file, for the annotations that follow it.
+        let mut s: Vec<(Time, u32, usize, LaserScan)> = std::mem::take(&mut raw.scans)
             .into_iter()
             .zip(times)
-            .map(|((seq, scan), t)| (t, seq, scan))
+            .enumerate()
+            .map(|(k, ((seq, scan), t))| (t, seq, k, scan))
             .collect();
-        s.sort_by_key(|s| (s.0, s.1));
+        s.sort_by_key(|s| (s.0, s.1, s.2));
         s
     };
+    let mut sorted_of_file = vec![0usize; scans.len()];
+    for (i, s) in scans.iter().enumerate() {
+        sorted_of_file[s.2] = i;
+    }
     if !scans.is_empty() && odometry.is_empty() {
         return Err(BagError {
             offset: 0,
@@ -456,10 +501,24 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
         skipped: raw.skipped,
         ..Default::default()
     };
+    for &(before, id, position) in &raw.people {
+        match before.checked_sub(1) {
+            Some(k) => log.people.push(PersonMark {
+                scan: sorted_of_file[k],
+                id,
+                position,
+            }),
+            None => {
+                *log.skipped
+                    .entry("leg_tracker/Person before any scan".into())
+                    .or_insert(0) += 1
+            }
+        }
+    }
     let base = raw.base.clone().unwrap_or_else(|| "base_link".into());
     // Each frame's mount, found once.
     let mut mounts: HashMap<String, Option<(Pose2, bool)>> = HashMap::new();
-    for (taken, _, mut scan) in scans {
+    for (taken, _, _, mut scan) in scans {
         let logged = scan.stamp;
         scan.stamp = taken;
         let pose =
@@ -744,6 +803,47 @@ pub fn example_mounted(compression: &str, laser_q: [f64; 4]) -> Vec<u8> {
 mod tests {
     use super::*;
 
+    /// A 3-beam `sensor_msgs/LaserScan` in `frame`, numbered `seq`, stamped `stamp` s.
+    fn scan_message(frame: &str, seq: u32, stamp: u32) -> Vec<u8> {
+        let mut m = header_seq(seq, stamp, frame);
+        for v in [-1.0f32, 1.0, 1.0, 0.0, 0.0, 0.02, 10.0] {
+            m.extend(v.to_bits().to_le_bytes());
+        }
+        m.extend(3u32.to_le_bytes());
+        for r in [1.0f32, 2.0, 3.0] {
+            m.extend(r.to_bits().to_le_bytes());
+        }
+        m.extend(0u32.to_le_bytes());
+        m
+    }
+
+    /// A `nav_msgs/Odometry` of `child` at x = `x` m, numbered `seq`, stamped `stamp` s.
+    fn odometry_message(child: &str, seq: u32, stamp: u32, x: f64) -> Vec<u8> {
+        let mut m = header_seq(seq, stamp, "odom");
+        m.extend(ros_string(child));
+        for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
+            m.extend(v.to_le_bytes());
+        }
+        m.extend(vec![0u8; 36 * 8 + 6 * 8 + 36 * 8]);
+        m
+    }
+
+    /// A connection record of message type `ty`, outside any chunk.
+    fn bare_connection(id: u32, ty: &str) -> Vec<u8> {
+        record(
+            &[field("op", &[0x07]), field("conn", &id.to_le_bytes())],
+            &field("type", ty.as_bytes()),
+        )
+    }
+
+    /// A message record on connection `id`, outside any chunk.
+    fn bare_message(id: u32, body: Vec<u8>) -> Vec<u8> {
+        record(
+            &[field("op", &[0x02]), field("conn", &id.to_le_bytes())],
+            &body,
+        )
+    }
+
     #[test]
     fn scans_and_odometry_come_out_of_a_bz2_chunk() {
         let log = read(&example(true)).unwrap();
@@ -829,54 +929,21 @@ mod tests {
 
     #[test]
     fn a_scan_logged_late_takes_the_odometry_of_its_place_in_the_sequence() {
-        let scan = |seq: u32, stamp: u32| {
-            let mut m = header_seq(seq, stamp, "laser");
-            for v in [-1.0f32, 1.0, 1.0, 0.0, 0.0, 0.02, 10.0] {
-                m.extend(v.to_bits().to_le_bytes());
-            }
-            m.extend(3u32.to_le_bytes());
-            for r in [1.0f32, 2.0, 3.0] {
-                m.extend(r.to_bits().to_le_bytes());
-            }
-            m.extend(0u32.to_le_bytes());
-            m
-        };
-        let odo = |seq: u32, stamp: u32, x: f64| {
-            let mut m = header_seq(seq, stamp, "odom");
-            m.extend(ros_string("base_link"));
-            for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
-                m.extend(v.to_le_bytes());
-            }
-            m.extend(vec![0u8; 36 * 8 + 6 * 8 + 36 * 8]);
-            m
-        };
-        let conn = |id: u32, ty: &str| {
-            record(
-                &[field("op", &[0x07]), field("conn", &id.to_le_bytes())],
-                &field("type", ty.as_bytes()),
-            )
-        };
-        let msg = |id: u32, body: Vec<u8>| {
-            record(
-                &[field("op", &[0x02]), field("conn", &id.to_le_bytes())],
-                &body,
-            )
-        };
         let mut bag = b"#ROSBAG V2.0\n".to_vec();
         for r in [
             record(&[field("op", &[0x03])], &[]),
-            conn(0, "sensor_msgs/LaserScan"),
-            conn(1, "nav_msgs/Odometry"),
-            msg(1, odo(0, 1, 0.0)),
-            msg(1, odo(1, 2, 1.0)),
-            msg(0, scan(0, 1)),
-            msg(1, odo(3, 4, 3.0)),
-            msg(0, scan(2, 3)),
-            msg(1, odo(4, 5, 4.0)),
-            msg(0, scan(3, 4)),
+            bare_connection(0, "sensor_msgs/LaserScan"),
+            bare_connection(1, "nav_msgs/Odometry"),
+            bare_message(1, odometry_message("base_link", 0, 1, 0.0)),
+            bare_message(1, odometry_message("base_link", 1, 2, 1.0)),
+            bare_message(0, scan_message("laser", 0, 1)),
+            bare_message(1, odometry_message("base_link", 3, 4, 3.0)),
+            bare_message(0, scan_message("laser", 2, 3)),
+            bare_message(1, odometry_message("base_link", 4, 5, 4.0)),
+            bare_message(0, scan_message("laser", 3, 4)),
             // Scan 1 and odometry 2 arrive last, stamped after everything else.
-            msg(0, scan(1, 5)),
-            msg(1, odo(2, 6, 2.5)),
+            bare_message(0, scan_message("laser", 1, 5)),
+            bare_message(1, odometry_message("base_link", 2, 6, 2.5)),
         ] {
             bag.extend(r);
         }
@@ -897,6 +964,55 @@ mod tests {
                 (4.0, 4.0, 3.0)
             ]
         );
+    }
+
+    #[test]
+    fn annotated_people_follow_their_scan_and_slashed_frames_are_one() {
+        let person = |id: u32, x: f64, y: f64| {
+            let mut m = Vec::new();
+            for v in [x, y, 0.0, 0.0, 0.0, 0.0, 1.0] {
+                m.extend(v.to_le_bytes());
+            }
+            m.extend(id.to_le_bytes());
+            m
+        };
+        let mut bag = b"#ROSBAG V2.0\n".to_vec();
+        for r in [
+            record(&[field("op", &[0x03])], &[]),
+            bare_connection(0, "sensor_msgs/LaserScan"),
+            bare_connection(1, "nav_msgs/Odometry"),
+            bare_connection(2, "leg_tracker/Person"),
+            bare_connection(3, "tf2_msgs/TFMessage"),
+            bare_message(
+                3,
+                tf_bytes("base_link", "laser", [0.3, 0.0, 0.2], [0.0, 0.0, 0.0, 1.0]),
+            ),
+            bare_message(2, person(9, 0.0, 0.0)),
+            bare_message(1, odometry_message("/base_link", 0, 1, 0.0)),
+            bare_message(0, scan_message("/laser", 0, 1)),
+            bare_message(2, person(1, 2.0, -0.5)),
+            bare_message(2, person(2, 3.0, 0.5)),
+            bare_message(0, scan_message("/laser", 1, 2)),
+            bare_message(1, odometry_message("/base_link", 1, 3, 0.0)),
+            bare_message(0, scan_message("/laser", 2, 3)),
+            bare_message(2, person(1, 1.5, -0.4)),
+        ] {
+            bag.extend(r);
+        }
+        let log = read(&bag).unwrap();
+        let marks: Vec<(usize, u32, [f64; 2])> = log
+            .people
+            .iter()
+            .map(|m| (m.scan, m.id, m.position))
+            .collect();
+        assert_eq!(
+            marks,
+            [(0, 1, [2.0, -0.5]), (0, 2, [3.0, 0.5]), (2, 1, [1.5, -0.4])]
+        );
+        assert_eq!(log.skipped["leg_tracker/Person before any scan"], 1);
+        // `/laser` and `/base_link` are tf's `laser` and `base_link`: the mount is found.
+        assert_eq!(log.scans[0].mount, Pose2::new(0.3, 0.0, 0.0));
+        assert_eq!(log.scans[0].scan.frame, "laser");
     }
 
     #[test]

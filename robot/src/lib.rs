@@ -6,7 +6,8 @@
 //!
 //! - [`config`]: range checks shared by every module's options;
 //! - [`geometry`]: distance transforms and plane fits;
-//! - [`perception`]: image features, floor levelling;
+//! - [`perception`]: image features, floor levelling, legs in laser scans;
+//! - [`tracking`]: optimal assignment and the people tracker;
 //! - [`localization`]: odometry, Monte Carlo localisation;
 //! - [`mapping`]: occupancy grids, scan matching, graph SLAM, the RGB-D 3D map;
 //! - [`control`]: path following and scripted drive plans;
@@ -19,3 +20,4 @@ pub mod localization;
 pub mod mapping;
 pub mod navigation;
 pub mod perception;
+pub mod tracking;

@@ -6,10 +6,11 @@
 use std::path::{Path, PathBuf};
 
 /// The groups in dependency order, as `lib.rs` lists them.
-const LAYERS: [&str; 7] = [
+const LAYERS: [&str; 8] = [
     "config",
     "geometry",
     "perception",
+    "tracking",
     "localization",
     "mapping",
     "control",

@@ -405,6 +405,21 @@ pub struct PersonTruth {
     pub pose: Pose2,
     /// Velocity, m/s, world frame.
     pub velocity: [f64; 2],
+    /// Each leg's axis (left, right): the hip joint's position and the axis's horizontal
+    /// run per metre down from it, world frame.
+    pub legs: [([f64; 2], [f64; 2]); 2],
+    /// The hips' height, m.
+    pub hip_height: f64,
+}
+
+impl PersonTruth {
+    /// Where each leg's axis crosses the height `z` (m, below the hips): what a laser at that
+    /// height sees.
+    pub fn legs_at(&self, z: f64) -> [[f64; 2]; 2] {
+        let down = (self.hip_height - z).max(0.0);
+        self.legs
+            .map(|(hip, run)| [hip[0] + down * run[0], hip[1] + down * run[1]])
+    }
 }
 
 /// A flow's arrivals: the next one's time and its random stream, and one who has arrived
@@ -542,14 +557,29 @@ impl Crowd {
 
     /// Every person in the world now, by slot.
     pub fn truth(&self) -> Vec<PersonTruth> {
-        self.walkers
-            .iter()
-            .filter(|w| w.active)
-            .map(|w| PersonTruth {
-                id: w.id,
-                name: w.name.clone(),
-                pose: Pose2::new(w.p[0], w.p[1], w.heading),
-                velocity: w.v,
+        let c = &self.config;
+        (0..self.walkers.len())
+            .filter_map(|i| {
+                let w = &self.walkers[i];
+                let (body, feet) = self.body(i)?;
+                let leg = |side: f64, forward: f64| {
+                    let hip = body.transform_point([0.0, side * c.hip_width / 2.0]);
+                    // A leg of length hip_height whose foot is `forward` of the hip leans by
+                    // tan α = forward / √(L² − forward²) along the heading.
+                    let l = c.hip_height;
+                    let f = forward.clamp(-0.99 * l, 0.99 * l);
+                    let tan = f / (l * l - f * f).sqrt();
+                    let (s, co) = body.theta.sin_cos();
+                    (hip, [tan * co, tan * s])
+                };
+                Some(PersonTruth {
+                    id: w.id,
+                    name: w.name.clone(),
+                    pose: body,
+                    velocity: w.v,
+                    legs: [leg(1.0, feet[0]), leg(-1.0, feet[1])],
+                    hip_height: c.hip_height,
+                })
             })
             .collect()
     }

@@ -6,6 +6,7 @@
 
 pub mod cloud;
 pub mod map;
+pub mod mot;
 pub mod planes;
 pub mod trajectory;
 

@@ -9,12 +9,28 @@
 //! - `people.time_within_0.45m_s`, `people.time_within_1.2m_s`: time with a person's body
 //!   closer than Hall's intimate (0.45 m) and personal (1.2 m) distances to the robot's.
 //!
+//! Tracking, when the scenario has a laser: the robot stack's leg detector (the shipped
+//! model, `models/legs.json`) and people tracker run on the first laser's scans. With a map
+//! and a pose in it (localisation's, else SLAM's), they track in the map's frame and leave out
+//! candidates off its free space (an occupied cell within 0.15 m: leg_tracker's free-space
+//! test); without, in the odometry frame. They are scored by CLEAR-MOT as the leg_tracker benchmark scores a real
+//! log: frame by frame (each scan), in the laser's frame, within 0.75 m. The true people of a
+//! frame are those the scan sees: as many beams as a segment needs (3) end within 0.15 m of
+//! their legs where they cross the laser's plane (`people.mota`, `people.motp_m`, `people.id_switches`,
+//! `people.false_positives`, `people.misses`).
+//!
 //! Only scenarios with people (`[[person]]` or `[[flow]]`) run this node.
 
 use super::{Bus, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
+use crate::ground_truth::mot::{Frame, clear_mot};
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
+use futago_msgs::grid::OccupancyGrid;
+use futago_msgs::{LaserScan, Pose2};
+use futago_robot::geometry::grid::OCCUPIED;
+use futago_robot::perception::legs::{AdaBoost, LegConfig, detect};
+use futago_robot::tracking::people::{PeopleTracker, TrackerConfig};
 use serde_json::json;
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -35,7 +51,21 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
         "people.time_within_1.2m_s",
     ]
     .map(String::from)
-    .to_vec()
+    .into_iter()
+    .chain(
+        (!s.lidar.is_empty())
+            .then_some([
+                "people.mota",
+                "people.motp_m",
+                "people.id_switches",
+                "people.false_positives",
+                "people.misses",
+            ])
+            .into_iter()
+            .flatten()
+            .map(String::from),
+    )
+    .collect()
 }
 
 /// The people's node of a scenario: `None` without people.
@@ -50,7 +80,27 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
         )),
         None => None,
     };
+    let tracking = match s.lidars.first() {
+        Some((l, _)) => Some(Tracking {
+            source: if s.spec.localization.is_some() {
+                Some("localization")
+            } else if s.slam.is_some() {
+                Some("slam")
+            } else {
+                None
+            },
+            laser: l.name.clone(),
+            mount: l.planar_mount(),
+            height: l.xyz[2],
+            model: crate::legs_train::default_model()?,
+            legs: LegConfig::default(),
+            tracker: PeopleTracker::new(TrackerConfig::default()),
+            frames: Vec::new(),
+        }),
+        None => None,
+    };
     Ok(Some(PeopleNode {
+        tracking,
         file,
         scenario: s.spec.name.clone(),
         robot_radius: s.spec.robot.radius,
@@ -64,8 +114,23 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
     }))
 }
 
-/// Writes `people.txt` and scores the robot's safety among the people.
+/// The stack's people tracking on one laser, and its CLEAR-MOT frames.
+struct Tracking {
+    /// The module whose pose and map the tracker uses (`pose/NAME`, `map/NAME`), if any.
+    source: Option<&'static str>,
+    laser: String,
+    mount: Pose2,
+    height: f64,
+    model: AdaBoost,
+    legs: LegConfig,
+    tracker: PeopleTracker,
+    frames: Vec<Frame>,
+}
+
+/// Writes `people.txt`, tracks people from the laser and scores the tracks and the robot's
+/// safety among the people.
 pub struct PeopleNode {
+    tracking: Option<Tracking>,
     file: Option<BufWriter<File>>,
     scenario: String,
     robot_radius: f64,
@@ -84,16 +149,117 @@ pub struct PeopleNode {
 /// Hall's intimate and personal distances, m.
 const ZONES: [f64; 2] = [0.45, 1.2];
 
+/// A candidate counts only where no occupied cell of the map lies this close, m (a shin's
+/// radius and a cell's diagonal at 5 cm).
+const FREE_RADIUS: f64 = 0.15;
+
+/// Whether no occupied cell of `m` lies within `r` of `q`; a point off the map is not free.
+fn in_free_space(m: &OccupancyGrid, q: [f64; 2], r: f64) -> bool {
+    let k = (r / m.resolution).ceil() as i64;
+    let Some((ci, cj)) = m.cell_of(q[0], q[1]) else {
+        return false;
+    };
+    for dj in -k..=k {
+        for di in -k..=k {
+            let (i, j) = (ci as i64 + di, cj as i64 + dj);
+            if i < 0 || j < 0 || i >= m.width as i64 || j >= m.height as i64 {
+                continue;
+            }
+            let c = m.cell_center(i as usize, j as usize);
+            if (c[0] - q[0]).hypot(c[1] - q[1]) <= r + 0.5 * m.resolution
+                && m.get(i as usize, j as usize) >= OCCUPIED
+            {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// A person is in a scan when a beam ends this close to one of their legs' axes, m (a shin's
+/// radius, 0.05 m, and the laser's noise).
+const SEEN_WITHIN: f64 = 0.15;
+
 impl Node for PeopleNode {
     fn name(&self) -> &'static str {
         "people"
     }
 
     fn streams(&self) -> Streams {
+        let mut consumes = vec!["truth".to_string()];
+        if let Some(t) = &self.tracking {
+            consumes.push(format!("scan/{}", t.laser));
+            if let Some(src) = t.source {
+                consumes.push(format!("pose/{src}"));
+                consumes.push(format!("map/{src}"));
+            }
+        }
         Streams {
-            consumes: vec!["truth".into()],
+            consumes,
             ..Streams::default()
         }
+    }
+
+    fn on_scan(&mut self, _laser: &str, scan: &LaserScan, bus: &mut Bus) -> Result<()> {
+        let Some(t) = &mut self.tracking else {
+            return Ok(());
+        };
+        // The stack's view: the laser placed by the map pose, else by odometry.
+        let robot = t
+            .source
+            .and_then(|src| bus.pose(src))
+            .unwrap_or(bus.odometry);
+        let laser = robot.compose(&t.mount);
+        let seen: Vec<[f64; 2]> = detect(scan, &t.legs, &t.model)
+            .iter()
+            .map(|l| laser.transform_point(l.position))
+            .collect();
+        let map = t
+            .source
+            .and_then(|src| bus.map(src))
+            .map(|(_, m)| m.clone());
+        let free = |q: [f64; 2]| {
+            map.as_ref()
+                .is_none_or(|m| in_free_space(m, q, FREE_RADIUS))
+        };
+        t.tracker.update_where(scan.stamp, &seen, &free);
+        let back = laser.inverse();
+        let tracks = t
+            .tracker
+            .people()
+            .iter()
+            .map(|p| (p.id, back.transform_point(p.position)))
+            .collect();
+        // The truth: people the scan sees, in the true laser frame.
+        let true_laser = bus.truth.compose(&t.mount);
+        let to_laser = true_laser.inverse();
+        let ends: Vec<[f64; 2]> = (0..scan.ranges.len())
+            .filter_map(|i| {
+                let r = scan.ranges[i] as f64;
+                r.is_finite().then(|| {
+                    let a = scan.angle(i);
+                    [r * a.cos(), r * a.sin()]
+                })
+            })
+            .collect();
+        let truth = bus
+            .people
+            .iter()
+            .filter(|p| {
+                let legs = p.legs_at(t.height).map(|l| to_laser.transform_point(l));
+                let on_legs = ends
+                    .iter()
+                    .filter(|e| {
+                        legs.iter()
+                            .any(|q| (e[0] - q[0]).hypot(e[1] - q[1]) < SEEN_WITHIN)
+                    })
+                    .count();
+                on_legs >= t.legs.min_points
+            })
+            .map(|p| (p.id, to_laser.transform_point([p.pose.x, p.pose.y])))
+            .collect();
+        t.frames.push(Frame { truth, tracks });
+        Ok(())
     }
 
     fn start(&mut self, _bus: &mut Bus) -> Result<()> {
@@ -150,17 +316,21 @@ impl Node for PeopleNode {
                 .with_context(|| format!("writing {PEOPLE_FILE}"))?;
             files.push(PEOPLE_FILE.to_string());
         }
+        let mut entry = json!({
+            "people": self.seen.len(),
+            "collisions": self.collisions,
+            "min_clearance_m": self.clearance(),
+            "time_within_0.45m_s": self.within[0],
+            "time_within_1.2m_s": self.within[1],
+        });
+        if let Some(t) = &self.tracking {
+            let m = clear_mot(&t.frames, crate::replay::MOT_GATE);
+            let mut tracking = m.summary();
+            tracking["laser"] = json!(t.laser);
+            entry["tracking"] = tracking;
+        }
         Ok(Report {
-            summary: vec![(
-                "people".into(),
-                json!({
-                    "people": self.seen.len(),
-                    "collisions": self.collisions,
-                    "min_clearance_m": self.clearance(),
-                    "time_within_0.45m_s": self.within[0],
-                    "time_within_1.2m_s": self.within[1],
-                }),
-            )],
+            summary: vec![("people".into(), entry)],
             files,
             ..Report::default()
         })
@@ -168,6 +338,18 @@ impl Node for PeopleNode {
 
     fn score(&self, _truth: &Truth) -> Result<Metrics> {
         let mut m = Metrics::default();
+        if let Some(t) = &self.tracking {
+            let mot = clear_mot(&t.frames, crate::replay::MOT_GATE);
+            // No one seen at all: nothing missed, every track a false positive.
+            m.insert(
+                "people.mota",
+                mot.mota().unwrap_or(1.0 - mot.false_positives as f64),
+            );
+            m.insert("people.motp_m", mot.motp().unwrap_or(0.0));
+            m.insert("people.id_switches", mot.id_switches as f64);
+            m.insert("people.false_positives", mot.false_positives as f64);
+            m.insert("people.misses", mot.misses as f64);
+        }
         m.insert("people.collisions", self.collisions as f64);
         m.insert("people.min_clearance_m", self.clearance());
         m.insert("people.time_within_0.45m_s", self.within[0]);

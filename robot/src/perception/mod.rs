@@ -1,5 +1,7 @@
-//! What the camera sees: image features (FAST corners, BRIEF descriptors; [`features`]) and
-//! the floor plane that fixes the camera's height, pitch and roll ([`floor`]).
+//! What the sensors see: image features (FAST corners, BRIEF descriptors; [`features`]), the
+//! floor plane that fixes the camera's height, pitch and roll ([`floor`]), and people's legs
+//! in a laser scan ([`legs`]).
 
 pub mod features;
 pub mod floor;
+pub mod legs;
