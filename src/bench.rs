@@ -370,3 +370,126 @@ pub fn bench_rgbd(s: &Scenario, duration: Option<f64>) -> Result<Value> {
         "methods": methods,
     }))
 }
+
+/// People detection and tracking per scan, and the simulator's speed among people. A robot
+/// stands at `start` with a URG-04LX (682 beams) at 0.25 m while `people` walk back and forth
+/// across its view, 0.6 m apart, from 1.5 m out; `scans` of its scans are collected, then the
+/// leg detector (the shipped model) and the tracker run over them, timed alone. The
+/// simulation's real-time factor is measured with the same robot, its laser and
+/// `crowd` people walking the same way.
+pub fn bench_people(
+    world: &World,
+    start: Pose2,
+    people: usize,
+    scans: usize,
+    crowd: usize,
+) -> Result<Value> {
+    use futago_robot::perception::legs::{LegConfig, detect};
+    use futago_robot::tracking::people::{PeopleTracker, TrackerConfig};
+    use futago_sim::lidar::LidarConfig;
+    use futago_sim::people::PersonConfig;
+    let mut lidar = LidarConfig::preset(LidarPreset::Urg04lx);
+    lidar.xyz = [0.08, 0.0, 0.25];
+    let spec = lidar
+        .resolve(Path::new("bench"), "lidar")
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let walkers = |n: usize| Movers {
+        people: (0..n)
+            .map(|k| {
+                let x = 1.5 + 0.6 * (k % 10) as f64;
+                let lane = (k / 10) as f64 * 0.3;
+                PersonConfig {
+                    name: format!("p{k}"),
+                    route: vec![
+                        start.transform_point([x + lane, -3.0]),
+                        start.transform_point([x + lane, 3.0]),
+                    ],
+                    mode: futago_sim::agent::PathMode::BackAndForth,
+                    speed: None,
+                    start_time: 0.0,
+                    heading_deg: 0.0,
+                    yields: true,
+                    shirt: [0.3, 0.3, 0.5],
+                    trousers: [0.1, 0.1, 0.1],
+                }
+            })
+            .collect(),
+        ..Movers::default()
+    };
+    let lidars = [(lidar.clone(), spec)];
+    let mut sim = Simulation::new(
+        world,
+        &PhysicsConfig::default(),
+        &CreateConfig::default(),
+        &lidars,
+        &walkers(people),
+        start,
+        1,
+    );
+    let mut taken = Vec::with_capacity(scans);
+    let mut in_view = 0usize;
+    while taken.len() < scans {
+        for (_, scan) in sim.step(None).scans {
+            if sim.time().secs() < 2.0 {
+                continue;
+            }
+            in_view += sim
+                .people()
+                .iter()
+                .filter(|p| {
+                    let q = start.inverse().transform_point([p.pose.x, p.pose.y]);
+                    q[0] > 0.0 && q[0].hypot(q[1]) < lidars[0].1.range_max
+                })
+                .count();
+            taken.push(scan);
+        }
+    }
+    let model = crate::legs_train::default_model()?;
+    let legs = LegConfig::default();
+    let mount = lidar.planar_mount();
+    let laser = start.compose(&mount);
+    // Detection and tracking over the scans, repeated until a quarter second has passed.
+    let (mut runs, mut found) = (0usize, 0usize);
+    let t = Instant::now();
+    while runs == 0 || t.elapsed().as_secs_f64() < 0.25 {
+        let mut tracker = PeopleTracker::new(TrackerConfig::default());
+        found = 0;
+        for s in &taken {
+            let seen: Vec<[f64; 2]> = detect(s, &legs, &model)
+                .iter()
+                .map(|l| laser.transform_point(l.position))
+                .collect();
+            found += seen.len();
+            tracker.update(s.stamp, &seen);
+        }
+        runs += 1;
+    }
+    let per_scan = t.elapsed().as_secs_f64() / (runs * taken.len()) as f64;
+    // The simulation among a crowd.
+    let mut sim = Simulation::new(
+        world,
+        &PhysicsConfig::default(),
+        &CreateConfig::default(),
+        &lidars,
+        &walkers(crowd),
+        start,
+        1,
+    );
+    let seconds = 20.0;
+    let t = Instant::now();
+    while sim.time().secs() < seconds {
+        sim.step(None);
+    }
+    let rtf = seconds / t.elapsed().as_secs_f64();
+    Ok(json!({
+        "world": world.name,
+        "laser": {"preset": lidar.preset.name(), "beams": taken.first().map(|s| s.ranges.len())},
+        "scans": taken.len(),
+        "people": people,
+        "people_in_view_per_scan": in_view as f64 / taken.len().max(1) as f64,
+        "legs_per_scan": found as f64 / taken.len().max(1) as f64,
+        "ms_per_scan_detect_and_track": per_scan * 1e3,
+        "crowd": crowd,
+        "simulation_real_time_factor": rtf,
+    }))
+}

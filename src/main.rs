@@ -255,6 +255,24 @@ enum BenchCommand {
         #[arg(long, default_value_t = 200)]
         updates: usize,
     },
+    /// People detection and tracking per scan (a URG-04LX before walking people) and the
+    /// simulator's real-time factor among a crowd.
+    People {
+        #[arg(long, default_value = "worlds/hall.toml")]
+        world: PathBuf,
+        /// Spawn the robot stands at.
+        #[arg(long, default_value = "hall")]
+        spawn: String,
+        /// People walking across the laser's view.
+        #[arg(long, default_value_t = 10)]
+        people: usize,
+        /// Scans to collect and process.
+        #[arg(long, default_value_t = 200)]
+        scans: usize,
+        /// People for the simulation's real-time factor.
+        #[arg(long, default_value_t = 20)]
+        crowd: usize,
+    },
     /// Camera images per second (640×480 RGB + depth, depth alone, batches of small depth
     /// images) and laser rays per second, in any world.
     Sensors {
@@ -712,6 +730,26 @@ fn real_main() -> Result<()> {
         } => {
             let s = scenario::Scenario::load(&scenario)?;
             let r = bench::bench_rgbd(&s, duration)?;
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+        Command::Bench {
+            command:
+                BenchCommand::People {
+                    world,
+                    spawn,
+                    people,
+                    scans,
+                    crowd,
+                },
+        } => {
+            let w = world_cmd::load(&world)?;
+            let start = w
+                .spawn(&spawn)
+                .with_context(|| format!("world `{}` has no spawn `{spawn}`", w.name))?;
+            if people > 1000 || crowd > 1000 || !(1..=100_000).contains(&scans) {
+                anyhow::bail!("expected at most 1000 people and crowd, and 1 to 100000 scans");
+            }
+            let r = bench::bench_people(&w, start, people, scans, crowd)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
         Command::Bench {

@@ -1895,6 +1895,25 @@ fn replay_of_an_annotated_people_log_scores_its_tracks() {
     assert!(tracks.lines().count() > 1);
 }
 
+/// `futago bench people` times detection and tracking over scans of walking people and the
+/// simulation among a crowd; it reports what it measured and refuses absurd sizes.
+#[test]
+fn bench_people_measures_and_refuses_absurd_sizes() {
+    let o = futago(&[
+        "bench", "people", "--scans", "20", "--people", "4", "--crowd", "2",
+    ]);
+    ok(&o);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["scans"], 20);
+    assert_eq!(v["laser"]["beams"], 682);
+    assert!(v["ms_per_scan_detect_and_track"].as_f64().unwrap() > 0.0);
+    assert!(v["people_in_view_per_scan"].as_f64().unwrap() > 0.0);
+    assert!(v["simulation_real_time_factor"].as_f64().unwrap() > 0.0);
+    let o = futago(&["bench", "people", "--scans", "0"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("1 to 100000 scans"));
+}
+
 /// The shipped leg classifier is what `futago train-legs` makes of its scenario, byte for
 /// byte: training is deterministic, and a change to the simulator, the features or the
 /// booster that moves the model fails here until the model is retrained.

@@ -153,6 +153,9 @@ pub struct CrowdConfig {
     pub n_prime: f64,
     /// The radius people see the robot as when they avoid it, m (pedsim_ros's r_r).
     pub robot_radius: f64,
+    /// How often the forces are evaluated, Hz (people move on at every physics step under
+    /// the forces last evaluated).
+    pub rate: f64,
     /// The speed is capped at this multiple of the person's own.
     pub max_speed_factor: f64,
     /// A waypoint counts as reached this close, m.
@@ -189,6 +192,7 @@ impl Default for CrowdConfig {
             n: 2.0,
             n_prime: 3.0,
             robot_radius: 0.5,
+            rate: 50.0,
             max_speed_factor: 1.3,
             waypoint_radius: 0.3,
             radius: 0.2,
@@ -322,6 +326,7 @@ impl CrowdConfig {
             ("n", self.n, 0.0, 100.0, ""),
             ("n_prime", self.n_prime, 0.0, 100.0, ""),
             ("robot_radius", self.robot_radius, 0.0, 5.0, "m"),
+            ("rate", self.rate, 1.0, 10_000.0, "Hz"),
             ("max_speed_factor", self.max_speed_factor, 1.0, 10.0, ""),
             ("waypoint_radius", self.waypoint_radius, 0.01, 10.0, "m"),
             ("radius", self.radius, 0.05, 1.0, "m"),
@@ -443,6 +448,8 @@ pub struct Crowd {
     next_id: u32,
     /// Arrivals that found their flow full.
     turned_away: u64,
+    /// Each slot's acceleration from the last evaluation of the forces.
+    accel: Vec<[f64; 2]>,
 }
 
 /// Where an empty slot's bodies wait: far below the floor, out of every sensor's sight.
@@ -524,6 +531,7 @@ impl Crowd {
             config,
             flows: flows.to_vec(),
             next_id: people.len() as u32,
+            accel: vec![[0.0; 2]; walkers.len()],
             walkers,
             arrivals,
             turned_away: 0,
@@ -597,19 +605,31 @@ impl Crowd {
 
     /// Advances the crowd from `t` by `dt` seconds.
     pub fn step(&mut self, t: f64, dt: f64, around: &Surroundings) {
+        self.plan(t, around);
+        self.advance(t, dt, around);
+    }
+
+    /// Evaluates everyone's forces at `t` (from the state now; the order of the slots does
+    /// not matter), held until the next call: the social forces change over tenths of a
+    /// second, so they need not be evaluated at every physics step.
+    pub fn plan(&mut self, t: f64, around: &Surroundings) {
+        let n = self.walkers.len();
+        self.accel = (0..n).map(|i| self.acceleration(i, t, around)).collect();
+    }
+
+    /// Moves everyone on from `t` by `dt` under the forces of the last [`plan`](Self::plan),
+    /// keeping bodies out of walls, each other and the robot; lets arrivals in and moves
+    /// targets on.
+    pub fn advance(&mut self, t: f64, dt: f64, around: &Surroundings) {
         self.arrive(t + dt);
         let c = self.config;
-        let n = self.walkers.len();
-        // Forces from the state at t for everyone, then every move (the order of the slots
-        // does not matter).
-        let accel: Vec<[f64; 2]> = (0..n).map(|i| self.acceleration(i, t, around)).collect();
-        for (w, a) in self.walkers.iter_mut().zip(&accel) {
+        for (w, a) in self.walkers.iter_mut().zip(&self.accel) {
             if !w.active {
                 continue;
             }
             let mut v = [w.v[0] + a[0] * dt, w.v[1] + a[1] * dt];
             let cap = c.max_speed_factor * w.speed;
-            let s = v[0].hypot(v[1]);
+            let s = norm(v[0], v[1]);
             if s > cap {
                 v = [v[0] * cap / s, v[1] * cap / s];
             }
@@ -626,7 +646,7 @@ impl Crowd {
             // swinging feet may still touch it) rather than shove it along.
             if let Some((rp, _, rr)) = around.robot {
                 let (dx, dy) = (p[0] - rp[0], p[1] - rp[1]);
-                let d = dx.hypot(dy);
+                let d = norm(dx, dy);
                 let min = rr + c.radius;
                 if d > 1e-9 && d < min {
                     let (nx, ny) = (dx / d, dy / d);
@@ -640,7 +660,7 @@ impl Crowd {
             // Never through a wall: back out to the radius, and no velocity into it.
             if let Some(q) = (around.nearest_obstacle)(p, c.radius) {
                 let (dx, dy) = (p[0] - q[0], p[1] - q[1]);
-                let d = dx.hypot(dy);
+                let d = norm(dx, dy);
                 if d > 1e-9 && d < c.radius {
                     let (nx, ny) = (dx / d, dy / d);
                     p = [q[0] + nx * c.radius, q[1] + ny * c.radius];
@@ -652,7 +672,7 @@ impl Crowd {
             }
             w.p = p;
             w.v = v;
-            let speed = v[0].hypot(v[1]);
+            let speed = norm(v[0], v[1]);
             if speed > 0.1 {
                 w.heading = v[1].atan2(v[0]);
             }
@@ -693,7 +713,7 @@ impl Crowd {
         }
         if let Some(q) = (around.nearest_obstacle)(w.p, c.radius + 5.0 * c.obstacle_sigma) {
             let (dx, dy) = (w.p[0] - q[0], w.p[1] - q[1]);
-            let d = dx.hypot(dy);
+            let d = norm(dx, dy);
             if d > 1e-9 {
                 let f = c.obstacle_force * (-(d - c.radius).max(0.0) / c.obstacle_sigma).exp();
                 a[0] += f * dx / d;
@@ -719,7 +739,7 @@ impl Crowd {
                 }
                 let (a, b) = (self.walkers[i].p, self.walkers[j].p);
                 let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-                let d = dx.hypot(dy);
+                let d = norm(dx, dy);
                 if d >= min || d < 1e-9 {
                     continue;
                 }
@@ -750,7 +770,7 @@ impl Crowd {
         }
         let goal = w.route[w.target];
         let (dx, dy) = (goal[0] - w.p[0], goal[1] - w.p[1]);
-        let d = dx.hypot(dy);
+        let d = norm(dx, dy);
         if d < 1e-9 {
             return [0.0; 2];
         }
@@ -771,7 +791,7 @@ impl Crowd {
                 continue;
             }
             let g = w.route[w.target];
-            if (g[0] - w.p[0]).hypot(g[1] - w.p[1]) > r {
+            if norm(g[0] - w.p[0], g[1] - w.p[1]) > r {
                 continue;
             }
             let n = w.route.len();
@@ -822,7 +842,7 @@ impl Crowd {
                 if self
                     .walkers
                     .iter()
-                    .any(|w| w.active && (w.p[0] - from[0]).hypot(w.p[1] - from[1]) < room)
+                    .any(|w| w.active && norm(w.p[0] - from[0], w.p[1] - from[1]) < room)
                 {
                     break;
                 }
@@ -855,6 +875,13 @@ impl Crowd {
             }
         }
     }
+}
+
+/// The length of (x, y). Coordinates here are bounded by the world's extent, so the plain
+/// square root is safe, and several times faster than `hypot`'s overflow-proof one (the
+/// crowd's forces take it for every pair of people at every physics step).
+fn norm(x: f64, y: f64) -> f64 {
+    (x * x + y * y).sqrt()
 }
 
 /// A walking speed from N(mean, std²), kept within [0.3, 2.5] m/s.
@@ -902,7 +929,7 @@ pub fn social_force(
     nearer: f64,
 ) -> [f64; 2] {
     let d = [pj[0] - pi[0], pj[1] - pi[1]];
-    let centres = d[0].hypot(d[1]);
+    let centres = norm(d[0], d[1]);
     if centres < 1e-9 {
         return [0.0; 2];
     }
@@ -912,7 +939,7 @@ pub fn social_force(
         c.lambda * (vi[0] - vj[0]) + e[0],
         c.lambda * (vi[1] - vj[1]) + e[1],
     ];
-    let il = iv[0].hypot(iv[1]);
+    let il = norm(iv[0], iv[1]);
     if il < 1e-9 {
         return [0.0; 2];
     }
