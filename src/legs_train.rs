@@ -89,10 +89,9 @@ pub fn train(scenario: &Scenario, seeds: &[u64], rounds: usize, out: &Path) -> R
             scenario.spec.name
         );
     }
-    let Some((lidar, spec)) = scenario.lidars.first() else {
+    let Some((lidar, _)) = scenario.lidars.first() else {
         bail!("{}: the scenario has no [[lidar]]", scenario.spec.name);
     };
-    let _ = spec;
     let mut runs = Vec::new();
     for &seed in seeds {
         let samples = Rc::new(RefCell::new(Samples::default()));
@@ -112,7 +111,7 @@ pub fn train(scenario: &Scenario, seeds: &[u64], rounds: usize, out: &Path) -> R
         };
         simulate_with(scenario, &opts, None, vec![Box::new(collector)])
             .with_context(|| format!("running {} with seed {seed}", scenario.spec.name))?;
-        runs.push(Rc::try_unwrap(samples).map_or_else(|_| unreachable!(), RefCell::into_inner));
+        runs.push(std::mem::take(&mut *samples.borrow_mut()));
     }
     let (test, train) = runs.split_last().expect("two seeds or more");
     let mut x = Vec::new();

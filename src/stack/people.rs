@@ -340,7 +340,9 @@ impl Node for PeopleNode {
         let mut m = Metrics::default();
         if let Some(t) = &self.tracking {
             let mot = clear_mot(&t.frames, crate::replay::MOT_GATE);
-            // No one seen at all: nothing missed, every track a false positive.
+            // MOTA is undefined where nobody was seen; it is taken as 1 − false positives (as
+            // if one person were there to find), so false tracks still count against such a
+            // run.
             m.insert(
                 "people.mota",
                 mot.mota().unwrap_or(1.0 - mot.false_positives as f64),
