@@ -384,8 +384,8 @@ pub fn bench_people(
     scans: usize,
     crowd: usize,
 ) -> Result<Value> {
-    use futago_robot::perception::legs::{LegConfig, detect};
-    use futago_robot::tracking::people::{PeopleTracker, TrackerConfig};
+    use futago_robot::tracking::PeopleConfig;
+    use futago_robot::tracking::laser_people::LaserPeople;
     use futago_sim::lidar::LidarConfig;
     use futago_sim::people::PersonConfig;
     let mut lidar = LidarConfig::preset(LidarPreset::Urg04lx);
@@ -445,22 +445,26 @@ pub fn bench_people(
         }
     }
     let model = crate::legs_train::default_model()?;
-    let legs = LegConfig::default();
     let mount = lidar.planar_mount();
     let laser = start.compose(&mount);
-    // Detection and tracking over the scans, repeated until a quarter second has passed.
+    let map = futago_sim::world::export::occupancy_grid(
+        world,
+        0.05,
+        lidar.xyz[2] - 0.05,
+        lidar.xyz[2] + 0.05,
+        0.5,
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut pipeline = LaserPeople::new(PeopleConfig::default(), model);
+    pipeline.set_map(&map);
+    // The pipeline over the scans, repeated until a quarter second has passed.
     let (mut runs, mut found) = (0usize, 0usize);
     let t = Instant::now();
     while runs == 0 || t.elapsed().as_secs_f64() < 0.25 {
-        let mut tracker = PeopleTracker::new(TrackerConfig::default());
+        let mut p = pipeline.clone();
         found = 0;
         for s in &taken {
-            let seen: Vec<[f64; 2]> = detect(s, &legs, &model)
-                .iter()
-                .map(|l| laser.transform_point(l.position))
-                .collect();
-            found += seen.len();
-            tracker.update(s.stamp, &seen);
+            found += p.update(s, Some(laser), laser).legs.len();
         }
         runs += 1;
     }
@@ -487,7 +491,7 @@ pub fn bench_people(
         "scans": taken.len(),
         "people": people,
         "people_in_view_per_scan": in_view as f64 / taken.len().max(1) as f64,
-        "legs_per_scan": found as f64 / taken.len().max(1) as f64,
+        "person_candidates_per_scan": found as f64 / taken.len().max(1) as f64,
         "ms_per_scan_detect_and_track": per_scan * 1e3,
         "crowd": crowd,
         "simulation_real_time_factor": rtf,

@@ -14,6 +14,7 @@ use futago_robot::mapping::rgbd_map::RgbdMapConfig;
 use futago_robot::mapping::slam::SlamConfig;
 use futago_robot::navigation::NavigationConfig;
 use futago_robot::navigation::{ExploreConfig, NavigateConfig};
+use futago_robot::tracking::PeopleConfig;
 use futago_sim::agent::AgentConfig;
 use futago_sim::config::{SpecError, check_name, check_range, load_toml};
 use futago_sim::create::CreateConfig;
@@ -68,6 +69,10 @@ pub struct ScenarioSpec {
     /// The people's motion model (social forces) and body.
     #[serde(default)]
     pub crowd: CrowdConfig,
+    /// The stack's people detection and tracking (leg detector, moving-object detectors,
+    /// tracker), run in scenarios with people.
+    #[serde(default)]
+    pub people: PeopleConfig,
     /// Monte Carlo localisation on the world's map, from its laser's scans.
     pub localization: Option<LocalizationSpec>,
     /// Laser SLAM in the loop, from its laser's scans; typed by [`slam_config`].
@@ -850,6 +855,9 @@ impl Scenario {
             }
         };
         spec.navigation
+            .validate()
+            .map_err(|(k, m)| SpecError::new(path, k, m))?;
+        spec.people
             .validate()
             .map_err(|(k, m)| SpecError::new(path, k, m))?;
         for (i, e) in spec.event.iter().enumerate() {

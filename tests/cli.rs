@@ -1893,6 +1893,21 @@ fn replay_of_an_annotated_people_log_scores_its_tracks() {
     assert!(p["annotated_frames"]["frames"].as_u64().unwrap() < 873);
     let tracks = std::fs::read_to_string(out.join("people_tracks.txt")).unwrap();
     assert!(tracks.lines().count() > 1);
+    // The leg detector is scored on every annotated scan against all 153 annotations; a
+    // hit is counted once, so recall and precision follow from the counts.
+    let legs = &p["detection_on_annotated_frames"]["legs"];
+    assert_eq!(legs["scans"], p["annotated_frames"]["frames"]);
+    for r in ["0.5", "0.3"] {
+        let d = &legs["by_radius_m"][r];
+        assert_eq!(d["truth"], 153);
+        let tp = d["true_positives"].as_f64().unwrap();
+        assert!((d["recall"].as_f64().unwrap() - tp / 153.0).abs() < 1e-12);
+        let ap = d["ap"].as_f64().unwrap();
+        assert!((0.0..=d["recall"].as_f64().unwrap()).contains(&ap), "{d}");
+    }
+    // A tighter radius never finds more.
+    let tp = |r: &str| legs["by_radius_m"][r]["true_positives"].as_u64().unwrap();
+    assert!(tp("0.3") <= tp("0.5"));
 }
 
 /// `futago bench people` times detection and tracking over scans of walking people and the

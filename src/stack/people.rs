@@ -9,28 +9,34 @@
 //! - `people.time_within_0.45m_s`, `people.time_within_1.2m_s`: time with a person's body
 //!   closer than Hall's intimate (0.45 m) and personal (1.2 m) distances to the robot's.
 //!
-//! Tracking, when the scenario has a laser: the robot stack's leg detector (the shipped
-//! model, `models/legs.json`) and people tracker run on the first laser's scans. With a map
-//! and a pose in it (localisation's, else SLAM's), they track in the map's frame and leave out
-//! candidates off its free space (an occupied cell within 0.15 m: leg_tracker's free-space
-//! test); without, in the odometry frame. They are scored by CLEAR-MOT as the leg_tracker benchmark scores a real
-//! log: frame by frame (each scan), in the laser's frame, within 0.75 m. The true people of a
-//! frame are those the scan sees: as many beams as a segment needs (3) end within 0.15 m of
-//! their legs where they cross the laser's plane (`people.mota`, `people.motp_m`, `people.id_switches`,
+//! Tracking, when the scenario has a laser: the robot stack's people pipeline
+//! (`futago_robot::tracking::laser_people`, with the shipped leg model `models/legs.json` and
+//! the scenario's `[people]` settings) runs on the first laser's scans. With a map and a pose
+//! in it (localisation's, else SLAM's), it tracks in the map's frame and leaves out candidates
+//! off its free space (leg_tracker's free-space test); without, in the odometry frame. The
+//! tracks are scored by CLEAR-MOT as the leg_tracker benchmark scores a real log: frame by
+//! frame (each scan), in the laser's frame, within 0.75 m. The true people of a frame are
+//! those the scan sees: as many beams as a segment needs (3) end within 0.15 m of their legs
+//! where they cross the laser's plane (`people.mota`, `people.motp_m`, `people.id_switches`,
 //! `people.false_positives`, `people.misses`).
+//!
+//! Detection, against the same true people: each detector's candidates (`legs`,
+//! `map_difference` and `fused` with a map, `temporal`) are scored by DROW's average
+//! precision within 0.5 m and 0.3 m (`people.legs.ap_0.5`, …), with precision and recall at
+//! the operating point and AP against range in the summary. The temporal difference is scored
+//! on the scans it kept, each against the people of its own time.
 //!
 //! Only scenarios with people (`[[person]]` or `[[flow]]`) run this node.
 
 use super::{Bus, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
+use crate::ground_truth::detection::{Detection, DetectionFrame, by_range, score};
 use crate::ground_truth::mot::{Frame, clear_mot};
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
-use futago_msgs::grid::OccupancyGrid;
-use futago_msgs::{LaserScan, Pose2};
-use futago_robot::geometry::grid::OCCUPIED;
-use futago_robot::perception::legs::{AdaBoost, LegConfig, detect};
-use futago_robot::tracking::people::{PeopleTracker, TrackerConfig};
+use futago_msgs::{LaserScan, Pose2, Time};
+use futago_robot::tracking::laser_people::{Detections, LaserPeople};
+use futago_robot::tracking::people::Candidate;
 use serde_json::json;
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -65,8 +71,29 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
             .flatten()
             .map(String::from),
     )
+    .chain(
+        (!s.lidar.is_empty())
+            .then(|| {
+                let mapped = s.localization.is_some() || s.slam.is_some();
+                DETECTORS
+                    .iter()
+                    .enumerate()
+                    .filter(move |(k, _)| mapped || !NEEDS_MAP[*k])
+                    .flat_map(|(_, d)| MATCH_RADII.map(|r| format!("people.{d}.ap_{r}")))
+            })
+            .into_iter()
+            .flatten(),
+    )
     .collect()
 }
+
+/// The laser's people detectors, in the order [`ScanFrame::found`] holds them (see
+/// `futago_robot::tracking::laser_people`).
+const DETECTORS: [&str; 4] = ["legs", "map_difference", "fused", "temporal"];
+/// Which of them need a map.
+const NEEDS_MAP: [bool; 4] = [false, true, true, false];
+/// The DROW benchmark's association radii, m.
+const MATCH_RADII: [f64; 2] = [0.5, 0.3];
 
 /// The people's node of a scenario: `None` without people.
 pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
@@ -92,10 +119,11 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
             laser: l.name.clone(),
             mount: l.planar_mount(),
             height: l.xyz[2],
-            model: crate::legs_train::default_model()?,
-            legs: LegConfig::default(),
-            tracker: PeopleTracker::new(TrackerConfig::default()),
+            min_points: s.spec.people.legs.min_points,
+            people: LaserPeople::new(s.spec.people, crate::legs_train::default_model()?),
+            map_seen: None,
             frames: Vec::new(),
+            scans: Vec::new(),
         }),
         None => None,
     };
@@ -114,17 +142,35 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
     }))
 }
 
-/// The stack's people tracking on one laser, and its CLEAR-MOT frames.
+/// The stack's people tracking on one laser, its CLEAR-MOT frames and its detections.
 struct Tracking {
     /// The module whose pose and map the tracker uses (`pose/NAME`, `map/NAME`), if any.
     source: Option<&'static str>,
     laser: String,
     mount: Pose2,
     height: f64,
-    model: AdaBoost,
-    legs: LegConfig,
-    tracker: PeopleTracker,
+    /// Beams that must end on a person's legs for the scan to see them.
+    min_points: usize,
+    people: LaserPeople,
+    /// The time of the map last given to `people`.
+    map_seen: Option<Time>,
     frames: Vec<Frame>,
+    scans: Vec<ScanFrame>,
+}
+
+/// One scan's detections and the people it sees, in the laser's frame.
+struct ScanFrame {
+    stamp: Time,
+    /// The laser's pose in the odometry frame, where the temporal difference works.
+    in_odometry: Pose2,
+    truth: Vec<[f64; 2]>,
+    /// Per detector of [`DETECTORS`]; `None` where it gave nothing for this scan (no map, or
+    /// a scan the temporal difference did not keep).
+    found: [Option<Vec<Detection>>; 4],
+}
+
+fn as_points(c: &[Candidate]) -> Vec<Detection> {
+    c.iter().map(|q| (q.position, q.confidence)).collect()
 }
 
 /// Writes `people.txt`, tracks people from the laser and scores the tracks and the robot's
@@ -148,33 +194,6 @@ pub struct PeopleNode {
 
 /// Hall's intimate and personal distances, m.
 const ZONES: [f64; 2] = [0.45, 1.2];
-
-/// A candidate counts only where no occupied cell of the map lies this close, m (a shin's
-/// radius and a cell's diagonal at 5 cm).
-const FREE_RADIUS: f64 = 0.15;
-
-/// Whether no occupied cell of `m` lies within `r` of `q`; a point off the map is not free.
-fn in_free_space(m: &OccupancyGrid, q: [f64; 2], r: f64) -> bool {
-    let k = (r / m.resolution).ceil() as i64;
-    let Some((ci, cj)) = m.cell_of(q[0], q[1]) else {
-        return false;
-    };
-    for dj in -k..=k {
-        for di in -k..=k {
-            let (i, j) = (ci as i64 + di, cj as i64 + dj);
-            if i < 0 || j < 0 || i >= m.width as i64 || j >= m.height as i64 {
-                continue;
-            }
-            let c = m.cell_center(i as usize, j as usize);
-            if (c[0] - q[0]).hypot(c[1] - q[1]) <= r + 0.5 * m.resolution
-                && m.get(i as usize, j as usize) >= OCCUPIED
-            {
-                return false;
-            }
-        }
-    }
-    true
-}
 
 /// A person is in a scan when a beam ends this close to one of their legs' axes, m (a shin's
 /// radius, 0.05 m, and the laser's noise).
@@ -204,28 +223,26 @@ impl Node for PeopleNode {
         let Some(t) = &mut self.tracking else {
             return Ok(());
         };
-        // The stack's view: the laser placed by the map pose, else by odometry.
-        let robot = t
+        // The stack's view: the laser placed by the map pose (with a map), and by odometry.
+        if let Some((stamp, map)) = t.source.and_then(|src| bus.map(src))
+            && t.map_seen != Some(stamp)
+        {
+            t.people.set_map(map);
+            t.map_seen = Some(stamp);
+        }
+        let in_map = t
             .source
             .and_then(|src| bus.pose(src))
-            .unwrap_or(bus.odometry);
-        let laser = robot.compose(&t.mount);
-        let seen: Vec<[f64; 2]> = detect(scan, &t.legs, &t.model)
-            .iter()
-            .map(|l| laser.transform_point(l.position))
-            .collect();
-        let map = t
-            .source
-            .and_then(|src| bus.map(src))
-            .map(|(_, m)| m.clone());
-        let free = |q: [f64; 2]| {
-            map.as_ref()
-                .is_none_or(|m| in_free_space(m, q, FREE_RADIUS))
+            .map(|p| p.compose(&t.mount));
+        let in_odometry = bus.odometry.compose(&t.mount);
+        let found: Detections = t.people.update(scan, in_map, in_odometry);
+        let laser = match (in_map, t.map_seen) {
+            (Some(l), Some(_)) => l,
+            _ => in_odometry,
         };
-        t.tracker.update_where(scan.stamp, &seen, &free);
         let back = laser.inverse();
         let tracks = t
-            .tracker
+            .people
             .people()
             .iter()
             .map(|p| (p.id, back.transform_point(p.position)))
@@ -254,10 +271,31 @@ impl Node for PeopleNode {
                             .any(|q| (e[0] - q[0]).hypot(e[1] - q[1]) < SEEN_WITHIN)
                     })
                     .count();
-                on_legs >= t.legs.min_points
+                on_legs >= t.min_points
             })
             .map(|p| (p.id, to_laser.transform_point([p.pose.x, p.pose.y])))
-            .collect();
+            .collect::<Vec<_>>();
+        t.scans.push(ScanFrame {
+            stamp: scan.stamp,
+            in_odometry,
+            truth: truth.iter().map(|p| p.1).collect(),
+            found: [
+                Some(as_points(&found.legs)),
+                found.map_difference.as_deref().map(as_points),
+                found.fused.as_deref().map(as_points),
+                None,
+            ],
+        });
+        if let Some((when, c)) = &found.temporal
+            && let Ok(k) = t.scans.binary_search_by_key(when, |f| f.stamp)
+        {
+            let back = t.scans[k].in_odometry.inverse();
+            t.scans[k].found[3] = Some(
+                c.iter()
+                    .map(|q| (back.transform_point(q.position), q.confidence))
+                    .collect(),
+            );
+        }
         t.frames.push(Frame { truth, tracks });
         Ok(())
     }
@@ -328,6 +366,25 @@ impl Node for PeopleNode {
             let mut tracking = m.summary();
             tracking["laser"] = json!(t.laser);
             entry["tracking"] = tracking;
+            let mut detection = serde_json::Map::new();
+            for (k, name) in DETECTORS.iter().enumerate() {
+                let Some(frames) = t.detection_frames(k) else {
+                    continue;
+                };
+                let radii: serde_json::Map<String, serde_json::Value> = MATCH_RADII
+                    .iter()
+                    .map(|&r| (format!("{r}"), json!(score(&frames, r))))
+                    .collect();
+                let ranges: Vec<serde_json::Value> = by_range(&frames, MATCH_RADII[0])
+                    .into_iter()
+                    .map(|(lo, hi, s)| json!({"from_m": lo, "to_m": hi, "score": s}))
+                    .collect();
+                detection.insert(
+                    name.to_string(),
+                    json!({"scans": frames.len(), "by_radius_m": radii, "by_range_at_0.5m": ranges}),
+                );
+            }
+            entry["detection"] = serde_json::Value::Object(detection);
         }
         Ok(Report {
             summary: vec![("people".into(), entry)],
@@ -351,12 +408,42 @@ impl Node for PeopleNode {
             m.insert("people.id_switches", mot.id_switches as f64);
             m.insert("people.false_positives", mot.false_positives as f64);
             m.insert("people.misses", mot.misses as f64);
+            for (k, name) in DETECTORS.iter().enumerate() {
+                let Some(frames) = t.detection_frames(k) else {
+                    continue;
+                };
+                for r in MATCH_RADII {
+                    let s = score(&frames, r);
+                    // AP is undefined where nobody was seen: 1 without detections, else 0
+                    // (every detection was false).
+                    let ap = s.ap.unwrap_or(if s.detections == 0 { 1.0 } else { 0.0 });
+                    m.insert(format!("people.{name}.ap_{r}"), ap);
+                }
+            }
         }
         m.insert("people.collisions", self.collisions as f64);
         m.insert("people.min_clearance_m", self.clearance());
         m.insert("people.time_within_0.45m_s", self.within[0]);
         m.insert("people.time_within_1.2m_s", self.within[1]);
         Ok(m)
+    }
+}
+
+impl Tracking {
+    /// The scans detector `k` of [`DETECTORS`] gave detections for, as detection frames;
+    /// `None` when it gave none at all (it needs a map and there was none).
+    fn detection_frames(&self, k: usize) -> Option<Vec<DetectionFrame>> {
+        let frames: Vec<DetectionFrame> = self
+            .scans
+            .iter()
+            .filter_map(|f| {
+                f.found[k].as_ref().map(|d| DetectionFrame {
+                    truth: f.truth.clone(),
+                    detections: d.clone(),
+                })
+            })
+            .collect();
+        (!frames.is_empty() || !NEEDS_MAP[k]).then_some(frames)
     }
 }
 

@@ -1,7 +1,8 @@
 //! What the sensors see: image features (FAST corners, BRIEF descriptors; [`features`]), the
 //! floor plane that fixes the camera's height, pitch and roll ([`floor`]), and people's legs
-//! in a laser scan ([`legs`]).
+//! in a laser scan ([`legs`]), and things that move in it ([`motion`]).
 
 pub mod features;
 pub mod floor;
 pub mod legs;
+pub mod motion;

@@ -1,5 +1,34 @@
 //! Following what moves: optimal assignment ([`assignment`]) and the people tracker
-//! ([`people`]), which turns leg detections into tracks of people.
+//! ([`people`]), which turns leg detections into tracks of people. [`PeopleConfig`] gathers
+//! the settings of the whole people pipeline, detectors included.
 
 pub mod assignment;
+pub mod laser_people;
 pub mod people;
+
+use crate::config::ConfigError;
+use crate::perception::legs::LegConfig;
+use crate::perception::motion::MotionConfig;
+use people::TrackerConfig;
+use serde::{Deserialize, Serialize};
+
+/// Settings of people detection and tracking (`people`).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PeopleConfig {
+    /// The laser leg detector (`people.legs`).
+    pub legs: LegConfig,
+    /// The moving-object detectors (`people.motion`).
+    pub motion: MotionConfig,
+    /// The tracker (`people.tracker`).
+    pub tracker: TrackerConfig,
+}
+
+impl PeopleConfig {
+    /// Checks every field; errors name the full key (`people.legs.threshold`).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.legs.validate("people.legs")?;
+        self.motion.validate("people.motion")?;
+        self.tracker.validate("people.tracker")
+    }
+}

@@ -131,16 +131,24 @@ impl PeopleTracker {
     /// map's obstacle) left out, leg_tracker's free-space test: furniture legs in the map
     /// neither start tracks nor hold a track that walked past them.
     pub fn update_where(&mut self, t: Time, legs: &[[f64; 2]], free: &dyn Fn([f64; 2]) -> bool) {
+        let with_confidence: Vec<([f64; 2], f64)> = legs.iter().map(|l| (*l, 1.0)).collect();
+        let candidates: Vec<[f64; 2]> = pair_legs(&with_confidence, self.config.pair_distance)
+            .into_iter()
+            .map(|q| q.position)
+            .filter(|q| free(*q))
+            .collect();
+        self.update_candidates(t, &candidates);
+    }
+
+    /// Takes one scan's person candidates at `t` (legs already paired, see [`pair_legs`]), in
+    /// the tracking frame, m.
+    pub fn update_candidates(&mut self, t: Time, candidates: &[[f64; 2]]) {
         let c = self.config;
         let dt = self.last.map_or(0.0, |l| (t - l).secs().max(0.0));
         self.last = Some(t);
         for tr in &mut self.tracks {
             predict(tr, dt, c.acceleration_noise);
         }
-        let candidates: Vec<[f64; 2]> = pair_legs(legs, c.pair_distance)
-            .into_iter()
-            .filter(|q| free(*q))
-            .collect();
         let costs: Vec<Vec<f64>> = self
             .tracks
             .iter()
@@ -216,13 +224,21 @@ impl PeopleTracker {
     }
 }
 
-/// People candidates: legs paired nearest first within `max`, each pair at its midpoint, each
-/// unpaired leg on its own.
-fn pair_legs(legs: &[[f64; 2]], max: f64) -> Vec<[f64; 2]> {
+/// A person candidate: where, and how sure (the mean confidence of the legs it rests on).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate {
+    pub position: [f64; 2],
+    pub confidence: f64,
+}
+
+/// People candidates from legs with their confidences: legs paired nearest first within
+/// `max`, each pair at its midpoint, each unpaired leg on its own (its partner hidden).
+pub fn pair_legs(legs: &[([f64; 2], f64)], max: f64) -> Vec<Candidate> {
     let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
     for i in 0..legs.len() {
         for j in i + 1..legs.len() {
-            let d = (legs[i][0] - legs[j][0]).hypot(legs[i][1] - legs[j][1]);
+            let (a, b) = (legs[i].0, legs[j].0);
+            let d = (a[0] - b[0]).hypot(a[1] - b[1]);
             if d <= max {
                 pairs.push((d, i, j));
             }
@@ -237,17 +253,18 @@ fn pair_legs(legs: &[[f64; 2]], max: f64) -> Vec<[f64; 2]> {
         }
         taken[i] = true;
         taken[j] = true;
-        out.push([
-            0.5 * (legs[i][0] + legs[j][0]),
-            0.5 * (legs[i][1] + legs[j][1]),
-        ]);
+        let ((a, ca), (b, cb)) = (legs[i], legs[j]);
+        out.push(Candidate {
+            position: [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])],
+            confidence: 0.5 * (ca + cb),
+        });
     }
-    out.extend(
-        legs.iter()
-            .zip(&taken)
-            .filter(|(_, t)| !**t)
-            .map(|(l, _)| *l),
-    );
+    out.extend(legs.iter().zip(&taken).filter(|(_, t)| !**t).map(
+        |(&(position, confidence), _)| Candidate {
+            position,
+            confidence,
+        },
+    ));
     out
 }
 
