@@ -34,6 +34,9 @@ pub struct Bus {
     pub people: Vec<futago_sim::people::PersonTruth>,
     /// Contacts begun between the robot and a person so far (the physics' count).
     pub person_collisions: u64,
+    /// `people/tracked`: the people the stack tracks, in the robot base's frame at the last
+    /// scan (positions, m; velocities, m/s).
+    pub people_tracked: Vec<futago_robot::tracking::people::TrackedPerson>,
     /// Each joint's angle, rad, as its encoder reports it with the Create's sensor stream.
     pub joints: Vec<(String, f64)>,
     /// Angles (rad) asked of `command` joints at the last control tick (`joint/NAME`), until
@@ -64,6 +67,7 @@ impl Bus {
             agents: Vec::new(),
             people: Vec::new(),
             person_collisions: 0,
+            people_tracked: Vec::new(),
             joints: Vec::new(),
             joint_commands: Vec::new(),
             history: VecDeque::from([(Time::ZERO, start)]),

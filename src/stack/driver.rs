@@ -10,6 +10,7 @@ use futago_robot::control::PoseSource;
 use futago_robot::control::script::{ControlInput, ScriptedController};
 use futago_robot::localization::odometry::OdometryIntegrator;
 use futago_robot::navigation::{NavInput, Navigator, Task};
+use futago_robot::tracking::people::TrackedPerson;
 use serde_json::{Value, json};
 use std::path::Path;
 
@@ -108,6 +109,9 @@ impl Node for DriverNode {
     fn streams(&self) -> Streams {
         let mut consumes = vec!["odometry".to_string()];
         consumes.extend(self.laser.iter().map(|(n, _)| format!("scan/{n}")));
+        if matches!(self.driver, Driver::Navigator { .. }) {
+            consumes.push("people/tracked".into());
+        }
         let mut periods = Vec::new();
         match &self.driver {
             Driver::Navigator {
@@ -177,6 +181,20 @@ impl Node for DriverNode {
                 if let Some((t, _)) = map {
                     self.map_seen = Some(t);
                 }
+                // The tracked people, from the base's frame into the navigator's.
+                let (c, s) = (pose.theta.cos(), pose.theta.sin());
+                let people: Vec<TrackedPerson> = bus
+                    .people_tracked
+                    .iter()
+                    .map(|p| TrackedPerson {
+                        id: p.id,
+                        position: pose.transform_point(p.position),
+                        velocity: [
+                            c * p.velocity[0] - s * p.velocity[1],
+                            s * p.velocity[0] + c * p.velocity[1],
+                        ],
+                    })
+                    .collect();
                 let cmd = nav.update(&NavInput {
                     now: input.now,
                     pose,
@@ -186,6 +204,7 @@ impl Node for DriverNode {
                         .as_ref()
                         .zip(self.laser.as_ref().map(|l| l.1)),
                     map: map.map(|(_, m)| m.as_ref()),
+                    people: &people,
                 });
                 (*last != Some(cmd)).then(|| {
                     *last = Some(cmd);

@@ -36,7 +36,7 @@ use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Pose2, Time};
 use futago_robot::tracking::laser_people::{Detections, LaserPeople};
-use futago_robot::tracking::people::Candidate;
+use futago_robot::tracking::people::{Candidate, TrackedPerson};
 use serde_json::json;
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -214,6 +214,11 @@ impl Node for PeopleNode {
             }
         }
         Streams {
+            publishes: self
+                .tracking
+                .iter()
+                .map(|_| "people/tracked".to_string())
+                .collect(),
             consumes,
             ..Streams::default()
         }
@@ -241,11 +246,25 @@ impl Node for PeopleNode {
             _ => in_odometry,
         };
         let back = laser.inverse();
-        let tracks = t
-            .people
-            .people()
+        let people = t.people.people();
+        let tracks = people
             .iter()
             .map(|p| (p.id, back.transform_point(p.position)))
+            .collect();
+        // Published in the base's frame, for the driver.
+        let base = laser.compose(&t.mount.inverse());
+        let to_base = base.inverse();
+        let (c, s) = (base.theta.cos(), base.theta.sin());
+        bus.people_tracked = people
+            .iter()
+            .map(|p| TrackedPerson {
+                id: p.id,
+                position: to_base.transform_point(p.position),
+                velocity: [
+                    c * p.velocity[0] + s * p.velocity[1],
+                    -s * p.velocity[0] + c * p.velocity[1],
+                ],
+            })
             .collect();
         // The truth: people the scan sees, in the true laser frame.
         let true_laser = bus.truth.compose(&t.mount);

@@ -7,13 +7,17 @@
 //!   it resumes when the strip is clear (seed 000 stops for people and resumes); after
 //!   `blocked_timeout` it backs off and plans again;
 //! - a bumper press backs it off `backup_distance`, turning away from the pressed side, and it
-//!   plans again from where it ends up.
+//!   plans again from where it ends up;
+//! - a tracked person it would come too close to stops it until the risk has passed, and one
+//!   who stays in the way is driven round ([`yielding`]).
 
 pub mod exploration;
 pub mod planner;
+pub mod yielding;
 
 use crate::control::PoseSource;
 use crate::control::pursuit::{FollowParams, PathFollower};
+use crate::tracking::people::TrackedPerson;
 use exploration::path_to_frontier;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{BumpsAndDrops, DriveCommand, LaserScan, Pose2, Radius, Time};
@@ -58,6 +62,13 @@ pub struct NavigationConfig {
     pub frontier_min_length: f64,
     /// Exploration: a frontier reached that is still a frontier is given up within this, m.
     pub frontier_exclusion: f64,
+    /// Stop for a tracked person who would come this close, centre to centre, m; 0 turns
+    /// yielding off ([`yielding`]).
+    pub people_clearance: f64,
+    /// How far ahead a person's and the robot's motion are looked at, s.
+    pub people_horizon: f64,
+    /// Stopped for people this long, drive round them, s.
+    pub people_patience: f64,
 }
 
 impl Default for NavigationConfig {
@@ -81,6 +92,9 @@ impl Default for NavigationConfig {
             replan_period: 4.0,
             frontier_min_length: 0.4,
             frontier_exclusion: 0.6,
+            people_clearance: 0.8,
+            people_horizon: 2.0,
+            people_patience: 5.0,
         }
     }
 }
@@ -107,6 +121,9 @@ impl NavigationConfig {
             ("replan_period", self.replan_period, 0.1, 600.0),
             ("frontier_min_length", self.frontier_min_length, 0.0, 100.0),
             ("frontier_exclusion", self.frontier_exclusion, 0.0, 100.0),
+            ("people_clearance", self.people_clearance, 0.0, 10.0),
+            ("people_horizon", self.people_horizon, 0.0, 60.0),
+            ("people_patience", self.people_patience, 0.1, 600.0),
         ] {
             if !(v.is_finite() && v >= lo && v <= hi) {
                 return Err((
@@ -201,6 +218,8 @@ pub struct NavInput<'a> {
     pub scan: Option<(&'a LaserScan, Pose2)>,
     /// For exploration: a newer map than the last one given, when there is one.
     pub map: Option<&'a OccupancyGrid>,
+    /// The people tracked now, in the map frame.
+    pub people: &'a [TrackedPerson],
 }
 
 /// Counts of what happened, for the run's summary.
@@ -212,6 +231,11 @@ pub struct NavStats {
     pub bumps: usize,
     pub obstacle_stops: usize,
     pub frontiers_exhausted: usize,
+    /// Stops for people, and the time stopped for them, s.
+    pub people_stops: usize,
+    pub people_wait_s: f64,
+    /// Paths planned round people who stayed in the way.
+    pub people_detours: usize,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -219,6 +243,8 @@ enum Mode {
     Driving,
     /// Stopped for an obstacle since then.
     Blocked(Time),
+    /// Stopped for people since then; the last tick's time.
+    Yielding(Time, Time),
     /// Backing off until then, then turning away in this direction (+1 left) until the
     /// second time.
     Backing(Time, f64, Time),
@@ -239,6 +265,8 @@ pub struct Navigator {
     /// Where bumpers found obstacles the map does not hold (low, thin, glass); exploration
     /// plans round them.
     bump_marks: Vec<[f64; 2]>,
+    /// The people the path being followed goes round, and where they stood.
+    detoured: Vec<(u32, [f64; 2])>,
     stats: NavStats,
 }
 
@@ -261,6 +289,7 @@ impl Navigator {
             last_plan: None,
             exhausted: Vec::new(),
             bump_marks: Vec::new(),
+            detoured: Vec::new(),
             stats: NavStats::default(),
         }
     }
@@ -375,6 +404,9 @@ impl Navigator {
             }
             DriveCommand::DriveDirect { left, right } => left + right > 0.0,
         };
+        if forward && self.yields(input) {
+            return DriveCommand::STOP;
+        }
         if forward && let Some((scan, mount)) = input.scan {
             if self.blocked(scan, &mount, &input.pose) {
                 match self.mode {
@@ -393,6 +425,73 @@ impl Navigator {
             self.mode = Mode::Driving;
         }
         cmd
+    }
+
+    /// Whether to stop for people now (see [`yielding`]); after `people_patience` stopped,
+    /// plans a way round them to the goal.
+    fn yields(&mut self, input: &NavInput) -> bool {
+        let c = self.config;
+        let now = input.now;
+        // The people a detour goes round are no risk while they stand where they stood.
+        let people: Vec<TrackedPerson> = input
+            .people
+            .iter()
+            .filter(|p| {
+                !self.detoured.iter().any(|(id, at)| {
+                    *id == p.id
+                        && (p.position[0] - at[0]).hypot(p.position[1] - at[1])
+                            < yielding::STILL_WITHIN
+                })
+            })
+            .copied()
+            .collect();
+        let risk = c.people_clearance > 0.0
+            && yielding::at_risk(
+                &input.pose,
+                c.speed,
+                &people,
+                c.people_clearance,
+                c.people_horizon,
+            );
+        if !risk {
+            if matches!(self.mode, Mode::Yielding(..)) {
+                self.mode = Mode::Driving;
+            }
+            return false;
+        }
+        let since = match self.mode {
+            Mode::Yielding(since, last) => {
+                self.stats.people_wait_s += (now - last).secs();
+                since
+            }
+            _ => {
+                self.stats.people_stops += 1;
+                now
+            }
+        };
+        self.mode = Mode::Yielding(since, now);
+        if (now - since).secs() >= c.people_patience
+            && let (Task::Goals(goals), Some(roadmap)) = (&self.task, &self.roadmap)
+            && let Some(&goal) = goals.get(self.next_goal)
+        {
+            // Patience is spent either way: wait another spell before trying again.
+            self.mode = Mode::Yielding(now, now);
+            if let Some(path) = yielding::detour(
+                roadmap.grid(),
+                c.planner.clearance,
+                input.people,
+                c.people_clearance,
+                [input.pose.x, input.pose.y],
+                goal,
+            ) {
+                self.stats.people_detours += 1;
+                self.follower = Some(PathFollower::new(c.follow_params(), path));
+                self.detoured = input.people.iter().map(|p| (p.id, p.position)).collect();
+                self.mode = Mode::Driving;
+                // The new path is followed from the next tick.
+            }
+        }
+        true
     }
 
     fn start_backing(&mut self, now: Time, away: f64) {
@@ -439,6 +538,7 @@ impl Navigator {
     fn plan(&mut self, now: Time, pose: &Pose2) -> bool {
         let start = [pose.x, pose.y];
         self.last_plan = Some(now);
+        self.detoured.clear();
         match &self.task {
             Task::Goals(goals) => {
                 let Some(roadmap) = &self.roadmap else {
@@ -447,7 +547,17 @@ impl Navigator {
                 };
                 while self.next_goal < goals.len() {
                     let goal = goals[self.next_goal];
-                    if let Some(path) = roadmap.plan(start, goal) {
+                    // A start the road map does not join (a pose estimate close to a wall)
+                    // is planned from on the grid.
+                    let path = roadmap.plan(start, goal).or_else(|| {
+                        planner::grid_route(
+                            roadmap.grid(),
+                            self.config.planner.clearance,
+                            start,
+                            goal,
+                        )
+                    });
+                    if let Some(path) = path {
                         self.stats.plans += 1;
                         self.follower = Some(PathFollower::new(self.config.follow_params(), path));
                         return true;
@@ -557,6 +667,7 @@ mod tests {
                 bumps: BumpsAndDrops::default(),
                 scan: None,
                 map: None,
+                people: &[],
             });
             let (v, w) = unicycle(&cmd);
             pose = pose.compose(&Pose2::new(v * dt, 0.0, w * dt));
@@ -587,6 +698,7 @@ mod tests {
                 bumps,
                 scan,
                 map: None,
+                people: &[],
             }
         }
         let clear = scan_with_return_at(2.0);
@@ -614,6 +726,70 @@ mod tests {
     }
 
     /// (v, ω) of a Create command.
+    /// A person standing on the straight way to the goal stops the robot short of them;
+    /// after `people_patience` it drives round them, never within the clearance, and reaches
+    /// the goal. A person who walks out of the way lets it go on without a detour.
+    #[test]
+    fn a_person_in_the_way_is_waited_for_then_driven_round() {
+        let run = |walks: bool| {
+            let c = NavigationConfig::default();
+            let mut nav = Navigator::new(c, Task::Goals(vec![[5.0, 2.0]]), Some(room()));
+            let mut pose = Pose2::new(1.0, 2.0, 0.0);
+            let dt = 0.05;
+            let mut nearest = f64::INFINITY;
+            let mut first_stop = None;
+            for k in 0..4000 {
+                let t = k as f64 * dt;
+                // Standing at (3, 2); the walker leaves up the room at 1 m/s from t = 3 s.
+                let vy = if walks && t >= 3.0 { 1.0 } else { 0.0 };
+                let y = 2.0 + vy * (t - 3.0).max(0.0);
+                let people = [TrackedPerson {
+                    id: 7,
+                    position: [3.0, y.min(3.8)],
+                    velocity: [0.0, if y < 3.8 { vy } else { 0.0 }],
+                }];
+                let cmd = nav.update(&NavInput {
+                    now: Time::from_secs(t),
+                    pose,
+                    bumps: BumpsAndDrops::default(),
+                    scan: None,
+                    map: None,
+                    people: &people,
+                });
+                if first_stop.is_none() && nav.stats().people_stops > 0 {
+                    first_stop = Some(pose);
+                }
+                let (v, w) = unicycle(&cmd);
+                pose = pose.compose(&Pose2::new(v * dt, 0.0, w * dt));
+                nearest = nearest.min((pose.x - 3.0).hypot(pose.y - people[0].position[1]));
+                if nav.finished() {
+                    break;
+                }
+            }
+            (nav.stats(), nearest, first_stop, pose)
+        };
+        let (stats, nearest, stop, pose) = run(false);
+        assert_eq!(stats.goals_reached, 1, "{stats:?}");
+        assert_eq!(stats.people_detours, 1, "{stats:?}");
+        assert!(stats.people_wait_s >= 5.0 - 0.1, "{stats:?}");
+        // It stopped where driving on would have come within 0.8 m in 2 s at 0.3 m/s.
+        let stop = stop.expect("it stopped");
+        assert!(
+            stop.x > 3.0 - 0.8 - 0.6 - 0.1 && stop.x < 3.0 - 0.8,
+            "{stop:?}"
+        );
+        assert!(nearest > 0.8, "came {nearest} m from the person");
+        assert!((pose.x - 5.0).hypot(pose.y - 2.0) < 0.2, "{pose:?}");
+        let (stats, _, _, pose) = run(true);
+        assert_eq!(
+            (stats.goals_reached, stats.people_detours),
+            (1, 0),
+            "{stats:?}"
+        );
+        assert!(stats.people_wait_s < 5.0, "{stats:?}");
+        assert!((pose.x - 5.0).hypot(pose.y - 2.0) < 0.2, "{pose:?}");
+    }
+
     fn unicycle(cmd: &DriveCommand) -> (f64, f64) {
         let b = crate::control::pursuit::CREATE_WHEEL_BASE;
         match *cmd {

@@ -443,6 +443,26 @@ pub const START_ESCAPE: f64 = 0.5;
 /// Least clearance there, m (below the Create's 0.17 m radius, for localisation error).
 pub const START_CLEARANCE: f64 = 0.12;
 
+/// A path from `start` to `goal` over the cells of `grid` that keep `clearance` from its
+/// obstacles ([`grid_path`], which lets a start near a wall escape), ending at `goal`; `None`
+/// when there is none. Slower than the road map, for when the road map cannot be used: a
+/// start it does not join, or obstacles it does not hold.
+pub fn grid_route(
+    grid: &OccupancyGrid,
+    clearance: f64,
+    start: [f64; 2],
+    goal: [f64; 2],
+) -> Option<Vec<[f64; 2]>> {
+    let distance = obstacle_distance(grid, |v| v >= OCCUPIED, clearance + 1.0);
+    let (gi, gj) = grid.cell_of(goal[0], goal[1])?;
+    let mut path = grid_path(grid, &distance, clearance, start, |i, j| i == gi && j == gj)?;
+    // The path ends at the goal cell's centre; the goal itself is where it should end.
+    if let Some(last) = path.last_mut() {
+        *last = goal;
+    }
+    Some(path)
+}
+
 fn distance_at(grid: &OccupancyGrid, distance: &[f32], p: [f64; 2]) -> f64 {
     grid.cell_of(p[0], p[1])
         .map(|(i, j)| distance[j * grid.width + i] as f64)
