@@ -432,12 +432,12 @@ pub fn detect(scan: &LaserScan, c: &LegConfig, model: &AdaBoost) -> Vec<Leg> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use futago_msgs::Time;
 
     /// A scan of 0.5° beams over ±90° that sees circles and a wall (a line at x = `wall`).
-    fn scan(circles: &[([f64; 2], f64)], wall: f64) -> LaserScan {
+    pub(crate) fn scan(circles: &[([f64; 2], f64)], wall: f64) -> LaserScan {
         let inc = 0.5f64.to_radians();
         let n = 361;
         let ranges = (0..n)

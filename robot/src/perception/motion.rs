@@ -309,38 +309,12 @@ impl TemporalDifference {
 mod tests {
     use super::*;
 
-    /// A scan of 0.5° beams over ±90° from a laser at the origin looking along x, that sees
-    /// circles (centre, radius) before a wall at x = `wall`.
+    /// The leg tests' scan (0.5° beams over ±90°, circles before a wall at x = `wall`),
+    /// taken at `t`.
     fn scan(t: f64, circles: &[([f64; 2], f64)], wall: f64) -> LaserScan {
-        let inc = 0.5f64.to_radians();
-        let ranges = (0..361)
-            .map(|i| {
-                let a = -std::f64::consts::FRAC_PI_2 + i as f64 * inc;
-                let (dx, dy) = (a.cos(), a.sin());
-                let mut r = if dx > 1e-9 { wall / dx } else { f64::INFINITY };
-                for (c, rad) in circles {
-                    let b = -(c[0] * dx + c[1] * dy);
-                    let disc = b * b - (c[0] * c[0] + c[1] * c[1] - rad * rad);
-                    if disc >= 0.0 {
-                        let t = -b - disc.sqrt();
-                        if t > 0.0 {
-                            r = r.min(t);
-                        }
-                    }
-                }
-                if r > 30.0 { f64::INFINITY } else { r }
-            })
-            .map(|r| r as f32)
-            .collect();
         LaserScan {
-            frame: "laser".into(),
             stamp: Time::from_secs(t),
-            angle_min: -std::f64::consts::FRAC_PI_2,
-            angle_increment: inc,
-            time_increment: 0.0,
-            range_min: 0.02,
-            range_max: 30.0,
-            ranges,
+            ..crate::perception::legs::tests::scan(circles, wall)
         }
     }
 
