@@ -97,6 +97,11 @@ pub struct ScenarioSpec {
 }
 
 impl ScenarioSpec {
+    /// Whether the scenario puts people in the world (`[[person]]` or `[[flow]]`).
+    pub fn has_people(&self) -> bool {
+        !(self.person.is_empty() && self.flow.is_empty())
+    }
+
     /// The names of the metrics a run of this scenario produces (for gates and tuning), as
     /// the stack's scorers declare them.
     pub fn metric_names(&self) -> Vec<String> {

@@ -9,6 +9,7 @@ pub mod detection;
 pub mod map;
 pub mod mot;
 pub mod planes;
+pub mod pollution;
 pub mod trajectory;
 
 use std::collections::BTreeMap;

@@ -37,6 +37,8 @@ pub struct Bus {
     /// `people/tracked`: the people the stack tracks, in the robot base's frame at the last
     /// scan (positions, m; velocities, m/s).
     pub people_tracked: Vec<futago_robot::tracking::people::TrackedPerson>,
+    /// When `people/tracked` was published, and the odometry pose then (its base frame).
+    pub people_tracked_at: (Time, Pose2),
     /// Each joint's angle, rad, as its encoder reports it with the Create's sensor stream.
     pub joints: Vec<(String, f64)>,
     /// Angles (rad) asked of `command` joints at the last control tick (`joint/NAME`), until
@@ -68,6 +70,7 @@ impl Bus {
             people: Vec::new(),
             person_collisions: 0,
             people_tracked: Vec::new(),
+            people_tracked_at: (Time::ZERO, start),
             joints: Vec::new(),
             joint_commands: Vec::new(),
             history: VecDeque::from([(Time::ZERO, start)]),
@@ -106,6 +109,29 @@ impl Bus {
             }
         }
         self.history.front().map(|h| h.1).unwrap_or(p_last)
+    }
+
+    /// Publishes `people/tracked`: `people` in the base frame now.
+    pub fn publish_people(&mut self, people: Vec<futago_robot::tracking::people::TrackedPerson>) {
+        self.people_tracked = people;
+        self.people_tracked_at = (self.now, self.odometry);
+    }
+
+    /// The tracked people's centres in the base frame now: each carried from when they were
+    /// published by their velocity, and into the base's frame now by the odometry since.
+    pub fn people_now(&self) -> Vec<[f64; 2]> {
+        let (t, then) = self.people_tracked_at;
+        let dt = (self.now - t).secs();
+        let back = then.between(&self.odometry).inverse();
+        self.people_tracked
+            .iter()
+            .map(|p| {
+                back.transform_point([
+                    p.position[0] + p.velocity[0] * dt,
+                    p.position[1] + p.velocity[1] * dt,
+                ])
+            })
+            .collect()
     }
 
     /// Publishes estimate `pose` on `pose/TOPIC`, made when odometry read `at`.

@@ -1,7 +1,8 @@
 //! The driver node: a scripted controller or the navigator, whichever the scenario's
 //! `[controller]` names. It publishes the drive command at every control tick.
 
-use super::{Bus, Node, Report, Streams};
+use super::{Bus, Node, Report, Streams, Truth};
+use crate::ground_truth::Metrics;
 use crate::scenario::ControllerConfig;
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
@@ -39,6 +40,8 @@ pub struct DriverNode {
     /// Return-to-start errors per lap of a waypoint list (seed 000, Fig. 2.8).
     laps: Vec<Value>,
     localizes: bool,
+    /// How many goals a navigator was given (none for other drivers and for exploration).
+    goals: Option<usize>,
 }
 
 impl DriverNode {
@@ -97,6 +100,13 @@ impl DriverNode {
             pending: Vec::new(),
             laps: Vec::new(),
             localizes: spec.localization.is_some(),
+            goals: match &s.controller {
+                ControllerConfig::Navigate(n) => match n.task() {
+                    Task::Goals(g) => Some(g.len()),
+                    Task::Explore => None,
+                },
+                _ => None,
+            },
         })
     }
 }
@@ -249,5 +259,25 @@ impl Node for DriverNode {
             summary,
             ..Report::default()
         })
+    }
+
+    fn score(&self, _truth: &Truth) -> Result<Metrics> {
+        let mut m = Metrics::default();
+        if let (Some(goals), Driver::Navigator { nav, .. }) = (self.goals, &self.driver) {
+            m.insert(
+                "navigation.goals_missed",
+                goals.saturating_sub(nav.stats().goals_reached) as f64,
+            );
+        }
+        Ok(m)
+    }
+}
+
+/// `navigation.goals_missed` (goals a navigator did not reach) where it is given goals.
+pub fn metric_names(s: &crate::scenario::ScenarioSpec) -> Vec<String> {
+    if s.controller.get("type").and_then(|t| t.as_str()) == Some("navigate") {
+        vec!["navigation.goals_missed".into()]
+    } else {
+        Vec::new()
     }
 }

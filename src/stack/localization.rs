@@ -1,8 +1,9 @@
 //! The localiser node: Monte Carlo localisation on the world's occupancy grid at its laser's
 //! height, updated at its rate from that laser's scans and carried by odometry in between.
-//! It publishes `pose/localization` and the map it was given (`map/localization`), writes
-//! `localization.txt`, and scores its trajectory, its worst recovery from a kidnapping and
-//! its convergence from a global start.
+//! Beams that end on a person the stack tracks (`people/tracked`) are left out
+//! (`people.exclusion`). It publishes `pose/localization` and the map it was given
+//! (`map/localization`), writes `localization.txt`, and scores its trajectory, its worst
+//! recovery from a kidnapping and its convergence from a global start.
 
 use super::{Bus, Node, Report, Streams, Truth, tum_line};
 use crate::ground_truth::Metrics;
@@ -10,6 +11,7 @@ use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, LaserScan, Pose2, Time, wrap_angle};
 use futago_robot::localization::mcl::{Mcl, MclMap};
+use futago_robot::tracking::exclusion::{Exclusion, ExclusionConfig};
 use futago_sim::noise::stream;
 use serde_json::{Value, json};
 use std::path::Path;
@@ -39,6 +41,10 @@ pub struct LocalizationNode {
     global: bool,
     map: Option<futago_msgs::grid::OccupancyGrid>,
     summary: Option<Value>,
+    /// Cutting tracked people out of the scans (`people.exclusion`).
+    exclusion: ExclusionConfig,
+    /// Beams cut out so far.
+    beams_excluded: u64,
 }
 
 /// The localiser when the scenario has `[localization]`.
@@ -71,6 +77,8 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<LocalizationNode>> {
         global: spec.global,
         map: Some(grid),
         summary: None,
+        exclusion: s.spec.people.exclusion,
+        beams_excluded: 0,
     }))
 }
 
@@ -131,8 +139,12 @@ impl Node for LocalizationNode {
     }
 
     fn streams(&self) -> Streams {
+        let mut consumes = vec![format!("scan/{}", self.laser), "odometry".into()];
+        if self.exclusion.enabled {
+            consumes.push("people/tracked".into());
+        }
         Streams {
-            consumes: vec![format!("scan/{}", self.laser), "odometry".into()],
+            consumes,
             publishes: vec!["pose/localization".into(), "map/localization".into()],
             ..Streams::default()
         }
@@ -151,6 +163,15 @@ impl Node for LocalizationNode {
         }
         self.next = scan.stamp + self.period;
         let at = bus.odometry_at(scan.stamp);
+        // The tracked people (published for this scan) are left out of the likelihood.
+        let masked = Exclusion::new(&self.exclusion, bus.people_now()).mask_scan(scan, &self.mount);
+        let scan = match &masked {
+            Some((m, cut)) => {
+                self.beams_excluded += *cut as u64;
+                m
+            }
+            None => scan,
+        };
         let est = self.mcl.update(&at, scan, &self.mount);
         bus.publish_pose("localization", est.pose, at);
         self.updates += 1;
@@ -181,6 +202,7 @@ impl Node for LocalizationNode {
             "max_position_error_m": l.iter().map(|e| e.1).fold(0.0, f64::max),
             "final_position_error_m": l.last().map(|e| e.1),
             "mean_heading_error_deg": l.iter().map(|e| e.2).sum::<f64>() / n * 180.0 / std::f64::consts::PI,
+            "beams_excluded": self.beams_excluded,
         });
         if !self.events.is_empty() {
             v["kidnappings"] =

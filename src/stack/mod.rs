@@ -219,7 +219,7 @@ pub const MODULES: &[Module] = &[
     },
     Module {
         build: |s, _, _| Ok(vec![Box::new(driver::DriverNode::new(s)?) as Box<dyn Node>]),
-        metric_names: |_| Vec::new(),
+        metric_names: driver::metric_names,
     },
     Module {
         build: |s, seed, _| boxed(localization::node(s, seed)),

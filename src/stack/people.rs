@@ -4,6 +4,10 @@
 //! Safety, scored at the ground-truth rate (`people.*`):
 //! - `people.collisions`: contacts begun between the robot's body and a person's, counted by
 //!   the physics;
+//! - `people.collisions_driving`: those of them the robot drove into: begun while the robot
+//!   itself closed on the nearest person at more than 0.05 m/s (its own velocity towards
+//!   them, over the last ground-truth tick). The rest are people walking into a robot that
+//!   stood or drew back, which the stack cannot prevent;
 //! - `people.min_clearance_m`: the smallest gap between the robot's body and a person's (centre
 //!   distance less the robot's radius and the person's, `crowd.radius`);
 //! - `people.time_within_0.45m_s`, `people.time_within_1.2m_s`: time with a person's body
@@ -47,11 +51,12 @@ pub const PEOPLE_FILE: &str = "people.txt";
 
 /// The metric names of the people's scorer for a scenario.
 pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    if s.person.is_empty() && s.flow.is_empty() {
+    if !s.has_people() {
         return Vec::new();
     }
     [
         "people.collisions",
+        "people.collisions_driving",
         "people.min_clearance_m",
         "people.time_within_0.45m_s",
         "people.time_within_1.2m_s",
@@ -135,6 +140,8 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
         person_radius: s.movers.crowd.radius,
         period: 1.0 / s.spec.output.groundtruth_rate,
         collisions: 0,
+        collisions_driving: 0,
+        last_pose: None,
         min_clearance: f64::INFINITY,
         within: [0.0; 2],
         seen: std::collections::BTreeSet::new(),
@@ -184,6 +191,10 @@ pub struct PeopleNode {
     /// The ground-truth period, s: each tick counts for this long.
     period: f64,
     collisions: u64,
+    /// Contacts begun while the robot drove at the person.
+    collisions_driving: u64,
+    /// The robot's true pose at the last tick.
+    last_pose: Option<futago_msgs::Pose2>,
     min_clearance: f64,
     /// Time within 0.45 m and 1.2 m, s.
     within: [f64; 2],
@@ -191,6 +202,10 @@ pub struct PeopleNode {
     seen: std::collections::BTreeSet<u32>,
     line: String,
 }
+
+/// A robot closing on a person faster than this drove into them, m/s (the Create's slowest
+/// useful speed is about 0.05 m/s; standing, it reads 0 within odometry's noise).
+const DRIVING_AT: f64 = 0.05;
 
 /// Hall's intimate and personal distances, m.
 const ZONES: [f64; 2] = [0.45, 1.2];
@@ -255,17 +270,19 @@ impl Node for PeopleNode {
         let base = laser.compose(&t.mount.inverse());
         let to_base = base.inverse();
         let (c, s) = (base.theta.cos(), base.theta.sin());
-        bus.people_tracked = people
-            .iter()
-            .map(|p| TrackedPerson {
-                id: p.id,
-                position: to_base.transform_point(p.position),
-                velocity: [
-                    c * p.velocity[0] + s * p.velocity[1],
-                    -s * p.velocity[0] + c * p.velocity[1],
-                ],
-            })
-            .collect();
+        bus.publish_people(
+            people
+                .iter()
+                .map(|p| TrackedPerson {
+                    id: p.id,
+                    position: to_base.transform_point(p.position),
+                    velocity: [
+                        c * p.velocity[0] + s * p.velocity[1],
+                        -s * p.velocity[0] + c * p.velocity[1],
+                    ],
+                })
+                .collect(),
+        );
         // The truth: people the scan sees, in the true laser frame.
         let true_laser = bus.truth.compose(&t.mount);
         let to_laser = true_laser.inverse();
@@ -333,8 +350,25 @@ impl Node for PeopleNode {
 
     fn on_truth(&mut self, bus: &Bus) -> Result<()> {
         use std::fmt::Write as _;
-        self.collisions = bus.person_collisions;
         let r = bus.truth;
+        if bus.person_collisions > self.collisions {
+            // Who began it: the robot's own speed towards the nearest person.
+            let last = self.last_pose.unwrap_or(r);
+            let v = [(r.x - last.x) / self.period, (r.y - last.y) / self.period];
+            let nearest = bus
+                .people
+                .iter()
+                .min_by(|a, b| a.pose.distance(&r).total_cmp(&b.pose.distance(&r)));
+            if let Some(p) = nearest {
+                let d = p.pose.distance(&r).max(1e-9);
+                let closing = (v[0] * (p.pose.x - r.x) + v[1] * (p.pose.y - r.y)) / d;
+                if closing > DRIVING_AT {
+                    self.collisions_driving += bus.person_collisions - self.collisions;
+                }
+            }
+        }
+        self.collisions = bus.person_collisions;
+        self.last_pose = Some(r);
         let mut nearest = f64::INFINITY;
         for p in &bus.people {
             self.seen.insert(p.id);
@@ -376,6 +410,7 @@ impl Node for PeopleNode {
         let mut entry = json!({
             "people": self.seen.len(),
             "collisions": self.collisions,
+            "collisions_driving": self.collisions_driving,
             "min_clearance_m": self.clearance(),
             "time_within_0.45m_s": self.within[0],
             "time_within_1.2m_s": self.within[1],
@@ -441,6 +476,7 @@ impl Node for PeopleNode {
             }
         }
         m.insert("people.collisions", self.collisions as f64);
+        m.insert("people.collisions_driving", self.collisions_driving as f64);
         m.insert("people.min_clearance_m", self.clearance());
         m.insert("people.time_within_0.45m_s", self.within[0]);
         m.insert("people.time_within_1.2m_s", self.within[1]);

@@ -3,9 +3,17 @@
 //! after the run against the 2D map SLAM or the localiser had (`map/slam`, else
 //! `map/localization`). It keeps the true surfaces its keyframes saw for scoring, writes the
 //! map, its planes, its truth and its laser-height slice, and scores every method's map.
+//!
+//! People: while a person the stack tracks (`people/tracked`) is in the camera's view, the
+//! mapper takes no keyframe (`rgbd_map.pause_for_people`, seed 000 §5.4); the points that
+//! lie on tracked people are left out of the keyframes it takes (`people.exclusion`). The
+//! true surfaces leave out the true people, and in a world with people the share of the map
+//! that lies where they walked is scored (`rgbd_map.people_pollution`, see
+//! `ground_truth::pollution`).
 
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
+use crate::ground_truth::pollution::{FLOOR, HEAD_ROOM, PATH_RADIUS, PeoplePaths};
 use crate::scenario::{MapPose, Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::camera::{DepthImage, Intrinsics};
@@ -13,6 +21,7 @@ use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{Pose2, Pose3};
 use futago_robot::mapping::registration::{EnvironmentMap, Method};
 use futago_robot::mapping::rgbd_map::{CameraMount, RgbdMap, RgbdMapper};
+use futago_robot::tracking::exclusion::{Exclusion, ExclusionConfig};
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
@@ -55,6 +64,15 @@ pub struct RgbdMapNode {
     offer_seconds: f64,
     maps: Vec<RgbdMap>,
     scenario: String,
+    exclusion: ExclusionConfig,
+    pause_for_people: bool,
+    /// The camera's place and heading in the base frame, its horizontal half field of view
+    /// (rad) and its range (m): where a person is in view.
+    view: (Pose2, f64, f64),
+    /// Frames the mapper wanted but put off for a person in view.
+    paused_frames: std::cell::Cell<u64>,
+    /// Where the world's people walked (truth, for scoring); `None` in a world without.
+    paths: Option<PeoplePaths>,
 }
 
 /// The mapper when the scenario has `[rgbd_map]`.
@@ -116,6 +134,15 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<RgbdMapNode>> {
         offer_seconds: 0.0,
         maps: Vec::new(),
         scenario: s.spec.name.clone(),
+        exclusion: s.spec.people.exclusion,
+        pause_for_people: m.config.pause_for_people,
+        view: (
+            Pose2::new(mount.translation.x as f64, mount.translation.y as f64, yaw),
+            (cam.depth.width as f64 / (2.0 * cam.depth.fx)).atan(),
+            m.config.max_depth.min(cam.range_max),
+        ),
+        paused_frames: std::cell::Cell::new(0),
+        paths: s.spec.has_people().then(PeoplePaths::default),
     }))
 }
 
@@ -150,6 +177,9 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
         .map(|m| m.name())
         .collect();
     let mut names = Vec::new();
+    if s.has_people() {
+        names.push("rgbd_map.people_pollution".into());
+    }
     let prefixes = std::iter::once("rgbd_map".to_string())
         .chain(methods.iter().map(|m| format!("rgbd_map.{m}")));
     for prefix in prefixes {
@@ -176,9 +206,31 @@ impl RgbdMapNode {
         }
     }
 
+    /// The tracked people now, as the exclusion cuts them out.
+    fn people(&self, bus: &Bus) -> Exclusion {
+        Exclusion::new(&self.exclusion, bus.people_now())
+    }
+
+    /// Whether a tracked person is in the camera's view now.
+    fn person_in_view(&self, bus: &Bus) -> bool {
+        let seen = ExclusionConfig {
+            enabled: true,
+            ..self.exclusion
+        };
+        let (camera, half_fov, range) = self.view;
+        Exclusion::new(&seen, bus.people_now()).in_view(&camera, half_fov, range)
+    }
+
     /// Adds a noiseless depth image taken from `optical` (the optical frame's world pose) to
-    /// the true surfaces.
-    fn add_truth(&mut self, depth: &DepthImage, k: &Intrinsics, optical: &Pose3) {
+    /// the true surfaces, less the people in the world (`people`, their true positions): the
+    /// map is scored against the building.
+    fn add_truth(
+        &mut self,
+        depth: &DepthImage,
+        k: &Intrinsics,
+        optical: &Pose3,
+        people: &[[f64; 2]],
+    ) {
         let [qx, qy, qz, qw] = optical.rotation;
         let q =
             nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, qx, qy, qz));
@@ -195,6 +247,14 @@ impl RgbdMapNode {
                     r[1] + optical.translation[1],
                     r[2] + optical.translation[2],
                 ];
+                let on_person = w[2] > FLOOR
+                    && w[2] <= HEAD_ROOM
+                    && people
+                        .iter()
+                        .any(|p| (w[0] - p[0]).hypot(w[1] - p[1]) <= PATH_RADIUS);
+                if on_person {
+                    continue;
+                }
                 let key = w.map(|x| (x / self.voxel).floor() as i64);
                 if let std::collections::hash_map::Entry::Vacant(e) = self.truth.entry(key) {
                     e.insert(w);
@@ -221,14 +281,34 @@ impl Node for RgbdMapNode {
             MapPose::Slam => consumes.push("pose/slam".into()),
             _ => {}
         }
+        if self.exclusion.enabled || self.pause_for_people {
+            consumes.push("people/tracked".into());
+        }
+        if self.paths.is_some() {
+            consumes.push("truth".into());
+        }
         Streams {
             consumes,
             ..Streams::default()
         }
     }
 
+    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
+        if let Some(p) = &mut self.paths {
+            p.add(&bus.people);
+        }
+        Ok(())
+    }
+
     fn wants_frame(&self, camera: &str, bus: &Bus) -> bool {
-        camera == self.camera && self.mapper.wants(&self.map_pose(bus))
+        if camera != self.camera || !self.mapper.wants(&self.map_pose(bus)) {
+            return false;
+        }
+        if self.pause_for_people && self.person_in_view(bus) {
+            self.paused_frames.set(self.paused_frames.get() + 1);
+            return false;
+        }
+        true
     }
 
     fn on_frame(
@@ -243,11 +323,19 @@ impl Node for RgbdMapNode {
         }
         let pose = self.map_pose(bus);
         let t0 = Instant::now();
-        let taken = self.mapper.offer(&frame.frame, &pose);
+        let taken = self
+            .mapper
+            .offer_excluding(&frame.frame, &pose, &self.people(bus));
         self.offer_seconds += t0.elapsed().as_secs_f64();
         if taken {
             let depth = truth.true_depth()?;
-            self.add_truth(&depth, &frame.frame.depth_intrinsics, &frame.optical);
+            let people: Vec<[f64; 2]> = bus.people.iter().map(|p| [p.pose.x, p.pose.y]).collect();
+            self.add_truth(
+                &depth,
+                &frame.frame.depth_intrinsics,
+                &frame.optical,
+                &people,
+            );
             self.truth_poses.push(bus.truth);
         }
         Ok(())
@@ -300,6 +388,7 @@ impl Node for RgbdMapNode {
         }
         let truth = self.truth_points();
         counts["truth_points"] = json!(truth.len());
+        counts["paused_frames"] = json!(self.paused_frames.get());
         let mut files = Vec::new();
         if let (Some(dir), Some(first)) = (out, maps.first()) {
             let name = &self.scenario;
@@ -361,8 +450,24 @@ impl Node for RgbdMapNode {
         })
     }
 
-    fn score(&self, _truth: &Truth) -> Result<Metrics> {
+    fn score(&self, truth: &Truth) -> Result<Metrics> {
         let mut metrics = Metrics::default();
+        if let (Some(paths), Some(map)) = (&self.paths, self.maps.first()) {
+            // Every static obstacle between the floor and the people's heads.
+            let world = futago_sim::world::export::occupancy_grid(
+                &truth.scenario.world,
+                SLICE_MAP_RESOLUTION,
+                FLOOR,
+                HEAD_ROOM,
+                0.5,
+            )
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let points: Vec<[f64; 3]> = map.points.iter().map(|p| p.0).collect();
+            metrics.insert(
+                "rgbd_map.people_pollution",
+                paths.cloud_share(&points, &world).unwrap_or(0.0),
+            );
+        }
         let points = self.truth_points();
         for (k, map) in self.maps.iter().enumerate() {
             let found = score_map(map, &points, &self.truth_poses, &self.walls, self.slice_z);

@@ -1,15 +1,19 @@
-//! The SLAM node: laser SLAM on one named laser's scans. It publishes `pose/slam` (the start
-//! pose until its first scan), `map/slam` at the period
-//! a consumer asks for and once more at the end, writes its trajectory and map, and scores
-//! both against the truth.
+//! The SLAM node: laser SLAM on one named laser's scans, less the beams that end on a person
+//! the stack tracks (`people/tracked`, cut out by `people.exclusion`). It publishes
+//! `pose/slam` (the start pose until its first scan), `map/slam` at the period a consumer
+//! asks for and once more at the end, writes its trajectory and map, and scores both against
+//! the truth; in a world with people, also the share of the map that is people
+//! (`slam.map.people_pollution`, see `ground_truth::pollution`).
 
 use super::{Bus, Node, Report, Streams, Truth, tum_line};
 use crate::ground_truth::Metrics;
+use crate::ground_truth::pollution::PeoplePaths;
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2, Time, wrap_angle};
 use futago_robot::mapping::slam::Slam;
+use futago_robot::tracking::exclusion::{Exclusion, ExclusionConfig};
 use serde_json::json;
 use std::path::Path;
 
@@ -33,6 +37,10 @@ pub struct SlamNode {
     name: String,
     /// The final map, kept for scoring.
     map: Option<OccupancyGrid>,
+    exclusion: ExclusionConfig,
+    beams_excluded: u64,
+    /// Where the world's people walked (truth, for scoring); `None` in a world without.
+    paths: Option<PeoplePaths>,
 }
 
 /// SLAM when the scenario has `[slam]`.
@@ -51,6 +59,9 @@ pub fn node(s: &Scenario) -> Result<Option<SlamNode>> {
         last_map: None,
         name: s.spec.name.clone(),
         map: None,
+        exclusion: s.spec.people.exclusion,
+        beams_excluded: 0,
+        paths: s.spec.has_people().then(PeoplePaths::default),
     }))
 }
 
@@ -61,6 +72,9 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     }
     let mut names = crate::ground_truth::trajectory_metric_names("slam");
     names.extend(crate::ground_truth::map_metric_names("slam.map"));
+    if s.has_people() {
+        names.push("slam.map.people_pollution".into());
+    }
     names
 }
 
@@ -75,11 +89,25 @@ impl Node for SlamNode {
     }
 
     fn streams(&self) -> Streams {
+        let mut consumes = vec![format!("scan/{}", self.laser), "odometry".into()];
+        if self.exclusion.enabled {
+            consumes.push("people/tracked".into());
+        }
+        if self.paths.is_some() {
+            consumes.push("truth".into());
+        }
         Streams {
-            consumes: vec![format!("scan/{}", self.laser), "odometry".into()],
+            consumes,
             publishes: vec!["pose/slam".into(), "map/slam".into()],
             ..Streams::default()
         }
+    }
+
+    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
+        if let Some(p) = &mut self.paths {
+            p.add(&bus.people);
+        }
+        Ok(())
     }
 
     fn start(&mut self, bus: &mut Bus) -> Result<()> {
@@ -92,6 +120,14 @@ impl Node for SlamNode {
             return Ok(());
         }
         let at = bus.odometry_at(scan.stamp);
+        let masked = Exclusion::new(&self.exclusion, bus.people_now()).mask_scan(scan, &self.mount);
+        let scan = match &masked {
+            Some((m, cut)) => {
+                self.beams_excluded += *cut as u64;
+                m
+            }
+            None => scan,
+        };
         let u = self.slam.update(scan, &at, &self.mount);
         self.at = at;
         bus.publish_pose("slam", self.slam.pose(), at);
@@ -129,6 +165,7 @@ impl Node for SlamNode {
             "online_max_position_error_m": e.iter().map(|e| e.0).fold(0.0, f64::max),
             "online_mean_heading_error_deg": e.iter().map(|e| e.1).sum::<f64>() / n * 180.0 / std::f64::consts::PI,
             "map_known_area_m2": known_area(&grid),
+            "beams_excluded": self.beams_excluded,
         });
         let mut files = Vec::new();
         if let Some(dir) = out {
@@ -171,6 +208,12 @@ impl Node for SlamNode {
             let score = crate::ground_truth::map::score(map, &world, [s.x, s.y])
                 .map_err(|e| anyhow::anyhow!("scoring the SLAM map: {e}"))?;
             m.insert_map("slam.map", &score);
+            if let Some(p) = &self.paths {
+                m.insert(
+                    "slam.map.people_pollution",
+                    p.grid_share(map, &world).unwrap_or(0.0),
+                );
+            }
         }
         Ok(m)
     }

@@ -17,6 +17,7 @@ use crate::mapping::registration::{
 };
 use crate::perception::features::{Detector, grey};
 use crate::perception::floor::{FloorConfig, Level, level, optical_to_body};
+use crate::tracking::exclusion::Exclusion;
 use futago_msgs::Pose2;
 use futago_msgs::camera::RgbdFrame;
 use rand::SeedableRng;
@@ -46,6 +47,9 @@ pub struct RgbdMapConfig {
     /// keyframes, and the first is the run's map.
     pub methods: Vec<Method>,
     pub registration: RegistrationConfig,
+    /// Put keyframes off while a tracked person is in view (seed 000 §5.4 pauses its data
+    /// collection for people), taking the next frame without one.
+    pub pause_for_people: bool,
 }
 
 impl Default for RgbdMapConfig {
@@ -60,6 +64,7 @@ impl Default for RgbdMapConfig {
             polygons: PolygonConfig::default(),
             methods: vec![Method::Full],
             registration: RegistrationConfig::default(),
+            pause_for_people: true,
         }
     }
 }
@@ -122,6 +127,8 @@ pub struct RgbdMapCounts {
     pub points: u64,
     /// Image features with valid depth, over all keyframes.
     pub features: u64,
+    /// Sampled points left out because they lay on a tracked person.
+    pub excluded_points: u64,
 }
 
 struct Voxel {
@@ -187,6 +194,12 @@ impl RgbdMapper {
     /// Offers a frame taken with the robot at `pose` (its 2D estimate); returns whether it
     /// became a keyframe.
     pub fn offer(&mut self, frame: &RgbdFrame, pose: &Pose2) -> bool {
+        self.offer_excluding(frame, pose, &Exclusion::default())
+    }
+
+    /// [`Self::offer`], leaving out the points (and features) that lie on the people of
+    /// `people` (cylinders in the base frame at the frame's time).
+    pub fn offer_excluding(&mut self, frame: &RgbdFrame, pose: &Pose2, people: &Exclusion) -> bool {
         self.counts.frames += 1;
         if !self.wants(pose) {
             return false;
@@ -230,6 +243,27 @@ impl RgbdMapper {
             self.counts.no_floor += 1;
             return false;
         };
+        let mount = Pose2::new(self.mount.x, self.mount.y, self.mount.yaw);
+        let to_base = |p: [f64; 3]| place(&mount, lv.apply(p));
+        // People are cut out: their cells lose their point (so the points beside them are on
+        // the data's boundary, as beside any hole).
+        let mut pts: Vec<([f64; 3], [u8; 3])> = pts.iter().map(|p| (to_base(p.0), p.1)).collect();
+        if !people.is_empty() {
+            let mut kept = Vec::with_capacity(pts.len());
+            let mut index = vec![None; pts.len()];
+            for (i, p) in pts.iter().enumerate() {
+                if people.contains([p.0[0], p.0[1]]) {
+                    self.counts.excluded_points += 1;
+                } else {
+                    index[i] = Some(kept.len());
+                    kept.push(*p);
+                }
+            }
+            for g in grid.iter_mut() {
+                *g = g.and_then(|i| index[i]);
+            }
+            pts = kept;
+        }
         // A point is on the data's boundary when a neighbouring cell has no depth.
         let mut boundary = vec![false; pts.len()];
         for r in 0..rows {
@@ -249,8 +283,6 @@ impl RgbdMapper {
                     !(has(ri - 1, ci) && has(ri + 1, ci) && has(ri, ci - 1) && has(ri, ci + 1));
             }
         }
-        let mount = Pose2::new(self.mount.x, self.mount.y, self.mount.yaw);
-        let to_base = |p: [f64; 3]| place(&mount, lv.apply(p));
         // Features: corners of the colour image with valid depth under them.
         let mut features = Vec::new();
         if let Some(rgb) = &frame.rgb {
@@ -262,8 +294,10 @@ impl RgbdMapper {
                 let dv = ((cv as f64 + 0.5) * d.height as f64 / rgb.height as f64) as u32;
                 let z = d.at(du.min(d.width - 1), dv.min(d.height - 1)) as f64;
                 if z.is_finite() && z > 0.0 && z <= cfg.max_depth {
-                    let body = optical_to_body(k.back_project(du as f64, dv as f64, z));
-                    features.push((to_base(body), desc));
+                    let base = to_base(optical_to_body(k.back_project(du as f64, dv as f64, z)));
+                    if !people.contains([base[0], base[1]]) {
+                        features.push((base, desc));
+                    }
                 }
             }
         }
@@ -274,7 +308,7 @@ impl RgbdMapper {
         self.levels.push(lv);
         self.keyframes.push(Keyframe {
             pose: *pose,
-            points: pts.iter().map(|p| to_base(p.0)).collect(),
+            points: pts.iter().map(|p| p.0).collect(),
             colours: pts.iter().map(|p| p.1).collect(),
             boundary,
             features,
@@ -351,6 +385,7 @@ impl RgbdMapper {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::tracking::exclusion::ExclusionConfig;
     use futago_msgs::Time;
     use futago_msgs::camera::{DepthImage, Intrinsics};
 
@@ -399,6 +434,34 @@ mod tests {
                 data,
             },
             depth_intrinsics: k,
+        }
+    }
+
+    #[test]
+    fn points_on_a_tracked_person_are_left_out() {
+        let cfg = RgbdMapConfig {
+            stride: 1,
+            ..Default::default()
+        };
+        let mount = CameraMount {
+            x: 0.1,
+            y: 0.0,
+            yaw: 0.0,
+        };
+        let f = frame(2.0, 0.0);
+        // The wall stands 2.1 m ahead of the base; a "person" 2.1 m ahead with a 0.5 m
+        // cylinder covers the wall's middle metre and the floor within 0.5 m of its foot.
+        let person = [2.1, 0.0];
+        let cut = Exclusion::new(&ExclusionConfig::default(), vec![person]);
+        let mut whole = RgbdMapper::new(cfg.clone(), mount, 1);
+        let mut less = RgbdMapper::new(cfg, mount, 1);
+        assert!(whole.offer(&f, &Pose2::IDENTITY));
+        assert!(less.offer_excluding(&f, &Pose2::IDENTITY, &cut));
+        let (all, kept) = (whole.counts().points, less.counts().points);
+        assert_eq!(all, kept + less.counts().excluded_points);
+        assert!(less.counts().excluded_points > 500, "{:?}", less.counts());
+        for (p, _) in &less.build(Method::Pose, None).points {
+            assert!((p[0] - person[0]).hypot(p[1] - person[1]) > 0.49, "{p:?}");
         }
     }
 

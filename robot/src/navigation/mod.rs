@@ -340,6 +340,20 @@ impl Navigator {
             self.start_backing(now, away);
         }
         if let Mode::Backing(until, away, turn_until) = self.mode {
+            let c = &self.config;
+            if now < until
+                && yielding::behind(
+                    &input.pose,
+                    input.people,
+                    c.backup_distance,
+                    c.people_clearance,
+                )
+            {
+                // Someone walked up behind: stop backing, and try the way ahead again.
+                self.mode = Mode::Blocked(now);
+                self.follower = None;
+                return DriveCommand::STOP;
+            }
             if now < until {
                 return DriveCommand::Drive {
                     velocity: -self.config.backup_speed,
@@ -411,7 +425,16 @@ impl Navigator {
             if self.blocked(scan, &mount, &input.pose) {
                 match self.mode {
                     Mode::Blocked(since) => {
-                        if (now - since).secs() >= self.config.blocked_timeout {
+                        let c = &self.config;
+                        // Not back into someone: wait on while a person is behind.
+                        if (now - since).secs() >= c.blocked_timeout
+                            && !yielding::behind(
+                                &input.pose,
+                                input.people,
+                                c.backup_distance,
+                                c.people_clearance,
+                            )
+                        {
                             self.start_backing(now, 1.0);
                         }
                     }

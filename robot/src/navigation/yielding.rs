@@ -14,7 +14,7 @@
 //! path, taking those people for no risk while they stay within 0.3 m of where they stood;
 //! where there is no such path (a person in a doorway), it waits on.
 
-use super::planner::grid_route;
+use super::planner::{START_CLEARANCE, grid_route};
 use crate::tracking::people::TrackedPerson;
 use futago_msgs::Pose2;
 use futago_msgs::grid::OccupancyGrid;
@@ -54,12 +54,25 @@ pub fn at_risk(
     })
 }
 
+/// Whether any of `people` (map frame) stands in the way of the robot at `pose` backing
+/// straight up by `distance`: behind it, within `clearance` of that stretch. The Create has no
+/// eyes behind; the tracker, which sees people walk up before they get there, is its only
+/// warning.
+pub fn behind(pose: &Pose2, people: &[TrackedPerson], distance: f64, clearance: f64) -> bool {
+    let back = pose.inverse();
+    people.iter().any(|p| {
+        let [x, y] = back.transform_point(p.position);
+        let along = x.clamp(-distance, 0.0);
+        x < 0.0 && (x - along).hypot(y) < clearance
+    })
+}
+
 /// Where people stand, this much wider than the clearance, the detour does not go, m.
 const DETOUR_MARGIN: f64 = 0.1;
 
 /// A path from `start` to `goal` on `grid` that keeps `clearance` from the grid's obstacles
-/// and passes every person further than `people_clearance` + 0.1 m from their centre; `None`
-/// when there is no such path.
+/// and passes every person further than `people_clearance` + 0.1 m from their centre (less
+/// for one the robot already stands closer to); `None` when there is no such path.
 pub fn detour(
     grid: &OccupancyGrid,
     clearance: f64,
@@ -71,12 +84,19 @@ pub fn detour(
     let mut g = grid.clone();
     // A disc of occupied cells round each person, so that the planner's clearance adds to it:
     // the disc's radius plus `clearance` is the distance kept from the person's centre.
-    let radius = (people_clearance + DETOUR_MARGIN - clearance).max(0.0);
-    let k = (radius / g.resolution).ceil() as i64;
+    let wide = (people_clearance + DETOUR_MARGIN - clearance).max(0.0);
     for p in people {
         let Some((ci, cj)) = g.cell_of(p.position[0], p.position[1]) else {
             continue;
         };
+        // The robot often stopped closer than that to someone who came near: their disc
+        // stops short of its start (by the least clearance the start may escape with, and a
+        // cell), so that the way leads off from them rather than nowhere.
+        let near = (p.position[0] - start[0]).hypot(p.position[1] - start[1])
+            - START_CLEARANCE
+            - 1.5 * g.resolution;
+        let radius = wide.min(near).max(0.0);
+        let k = (radius / g.resolution).ceil() as i64;
         for dj in -k..=k {
             for di in -k..=k {
                 let (i, j) = (ci as i64 + di, cj as i64 + dj);
@@ -172,5 +192,30 @@ mod tests {
             }
         }
         assert!(detour(&narrow, 0.3, &p, 0.8, [1.0, 2.0], [9.0, 2.0]).is_none());
+    }
+
+    #[test]
+    fn someone_behind_is_in_the_way_of_backing_up() {
+        let robot = Pose2::new(2.0, 1.0, std::f64::consts::FRAC_PI_2);
+        let at = |x: f64, y: f64| behind(&robot, &[person(x, y, 0.0, 0.0)], 0.3, 0.8);
+        // Facing +y: 0.9 m behind is within 0.3 + 0.8; 1.2 m behind is not.
+        assert!(at(2.0, 0.1));
+        assert!(!at(2.0, -0.2));
+        // Beside the robot, a little behind, 0.7 m to its right: in the way; ahead: not.
+        assert!(at(2.7, 0.9));
+        assert!(!at(2.0, 1.5));
+    }
+
+    #[test]
+    fn a_robot_stopped_close_to_a_person_still_finds_the_way_round() {
+        // 0.59 m from the person, well inside the 0.9 m the detour keeps: the way must start
+        // off from them, and never come closer than the escape's least clearance allows.
+        let p = [person(5.0, 2.0, 0.0, 0.0)];
+        let start = [4.45, 2.2];
+        let path = detour(&room(), 0.3, &p, 0.8, start, [9.0, 2.0]).expect("a way round");
+        assert_eq!(*path.last().unwrap(), [9.0, 2.0]);
+        for q in &path {
+            assert!((q[0] - 5.0).hypot(q[1] - 2.0) > 0.5, "{q:?} in {path:?}");
+        }
     }
 }

@@ -1,14 +1,17 @@
-//! Following what moves: optimal assignment ([`assignment`]) and the people tracker
-//! ([`people`]), which turns leg detections into tracks of people. [`PeopleConfig`] gathers
-//! the settings of the whole people pipeline, detectors included.
+//! Following what moves: optimal assignment ([`assignment`]), the people tracker
+//! ([`people`]), which turns leg detections into tracks of people, and the cutting of tracked
+//! people out of scans and keyframes ([`exclusion`]). [`PeopleConfig`] gathers the settings
+//! of the whole people pipeline, detectors included.
 
 pub mod assignment;
+pub mod exclusion;
 pub mod laser_people;
 pub mod people;
 
 use crate::config::ConfigError;
 use crate::perception::legs::LegConfig;
 use crate::perception::motion::MotionConfig;
+use exclusion::ExclusionConfig;
 use people::TrackerConfig;
 use serde::{Deserialize, Serialize};
 
@@ -22,6 +25,9 @@ pub struct PeopleConfig {
     pub motion: MotionConfig,
     /// The tracker (`people.tracker`).
     pub tracker: TrackerConfig,
+    /// Cutting tracked people out of the scans and keyframes the maps and the localiser
+    /// take (`people.exclusion`).
+    pub exclusion: ExclusionConfig,
 }
 
 impl PeopleConfig {
@@ -29,6 +35,7 @@ impl PeopleConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.legs.validate("people.legs")?;
         self.motion.validate("people.motion")?;
-        self.tracker.validate("people.tracker")
+        self.tracker.validate("people.tracker")?;
+        self.exclusion.validate("people.exclusion")
     }
 }
