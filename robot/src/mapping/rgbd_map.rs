@@ -437,8 +437,8 @@ mod tests {
         }
     }
 
-    #[test]
-    fn points_on_a_tracked_person_are_left_out() {
+    /// A mapper's settings that use every pixel, and a camera 0.1 m ahead of the base.
+    fn every_pixel() -> (RgbdMapConfig, CameraMount) {
         let cfg = RgbdMapConfig {
             stride: 1,
             ..Default::default()
@@ -448,6 +448,12 @@ mod tests {
             y: 0.0,
             yaw: 0.0,
         };
+        (cfg, mount)
+    }
+
+    #[test]
+    fn points_on_a_tracked_person_are_left_out() {
+        let (cfg, mount) = every_pixel();
         let f = frame(2.0, 0.0);
         // The wall stands 2.1 m ahead of the base; a "person" 2.1 m ahead with a 0.5 m
         // cylinder covers the wall's middle metre and the floor within 0.5 m of its foot.
@@ -467,15 +473,7 @@ mod tests {
 
     #[test]
     fn points_land_on_the_floor_and_the_wall_in_the_world() {
-        let cfg = RgbdMapConfig {
-            stride: 1,
-            ..Default::default()
-        };
-        let mount = CameraMount {
-            x: 0.1,
-            y: 0.0,
-            yaw: 0.0,
-        };
+        let (cfg, mount) = every_pixel();
         let mut m = RgbdMapper::new(cfg, mount, 1);
         // The robot at (2, 1) facing +y: the camera (0.1 m ahead) sees a wall 2 m ahead, at
         // world y = 1 + 0.1 + 2 = 3.1; a 3° nose-down pitch is levelled away.
