@@ -131,3 +131,20 @@ pub struct RgbdFrame {
     pub depth: DepthImage,
     pub depth_intrinsics: Intrinsics,
 }
+
+impl RgbdFrame {
+    /// A frame without colour: row-major depths `data` (m) of a `k.width × k.height` image.
+    pub fn depth_only(stamp: Time, k: Intrinsics, data: Vec<f32>) -> RgbdFrame {
+        RgbdFrame {
+            stamp,
+            rgb: None,
+            rgb_intrinsics: k,
+            depth: DepthImage {
+                width: k.width,
+                height: k.height,
+                data,
+            },
+            depth_intrinsics: k,
+        }
+    }
+}

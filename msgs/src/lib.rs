@@ -230,6 +230,23 @@ impl Pose3 {
         }
     }
 
+    /// A point of this pose's frame in the parent frame: rotated by the (unit) quaternion,
+    /// then translated (`v + 2w(q×v) + 2q×(q×v)`, `q` the vector part).
+    pub fn transform_point(&self, p: [f64; 3]) -> [f64; 3] {
+        let [x, y, z, w] = self.rotation;
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ]
+        };
+        let q = [x, y, z];
+        let t = cross(q, p).map(|c| 2.0 * c);
+        let u = cross(q, t);
+        std::array::from_fn(|i| p[i] + w * t[i] + u[i] + self.translation[i])
+    }
+
     /// Projects onto the ground plane: x, y and the yaw (rotation about z) of the orientation.
     pub fn to_pose2(&self) -> Pose2 {
         let [x, y, z, w] = self.rotation;
@@ -380,5 +397,33 @@ mod tests {
             rotation: [0.0, 0.0, h, h],
         };
         assert!((q.to_pose2().theta - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_3d_pose_moves_points_as_its_rotation_and_translation_say() {
+        let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
+        // A planar pose lifted: as the 2D transform, at its height.
+        let p = Pose2::new(1.0, 2.0, 0.5);
+        let [x, y] = p.transform_point([0.3, -0.4]);
+        let q = Pose3::from_pose2(&p, 0.25).transform_point([0.3, -0.4, 1.0]);
+        assert!(close(q, [x, y, 1.25]), "{q:?}");
+        // The optical frame (x right, y down, z forward) of a level camera, by hand: a
+        // rotation of 120° about (1, −1, 1)/√3 turns z onto body x, x onto −y, y onto −z.
+        let optical = Pose3 {
+            translation: [0.0, 0.0, 0.4],
+            rotation: [0.5, -0.5, 0.5, -0.5],
+        };
+        assert!(close(
+            optical.transform_point([0.0, 0.0, 2.0]),
+            [2.0, 0.0, 0.4]
+        ));
+        assert!(close(
+            optical.transform_point([1.0, 0.0, 0.0]),
+            [0.0, -1.0, 0.4]
+        ));
+        assert!(close(
+            optical.transform_point([0.0, 1.0, 0.0]),
+            [0.0, 0.0, -0.6]
+        ));
     }
 }

@@ -177,6 +177,18 @@ pub fn world_map(s: &Scenario, resolution: f64, height: f64) -> Result<Occupancy
     .map_err(|e| anyhow::anyhow!("{e}"))
 }
 
+/// A camera's place and heading on the robot's base, as a 2D pose: x, y and the yaw of its
+/// mount (its height, pitch and roll the stack takes from the floor in each frame).
+pub fn camera_on_base(cam: &futago_sim::kinect::KinectSpec) -> Pose2 {
+    let m = cam.mount;
+    let forward = m.rotation * glam::Vec3::X;
+    Pose2::new(
+        m.translation.x as f64,
+        m.translation.y as f64,
+        (forward.y as f64).atan2(forward.x as f64),
+    )
+}
+
 /// The laser named `name` (resolved when the scenario was loaded: named, or the only one).
 pub fn laser<'a>(
     s: &'a Scenario,

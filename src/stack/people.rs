@@ -30,15 +30,25 @@
 //! the operating point and AP against range in the summary. The temporal difference is scored
 //! on the scans it kept, each against the people of its own time.
 //!
+//! People in depth images, when the scenario has a laser and a camera (the first, not on a
+//! joint) and `people.depth.enabled`: the stack's depth detector
+//! (`futago_robot::perception::depth_people`) takes a frame every 1/`people.depth.rate`
+//! seconds and hands its people to the laser's tracker (in the map's free space, they confirm
+//! a track by shape). Its detections are scored by AP like the laser's (`people.depth.ap_0.5`,
+//! `people.depth.ap_0.3`) against the true people the frame sees: those whose body (within
+//! 0.3 m of their centre, between 0.1 m and 2.3 m up) fills at least `people.depth.min_voxels`
+//! of the detector's voxels among the frame's pixels, placed by the camera's true pose.
+//!
 //! Only scenarios with people (`[[person]]` or `[[flow]]`) run this node.
 
-use super::{Bus, Node, Report, Streams, Truth};
+use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::detection::{Detection, DetectionFrame, by_range, score};
 use crate::ground_truth::mot::{Frame, clear_mot};
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Pose2, Time};
+use futago_robot::perception::depth_people::{DepthPeople, DepthPeopleConfig};
 use futago_robot::tracking::laser_people::{Detections, LaserPeople};
 use futago_robot::tracking::people::{Candidate, TrackedPerson};
 use serde_json::json;
@@ -89,7 +99,21 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
             .into_iter()
             .flatten(),
     )
+    .chain(
+        depth_camera(s)
+            .then(|| MATCH_RADII.map(|r| format!("people.depth.ap_{r}")))
+            .into_iter()
+            .flatten(),
+    )
     .collect()
+}
+
+/// Whether the scenario's people are looked for in depth images: a laser to track with, a
+/// camera off any joint, and the detector enabled.
+fn depth_camera(s: &ScenarioSpec) -> bool {
+    !s.lidar.is_empty()
+        && s.camera.first().is_some_and(|c| c.joint.is_none())
+        && s.people.depth.enabled
 }
 
 /// The laser's people detectors, in the order [`ScanFrame::found`] holds them (see
@@ -129,6 +153,23 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
             map_seen: None,
             frames: Vec::new(),
             scans: Vec::new(),
+            depth: match s.cameras.first() {
+                Some(cam) if depth_camera(&s.spec) => Some(DepthTracking {
+                    camera: cam.name.clone(),
+                    detector: DepthPeople::new(
+                        s.spec.people.depth,
+                        super::camera_on_base(cam),
+                        s.spec.seed,
+                    ),
+                    config: s.spec.people.depth,
+                    next: Time::ZERO,
+                    frames: Vec::new(),
+                    no_floor: 0,
+                    taken: 0,
+                    seconds: 0.0,
+                }),
+                _ => None,
+            },
         }),
         None => None,
     };
@@ -163,6 +204,70 @@ struct Tracking {
     map_seen: Option<Time>,
     frames: Vec<Frame>,
     scans: Vec<ScanFrame>,
+    /// People in depth images, feeding the same tracker.
+    depth: Option<DepthTracking>,
+}
+
+/// The depth-image person detector on one camera, and its scored frames.
+struct DepthTracking {
+    camera: String,
+    detector: DepthPeople,
+    config: DepthPeopleConfig,
+    /// When the next frame is due.
+    next: Time,
+    /// Each frame's true people and detections, in the base's true and estimated frames.
+    frames: Vec<DetectionFrame>,
+    /// Frames without a floor to level by.
+    no_floor: u64,
+    /// Detections the tracker took.
+    taken: u64,
+    /// Wall time spent detecting, s (a cost, not a result).
+    seconds: f64,
+}
+
+/// A person's body reaches this far from their centre, m (the torso's half-width, 0.2 m,
+/// and a stride's leg).
+const BODY_REACH: f64 = 0.3;
+/// The floor's band and a person's greatest height for the depth truth, m (the detector's
+/// defaults: a visible body is what it could cluster).
+const BODY_FROM: f64 = 0.1;
+const BODY_TO: f64 = 2.3;
+
+impl DepthTracking {
+    /// The true people `frame` sees, in the true base frame (see the module documentation).
+    fn visible(&self, frame: &CameraFrame, bus: &Bus) -> Vec<[f64; 2]> {
+        let (k, d) = (&frame.frame.depth_intrinsics, &frame.frame.depth);
+        let voxel = self.config.voxel;
+        let mut cells: Vec<std::collections::BTreeSet<[i64; 3]>> =
+            vec![Default::default(); bus.people.len()];
+        let step = self.config.stride as usize;
+        for v in (0..d.height).step_by(step) {
+            for u in (0..d.width).step_by(step) {
+                let z = d.at(u, v) as f64;
+                if !(z.is_finite() && z > 0.0 && z <= self.config.max_depth) {
+                    continue;
+                }
+                let w = frame
+                    .optical
+                    .transform_point(k.back_project(u as f64, v as f64, z));
+                if !(BODY_FROM..=BODY_TO).contains(&w[2]) {
+                    continue;
+                }
+                for (p, set) in bus.people.iter().zip(cells.iter_mut()) {
+                    if (w[0] - p.pose.x).hypot(w[1] - p.pose.y) <= BODY_REACH {
+                        set.insert(w.map(|x| (x / voxel).floor() as i64));
+                    }
+                }
+            }
+        }
+        let to_base = bus.truth.inverse();
+        bus.people
+            .iter()
+            .zip(&cells)
+            .filter(|(_, set)| set.len() >= self.config.min_voxels)
+            .map(|(p, _)| to_base.transform_point([p.pose.x, p.pose.y]))
+            .collect()
+    }
 }
 
 /// One scan's detections and the people it sees, in the laser's frame.
@@ -223,6 +328,9 @@ impl Node for PeopleNode {
         let mut consumes = vec!["truth".to_string()];
         if let Some(t) = &self.tracking {
             consumes.push(format!("scan/{}", t.laser));
+            if let Some(d) = &t.depth {
+                consumes.push(format!("camera/{}", d.camera));
+            }
             if let Some(src) = t.source {
                 consumes.push(format!("pose/{src}"));
                 consumes.push(format!("map/{src}"));
@@ -237,6 +345,57 @@ impl Node for PeopleNode {
             consumes,
             ..Streams::default()
         }
+    }
+
+    fn wants_frame(&self, camera: &str, bus: &Bus) -> bool {
+        self.tracking
+            .as_ref()
+            .and_then(|t| t.depth.as_ref())
+            .is_some_and(|d| d.camera == camera && bus.now >= d.next)
+    }
+
+    fn on_frame(
+        &mut self,
+        camera: &str,
+        frame: &CameraFrame,
+        _truth: &mut dyn FrameTruth,
+        bus: &mut Bus,
+    ) -> Result<()> {
+        let Some(t) = &mut self.tracking else {
+            return Ok(());
+        };
+        let in_map = t.source.and_then(|src| bus.pose(src));
+        let Some(d) = &mut t.depth else {
+            return Ok(());
+        };
+        if d.camera != camera {
+            return Ok(());
+        }
+        let period = futago_msgs::Duration::from_secs(1.0 / d.config.rate);
+        while d.next <= bus.now {
+            d.next = d.next + period;
+        }
+        let truth = d.visible(frame, bus);
+        let t0 = std::time::Instant::now();
+        let found = match d.detector.detect(&frame.frame) {
+            Some((found, _)) => found,
+            None => {
+                d.no_floor += 1;
+                Vec::new()
+            }
+        };
+        d.seconds += t0.elapsed().as_secs_f64();
+        d.taken += t.people.update_depth(
+            frame.frame.stamp,
+            &found.iter().map(|q| q.position).collect::<Vec<_>>(),
+            in_map,
+            bus.odometry,
+        ) as u64;
+        d.frames.push(DetectionFrame {
+            truth,
+            detections: found.iter().map(|q| (q.position, q.confidence)).collect(),
+        });
+        Ok(())
     }
 
     fn on_scan(&mut self, _laser: &str, scan: &LaserScan, bus: &mut Bus) -> Result<()> {
@@ -422,27 +581,35 @@ impl Node for PeopleNode {
             entry["tracking"] = tracking;
             let mut detection = serde_json::Map::new();
             for (k, name) in DETECTORS.iter().enumerate() {
-                let Some(frames) = t.detection_frames(k) else {
-                    continue;
-                };
-                let radii: serde_json::Map<String, serde_json::Value> = MATCH_RADII
-                    .iter()
-                    .map(|&r| (format!("{r}"), json!(score(&frames, r))))
-                    .collect();
-                let ranges: Vec<serde_json::Value> = by_range(&frames, MATCH_RADII[0])
-                    .into_iter()
-                    .map(|(lo, hi, s)| json!({"from_m": lo, "to_m": hi, "score": s}))
-                    .collect();
-                detection.insert(
-                    name.to_string(),
-                    json!({"scans": frames.len(), "by_radius_m": radii, "by_range_at_0.5m": ranges}),
-                );
+                if let Some(frames) = t.detection_frames(k) {
+                    let mut e = detection_entry(&frames);
+                    e["scans"] = json!(frames.len());
+                    detection.insert(name.to_string(), e);
+                }
+            }
+            if let Some(d) = &t.depth {
+                let mut e = detection_entry(&d.frames);
+                e["frames"] = json!(d.frames.len());
+                e["camera"] = json!(d.camera);
+                e["frames_without_floor"] = json!(d.no_floor);
+                e["taken_by_tracker"] = json!(d.taken);
+                detection.insert("depth".to_string(), e);
             }
             entry["detection"] = serde_json::Value::Object(detection);
+        }
+        let mut performance = serde_json::Map::new();
+        if let Some(d) = self.tracking.as_ref().and_then(|t| t.depth.as_ref()) {
+            let n = d.frames.len().max(1) as f64;
+            performance.insert("depth_frames".into(), json!(d.frames.len()));
+            performance.insert(
+                "depth_detect_ms_per_frame".into(),
+                json!(1e3 * d.seconds / n),
+            );
         }
         Ok(Report {
             summary: vec![("people".into(), entry)],
             files,
+            performance,
             ..Report::default()
         })
     }
@@ -463,16 +630,12 @@ impl Node for PeopleNode {
             m.insert("people.false_positives", mot.false_positives as f64);
             m.insert("people.misses", mot.misses as f64);
             for (k, name) in DETECTORS.iter().enumerate() {
-                let Some(frames) = t.detection_frames(k) else {
-                    continue;
-                };
-                for r in MATCH_RADII {
-                    let s = score(&frames, r);
-                    // AP is undefined where nobody was seen: 1 without detections, else 0
-                    // (every detection was false).
-                    let ap = s.ap.unwrap_or(if s.detections == 0 { 1.0 } else { 0.0 });
-                    m.insert(format!("people.{name}.ap_{r}"), ap);
+                if let Some(frames) = t.detection_frames(k) {
+                    insert_ap(&mut m, name, &frames);
                 }
+            }
+            if let Some(d) = &t.depth {
+                insert_ap(&mut m, "depth", &d.frames);
             }
         }
         m.insert("people.collisions", self.collisions as f64);
@@ -481,6 +644,29 @@ impl Node for PeopleNode {
         m.insert("people.time_within_0.45m_s", self.within[0]);
         m.insert("people.time_within_1.2m_s", self.within[1]);
         Ok(m)
+    }
+}
+
+/// A detector's summary: its scores at each match radius and its AP against range.
+fn detection_entry(frames: &[DetectionFrame]) -> serde_json::Value {
+    let radii: serde_json::Map<String, serde_json::Value> = MATCH_RADII
+        .iter()
+        .map(|&r| (format!("{r}"), json!(score(frames, r))))
+        .collect();
+    let ranges: Vec<serde_json::Value> = by_range(frames, MATCH_RADII[0])
+        .into_iter()
+        .map(|(lo, hi, s)| json!({"from_m": lo, "to_m": hi, "score": s}))
+        .collect();
+    json!({"by_radius_m": radii, "by_range_at_0.5m": ranges})
+}
+
+/// `people.NAME.ap_R` for each match radius. AP is undefined where nobody was seen: 1
+/// without detections, else 0 (every detection was false).
+fn insert_ap(m: &mut Metrics, name: &str, frames: &[DetectionFrame]) {
+    for r in MATCH_RADII {
+        let s = score(frames, r);
+        let ap = s.ap.unwrap_or(if s.detections == 0 { 1.0 } else { 0.0 });
+        m.insert(format!("people.{name}.ap_{r}"), ap);
     }
 }
 

@@ -87,9 +87,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<RgbdMapNode>> {
         .with_context(|| format!("rgbd_map: no camera is named `{}`", m.camera))?;
     // The camera's place on the robot: x, y and yaw of its mount (height, pitch and roll come
     // from the floor in each frame).
-    let mount = cam.mount;
-    let forward = mount.rotation * glam::Vec3::X;
-    let yaw = (forward.y as f64).atan2(forward.x as f64);
+    let mount = super::camera_on_base(cam);
     let slice_z = match &m.laser {
         Some(n) => s
             .lidars
@@ -113,9 +111,9 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<RgbdMapNode>> {
         mapper: RgbdMapper::new(
             m.config.clone(),
             CameraMount {
-                x: mount.translation.x as f64,
-                y: mount.translation.y as f64,
-                yaw,
+                x: mount.x,
+                y: mount.y,
+                yaw: mount.theta,
             },
             seed,
         ),
@@ -137,7 +135,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<RgbdMapNode>> {
         exclusion: s.spec.people.exclusion,
         pause_for_people: m.config.pause_for_people,
         view: (
-            Pose2::new(mount.translation.x as f64, mount.translation.y as f64, yaw),
+            mount,
             (cam.depth.width as f64 / (2.0 * cam.depth.fx)).atan(),
             m.config.max_depth.min(cam.range_max),
         ),
@@ -231,22 +229,13 @@ impl RgbdMapNode {
         optical: &Pose3,
         people: &[[f64; 2]],
     ) {
-        let [qx, qy, qz, qw] = optical.rotation;
-        let q =
-            nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, qx, qy, qz));
-        let rotate = |v: [f64; 3]| -> [f64; 3] { (q * nalgebra::Vector3::from(v)).into() };
         for v in (0..depth.height).step_by(self.stride as usize) {
             for u in (0..depth.width).step_by(self.stride as usize) {
                 let z = depth.at(u, v) as f64;
                 if !(z.is_finite() && z > 0.0 && z <= self.max_depth) {
                     continue;
                 }
-                let r = rotate(k.back_project(u as f64, v as f64, z));
-                let w = [
-                    r[0] + optical.translation[0],
-                    r[1] + optical.translation[1],
-                    r[2] + optical.translation[2],
-                ];
+                let w = optical.transform_point(k.back_project(u as f64, v as f64, z));
                 let on_person = w[2] > FLOOR
                     && w[2] <= HEAD_ROOM
                     && people

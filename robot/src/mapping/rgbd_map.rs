@@ -387,7 +387,7 @@ mod tests {
     use super::*;
     use crate::tracking::exclusion::ExclusionConfig;
     use futago_msgs::Time;
-    use futago_msgs::camera::{DepthImage, Intrinsics};
+    use futago_msgs::camera::Intrinsics;
 
     /// A level camera 0.4 m up, looking along its x axis at a wall `wall` m ahead over a flat
     /// floor: the depth image rendered by hand (ray-plane intersections).
@@ -424,17 +424,7 @@ mod tests {
                 });
             }
         }
-        RgbdFrame {
-            stamp: Time::from_secs(0.0),
-            rgb: None,
-            rgb_intrinsics: k,
-            depth: DepthImage {
-                width: k.width,
-                height: k.height,
-                data,
-            },
-            depth_intrinsics: k,
-        }
+        RgbdFrame::depth_only(Time::ZERO, k, data)
     }
 
     /// A mapper's settings that use every pixel, and a camera 0.1 m ahead of the base.

@@ -12,6 +12,11 @@
 //! - `temporal`: the temporal difference ([`TemporalDifference`], on odometry poses), which
 //!   belongs to an earlier scan and comes with its time.
 //!
+//! The tracker also takes the people a depth camera finds ([`LaserPeople::update_depth`],
+//! from [`crate::perception::depth_people`]) in the same frame: with a map, those in its
+//! free space, which confirm a track by their shape alone (a person standing still is a
+//! person); without one, as any candidate.
+//!
 //! The tracker takes the fused candidates at or above the leg detector's threshold (those the
 //! legs back), in the map's frame, when there is a map and a pose in it; otherwise the leg
 //! candidates in the odometry frame. Map-difference candidates without legs were measured to
@@ -137,6 +142,38 @@ impl LaserPeople {
             .collect();
         self.tracker.update_candidates(scan.stamp, &positions);
         out
+    }
+
+    /// Takes the people a depth camera found in a frame at `stamp` (`found`, positions in the
+    /// robot base's frame, m); `in_map` is the base's pose in the map, `in_odometry` in the
+    /// odometry frame. Returns how many the tracker took (with a map, those in its free space).
+    pub fn update_depth(
+        &mut self,
+        stamp: Time,
+        found: &[[f64; 2]],
+        in_map: Option<Pose2>,
+        in_odometry: Pose2,
+    ) -> usize {
+        let c = self.config;
+        match self.map.as_ref().zip(in_map) {
+            Some((map, base)) => {
+                let free: Vec<[f64; 2]> = found
+                    .iter()
+                    .map(|q| base.transform_point(*q))
+                    .filter(|&q| map.is_free(q, c.motion.static_distance))
+                    .collect();
+                self.tracker.update_shapes(stamp, &free);
+                free.len()
+            }
+            None => {
+                let placed: Vec<[f64; 2]> = found
+                    .iter()
+                    .map(|q| in_odometry.transform_point(*q))
+                    .collect();
+                self.tracker.update_candidates(stamp, &placed);
+                placed.len()
+            }
+        }
     }
 
     /// The confirmed people, in the tracking frame (the map's with a map and a pose in it,

@@ -9,6 +9,7 @@ pub mod laser_people;
 pub mod people;
 
 use crate::config::ConfigError;
+use crate::perception::depth_people::DepthPeopleConfig;
 use crate::perception::legs::LegConfig;
 use crate::perception::motion::MotionConfig;
 use exclusion::ExclusionConfig;
@@ -23,6 +24,8 @@ pub struct PeopleConfig {
     pub legs: LegConfig,
     /// The moving-object detectors (`people.motion`).
     pub motion: MotionConfig,
+    /// The depth-image person detector (`people.depth`).
+    pub depth: DepthPeopleConfig,
     /// The tracker (`people.tracker`).
     pub tracker: TrackerConfig,
     /// Cutting tracked people out of the scans and keyframes the maps and the localiser
@@ -35,6 +38,7 @@ impl PeopleConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.legs.validate("people.legs")?;
         self.motion.validate("people.motion")?;
+        self.depth.validate("people.depth")?;
         self.tracker.validate("people.tracker")?;
         self.exclusion.validate("people.exclusion")
     }

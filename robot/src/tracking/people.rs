@@ -12,6 +12,10 @@
 //! within `confirm_window` seconds (3 s), seen in at least `confirm_hits` scans: chair and
 //! table legs never walk, and the window keeps the odometry's slow drift (a few centimetres
 //! in seconds) from walking them.
+//! A track is also a person once a shape detector (people in depth images,
+//! [`crate::perception::depth_people`]) has seen it in `confirm_shape_hits` frames
+//! ([`PeopleTracker::update_shapes`]): a body of a person's height and width standing on the
+//! floor is a person whether it walks or not, which legs alone cannot tell.
 //! A confirmed person who then stands still stays a person. A track not seen for `max_coast`
 //! seconds, or whose position spreads beyond `max_std` (0.9 m, leg_tracker's), is dropped.
 
@@ -39,6 +43,9 @@ pub struct TrackerConfig {
     pub confirm_hits: usize,
     /// The travel must happen within this long, s.
     pub confirm_window: f64,
+    /// Frames of a shape detector a track must be seen in to become a person, walking or
+    /// not.
+    pub confirm_shape_hits: usize,
     /// A track unseen this long is dropped, s.
     pub max_coast: f64,
     /// A track whose position's standard deviation exceeds this is dropped, m.
@@ -55,6 +62,7 @@ impl Default for TrackerConfig {
             confirm_distance: 0.5,
             confirm_hits: 3,
             confirm_window: 3.0,
+            confirm_shape_hits: 3,
             max_coast: 1.5,
             max_std: 0.9,
         }
@@ -77,7 +85,13 @@ impl TrackerConfig {
                 ("max_std", self.max_std, 0.01, 100.0),
             ],
         )?;
-        check_counts(prefix, &[("confirm_hits", self.confirm_hits, 1, 1000)])
+        check_counts(
+            prefix,
+            &[
+                ("confirm_hits", self.confirm_hits, 1, 1000),
+                ("confirm_shape_hits", self.confirm_shape_hits, 1, 1000),
+            ],
+        )
     }
 }
 
@@ -99,6 +113,8 @@ struct Track {
     born_at: [f64; 2],
     born_time: Time,
     hits: usize,
+    /// Frames of a shape detector it was seen in.
+    shape_hits: usize,
     confirmed: bool,
     last_seen: Time,
 }
@@ -143,6 +159,19 @@ impl PeopleTracker {
     /// Takes one scan's person candidates at `t` (legs already paired, see [`pair_legs`]), in
     /// the tracking frame, m.
     pub fn update_candidates(&mut self, t: Time, candidates: &[[f64; 2]]) {
+        self.update_with(t, candidates, false);
+    }
+
+    /// Takes one frame's people from a shape detector (people in depth images) at `t`, in
+    /// the tracking frame: as [`update_candidates`](Self::update_candidates), and a track
+    /// seen in `confirm_shape_hits` such frames is a person without walking. Only a detector
+    /// whose candidates are people by their shape, and have passed the static map's
+    /// free-space test, should confirm this way.
+    pub fn update_shapes(&mut self, t: Time, candidates: &[[f64; 2]]) {
+        self.update_with(t, candidates, true);
+    }
+
+    fn update_with(&mut self, t: Time, candidates: &[[f64; 2]], shape: bool) {
         let c = self.config;
         let dt = self.last.map_or(0.0, |l| (t - l).secs().max(0.0));
         self.last = Some(t);
@@ -166,9 +195,12 @@ impl PeopleTracker {
             let tr = &mut self.tracks[k];
             correct(tr, candidates[j], c.measurement_noise);
             tr.hits += 1;
+            tr.shape_hits += usize::from(shape);
             tr.last_seen = t;
             let moved = (tr.x[0] - tr.born_at[0]).hypot(tr.x[1] - tr.born_at[1]);
-            if tr.hits >= c.confirm_hits && moved >= c.confirm_distance {
+            if tr.hits >= c.confirm_hits && moved >= c.confirm_distance
+                || tr.shape_hits >= c.confirm_shape_hits
+            {
                 tr.confirmed = true;
             } else if !tr.confirmed && (t - tr.born_time).secs() > c.confirm_window {
                 // Too slow: the window starts again from here.
@@ -198,6 +230,7 @@ impl PeopleTracker {
                 born_at: *q,
                 born_time: t,
                 hits: 1,
+                shape_hits: usize::from(shape),
                 confirmed: false,
                 last_seen: t,
             });
@@ -352,6 +385,30 @@ mod tests {
             tr.update(t(s), &[[2.0 + 0.05 * s, 1.0]]);
         }
         assert!(tr.people().is_empty(), "{:?}", tr.people());
+        assert_eq!(tr.tracks(), 1);
+    }
+
+    #[test]
+    fn a_standing_person_the_depth_detector_sees_is_confirmed_by_shape() {
+        // Someone stands at (2, 1): their legs are seen at 10 Hz, which never confirms them.
+        let mut tr = PeopleTracker::new(TrackerConfig::default());
+        for k in 0..30 {
+            tr.update(t(0.1 * k as f64), &[[2.0, 1.1], [2.0, 0.9]]);
+        }
+        assert!(tr.people().is_empty());
+        // A depth frame at 5 Hz sees a body there: after the third, they are a person.
+        let mut confirmed_at = None;
+        for k in 30..50 {
+            let s = 0.1 * k as f64;
+            tr.update(t(s), &[[2.0, 1.1], [2.0, 0.9]]);
+            if k % 2 == 0 {
+                tr.update_shapes(t(s), &[[2.02, 1.0]]);
+            }
+            if confirmed_at.is_none() && !tr.people().is_empty() {
+                confirmed_at = Some(k);
+            }
+        }
+        assert_eq!(confirmed_at, Some(34));
         assert_eq!(tr.tracks(), 1);
     }
 
