@@ -277,7 +277,8 @@ fn grid_image(grid: &OccupancyGrid, scale: u32) -> image::RgbImage {
     img
 }
 
-fn png(img: image::RgbImage) -> Vec<u8> {
+/// Encodes an image as PNG.
+pub fn png(img: image::RgbImage) -> Vec<u8> {
     let mut out = Vec::new();
     image::DynamicImage::ImageRgb8(img)
         .write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)

@@ -13,7 +13,8 @@ use futago_robot::localization::mcl::MclConfig;
 use futago_robot::mapping::rgbd_map::RgbdMapConfig;
 use futago_robot::mapping::slam::SlamConfig;
 use futago_robot::navigation::NavigationConfig;
-use futago_robot::navigation::{ExploreConfig, NavigateConfig};
+use futago_robot::navigation::coverage::CoverageConfig;
+use futago_robot::navigation::{CoverConfig, ExploreConfig, NavigateConfig};
 use futago_robot::tracking::PeopleConfig;
 use futago_sim::agent::AgentConfig;
 use futago_sim::config::{SpecError, check_name, check_range, load_toml};
@@ -80,9 +81,12 @@ pub struct ScenarioSpec {
     /// A 3D map from a camera's RGB-D keyframes, placed by a 2D pose and the floor; typed by
     /// [`rgbd_map_config`].
     pub rgbd_map: Option<toml::Table>,
-    /// Navigation parameters, for the `navigate` and `explore` controllers.
+    /// Navigation parameters, for the `navigate`, `explore` and `coverage` controllers.
     #[serde(default)]
     pub navigation: NavigationConfig,
+    /// Coverage planning parameters, for the `coverage` controller.
+    #[serde(default)]
+    pub coverage: CoverageConfig,
     /// Things that happen to the robot at set times.
     #[serde(default)]
     pub event: Vec<EventSpec>,
@@ -386,16 +390,28 @@ pub enum ControllerConfig {
     Navigate(NavigateConfig),
     /// Explore an unknown world with SLAM ([`futago_robot::navigation`]).
     Explore(ExploreConfig),
+    /// Drive a coverage route planned on the known map
+    /// ([`futago_robot::navigation::coverage`], parameters in `[coverage]`).
+    Coverage(CoverConfig),
 }
 
 impl ControllerConfig {
     /// The `type` names, in declaration order.
-    pub const TYPES: [&'static str; 5] = ["idle", "segments", "waypoints", "navigate", "explore"];
+    pub const TYPES: [&'static str; 6] = [
+        "idle",
+        "segments",
+        "waypoints",
+        "navigate",
+        "explore",
+        "coverage",
+    ];
 
     /// Checks values a controller cannot run with; returns `(key, expectation)` on error.
     pub fn validate(&self) -> Result<(), (String, String)> {
         match self {
-            ControllerConfig::Idle | ControllerConfig::Explore(_) => Ok(()),
+            ControllerConfig::Idle
+            | ControllerConfig::Explore(_)
+            | ControllerConfig::Coverage(_) => Ok(()),
             ControllerConfig::Segments(s) => s.validate(),
             ControllerConfig::Waypoints(w) => w.validate(),
             ControllerConfig::Navigate(n) => n.validate(),
@@ -408,7 +424,9 @@ impl ControllerConfig {
             ControllerConfig::Idle => Some(Script::Idle),
             ControllerConfig::Segments(s) => Some(Script::Segments(s.clone())),
             ControllerConfig::Waypoints(w) => Some(Script::Waypoints(w.clone())),
-            ControllerConfig::Navigate(_) | ControllerConfig::Explore(_) => None,
+            ControllerConfig::Navigate(_)
+            | ControllerConfig::Explore(_)
+            | ControllerConfig::Coverage(_) => None,
         }
     }
 }
@@ -463,6 +481,7 @@ pub fn controller_config(path: &Path, table: &toml::Table) -> Result<ControllerC
         "waypoints" => Ok(ControllerConfig::Waypoints(typed(path, rest)?)),
         "navigate" => Ok(ControllerConfig::Navigate(typed(path, rest)?)),
         "explore" => Ok(ControllerConfig::Explore(typed(path, rest)?)),
+        "coverage" => Ok(ControllerConfig::Coverage(typed(path, rest)?)),
         other => Err(SpecError::new(
             path,
             "controller.type",
@@ -532,6 +551,7 @@ impl ControllerConfig {
             ControllerConfig::Waypoints(c) => toml::Table::try_from(c),
             ControllerConfig::Navigate(c) => toml::Table::try_from(c),
             ControllerConfig::Explore(c) => toml::Table::try_from(c),
+            ControllerConfig::Coverage(c) => toml::Table::try_from(c),
         };
         let mut t = typed.unwrap_or_default();
         let names = ControllerConfig::TYPES;
@@ -541,6 +561,7 @@ impl ControllerConfig {
             ControllerConfig::Waypoints(_) => names[2],
             ControllerConfig::Navigate(_) => names[3],
             ControllerConfig::Explore(_) => names[4],
+            ControllerConfig::Coverage(_) => names[5],
         };
         t.insert("type".into(), toml::Value::String(ty.into()));
         t
@@ -862,6 +883,9 @@ impl Scenario {
         spec.navigation
             .validate()
             .map_err(|(k, m)| SpecError::new(path, k, m))?;
+        spec.coverage
+            .validate()
+            .map_err(|(k, m)| SpecError::new(path, k, m))?;
         spec.people
             .validate()
             .map_err(|(k, m)| SpecError::new(path, k, m))?;
@@ -995,7 +1019,9 @@ impl Scenario {
         let controller = controller_config(path, &controller_table)?;
         let navigates = matches!(
             controller,
-            ControllerConfig::Navigate(_) | ControllerConfig::Explore(_)
+            ControllerConfig::Navigate(_)
+                | ControllerConfig::Explore(_)
+                | ControllerConfig::Coverage(_)
         );
         let driver_laser = match (&controller_laser, navigates) {
             (Some(_), false) => {

@@ -10,6 +10,9 @@ use futago_msgs::{BumpsAndDrops, DriveCommand, Duration, Pose2, Time};
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 
+/// A published path: points in the map frame, m.
+type Path = Arc<Vec<[f64; 2]>>;
+
 /// Odometry poses kept for interpolation at scan stamps.
 const HISTORY: usize = 256;
 
@@ -44,7 +47,10 @@ pub struct Bus {
     /// Angles (rad) asked of `command` joints at the last control tick (`joint/NAME`), until
     /// the loop takes them.
     pub joint_commands: Vec<(String, f64)>,
+    /// When the driver last finished driving a route (`navigation/route_done`).
+    pub route_done: Option<Time>,
     history: VecDeque<(Time, Pose2)>,
+    paths: BTreeMap<String, (Time, Path)>,
     estimates: BTreeMap<String, Option<(Pose2, Pose2)>>,
     maps: BTreeMap<String, (Time, Arc<OccupancyGrid>)>,
     subscriptions: BTreeMap<String, Option<Duration>>,
@@ -73,7 +79,9 @@ impl Bus {
             people_tracked_at: (Time::ZERO, start),
             joints: Vec::new(),
             joint_commands: Vec::new(),
+            route_done: None,
             history: VecDeque::from([(Time::ZERO, start)]),
+            paths: BTreeMap::new(),
             estimates: estimates.into_iter().map(|t| (t, None)).collect(),
             maps: BTreeMap::new(),
             subscriptions: subscriptions.into_iter().collect(),
@@ -152,6 +160,17 @@ impl Bus {
     pub fn publish_map(&mut self, topic: &str, map: OccupancyGrid) {
         self.maps
             .insert(topic.to_string(), (self.now, Arc::new(map)));
+    }
+
+    /// Publishes a path (a route to drive, map frame) on `path/TOPIC`, stamped now.
+    pub fn publish_path(&mut self, topic: &str, points: Vec<[f64; 2]>) {
+        self.paths
+            .insert(topic.to_string(), (self.now, Arc::new(points)));
+    }
+
+    /// The latest path on `path/TOPIC` and its stamp.
+    pub fn path(&self, topic: &str) -> Option<(Time, &Path)> {
+        self.paths.get(topic).map(|(t, p)| (*t, p))
     }
 
     /// The latest map on `map/TOPIC` and its stamp.

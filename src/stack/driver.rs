@@ -42,18 +42,25 @@ pub struct DriverNode {
     localizes: bool,
     /// How many goals a navigator was given (none for other drivers and for exploration).
     goals: Option<usize>,
+    /// A route driver (`coverage`): the stamp of the last route taken from `path/coverage`,
+    /// and whether it has been driven to its end.
+    route: Option<(Option<Time>, bool)>,
+}
+
+/// The height of the band of the world's map that goal and route navigation plan on: the
+/// navigator's laser's (0.2 m without one).
+pub fn navigation_height(s: &Scenario) -> f64 {
+    s.driver_laser
+        .as_ref()
+        .and_then(|n| s.lidars.iter().find(|(c, _)| &c.name == n))
+        .map_or(0.2, |(c, _)| c.xyz[2])
 }
 
 impl DriverNode {
     pub fn new(s: &Scenario) -> Result<DriverNode> {
         let spec = &s.spec;
         let navigation_map = || {
-            let height = s
-                .driver_laser
-                .as_ref()
-                .and_then(|n| s.lidars.iter().find(|(c, _)| &c.name == n))
-                .map_or(0.2, |(c, _)| c.xyz[2]);
-            super::world_map(s, spec.navigation.map_resolution, height)
+            super::world_map(s, spec.navigation.map_resolution, navigation_height(s))
                 .context("navigation.map_resolution")
         };
         let driver = match &s.controller {
@@ -64,6 +71,17 @@ impl DriverNode {
                     Some(navigation_map()?),
                 )),
                 pose_source: Some(n.pose_source),
+                odometry: OdometryIntegrator::new(s.start),
+                last: None,
+            },
+            ControllerConfig::Coverage(c) => Driver::Navigator {
+                // The route comes on `path/coverage`.
+                nav: Box::new(Navigator::new(
+                    spec.navigation,
+                    Task::Route(Vec::new()),
+                    Some(navigation_map()?),
+                )),
+                pose_source: Some(c.pose_source),
                 odometry: OdometryIntegrator::new(s.start),
                 last: None,
             },
@@ -103,10 +121,11 @@ impl DriverNode {
             goals: match &s.controller {
                 ControllerConfig::Navigate(n) => match n.task() {
                     Task::Goals(g) => Some(g.len()),
-                    Task::Explore => None,
+                    Task::Explore | Task::Route(_) => None,
                 },
                 _ => None,
             },
+            route: matches!(s.controller, ControllerConfig::Coverage(_)).then_some((None, false)),
         })
     }
 }
@@ -121,6 +140,9 @@ impl Node for DriverNode {
         consumes.extend(self.laser.iter().map(|(n, _)| format!("scan/{n}")));
         if matches!(self.driver, Driver::Navigator { .. }) {
             consumes.push("people/tracked".into());
+        }
+        if self.route.is_some() {
+            consumes.push("path/coverage".into());
         }
         let mut periods = Vec::new();
         match &self.driver {
@@ -177,6 +199,15 @@ impl Node for DriverNode {
                 for o in input.odometry {
                     odometry.integrate(o);
                 }
+                // A new route to drive.
+                if let Some((seen, done)) = &mut self.route
+                    && let Some((t, points)) = bus.path("coverage")
+                    && seen.is_none_or(|s| t > s)
+                {
+                    *seen = Some(t);
+                    *done = false;
+                    nav.set_route(points.to_vec());
+                }
                 let pose = match pose_source {
                     Some(PoseSource::GroundTruth) => input.ground_truth,
                     Some(PoseSource::Localization) => input.localization,
@@ -224,6 +255,13 @@ impl Node for DriverNode {
         };
         self.pending.clear();
         bus.command = cmd;
+        if let (Some((_, done)), Driver::Navigator { nav, .. }) = (&mut self.route, &self.driver)
+            && !*done
+            && nav.finished()
+        {
+            *done = true;
+            bus.route_done = Some(bus.now);
+        }
         if let Driver::Scripted(c) = &self.driver
             && c.laps_completed() > self.laps.len()
         {

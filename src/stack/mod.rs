@@ -24,6 +24,7 @@
 //! does not change.
 
 pub mod bus;
+pub mod coverage;
 pub mod driver;
 pub mod localization;
 pub mod people;
@@ -218,7 +219,8 @@ fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
 }
 
 /// The stack's modules, in the order their nodes run in every phase: the recorders of the
-/// run's files (when it writes them), the people's truth and safety scores, the driver, the localiser, SLAM, the RGB-D mapper. A
+/// run's files (when it writes them), the people's truth and safety scores, the coverage
+/// planner and scorer, the driver, the localiser, SLAM, the RGB-D mapper. A
 /// new module is one line here; the loop and the metric checks read this table.
 pub const MODULES: &[Module] = &[
     Module {
@@ -228,6 +230,10 @@ pub const MODULES: &[Module] = &[
     Module {
         build: |s, _, out| boxed(people::node(s, out)),
         metric_names: people::metric_names,
+    },
+    Module {
+        build: |s, _, _| boxed(coverage::node(s)),
+        metric_names: coverage::metric_names,
     },
     Module {
         build: |s, _, _| Ok(vec![Box::new(driver::DriverNode::new(s)?) as Box<dyn Node>]),

@@ -1,6 +1,8 @@
-//! Geometry the stack's modules share: distance transforms of occupancy grids ([`grid`]) and
+//! Geometry the stack's modules share: distance transforms of occupancy grids ([`grid`]), their
+//! iso-lines ([`contour`]) and
 //! plane fits in point clouds ([`plane`]). Pose arithmetic and interpolation live with the pose
 //! type itself, in [`futago_msgs`], where the command's metrics and the log readers use them too.
 
+pub mod contour;
 pub mod grid;
 pub mod plane;

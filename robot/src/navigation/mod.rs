@@ -11,6 +11,7 @@
 //! - a tracked person it would come too close to stops it until the risk has passed, and one
 //!   who stays in the way is driven round ([`yielding`]).
 
+pub mod coverage;
 pub mod exploration;
 pub mod planner;
 pub mod yielding;
@@ -181,6 +182,16 @@ impl NavigateConfig {
     }
 }
 
+/// `[controller] type = "coverage"`: plan a coverage route on the known map (the
+/// `coverage.*` parameters, [`coverage`]) and drive it.
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoverConfig {
+    /// Where the pose comes from (normally the localiser).
+    #[serde(default = "localization")]
+    pub pose_source: PoseSource,
+}
+
 /// `[controller] type = "explore"`: frontier exploration on the map SLAM builds, on SLAM's
 /// pose (the scenario needs a `[slam]` table).
 #[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize, Default)]
@@ -205,6 +216,10 @@ pub enum Task {
     Goals(Vec<[f64; 2]>),
     /// Explore the map handed in by SLAM until no frontier is left.
     Explore,
+    /// Drive along this polyline of a known map (a coverage route), from its first point;
+    /// after a detour (an obstacle, a person, a push) it rejoins the route at the first
+    /// point not yet passed.
+    Route(Vec<[f64; 2]>),
 }
 
 /// What the navigator is told each control tick.
@@ -236,6 +251,9 @@ pub struct NavStats {
     pub people_wait_s: f64,
     /// Paths planned round people who stayed in the way.
     pub people_detours: usize,
+    /// Route points passed, and those given up as unreachable.
+    pub route_points_passed: usize,
+    pub route_points_skipped: usize,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -267,6 +285,9 @@ pub struct Navigator {
     bump_marks: Vec<[f64; 2]>,
     /// The people the path being followed goes round, and where they stood.
     detoured: Vec<(u32, [f64; 2])>,
+    /// A route's first point not yet passed, and where it lies in the follower's path.
+    route_next: usize,
+    route_at: usize,
     stats: NavStats,
 }
 
@@ -275,7 +296,7 @@ impl Navigator {
     /// it here), unused for exploration.
     pub fn new(config: NavigationConfig, task: Task, map: Option<OccupancyGrid>) -> Navigator {
         let roadmap = match (&task, map) {
-            (Task::Goals(_), Some(m)) => Some(RoadMap::new(m, config.planner)),
+            (Task::Goals(_) | Task::Route(_), Some(m)) => Some(RoadMap::new(m, config.planner)),
             _ => None,
         };
         Navigator {
@@ -290,12 +311,26 @@ impl Navigator {
             exhausted: Vec::new(),
             bump_marks: Vec::new(),
             detoured: Vec::new(),
+            route_next: 0,
+            route_at: 1,
             stats: NavStats::default(),
         }
     }
 
     pub fn finished(&self) -> bool {
         self.mode == Mode::Done
+    }
+
+    /// Drives `route` from now on (a route task: a new coverage route replaces the one being
+    /// driven, or starts again after it was done).
+    pub fn set_route(&mut self, route: Vec<[f64; 2]>) {
+        self.task = Task::Route(route);
+        self.route_next = 0;
+        self.route_at = 1;
+        self.follower = None;
+        if self.mode == Mode::Done {
+            self.mode = Mode::Driving;
+        }
     }
 
     pub fn stats(&self) -> NavStats {
@@ -395,6 +430,16 @@ impl Navigator {
             return DriveCommand::STOP;
         };
         let cmd = f.command(&input.pose);
+        if let Task::Route(route) = &self.task {
+            // Points of the route the follower has passed.
+            let passed = f.target().saturating_sub(self.route_at);
+            let next = (self.route_next + passed).min(route.len());
+            if f.target() > self.route_at {
+                self.stats.route_points_passed += next - self.route_next;
+                self.route_next = next;
+                self.route_at = f.target();
+            }
+        }
         if f.done() {
             self.follower = None;
             match self.task {
@@ -408,6 +453,7 @@ impl Navigator {
                     self.exhausted.push([input.pose.x, input.pose.y]);
                     self.stats.frontiers_exhausted += 1;
                 }
+                Task::Route(_) => self.mode = Mode::Done,
             }
             return DriveCommand::STOP;
         }
@@ -493,9 +539,13 @@ impl Navigator {
             }
         };
         self.mode = Mode::Yielding(since, now);
+        let goal = match &self.task {
+            Task::Goals(goals) => goals.get(self.next_goal).copied(),
+            Task::Route(route) => route.get(self.route_next).copied(),
+            Task::Explore => None,
+        };
         if (now - since).secs() >= c.people_patience
-            && let (Task::Goals(goals), Some(roadmap)) = (&self.task, &self.roadmap)
-            && let Some(&goal) = goals.get(self.next_goal)
+            && let (Some(goal), Some(roadmap)) = (goal, &self.roadmap)
         {
             // Patience is spent either way: wait another spell before trying again.
             self.mode = Mode::Yielding(now, now);
@@ -591,6 +641,42 @@ impl Navigator {
                 self.mode = Mode::Done;
                 false
             }
+            Task::Route(route) => {
+                let Some(roadmap) = &self.roadmap else {
+                    self.mode = Mode::Done;
+                    return false;
+                };
+                // A point no path reaches is given up when a later one is reached; when none
+                // of the next few is, the trouble is where the robot is (a localisation
+                // error): it stands and tries again, and gives nothing up.
+                for ahead in 0..ROUTE_LOOKAHEAD {
+                    let k = self.route_next + ahead;
+                    let Some(&goal) = route.get(k) else { break };
+                    // Route points keep the coverage planner's clearance, less than the road
+                    // map's: the grid fallback keeps the Create's radius and a centimetre.
+                    let path = roadmap.plan(start, goal).or_else(|| {
+                        planner::grid_route(
+                            roadmap.grid(),
+                            self.config.planner.clearance.min(ROUTE_CLEARANCE),
+                            start,
+                            goal,
+                        )
+                    });
+                    if let Some(mut path) = path {
+                        self.stats.plans += 1;
+                        self.stats.route_points_skipped += ahead;
+                        self.route_next = k;
+                        self.route_at = path.len() - 1;
+                        path.extend_from_slice(&route[k + 1..]);
+                        self.follower = Some(PathFollower::new(self.config.follow_params(), path));
+                        return true;
+                    }
+                }
+                if self.route_next >= route.len() {
+                    self.mode = Mode::Done;
+                }
+                false
+            }
             Task::Explore => {
                 let Some(map) = &self.map else {
                     return false;
@@ -624,6 +710,11 @@ impl Navigator {
         }
     }
 }
+
+/// How many route points ahead a route driver tries when the next cannot be reached.
+const ROUTE_LOOKAHEAD: usize = 5;
+/// Least clearance of a grid path to a route point, m: the Create's radius and 1 cm.
+const ROUTE_CLEARANCE: f64 = 0.18;
 
 /// A return within this many cells of an occupied map cell is the map's obstacle.
 const MAP_MATCH_CELLS: i64 = 2;
@@ -746,6 +837,61 @@ mod tests {
         let (v, w) = unicycle(&nav.update(&input(1.85, None, Default::default())));
         assert!(v == 0.0 && w > 0.0, "{v} {w}");
         assert_eq!(nav.stats().bumps, 1);
+    }
+
+    /// A route is driven through every point to its end; pushed 1.5 m off it half way, the
+    /// robot plans back to the first point it had not passed and goes on from there.
+    #[test]
+    fn a_route_is_driven_to_its_end_and_rejoined_after_a_push() {
+        // Up and down the room's left half in 1 m lanes.
+        let route: Vec<[f64; 2]> = vec![
+            [1.0, 1.0],
+            [4.0, 1.0],
+            [4.0, 2.0],
+            [1.0, 2.0],
+            [1.0, 3.0],
+            [4.0, 3.0],
+        ];
+        let mut nav = Navigator::new(
+            NavigationConfig::default(),
+            Task::Route(route.clone()),
+            Some(room()),
+        );
+        let mut pose = Pose2::new(1.0, 1.0, 0.0);
+        let dt = 0.05;
+        let mut pushed = false;
+        let mut near = vec![false; route.len()];
+        for k in 0..8000 {
+            let cmd = nav.update(&NavInput {
+                now: Time::from_secs(k as f64 * dt),
+                pose,
+                bumps: BumpsAndDrops::default(),
+                scan: None,
+                map: None,
+                people: &[],
+            });
+            let (v, w) = unicycle(&cmd);
+            pose = pose.compose(&Pose2::new(v * dt, 0.0, w * dt));
+            for (n, p) in route.iter().enumerate() {
+                near[n] |= (pose.x - p[0]).hypot(pose.y - p[1]) < 0.2;
+            }
+            if !pushed && nav.stats().route_points_passed == 3 {
+                // Just past [4, 2]: pushed 1.5 m east, beyond the wall at x = 5 m.
+                pose = Pose2::new(pose.x + 1.5, pose.y, pose.theta);
+                pushed = true;
+            }
+            if nav.finished() {
+                break;
+            }
+        }
+        assert!(nav.finished() && pushed);
+        assert_eq!(nav.stats().route_points_passed, route.len());
+        assert_eq!(nav.stats().route_points_skipped, 0);
+        assert!(near.iter().all(|n| *n), "{near:?}");
+        assert!((pose.x - 4.0).hypot(pose.y - 3.0) < 0.2, "{pose:?}");
+        // A new route starts it again.
+        nav.set_route(vec![[4.0, 3.0], [4.0, 4.0]]);
+        assert!(!nav.finished());
     }
 
     /// (v, ω) of a Create command.

@@ -1,0 +1,367 @@
+//! Boustrophedon cellular decomposition (Choset and Pignon 1997; written for futago): the
+//! baseline coverage planner.
+//!
+//! The cells the robot's centre may reach (the free space shrunk by the clearance) are swept
+//! by a line, column by column. Each column's runs of reachable cells continue a cell of the
+//! column before while the connectivity does not change; where a run splits or two runs join
+//! (an obstacle's start or end: Choset's critical points), cells close and new ones open; they
+//! also close where the boundary steps by more than a lane (a wall across the sweep). Each
+//! cell is covered by lanes `spacing` apart, joined along the cell's boundary, up one lane and
+//! down the next. Cells are visited depth first over the cells that touch (the next one a
+//! neighbour of the last where one is left), each from its nearest corner, and joined by
+//! shortest paths on the grid that go round obstacles. Lanes run along x or along y, whichever
+//! takes less time under the time model (ipa_coverage_planning rotates the map to the room's
+//! main direction to the same end).
+
+use super::{Field, route_stats};
+use serde::{Deserialize, Serialize};
+
+/// Which way lanes run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Sweep {
+    /// Both, keeping the quicker route.
+    #[default]
+    Auto,
+    /// Lanes along x.
+    X,
+    /// Lanes along y.
+    Y,
+}
+
+/// Boustrophedon parameters (`coverage.boustrophedon.*`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BoustrophedonConfig {
+    /// Distance between lanes, m: the Create's footprint (0.34 m) less an overlap for
+    /// tracking error.
+    pub spacing: f64,
+    pub sweep: Sweep,
+}
+
+impl Default for BoustrophedonConfig {
+    fn default() -> Self {
+        BoustrophedonConfig {
+            spacing: 0.3,
+            sweep: Sweep::Auto,
+        }
+    }
+}
+
+impl BoustrophedonConfig {
+    pub fn validate(&self, key: &str) -> Result<(), (String, String)> {
+        crate::config::check_ranges(key, &[("spacing", self.spacing, 0.05, 10.0)])
+    }
+}
+
+/// A cell of the decomposition: a run `[lo, hi]` of reachable cells per column, columns in
+/// order from `first`.
+struct Cell {
+    first: usize,
+    runs: Vec<(usize, usize)>,
+}
+
+/// The route from `start` over `field`.
+pub fn plan(
+    field: &Field,
+    c: &BoustrophedonConfig,
+    start: [f64; 2],
+) -> Result<Vec<[f64; 2]>, String> {
+    let along_y = || sweep(field, c, start, false);
+    let along_x = || sweep(field, c, start, true);
+    let route = match c.sweep {
+        Sweep::Y => along_y(),
+        Sweep::X => along_x(),
+        Sweep::Auto => {
+            let (a, b) = (along_y(), along_x());
+            let time = |p: &Vec<[f64; 2]>| route_stats(p, None, &Default::default()).time_s;
+            if time(&b) < time(&a) { b } else { a }
+        }
+    };
+    if route.len() < 2 {
+        return Err("the map has no free space for a coverage route".into());
+    }
+    Ok(route)
+}
+
+/// The route with lanes along y (columns are the grid's columns) or, `transposed`, along x.
+fn sweep(
+    field: &Field,
+    c: &BoustrophedonConfig,
+    start: [f64; 2],
+    transposed: bool,
+) -> Vec<[f64; 2]> {
+    let g = &field.grid;
+    // Columns u across the sweep, rows v along a lane.
+    let (nu, nv) = if transposed {
+        (g.height, g.width)
+    } else {
+        (g.width, g.height)
+    };
+    let index = |u: usize, v: usize| {
+        if transposed {
+            u * g.width + v
+        } else {
+            v * g.width + u
+        }
+    };
+    let point = |u: usize, v: usize| {
+        if transposed {
+            g.cell_center(v, u)
+        } else {
+            g.cell_center(u, v)
+        }
+    };
+    // Runs of each column.
+    let runs: Vec<Vec<(usize, usize)>> = (0..nu)
+        .map(|u| {
+            let mut out = Vec::new();
+            let mut open: Option<usize> = None;
+            for v in 0..=nv {
+                let r = v < nv && field.reachable[index(u, v)];
+                match (r, open) {
+                    (true, None) => open = Some(v),
+                    (false, Some(lo)) => {
+                        out.push((lo, v - 1));
+                        open = None;
+                    }
+                    _ => {}
+                }
+            }
+            out
+        })
+        .collect();
+    // The decomposition.
+    let jump = ((c.spacing / g.resolution).round() as usize).max(1);
+    let overlap = |a: (usize, usize), b: (usize, usize)| a.0 <= b.1 && b.0 <= a.1;
+    let mut cells: Vec<Cell> = Vec::new();
+    // Cells that touch across a column boundary.
+    let mut touching: Vec<(usize, usize)> = Vec::new();
+    // The cell each run of the previous column belongs to.
+    let mut active: Vec<((usize, usize), usize)> = Vec::new();
+    for (u, column) in runs.iter().enumerate() {
+        let mut next = Vec::new();
+        for &run in column {
+            let before: Vec<usize> = (0..active.len())
+                .filter(|&k| overlap(active[k].0, run))
+                .collect();
+            // One run before and after, and no step in the boundary wider than a lane (a
+            // wall across the sweep: lanes would not reach along it).
+            let continues = before.len() == 1 && {
+                let prev = active[before[0]].0;
+                column.iter().filter(|&&r| overlap(prev, r)).count() == 1
+                    && prev.0.abs_diff(run.0) <= jump
+                    && prev.1.abs_diff(run.1) <= jump
+            };
+            let id = if continues {
+                let id = active[before[0]].1;
+                cells[id].runs.push(run);
+                id
+            } else {
+                cells.push(Cell {
+                    first: u,
+                    runs: vec![run],
+                });
+                cells.len() - 1
+            };
+            for &k in &before {
+                if active[k].1 != id {
+                    touching.push((active[k].1, id));
+                }
+            }
+            next.push((run, id));
+        }
+        active = next;
+    }
+    // Lanes per cell, then the cells nearest first.
+    let res = g.resolution;
+    let step = ((c.spacing / res).round() as usize).max(1);
+    let lanes_of = |cell: &Cell| -> Vec<usize> {
+        // Column offsets within the cell: the first and last columns, and as few between
+        // them as keep lanes at most `step` apart.
+        let n = cell.runs.len();
+        let gaps = (n - 1).div_ceil(step);
+        let mut k: Vec<usize> = (0..=gaps).map(|g| g * (n - 1) / gaps.max(1)).collect();
+        k.dedup();
+        k
+    };
+    let mut neighbours = vec![Vec::new(); cells.len()];
+    for &(a, b) in &touching {
+        neighbours[a].push(b);
+        neighbours[b].push(a);
+    }
+    let mut done = vec![false; cells.len()];
+    let mut route = vec![start];
+    let mut here = start;
+    // Depth first over the cells that touch: the next cell is an unvisited neighbour of the
+    // last one, else of the one before, and so on; any unvisited cell when none is left.
+    let mut trail: Vec<usize> = Vec::new();
+    for _ in 0..cells.len() {
+        while let Some(&last) = trail.last() {
+            if neighbours[last].iter().any(|&n| !done[n]) {
+                break;
+            }
+            trail.pop();
+        }
+        let candidates: Vec<usize> = match trail.last() {
+            Some(&last) => neighbours[last]
+                .iter()
+                .copied()
+                .filter(|&n| !done[n])
+                .collect(),
+            None => (0..cells.len()).filter(|&n| !done[n]).collect(),
+        };
+        // The nearest corner of a candidate: (distance, cell, from the right, from the top).
+        let mut best: Option<(f64, usize, bool, bool)> = None;
+        for &id in &candidates {
+            let cell = &cells[id];
+            let n = cell.runs.len();
+            for (right, k) in [(false, 0), (true, n - 1)] {
+                let run = cell.runs[k];
+                for (top, v) in [(false, run.0), (true, run.1)] {
+                    let p = point(cell.first + k, v);
+                    let d = (p[0] - here[0]).hypot(p[1] - here[1]);
+                    if best.is_none_or(|b| d < b.0) {
+                        best = Some((d, id, right, top));
+                    }
+                }
+            }
+        }
+        let Some((_, id, right, mut top)) = best else {
+            break;
+        };
+        done[id] = true;
+        trail.push(id);
+        let cell = &cells[id];
+        let mut lanes = lanes_of(cell);
+        if right {
+            lanes.reverse();
+        }
+        for (n, &k) in lanes.iter().enumerate() {
+            let u = cell.first + k;
+            let run = cell.runs[k];
+            let (from, to) = if top { (run.1, run.0) } else { (run.0, run.1) };
+            if n > 0 {
+                // Along the boundary from the last lane's end to this lane's start.
+                let prev = lanes[n - 1];
+                let (a, b) = (prev.min(k), prev.max(k));
+                let mut edge: Vec<[f64; 2]> = (a..=b)
+                    .map(|m| {
+                        let r = cell.runs[m];
+                        point(cell.first + m, if top { r.1 } else { r.0 })
+                    })
+                    .collect();
+                if prev > k {
+                    edge.reverse();
+                }
+                route.extend(thin(field, &edge));
+            }
+            route.push(point(u, from));
+            route.push(point(u, to));
+            top = !top;
+        }
+        here = *route.last().unwrap_or(&here);
+    }
+    route.dedup();
+    route
+}
+
+/// The corners of a boundary polyline a straight line between neighbours cannot skip while
+/// staying on reachable cells.
+fn thin(field: &Field, points: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    if points.len() <= 2 {
+        return points.to_vec();
+    }
+    let keep = field.clearance - field.grid.resolution;
+    let mut out = vec![points[0]];
+    let mut anchor = 0;
+    for k in 1..points.len() - 1 {
+        if !field.clear(points[anchor], points[k + 1], keep) {
+            out.push(points[k]);
+            anchor = k;
+        }
+    }
+    out.push(points[points.len() - 1]);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::floor;
+    use super::super::{CoverageConfig, Field, PlannerKind, ROBOT_RADIUS, plan as plan_route};
+    use super::*;
+
+    /// The robot's footprint (a disc of the Create's radius) swept along the route covers
+    /// at least 99 % of the floor it can sweep at all (the reachable cells' footprints), and
+    /// no segment comes closer than its radius to an obstacle.
+    #[test]
+    fn lanes_a_footprint_apart_sweep_the_reachable_floor() {
+        for sweep in [Sweep::X, Sweep::Y] {
+            let mut config = CoverageConfig {
+                planner: PlannerKind::Boustrophedon,
+                ..CoverageConfig::default()
+            };
+            config.boustrophedon.sweep = sweep;
+            let start = [1.0, 1.0];
+            let route = plan_route(&floor(), &config, start).expect("a route");
+            let field = Field::new(&floor(), config.clearance, start).unwrap();
+            for w in route.points.windows(2) {
+                assert!(field.clear(w[0], w[1], ROBOT_RADIUS), "{w:?}");
+            }
+            let g = &field.grid;
+            let r = ROBOT_RADIUS;
+            let cells = (r / g.resolution).ceil() as i64;
+            let disc = |centre: [f64; 2], out: &mut Vec<bool>| {
+                let Some((ci, cj)) = g.cell_of(centre[0], centre[1]) else {
+                    return;
+                };
+                for dj in -cells..=cells {
+                    for di in -cells..=cells {
+                        let (i, j) = (ci as i64 + di, cj as i64 + dj);
+                        if i < 0 || j < 0 || i >= g.width as i64 || j >= g.height as i64 {
+                            continue;
+                        }
+                        let p = g.cell_center(i as usize, j as usize);
+                        if (p[0] - centre[0]).hypot(p[1] - centre[1]) <= r {
+                            out[j as usize * g.width + i as usize] = true;
+                        }
+                    }
+                }
+            };
+            let mut floor_reach = vec![false; g.width * g.height];
+            for k in 0..field.reachable.len() {
+                if field.reachable[k] {
+                    disc(g.cell_center(k % g.width, k / g.width), &mut floor_reach);
+                }
+            }
+            let mut swept = vec![false; g.width * g.height];
+            for w in route.points.windows(2) {
+                let len = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+                let n = (len / 0.02).ceil().max(1.0) as usize;
+                for s in 0..=n {
+                    let t = s as f64 / n as f64;
+                    disc(
+                        [
+                            w[0][0] + t * (w[1][0] - w[0][0]),
+                            w[0][1] + t * (w[1][1] - w[0][1]),
+                        ],
+                        &mut swept,
+                    );
+                }
+            }
+            let total = floor_reach.iter().filter(|x| **x).count();
+            let covered = (0..swept.len())
+                .filter(|&k| swept[k] && floor_reach[k])
+                .count();
+            let share = covered as f64 / total as f64;
+            let missed: Vec<[f64; 2]> = (0..swept.len())
+                .filter(|&k| !swept[k] && floor_reach[k])
+                .step_by(7)
+                .map(|k| g.cell_center(k % g.width, k / g.width))
+                .collect();
+            assert!(share >= 0.99, "{sweep:?}: {share} {missed:?}");
+            // Lanes 0.3 m apart over about 60 m² of floor: some 200 m, not much more.
+            assert!(route.stats.length_m < 400.0, "{:?}", route.stats);
+        }
+    }
+}

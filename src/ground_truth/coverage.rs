@@ -1,0 +1,393 @@
+//! Coverage against the simulated world: how much of the floor the robot's footprint swept,
+//! and how much of the true surfaces its camera saw.
+//!
+//! - **Footprint**: the floor the robot can sweep at all is every cell within the Create's
+//!   radius of a cell its centre can reach (at least the planner's clearance from obstacles,
+//!   connected to the start; the reachable floor of ipa_coverage_planning's evaluation). The
+//!   score is the share of it that a disc of the Create's radius at the true poses swept.
+//! - **Camera**: the world's triangles are sampled every [`SAMPLE_STEP`] into voxels of
+//!   [`VOXEL`], each voxel carrying the area of each surface class in it: the floor's top,
+//!   the walls' faces, the other static objects' upright faces (furniture). A voxel is seen
+//!   when a noiseless depth pixel rendered at the camera's true pose, within the camera's
+//!   valid range, lands in it. The score is the seen share of each class's area below the
+//!   highest point the camera can see at all (its height plus its range times the tangent of
+//!   half its vertical field of view): seed 000 painted a 2D fan onto the map, which it
+//!   admits is not rigorous; this counts what the renders saw.
+
+use futago_msgs::Pose2;
+use futago_msgs::camera::{DepthImage, Intrinsics};
+use futago_msgs::grid::OccupancyGrid;
+use futago_sim::World;
+use rustc_hash::{FxHashMap, FxHashSet};
+
+/// Voxel side of the surface samples, m.
+pub const VOXEL: f64 = 0.05;
+/// Spacing of the samples on a triangle, m (half a voxel: every voxel a surface crosses
+/// holds a sample).
+pub const SAMPLE_STEP: f64 = 0.025;
+/// The voxel grid's offset, m: away from the round coordinates where the worlds' axis-aligned
+/// faces lie (the floor's top at z = 0), so that a face and the depth points on it fall in
+/// the same voxels.
+const OFFSET: [f64; 3] = [0.0137, 0.0219, 0.0271];
+
+/// The surface classes scored.
+pub const CLASSES: [&str; 3] = ["floor", "walls", "furniture"];
+
+/// The true surfaces, voxelised, with each class's area per voxel.
+pub struct Surfaces {
+    area: FxHashMap<[i32; 3], [f64; 3]>,
+    total: [f64; 3],
+}
+
+fn key(p: [f64; 3]) -> [i32; 3] {
+    [0, 1, 2].map(|k| ((p[k] - OFFSET[k]) / VOXEL).floor() as i32)
+}
+
+impl Surfaces {
+    /// The world's static surfaces at or below `top` (m) where `keep(x, y)` holds (the area
+    /// to cover): the floor slab's upper face, the walls' upright faces and the other static
+    /// objects' upright faces.
+    pub fn from_world(world: &World, top: f64, keep: impl Fn([f64; 2]) -> bool) -> Surfaces {
+        let mut s = Surfaces {
+            area: FxHashMap::default(),
+            total: [0.0; 3],
+        };
+        for o in &world.objects {
+            if !matches!(o.motion, futago_sim::world::Motion::Static) || o.name == "ceiling" {
+                continue;
+            }
+            let class_of = |n: glam::Vec3| -> Option<usize> {
+                if o.name == "floor" {
+                    (n.z > 0.9).then_some(0)
+                } else if n.z.abs() < 0.2 {
+                    Some(if o.name.starts_with("walls[") { 1 } else { 2 })
+                } else {
+                    None
+                }
+            };
+            for part in &o.parts {
+                let m = &part.mesh;
+                for t in &m.indices {
+                    let [a, b, c] = t.map(|i| o.pose * m.positions[i as usize]);
+                    let n = (b - a).cross(c - a);
+                    let area2 = n.length();
+                    if area2 < 1e-9 {
+                        continue;
+                    }
+                    let Some(class) = class_of(n / area2) else {
+                        continue;
+                    };
+                    let [a, b, c] = [a, b, c].map(|v| [v.x as f64, v.y as f64, v.z as f64]);
+                    s.add_triangle(a, b, c, class, top, &keep);
+                }
+            }
+        }
+        s
+    }
+
+    /// Samples a triangle every [`SAMPLE_STEP`] and adds its area below `top` to `class`.
+    fn add_triangle(
+        &mut self,
+        a: [f64; 3],
+        b: [f64; 3],
+        c: [f64; 3],
+        class: usize,
+        top: f64,
+        keep: &impl Fn([f64; 2]) -> bool,
+    ) {
+        let e = |p: [f64; 3], q: [f64; 3]| {
+            ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2)).sqrt()
+        };
+        let longest = e(a, b).max(e(b, c)).max(e(c, a));
+        let n = ((longest / SAMPLE_STEP).ceil() as usize).clamp(1, 20_000);
+        let cross = {
+            let (u, v) = (
+                [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+                [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+            );
+            [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ]
+        };
+        let area = 0.5 * (cross[0].powi(2) + cross[1].powi(2) + cross[2].powi(2)).sqrt();
+        // Points at the centres of the n² small triangles of the subdivision, each of equal
+        // area.
+        let each = area / (n * n) as f64;
+        let at = |s: f64, t: f64| -> [f64; 3] {
+            [0, 1, 2].map(|k| a[k] + s * (b[k] - a[k]) + t * (c[k] - a[k]))
+        };
+        let nf = n as f64;
+        for i in 0..n {
+            for j in 0..n - i {
+                let mut centres =
+                    vec![at((i as f64 + 1.0 / 3.0) / nf, (j as f64 + 1.0 / 3.0) / nf)];
+                if i + j + 1 < n {
+                    centres.push(at((i as f64 + 2.0 / 3.0) / nf, (j as f64 + 2.0 / 3.0) / nf));
+                }
+                for p in centres {
+                    if p[2] > top || !keep([p[0], p[1]]) {
+                        continue;
+                    }
+                    self.area.entry(key(p)).or_insert([0.0; 3])[class] += each;
+                    self.total[class] += each;
+                }
+            }
+        }
+    }
+
+    /// Each class's area, m².
+    pub fn total(&self) -> [f64; 3] {
+        self.total
+    }
+
+    /// Each class's area in the voxels of `seen`, m².
+    pub fn seen_area(&self, seen: &CameraCoverage) -> [f64; 3] {
+        let mut out = [0.0; 3];
+        for k in &seen.voxels {
+            if let Some(a) = self.area.get(k) {
+                for c in 0..3 {
+                    out[c] += a[c];
+                }
+            }
+        }
+        out
+    }
+
+    /// The seen share of each class and of all of them (`None` for a class the world lacks).
+    pub fn shares(&self, seen: &CameraCoverage) -> ([Option<f64>; 3], f64) {
+        let got = self.seen_area(seen);
+        let share = |c: usize| (self.total[c] > 0.0).then(|| got[c] / self.total[c]);
+        let all = self.total.iter().sum::<f64>();
+        (
+            [share(0), share(1), share(2)],
+            if all > 0.0 {
+                got.iter().sum::<f64>() / all
+            } else {
+                0.0
+            },
+        )
+    }
+
+    /// Whether voxel `k` holds surface of `class`.
+    pub fn holds(&self, p: [f64; 3], class: usize) -> bool {
+        self.area.get(&key(p)).is_some_and(|a| a[class] > 0.0)
+    }
+}
+
+/// The voxels the camera saw.
+#[derive(Default)]
+pub struct CameraCoverage {
+    voxels: FxHashSet<[i32; 3]>,
+}
+
+impl CameraCoverage {
+    /// Adds what a noiseless depth image from `optical` (the optical frame's world pose) saw
+    /// between `range` (min, max, m), every `stride`-th pixel.
+    pub fn add(
+        &mut self,
+        depth: &DepthImage,
+        k: &Intrinsics,
+        optical: &futago_msgs::Pose3,
+        range: (f64, f64),
+        stride: u32,
+    ) {
+        for v in (0..depth.height).step_by(stride.max(1) as usize) {
+            for u in (0..depth.width).step_by(stride.max(1) as usize) {
+                let z = depth.at(u, v) as f64;
+                if !(z.is_finite() && z >= range.0 && z <= range.1) {
+                    continue;
+                }
+                let w = optical.transform_point(k.back_project(u as f64, v as f64, z));
+                self.voxels.insert(key(w));
+            }
+        }
+    }
+
+    /// Whether the voxel of `p` was seen.
+    pub fn saw(&self, p: [f64; 3]) -> bool {
+        self.voxels.contains(&key(p))
+    }
+}
+
+/// The floor the robot's footprint can sweep and what it swept, on a grid of the world.
+pub struct Footprint {
+    grid: OccupancyGrid,
+    radius: f64,
+    reachable: Vec<bool>,
+    swept: Vec<bool>,
+    total: usize,
+}
+
+impl Footprint {
+    /// On `grid` (the world's map), for a disc of `radius` whose centre keeps `clearance`
+    /// from obstacles, starting at `start`.
+    pub fn new(
+        grid: &OccupancyGrid,
+        radius: f64,
+        clearance: f64,
+        start: [f64; 2],
+    ) -> Result<Footprint, String> {
+        let field = futago_robot::navigation::coverage::Field::new(grid, clearance, start)?;
+        let mut f = Footprint {
+            grid: grid.clone(),
+            radius,
+            reachable: vec![false; grid.width * grid.height],
+            swept: vec![false; grid.width * grid.height],
+            total: 0,
+        };
+        let mut reach = vec![false; grid.width * grid.height];
+        for (k, r) in field.reachable.iter().enumerate() {
+            if *r {
+                let c = grid.cell_center(k % grid.width, k / grid.width);
+                f.disc(c, &mut reach);
+            }
+        }
+        f.reachable = reach;
+        f.total = f.reachable.iter().filter(|x| **x).count();
+        Ok(f)
+    }
+
+    fn disc(&self, centre: [f64; 2], out: &mut [bool]) {
+        let g = &self.grid;
+        let Some((ci, cj)) = g.cell_of(centre[0], centre[1]) else {
+            return;
+        };
+        let n = (self.radius / g.resolution).ceil() as i64;
+        for dj in -n..=n {
+            for di in -n..=n {
+                let (i, j) = (ci as i64 + di, cj as i64 + dj);
+                if i < 0 || j < 0 || i >= g.width as i64 || j >= g.height as i64 {
+                    continue;
+                }
+                let p = g.cell_center(i as usize, j as usize);
+                if (p[0] - centre[0]).hypot(p[1] - centre[1]) <= self.radius {
+                    out[j as usize * g.width + i as usize] = true;
+                }
+            }
+        }
+    }
+
+    /// Sweeps the footprint at `pose`.
+    pub fn add(&mut self, pose: &Pose2) {
+        let mut swept = std::mem::take(&mut self.swept);
+        self.disc([pose.x, pose.y], &mut swept);
+        self.swept = swept;
+    }
+
+    /// The swept share of the reachable floor.
+    pub fn share(&self) -> f64 {
+        if self.total == 0 {
+            return 0.0;
+        }
+        let got = (0..self.swept.len())
+            .filter(|&k| self.swept[k] && self.reachable[k])
+            .count();
+        got as f64 / self.total as f64
+    }
+
+    /// Each cell: 0 not reachable floor, 1 reachable and not swept, 2 swept.
+    pub fn states(&self) -> Vec<u8> {
+        (0..self.swept.len())
+            .map(|k| match (self.reachable[k], self.swept[k]) {
+                (false, _) => 0,
+                (true, false) => 1,
+                (true, true) => 2,
+            })
+            .collect()
+    }
+
+    pub fn grid(&self) -> &OccupancyGrid {
+        &self.grid
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 2 × 1 m rectangle of floor: its area is found, and a camera that sees its left half
+    /// covers half of it.
+    #[test]
+    fn a_triangle_pair_is_sampled_to_its_area_and_half_seen_is_half() {
+        let mut s = Surfaces {
+            area: FxHashMap::default(),
+            total: [0.0; 3],
+        };
+        let (a, b, c, d) = (
+            [0.0, 0.0, 0.0],
+            [2.0, 0.0, 0.0],
+            [2.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        );
+        s.add_triangle(a, b, c, 0, 1.0, &|_| true);
+        s.add_triangle(a, c, d, 0, 1.0, &|_| true);
+        assert!((s.total()[0] - 2.0).abs() < 1e-9, "{:?}", s.total());
+        // Seen: every voxel whose centre has x < 1.
+        let mut seen = CameraCoverage::default();
+        for i in -2..50 {
+            for j in -2..30 {
+                let p = [
+                    OFFSET[0] + (i as f64 + 0.5) * VOXEL,
+                    OFFSET[1] + (j as f64 + 0.5) * VOXEL,
+                    0.0,
+                ];
+                if p[0] < 1.0 {
+                    seen.voxels.insert(key(p));
+                }
+            }
+        }
+        let got = s.seen_area(&seen)[0];
+        // The voxel column straddling x = 1 (from 0.9637 to 1.0137) counts whole: up to
+        // 0.0137 m × 1 m more.
+        assert!((1.0 - 1e-9..=1.0 + 0.0137 + 1e-6).contains(&got), "{got}");
+        // A wall below `top` only: a 1 m high face cut at 0.5 m counts half.
+        let mut w = Surfaces {
+            area: FxHashMap::default(),
+            total: [0.0; 3],
+        };
+        w.add_triangle(
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 0.0, 1.0],
+            1,
+            0.5,
+            &|_| true,
+        );
+        w.add_triangle(
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+            1,
+            0.5,
+            &|_| true,
+        );
+        assert!((w.total()[1] - 0.5).abs() < 0.02, "{:?}", w.total());
+    }
+
+    /// A robot that drives along the middle of a 1 m wide corridor sweeps a 0.34 m strip of
+    /// the floor its footprint can reach (0.2 m to 0.8 m across, less 0.17 m each side).
+    #[test]
+    fn a_straight_drive_sweeps_its_strip() {
+        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 100, 20);
+        for j in 0..20 {
+            for i in 0..100 {
+                let wall = j == 0 || j == 19 || i == 0 || i == 99;
+                g.set(i, j, if wall { 100 } else { 0 });
+            }
+        }
+        let mut f = Footprint::new(&g, 0.17, 0.2, [1.0, 0.5]).unwrap();
+        for k in 0..=60 {
+            f.add(&Pose2::new(1.0 + k as f64 * 0.05, 0.5, 0.0));
+        }
+        // In 5 cm cells: reachable centres are the cells 0.2 m from the wall cells' centres
+        // (y from 0.225 to 0.775 m, x from 0.225 to 4.775 m); the floor they can sweep, the
+        // cells within 0.17 m of those, is 18 × 98 cells. The drive sweeps the 6 rows whose
+        // centres lie within 0.17 m of y = 0.5 m along 60 cells, and about 18 cells of each
+        // end's half-disc.
+        let share = f.share();
+        let expected = (6.0 * 60.0 + 2.0 * 18.0) / (18.0 * 98.0);
+        assert!((share - expected).abs() < 0.01, "{share} vs {expected}");
+    }
+}
