@@ -251,21 +251,8 @@ impl Footprint {
 
     fn disc(&self, centre: [f64; 2], out: &mut [bool]) {
         let g = &self.grid;
-        let Some((ci, cj)) = g.cell_of(centre[0], centre[1]) else {
-            return;
-        };
-        let n = (self.radius / g.resolution).ceil() as i64;
-        for dj in -n..=n {
-            for di in -n..=n {
-                let (i, j) = (ci as i64 + di, cj as i64 + dj);
-                if i < 0 || j < 0 || i >= g.width as i64 || j >= g.height as i64 {
-                    continue;
-                }
-                let p = g.cell_center(i as usize, j as usize);
-                if (p[0] - centre[0]).hypot(p[1] - centre[1]) <= self.radius {
-                    out[j as usize * g.width + i as usize] = true;
-                }
-            }
+        for (i, j) in futago_robot::geometry::grid::cells_within(g, centre, self.radius) {
+            out[j * g.width + i] = true;
         }
     }
 

@@ -70,6 +70,29 @@ pub fn obstacle_distance(
     d.into_iter().map(|c| (c * r).min(cap as f32)).collect()
 }
 
+/// The cells of `grid` whose centres lie within `radius` of `centre` (a disc: a person's
+/// keep-out, the robot's footprint), in row-major order; none when `centre` is off the grid.
+pub fn cells_within(grid: &OccupancyGrid, centre: [f64; 2], radius: f64) -> Vec<(usize, usize)> {
+    let Some((ci, cj)) = grid.cell_of(centre[0], centre[1]) else {
+        return Vec::new();
+    };
+    let k = (radius / grid.resolution).ceil() as i64;
+    let mut out = Vec::new();
+    for dj in -k..=k {
+        for di in -k..=k {
+            let (i, j) = (ci as i64 + di, cj as i64 + dj);
+            if i < 0 || j < 0 || i >= grid.width as i64 || j >= grid.height as i64 {
+                continue;
+            }
+            let c = grid.cell_center(i as usize, j as usize);
+            if (c[0] - centre[0]).hypot(c[1] - centre[1]) <= radius {
+                out.push((i as usize, j as usize));
+            }
+        }
+    }
+    out
+}
+
 /// Squared Euclidean distance transform of a `w × h` grid of sites, in cells².
 pub fn squared_edt(sites: &[bool], w: usize, h: usize) -> Vec<f64> {
     const INF: f64 = 1e20;

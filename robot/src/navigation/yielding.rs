@@ -86,9 +86,6 @@ pub fn detour(
     // the disc's radius plus `clearance` is the distance kept from the person's centre.
     let wide = (people_clearance + DETOUR_MARGIN - clearance).max(0.0);
     for p in people {
-        let Some((ci, cj)) = g.cell_of(p.position[0], p.position[1]) else {
-            continue;
-        };
         // The robot often stopped closer than that to someone who came near: their disc
         // stops short of its start (by the least clearance the start may escape with, and a
         // cell), so that the way leads off from them rather than nowhere.
@@ -96,18 +93,8 @@ pub fn detour(
             - START_CLEARANCE
             - 1.5 * g.resolution;
         let radius = wide.min(near).max(0.0);
-        let k = (radius / g.resolution).ceil() as i64;
-        for dj in -k..=k {
-            for di in -k..=k {
-                let (i, j) = (ci as i64 + di, cj as i64 + dj);
-                if i < 0 || j < 0 || i >= g.width as i64 || j >= g.height as i64 {
-                    continue;
-                }
-                let c = g.cell_center(i as usize, j as usize);
-                if (c[0] - p.position[0]).hypot(c[1] - p.position[1]) <= radius {
-                    g.set(i as usize, j as usize, 100);
-                }
-            }
+        for (i, j) in crate::geometry::grid::cells_within(&g, p.position, radius) {
+            g.set(i, j, 100);
         }
     }
     grid_route(&g, clearance, start, goal)

@@ -309,23 +309,9 @@ mod tests {
                 assert!(field.clear(w[0], w[1], ROBOT_RADIUS), "{w:?}");
             }
             let g = &field.grid;
-            let r = ROBOT_RADIUS;
-            let cells = (r / g.resolution).ceil() as i64;
             let disc = |centre: [f64; 2], out: &mut Vec<bool>| {
-                let Some((ci, cj)) = g.cell_of(centre[0], centre[1]) else {
-                    return;
-                };
-                for dj in -cells..=cells {
-                    for di in -cells..=cells {
-                        let (i, j) = (ci as i64 + di, cj as i64 + dj);
-                        if i < 0 || j < 0 || i >= g.width as i64 || j >= g.height as i64 {
-                            continue;
-                        }
-                        let p = g.cell_center(i as usize, j as usize);
-                        if (p[0] - centre[0]).hypot(p[1] - centre[1]) <= r {
-                            out[j as usize * g.width + i as usize] = true;
-                        }
-                    }
+                for (i, j) in crate::geometry::grid::cells_within(g, centre, ROBOT_RADIUS) {
+                    out[j * g.width + i] = true;
                 }
             };
             let mut floor_reach = vec![false; g.width * g.height];
