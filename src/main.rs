@@ -343,6 +343,37 @@ enum WorldCommand {
         #[arg(long)]
         no_grid: bool,
     },
+    /// Make a world from a ROS map_server map (its YAML file; PGM or PNG image), such as the
+    /// `map.yaml` that `futago replay` builds from a real log: occupied cells become walls.
+    FromMap {
+        map: PathBuf,
+        /// The world file to write; the map is copied beside it [default:
+        /// out/worlds/<map's stem>.toml].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// The world's name [default: the world file's stem].
+        #[arg(long)]
+        name: Option<String>,
+        /// Height of the walls and of the ceiling, m.
+        #[arg(long, default_value_t = 2.5)]
+        height: f64,
+        /// What unknown cells become: walls where they touch free space, or free floor.
+        #[arg(long, value_enum, default_value = "wall")]
+        unknown: UnknownArg,
+        /// The start pose `X,Y,YAW_DEG` [default: the free cell farthest from any wall].
+        #[arg(long)]
+        spawn: Option<String>,
+        /// Leave the ceiling out.
+        #[arg(long)]
+        no_ceiling: bool,
+    },
+}
+
+/// `--unknown` of `futago world from-map`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum UnknownArg {
+    Wall,
+    Free,
 }
 
 fn parse_band(s: &str) -> Result<(f64, f64)> {
@@ -711,6 +742,53 @@ fn real_main() -> Result<()> {
                 for p in written {
                     println!("wrote {}", p.display());
                 }
+            }
+            WorldCommand::FromMap {
+                map,
+                out,
+                name,
+                height,
+                unknown,
+                spawn,
+                no_ceiling,
+            } => {
+                let spawn = spawn
+                    .map(|s| -> Result<[f64; 3]> {
+                        let v: Vec<f64> = s
+                            .split(',')
+                            .map(|p| p.trim().parse::<f64>())
+                            .collect::<Result<_, _>>()
+                            .ok()
+                            .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite()))
+                            .with_context(|| {
+                                format!("--spawn: `{s}`: expected X,Y,YAW_DEG (m, m, degrees)")
+                            })?;
+                        Ok([v[0], v[1], v[2]])
+                    })
+                    .transpose()?;
+                let out = out.unwrap_or_else(|| {
+                    let stem = map
+                        .file_stem()
+                        .map(|s| s.to_string_lossy().to_string())
+                        .unwrap_or_else(|| "map".into());
+                    PathBuf::from("out/worlds").join(format!("{stem}.toml"))
+                });
+                let w = world_cmd::from_map(
+                    &map,
+                    &out,
+                    &world_cmd::FromMapOptions {
+                        name,
+                        height,
+                        unknown: match unknown {
+                            UnknownArg::Wall => futago_sim::world::floor_plan::UnknownCells::Wall,
+                            UnknownArg::Free => futago_sim::world::floor_plan::UnknownCells::Free,
+                        },
+                        spawn,
+                        ceiling: !no_ceiling,
+                    },
+                )?;
+                println!("wrote {}", out.display());
+                println!("{}", world_cmd::describe(&w));
             }
         },
         Command::Bench {

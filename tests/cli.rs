@@ -1760,6 +1760,124 @@ fn replay_of_a_simulated_log_beats_its_odometry_on_ground_truth_relations() {
     assert!(marked[0] >= m("slam", "abs_trans_m"), "{marked:?}");
 }
 
+/// A world made from the map that graph SLAM built from the real Intel log
+/// (`worlds/intel.map.yaml`): exported again at the map's resolution, its colliders give back
+/// the map's walls cell for cell: each occupied cell, and each unknown cell touching free
+/// space (sealed), is occupied; every other cell is free. Free cells in no 3 × 3 block of
+/// free cells (15 cm at 5 cm: the traces of rays into unmapped space) count as unknown.
+#[test]
+fn world_from_a_real_logs_map_gives_back_its_walls() {
+    use futago_msgs::map_server;
+    let tmp = tempfile::tempdir().unwrap();
+    let world = tmp.path().join("lab.toml");
+    let o = futago(&[
+        "world",
+        "from-map",
+        "worlds/intel.map.yaml",
+        "--out",
+        world.to_str().unwrap(),
+    ]);
+    ok(&o);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("spawns: start"));
+    assert!(tmp.path().join("lab.map.yaml").exists());
+    let export = tmp.path().join("export");
+    ok(&futago(&[
+        "world",
+        "export",
+        world.to_str().unwrap(),
+        "--out",
+        export.to_str().unwrap(),
+        "--mesh",
+        "none",
+    ]));
+    let map = map_server::read(&root().join("worlds/intel.map.yaml")).unwrap();
+    let got = map_server::read(&export.join("lab.yaml")).unwrap();
+    let raw = |i: isize, j: isize| -> i8 {
+        if i < 0 || j < 0 || i >= map.width as isize || j >= map.height as isize {
+            -1
+        } else {
+            map.get(i as usize, j as usize)
+        }
+    };
+    let free = |i: isize, j: isize| (0..65).contains(&raw(i, j));
+    let value = |i: isize, j: isize| -> i8 {
+        let in_block = (-2..=0).any(|a| {
+            (-2..=0).any(|b| (0..3).all(|di| (0..3).all(|dj| free(i + a + di, j + b + dj))))
+        });
+        if free(i, j) && !in_block {
+            -1
+        } else {
+            raw(i, j)
+        }
+    };
+    let (mut walls, mut sealed) = (0, 0);
+    // The map and a one-cell ring round it.
+    for j in -1..=map.height as isize {
+        for i in -1..=map.width as isize {
+            let v = value(i, j);
+            let touches_free =
+                (-1..=1).any(|dj| (-1..=1).any(|di| (0..65).contains(&value(i + di, j + dj))));
+            let wall = v >= 65 || (v < 0 && touches_free);
+            walls += wall as usize;
+            sealed += (wall && v < 0) as usize;
+            let c = [
+                map.origin[0] + (i as f64 + 0.5) * map.resolution,
+                map.origin[1] + (j as f64 + 0.5) * map.resolution,
+            ];
+            let (gi, gj) = got.cell_of(c[0], c[1]).expect("the export spans the map");
+            assert_eq!(got.get(gi, gj) == 100, wall, "cell ({i}, {j}) at {c:?}");
+        }
+    }
+    assert!(
+        walls > 10_000 && sealed > 0,
+        "{walls} walls, {sealed} sealed"
+    );
+}
+
+/// Bad maps and options are refused with the file and key named, and nothing is written.
+#[test]
+fn world_from_map_refuses_bad_maps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    std::fs::write(
+        d.join("m.pgm"),
+        b"P5\n3 3\n255\n\xfe\xfe\xfe\xfe\xfe\xfe\xfe\xfe\xfe",
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("m.yaml"),
+        "image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n",
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("bad.yaml"),
+        "image: m.pgm\nresolution: fine\norigin: [0, 0, 0]\n",
+    )
+    .unwrap();
+    let out = d.join("w").join("w.toml");
+    for (args, expect) in [
+        (vec!["bad.yaml"], "resolution"),
+        (vec!["missing.yaml"], "missing.yaml"),
+        // A 15 cm room has no place for the Create.
+        (vec!["m.yaml"], "no free cell"),
+        (vec!["m.yaml", "--spawn", "1,2"], "--spawn"),
+        (vec!["m.yaml", "--height", "0.01"], "--height"),
+        (vec!["m.yaml", "--name", "a b"], "--name"),
+    ] {
+        let map = d.join(args[0]);
+        let mut a = vec!["world", "from-map", map.to_str().unwrap()];
+        a.extend(&args[1..]);
+        a.extend(["--out", out.to_str().unwrap()]);
+        let o = futago(&a);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success() && err.contains(expect),
+            "{args:?}: {err}"
+        );
+        assert!(!out.exists(), "{args:?} wrote the world");
+    }
+}
+
 /// The published benchmark: both SLAM methods on the MIT CSAIL log, scored with its
 /// ground-truth relations. Graph SLAM must beat Cartographer's 0.0319 m (Hess et al. 2016,
 /// Table II); the ICP baseline must beat pure scan matching's 0.106 m (Kümmerle et al. 2009).

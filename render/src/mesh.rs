@@ -40,8 +40,9 @@ impl TriMesh {
         )
     }
 
-    /// Appends a planar quad `o, o+u, o+u+v, o+v` (counter-clockwise seen from `n`).
-    fn quad(&mut self, o: Vec3, u: Vec3, v: Vec3, uv: UvMap) {
+    /// Appends a planar quad `o, o+u, o+u+v, o+v`, facing `u × v` (counter-clockwise seen
+    /// from that side).
+    pub fn push_quad(&mut self, o: Vec3, u: Vec3, v: Vec3, uv: UvMap) {
         let n = u.cross(v).normalize();
         let base = self.positions.len() as u32;
         let (su, sv) = match uv {
@@ -67,12 +68,12 @@ impl TriMesh {
         let mut m = TriMesh::default();
         let (x, y, z) = (Vec3::X * h.x, Vec3::Y * h.y, Vec3::Z * h.z);
         // Each face: origin at its lower-left corner seen from outside, u to the right, v up.
-        m.quad(-x + y - z, -2.0 * y, 2.0 * z, uv); // -x face
-        m.quad(x - y - z, 2.0 * y, 2.0 * z, uv); // +x face
-        m.quad(-x - y - z, 2.0 * x, 2.0 * z, uv); // -y face
-        m.quad(x + y - z, -2.0 * x, 2.0 * z, uv); // +y face
-        m.quad(-x - y + z, 2.0 * x, 2.0 * y, uv); // top
-        m.quad(-x + y - z, 2.0 * x, -2.0 * y, uv); // bottom
+        m.push_quad(-x + y - z, -2.0 * y, 2.0 * z, uv); // -x face
+        m.push_quad(x - y - z, 2.0 * y, 2.0 * z, uv); // +x face
+        m.push_quad(-x - y - z, 2.0 * x, 2.0 * z, uv); // -y face
+        m.push_quad(x + y - z, -2.0 * x, 2.0 * z, uv); // +y face
+        m.push_quad(-x - y + z, 2.0 * x, 2.0 * y, uv); // top
+        m.push_quad(-x + y - z, 2.0 * x, -2.0 * y, uv); // bottom
         m
     }
 

@@ -60,7 +60,7 @@ impl Surfaces {
                 if o.name == "floor" {
                     (n.z > 0.9).then_some(0)
                 } else if n.z.abs() < 0.2 {
-                    Some(if o.name.starts_with("walls[") { 1 } else { 2 })
+                    Some(if o.is_wall() { 1 } else { 2 })
                 } else {
                     None
                 }

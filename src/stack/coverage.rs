@@ -3,10 +3,16 @@
 //! driver, and it scores the run against the world (`ground_truth::coverage`): the floor the
 //! robot's footprint swept and the true surfaces its camera saw, over time.
 //!
-//! Files: `coverage_route.txt` (the planned route, `x y` per line, map frame, m) and
+//! With `coverage.second_pass.enabled`, once the route is done the node plans a second one
+//! to the walls the robot's camera did not see (by the robot's own record of its frames and
+//! pose, [`second_pass`]), publishes it for the driver, and scores the camera coverage
+//! before and after it and the extra distance driven.
+//!
+//! Files: `coverage_route.txt` (the planned route, `x y` per line, map frame, m),
+//! `coverage_route_2.txt` (the second route, where there is one) and
 //! `coverage.png` (the world's map painted: floor swept green, reachable floor not swept
 //! orange, walls and furniture the camera saw blue and those it did not red; the planned
-//! route dark blue, the driven path black).
+//! route dark blue, the second route magenta, the driven path black).
 
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
@@ -14,14 +20,18 @@ use crate::ground_truth::coverage::{CLASSES, CameraCoverage, Footprint, Surfaces
 use crate::scenario::{ControllerConfig, Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, Pose2, Time};
+use futago_robot::control::PoseSource;
 use futago_robot::geometry::grid::OCCUPIED;
-use futago_robot::navigation::coverage::{self, ROBOT_RADIUS, Route};
+use futago_robot::navigation::coverage::second_pass::{self, SecondPassConfig, WallSight};
+use futago_robot::navigation::coverage::{self, Field, ROBOT_RADIUS, Route, RouteStats};
 use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Instant;
 
 /// The planned route.
 pub const ROUTE_FILE: &str = "coverage_route.txt";
+/// The second pass's route.
+pub const SECOND_ROUTE_FILE: &str = "coverage_route_2.txt";
 /// The coverage picture.
 pub const PICTURE_FILE: &str = "coverage.png";
 /// Period of the camera frames scored, s: at the navigator's in-place turn (0.12 m/s a
@@ -58,10 +68,31 @@ pub struct CoverageNode {
     driven_m: f64,
     /// The true path, a point every 5 cm (for the picture).
     driven: Vec<[f64; 2]>,
-    /// When the driver finished the route.
+    /// When the driver finished the route (the second, where there is one).
     done_at: Option<Time>,
     published: bool,
     scenario: String,
+    /// The second pass, when enabled and a camera is scored.
+    second: Option<SecondPass>,
+}
+
+/// The second pass's state: the robot's own record of the walls its camera saw, and, once
+/// the first route is done, the second route and the figures before it.
+struct SecondPass {
+    config: SecondPassConfig,
+    field: Field,
+    sight: WallSight,
+    /// Where the driver takes its pose from (the same pose places the camera's points).
+    pose_source: PoseSource,
+    time_model: coverage::TimeModel,
+    /// When the first route was done, and the second route then planned with its figures.
+    started: Option<(Time, Vec<[f64; 2]>, RouteStats)>,
+    gaps: usize,
+    views: usize,
+    unseeable: usize,
+    /// Driven length and camera shares (walls, all) at the end of the first route.
+    before: Option<(f64, f64, f64)>,
+    planning_s: f64,
 }
 
 /// The node when the scenario's controller is `coverage`.
@@ -113,6 +144,29 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         }
     }
     let planned_footprint = planned.share();
+    let ControllerConfig::Coverage(control) = &s.controller else {
+        unreachable!("checked above")
+    };
+    let second = match (&camera, s.spec.coverage.second_pass.enabled) {
+        (Some(_), true) => Some(SecondPass {
+            config: s.spec.coverage.second_pass.clone(),
+            field: Field::new(&floor, s.spec.coverage.clearance, start)
+                .map_err(|e| anyhow::anyhow!("coverage: {e}"))?,
+            sight: WallSight::new(&floor),
+            pose_source: control.pose_source,
+            time_model: s.spec.coverage.time_model,
+            started: None,
+            gaps: 0,
+            views: 0,
+            unseeable: 0,
+            before: None,
+            planning_s: 0.0,
+        }),
+        (None, true) => anyhow::bail!(
+            "coverage.second_pass.enabled: the second pass needs a camera off any joint ([[camera]])"
+        ),
+        _ => None,
+    };
     Ok(Some(CoverageNode {
         route,
         planning_s,
@@ -130,6 +184,7 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         done_at: None,
         published: false,
         scenario: s.spec.name.clone(),
+        second,
     }))
 }
 
@@ -158,8 +213,80 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
                 .chain(&["all"])
                 .map(|c| format!("coverage.camera.{c}")),
         );
+        if s.coverage.second_pass.enabled {
+            names.extend(
+                [
+                    "walls_before",
+                    "all_before",
+                    "walls_gain",
+                    "extra_m",
+                    "views",
+                    "gaps",
+                ]
+                .iter()
+                .map(|k| format!("coverage.second_pass.{k}")),
+            );
+        }
     }
     names
+}
+
+/// Height above the floor from which a depth point counts as wall, m: points on the floor
+/// beside a wall do not show the wall.
+const WALL_POINT_MIN_Z: f64 = 0.1;
+
+impl SecondPass {
+    /// The pose the driver steers by.
+    fn pose(&self, bus: &Bus) -> Pose2 {
+        match self.pose_source {
+            PoseSource::GroundTruth => bus.truth,
+            PoseSource::Localization => bus.pose("localization").unwrap_or(bus.odometry),
+            PoseSource::Odometry => bus.odometry,
+        }
+    }
+
+    /// Marks the walls a camera frame (its measured depth) shows, placed by the robot's own
+    /// pose: each point goes from the camera into the base's frame (the camera's mount, which
+    /// the robot knows) and from there by the pose the driver steers by.
+    fn see(&mut self, frame: &CameraFrame, range: (f64, f64), bus: &Bus) {
+        let to_base = bus.truth.inverse();
+        let pose = self.pose(bus);
+        let depth = &frame.frame.depth;
+        let k = &frame.frame.depth_intrinsics;
+        for v in (0..depth.height).step_by(PIXEL_STRIDE as usize) {
+            for u in (0..depth.width).step_by(PIXEL_STRIDE as usize) {
+                let z = depth.at(u, v) as f64;
+                if !(z.is_finite() && z >= range.0 && z <= range.1) {
+                    continue;
+                }
+                // The optical frame's place is the camera's mount on the base at the base's
+                // pose: through the true pose and back, only the mount remains.
+                let w = frame
+                    .optical
+                    .transform_point(k.back_project(u as f64, v as f64, z));
+                if w[2] < WALL_POINT_MIN_Z {
+                    continue;
+                }
+                let on_base = to_base.transform_point([w[0], w[1]]);
+                self.sight.add_point(pose.transform_point(on_base));
+            }
+        }
+    }
+
+    /// The second route from where the robot stands now, and its figures.
+    fn plan(&mut self, bus: &Bus) -> Result<(Vec<[f64; 2]>, RouteStats)> {
+        let t0 = Instant::now();
+        let here = self.pose(bus);
+        let (points, gaps) =
+            second_pass::plan(&self.field, &self.sight, [here.x, here.y], &self.config)
+                .map_err(|e| anyhow::anyhow!("coverage.second_pass: {e}"))?;
+        self.planning_s = t0.elapsed().as_secs_f64();
+        self.gaps = gaps.len();
+        self.views = gaps.iter().map(|g| g.views.len()).sum();
+        self.unseeable = gaps.iter().map(|g| g.unseeable).sum();
+        let stats = coverage::route_stats(&points, Some(here.theta), &self.time_model);
+        Ok((points, stats))
+    }
 }
 
 impl CoverageNode {
@@ -228,16 +355,22 @@ impl CoverageNode {
             let v = h as f64 - (p[1] - g.origin[1]) / g.resolution * scale as f64;
             (u as f32, v as f32)
         };
-        for s in self.route.points.windows(2) {
-            let (a, b) = (to_px(s[0]), to_px(s[1]));
-            let n = ((b.0 - a.0).hypot(b.1 - a.1) * 2.0).ceil().max(1.0) as usize;
-            for k in 0..=n {
-                let t = k as f32 / n as f32;
-                let (u, v) = (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1));
-                if u >= 0.0 && v >= 0.0 && (u as u32) < w && (v as u32) < h {
-                    img.put_pixel(u as u32, v as u32, image::Rgb([20, 30, 120]));
+        let mut polyline = |points: &[[f64; 2]], colour: [u8; 3]| {
+            for s in points.windows(2) {
+                let (a, b) = (to_px(s[0]), to_px(s[1]));
+                let n = ((b.0 - a.0).hypot(b.1 - a.1) * 2.0).ceil().max(1.0) as usize;
+                for k in 0..=n {
+                    let t = k as f32 / n as f32;
+                    let (u, v) = (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1));
+                    if u >= 0.0 && v >= 0.0 && (u as u32) < w && (v as u32) < h {
+                        img.put_pixel(u as u32, v as u32, image::Rgb(colour));
+                    }
                 }
             }
+        };
+        polyline(&self.route.points, [20, 30, 120]);
+        if let Some((_, second, _)) = self.second.as_ref().and_then(|s| s.started.as_ref()) {
+            polyline(second, [200, 0, 200]);
         }
         for p in &self.driven {
             let (u, v) = to_px(*p);
@@ -301,6 +434,9 @@ impl Node for CoverageNode {
         };
         let range = c.range;
         self.next_frame = bus.now + Duration::from_secs(FRAME_PERIOD);
+        if let Some(second) = &mut self.second {
+            second.see(frame, range, bus);
+        }
         let depth = truth.true_depth()?;
         self.seen.add(
             &depth,
@@ -319,8 +455,33 @@ impl Node for CoverageNode {
             bus.publish_path("coverage", self.route.points.clone());
             self.published = true;
         }
-        if self.done_at.is_none() && bus.route_done.is_some() {
-            self.done_at = bus.route_done;
+        if self.done_at.is_none()
+            && let Some(done) = bus.route_done
+        {
+            match &mut self.second {
+                None => self.done_at = Some(done),
+                Some(second) => match &second.started {
+                    None => {
+                        let (walls, all) = match &self.surfaces {
+                            Some(s) => {
+                                let (by, all) = s.shares(&self.seen);
+                                (by[1].unwrap_or(0.0), all)
+                            }
+                            None => (0.0, 0.0),
+                        };
+                        second.before = Some((self.driven_m, walls, all));
+                        let (points, stats) = second.plan(bus)?;
+                        if points.len() < 2 {
+                            self.done_at = Some(done);
+                        } else {
+                            bus.publish_path("coverage", points.clone());
+                        }
+                        second.started = Some((done, points, stats));
+                    }
+                    Some((first, ..)) if done > *first => self.done_at = Some(done),
+                    Some(_) => {}
+                },
+            }
         }
         Ok(())
     }
@@ -350,8 +511,34 @@ impl Node for CoverageNode {
                 json!({"t": s[0], "footprint": s[1], "camera_walls": s[2], "camera_floor": s[3], "camera_all": s[4]})
             })
             .collect();
+        let second = self.second.as_ref().map(|s| {
+            json!({
+                "route": s.started.as_ref().map(|(_, _, stats)| stats),
+                "started_s": s.started.as_ref().map(|(t, ..)| t.secs()),
+                "gaps": s.gaps,
+                "views": s.views,
+                "unseeable_pieces": s.unseeable,
+                "planning_s": s.planning_s,
+                "before": s.before.map(|(m, walls, all)| json!({"driven_m": m, "camera_walls": walls, "camera_all": all})),
+            })
+        });
+        if let (Some(dir), Some((_, points, _))) =
+            (out, self.second.as_ref().and_then(|s| s.started.as_ref()))
+        {
+            let mut text = format!(
+                "# futago second coverage route of {}: x y, map frame, m\n",
+                self.scenario
+            );
+            for p in points {
+                text += &format!("{:.4} {:.4}\n", p[0], p[1]);
+            }
+            std::fs::write(dir.join(SECOND_ROUTE_FILE), text)
+                .with_context(|| format!("writing {SECOND_ROUTE_FILE}"))?;
+            files.push(SECOND_ROUTE_FILE.to_string());
+        }
         let summary = json!({
             "planner": self.route.planner.name(),
+            "second_pass": second,
             "route": self.route.stats,
             "route_done_s": self.done_at.map(|t| t.secs()),
             "driven_m": self.driven_m,
@@ -391,6 +578,23 @@ impl Node for CoverageNode {
                 m.insert(format!("coverage.camera.{name}"), by[c].unwrap_or(0.0));
             }
             m.insert("coverage.camera.all", all);
+            if let Some(second) = &self.second {
+                // Without a second route (nothing missed, or the first never finished), the
+                // figures before it are those at the end.
+                let (before_m, walls0, all0) =
+                    second
+                        .before
+                        .unwrap_or((self.driven_m, by[1].unwrap_or(0.0), all));
+                m.insert("coverage.second_pass.walls_before", walls0);
+                m.insert("coverage.second_pass.all_before", all0);
+                m.insert(
+                    "coverage.second_pass.walls_gain",
+                    by[1].unwrap_or(0.0) - walls0,
+                );
+                m.insert("coverage.second_pass.extra_m", self.driven_m - before_m);
+                m.insert("coverage.second_pass.views", second.views as f64);
+                m.insert("coverage.second_pass.gaps", second.gaps as f64);
+            }
         }
         Ok(m)
     }

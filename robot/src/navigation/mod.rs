@@ -288,6 +288,8 @@ pub struct Navigator {
     /// A route's first point not yet passed, and where it lies in the follower's path.
     route_next: usize,
     route_at: usize,
+    /// Bumps since the route last passed a point.
+    route_bumps: usize,
     stats: NavStats,
 }
 
@@ -313,6 +315,7 @@ impl Navigator {
             detoured: Vec::new(),
             route_next: 0,
             route_at: 1,
+            route_bumps: 0,
             stats: NavStats::default(),
         }
     }
@@ -327,6 +330,7 @@ impl Navigator {
         self.task = Task::Route(route);
         self.route_next = 0;
         self.route_at = 1;
+        self.route_bumps = 0;
         self.follower = None;
         if self.mode == Mode::Done {
             self.mode = Mode::Driving;
@@ -366,6 +370,17 @@ impl Navigator {
                     .pose
                     .transform_point([r * f64::cos(side), r * f64::sin(side)]),
             );
+            // A route point the robot bumps on its way to, again and again, lies past
+            // something the map does not hold or the robot cannot pass (a gap as wide as its
+            // clearance between jagged walls): it is given up for the next.
+            if let Task::Route(route) = &self.task {
+                self.route_bumps += 1;
+                if self.route_bumps >= ROUTE_BUMP_LIMIT && self.route_next < route.len() {
+                    self.route_next += 1;
+                    self.stats.route_points_skipped += 1;
+                    self.route_bumps = 0;
+                }
+            }
             // Turn away from the pressed side (seed 000: right bumper, turn left).
             let away = if input.bumps.bump_right && !input.bumps.bump_left {
                 1.0
@@ -436,6 +451,9 @@ impl Navigator {
             let next = (self.route_next + passed).min(route.len());
             if f.target() > self.route_at {
                 self.stats.route_points_passed += next - self.route_next;
+                if next > self.route_next {
+                    self.route_bumps = 0;
+                }
                 self.route_next = next;
                 self.route_at = f.target();
             }
@@ -711,6 +729,8 @@ impl Navigator {
     }
 }
 
+/// Bumps on the way to one route point after which it is given up.
+const ROUTE_BUMP_LIMIT: usize = 3;
 /// How many route points ahead a route driver tries when the next cannot be reached.
 const ROUTE_LOOKAHEAD: usize = 5;
 /// Least clearance of a grid path to a route point, m: the Create's radius and 1 cm.
@@ -748,6 +768,17 @@ mod tests {
             }
         }
         g
+    }
+
+    /// A navigator driving `route` in [`room`], the robot at (1, 1) facing east, and the
+    /// tests' control period, s.
+    fn route_in_room(route: &[[f64; 2]]) -> (Navigator, Pose2, f64) {
+        let nav = Navigator::new(
+            NavigationConfig::default(),
+            Task::Route(route.to_vec()),
+            Some(room()),
+        );
+        (nav, Pose2::new(1.0, 1.0, 0.0), 0.05)
     }
 
     fn scan_with_return_at(distance: f64) -> LaserScan {
@@ -852,13 +883,7 @@ mod tests {
             [1.0, 3.0],
             [4.0, 3.0],
         ];
-        let mut nav = Navigator::new(
-            NavigationConfig::default(),
-            Task::Route(route.clone()),
-            Some(room()),
-        );
-        let mut pose = Pose2::new(1.0, 1.0, 0.0);
-        let dt = 0.05;
+        let (mut nav, mut pose, dt) = route_in_room(&route);
         let mut pushed = false;
         let mut near = vec![false; route.len()];
         for k in 0..8000 {
@@ -892,6 +917,46 @@ mod tests {
         // A new route starts it again.
         nav.set_route(vec![[4.0, 3.0], [4.0, 4.0]]);
         assert!(!nav.finished());
+    }
+
+    /// A wall the map does not hold across the way to a route point (x = 2.5 m, below
+    /// y = 1.5 m): after three bumps on the way to it the point is given up, and the robot
+    /// drives on to the next (back west) instead of bumping for ever.
+    #[test]
+    fn a_route_point_bumped_short_of_again_and_again_is_given_up() {
+        let route: Vec<[f64; 2]> = vec![[1.0, 1.0], [4.0, 1.0], [1.0, 3.0]];
+        let (mut nav, mut pose, dt) = route_in_room(&route);
+        for k in 0..12000 {
+            let blocked = pose.x >= 2.5 - 0.17 && pose.y < 1.5;
+            let cmd = nav.update(&NavInput {
+                now: Time::from_secs(k as f64 * dt),
+                pose,
+                bumps: BumpsAndDrops {
+                    bump_left: blocked,
+                    bump_right: blocked,
+                    ..Default::default()
+                },
+                scan: None,
+                map: None,
+                people: &[],
+            });
+            let (v, w) = unicycle(&cmd);
+            let next = pose.compose(&Pose2::new(v * dt, 0.0, w * dt));
+            // The hidden wall stops the body at it.
+            pose = if next.y < 1.5 && next.x > 2.5 - 0.17 {
+                Pose2::new(2.5 - 0.17, next.y, next.theta)
+            } else {
+                next
+            };
+            if nav.finished() {
+                break;
+            }
+        }
+        let st = nav.stats();
+        assert!(nav.finished(), "{st:?}");
+        assert_eq!(st.route_points_skipped, 1, "{st:?}");
+        assert!((3..10).contains(&st.bumps), "{st:?}");
+        assert!((pose.x - 1.0).hypot(pose.y - 3.0) < 0.2, "{pose:?}");
     }
 
     /// (v, ω) of a Create command.

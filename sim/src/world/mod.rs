@@ -7,6 +7,7 @@
 //! ground-truth exports all read this one description.
 
 pub mod export;
+pub mod floor_plan;
 pub mod gltf_io;
 pub mod spec;
 pub mod texture;
@@ -46,6 +47,14 @@ pub struct Object {
     /// The floor or ceiling slab. The planar robot body does not collide with slabs (its
     /// height is fixed), which keeps the contact solver idle while it drives.
     pub slab: bool,
+}
+
+impl Object {
+    /// Whether the object is part of a wall: of a `[[walls]]` polyline or extruded from a
+    /// floor plan's `[[map_walls]]` (the surface class "walls" of the coverage scores).
+    pub fn is_wall(&self) -> bool {
+        self.name.starts_with("walls[") || self.name.starts_with("map_walls[")
+    }
 }
 
 /// A compiled world: immutable while a simulation runs.
@@ -202,6 +211,9 @@ pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
     }
     for (i, w) in spec.walls.iter().enumerate() {
         c.wall(w, &format!("walls[{i}]"))?;
+    }
+    for (i, m) in spec.map_walls.iter().enumerate() {
+        c.map_walls(m, &format!("map_walls[{i}]"))?;
     }
     let root = Pose::IDENTITY;
     for (i, b) in spec.boxes.iter().enumerate() {
@@ -627,6 +639,44 @@ impl Compiler<'_> {
                     slab: false,
                 });
             }
+        }
+        Ok(())
+    }
+
+    fn map_walls(&mut self, m: &MapWallsSpec, key: &str) -> Result<(), SpecError> {
+        let mat = self.material(&m.material, &format!("{key}.material"))?;
+        check_range(
+            self.path,
+            &format!("{key}.height"),
+            m.height,
+            0.01,
+            100.0,
+            "m",
+        )?;
+        let file = self.dir.join(&m.map);
+        let grid = futago_msgs::map_server::read(&file)
+            .map_err(|e| self.err(format!("{key}.map"), e.to_string()))?;
+        let cells = floor_plan::WallCells::new(&grid, m.unknown);
+        let uv = self.uv(mat);
+        let h = m.height as f32;
+        for (k, r) in cells.rectangles().iter().enumerate() {
+            let (centre, half) = cells.extent(r);
+            self.world.objects.push(Object {
+                name: format!("{key}.rect{k}"),
+                pose: Pose::from_translation(Vec3::new(
+                    centre[0] as f32,
+                    centre[1] as f32,
+                    h / 2.0,
+                )),
+                shape: Some(SharedShape::cuboid(half[0] as f32, half[1] as f32, h / 2.0)),
+                parts: vec![MeshPart {
+                    material: mat,
+                    mesh: cells.mesh(r, h, uv),
+                }],
+                motion: Motion::Static,
+                friction: 0.6,
+                slab: false,
+            });
         }
         Ok(())
     }

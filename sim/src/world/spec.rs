@@ -27,6 +27,9 @@ pub struct WorldSpec {
     pub ceiling: Option<SlabSpec>,
     #[serde(default)]
     pub walls: Vec<WallSpec>,
+    /// Walls extruded from the occupied cells of map_server maps (floor plans).
+    #[serde(default)]
+    pub map_walls: Vec<MapWallsSpec>,
     #[serde(default)]
     pub boxes: Vec<BoxSpec>,
     #[serde(default)]
@@ -152,6 +155,22 @@ fn default_wall_height() -> f64 {
 
 fn default_wall_thickness() -> f64 {
     0.1
+}
+
+/// Walls from a floor plan: the occupied cells of a ROS map_server map (its YAML file; a PGM
+/// or PNG image) extruded upwards (see [`super::floor_plan`]).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapWallsSpec {
+    /// Path of the map's YAML file, relative to the world file.
+    pub map: String,
+    pub material: String,
+    #[serde(default = "default_wall_height")]
+    pub height: f64,
+    /// What the map's unknown cells become: `wall` where they touch free space (the default),
+    /// or `free`.
+    #[serde(default)]
+    pub unknown: super::floor_plan::UnknownCells,
 }
 
 /// An opening in a wall: centred on the wall point nearest `at`.

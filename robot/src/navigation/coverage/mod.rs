@@ -16,6 +16,7 @@
 //! No segment of a route comes closer to an obstacle than the Create's radius.
 
 pub mod boustrophedon;
+pub mod second_pass;
 pub mod seed000;
 
 use crate::geometry::grid::{OCCUPIED, squared_edt};
@@ -90,6 +91,8 @@ pub struct CoverageConfig {
     /// Obstacles drawn onto the map for planning (seed 000 §3.3.4).
     pub obstacles: Vec<Annotation>,
     pub time_model: TimeModel,
+    /// The second pass to the walls the camera missed (`coverage.second_pass.*`).
+    pub second_pass: second_pass::SecondPassConfig,
 }
 
 impl Default for CoverageConfig {
@@ -102,6 +105,7 @@ impl Default for CoverageConfig {
             region: Vec::new(),
             obstacles: Vec::new(),
             time_model: TimeModel::default(),
+            second_pass: second_pass::SecondPassConfig::default(),
         }
     }
 }
@@ -124,6 +128,7 @@ impl CoverageConfig {
         )?;
         self.seed000.validate("coverage.seed000", self.clearance)?;
         self.boustrophedon.validate("coverage.boustrophedon")?;
+        self.second_pass.validate("coverage.second_pass")?;
         if !self.region.is_empty() && self.region.len() < 3 {
             return Err((
                 "coverage.region".into(),
@@ -317,22 +322,13 @@ impl Field {
                     start[0], start[1]
                 )
             })?;
-        let mut stack = vec![seed];
         field.reachable[seed] = true;
-        while let Some(k) = stack.pop() {
-            let (i, j) = ((k % w) as i64, (k / w) as i64);
-            for (di, dj) in NEIGHBOURS_8 {
-                let (a, b) = (i + di, j + dj);
-                if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
-                    continue;
-                }
-                let m = b as usize * w + a as usize;
-                if !field.reachable[m] && field.distance[m] >= clearance {
-                    field.reachable[m] = true;
-                    stack.push(m);
-                }
-            }
-        }
+        let (reachable, distance) = (&mut field.reachable, &field.distance);
+        flood_8(w, h, seed, |m| {
+            let take = !reachable[m] && distance[m] >= clearance;
+            reachable[m] |= take;
+            take
+        });
         Ok(field)
     }
 
@@ -401,6 +397,30 @@ impl Field {
         }
         Ok(out)
     }
+}
+
+/// The cells 8-connected to `seed` (first) through cells that `take` accepts, in the order
+/// found (breadth first). `take` is asked of each neighbour of each cell found and must
+/// remember what it took, so that it refuses a cell the second time.
+pub fn flood_8(w: usize, h: usize, seed: usize, mut take: impl FnMut(usize) -> bool) -> Vec<usize> {
+    let mut cells = vec![seed];
+    let mut next = 0;
+    while next < cells.len() {
+        let k = cells[next];
+        next += 1;
+        let (i, j) = ((k % w) as i64, (k / w) as i64);
+        for (di, dj) in NEIGHBOURS_8 {
+            let (a, b) = (i + di, j + dj);
+            if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
+                continue;
+            }
+            let m = b as usize * w + a as usize;
+            if take(m) {
+                cells.push(m);
+            }
+        }
+    }
+    cells
 }
 
 /// The 8 neighbours of a cell.
