@@ -497,3 +497,61 @@ pub fn bench_people(
         "simulation_real_time_factor": rtf,
     }))
 }
+
+/// Planning time of each coverage planner on a scenario's map, its region and annotations
+/// (the scenario's `[coverage]`), from its start: the median of `repeats` plans, with each
+/// route's figures. With a camera, also the second pass's planning as if the camera had seen
+/// nothing (every wanted wall a gap: its worst case).
+pub fn bench_coverage(s: &Scenario, repeats: usize) -> Result<Value> {
+    use futago_robot::navigation::coverage::{self, Field, PlannerKind, second_pass};
+    let height = crate::stack::driver::navigation_height(s);
+    let map = crate::stack::world_map(s, s.spec.navigation.map_resolution, height)
+        .context("navigation.map_resolution")?;
+    let start = [s.start.x, s.start.y];
+    let repeats = repeats.max(1);
+    let median = |mut t: Vec<f64>| {
+        t.sort_by(f64::total_cmp);
+        t[t.len() / 2]
+    };
+    let mut planners = serde_json::Map::new();
+    for kind in [PlannerKind::Seed000, PlannerKind::Boustrophedon] {
+        let config = coverage::CoverageConfig {
+            planner: kind,
+            ..s.spec.coverage.clone()
+        };
+        let mut times = Vec::with_capacity(repeats);
+        let mut route = None;
+        for _ in 0..repeats {
+            let t0 = std::time::Instant::now();
+            let r = coverage::plan(&map, &config, start)
+                .map_err(|e| anyhow::anyhow!("coverage ({}): {e}", kind.name()))?;
+            times.push(t0.elapsed().as_secs_f64());
+            route = Some(r);
+        }
+        let stats = route.map(|r| r.stats);
+        planners.insert(
+            kind.name().into(),
+            json!({ "planning_s": median(times), "route": stats }),
+        );
+    }
+    let floor = coverage::restricted(&map, &s.spec.coverage);
+    let field = Field::new(&floor, s.spec.coverage.clearance, start)
+        .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
+    let sight = second_pass::WallSight::new(&floor);
+    let mut times = Vec::with_capacity(repeats);
+    let mut views = 0;
+    for _ in 0..repeats {
+        let t0 = std::time::Instant::now();
+        let (_, gaps) = second_pass::plan(&field, &sight, start, &s.spec.coverage.second_pass)
+            .map_err(|e| anyhow::anyhow!("coverage.second_pass: {e}"))?;
+        times.push(t0.elapsed().as_secs_f64());
+        views = gaps.iter().map(|g| g.views.len()).sum::<usize>();
+    }
+    Ok(json!({
+        "scenario": s.spec.name,
+        "map_cells": [map.width, map.height],
+        "repeats": repeats,
+        "planners": planners,
+        "second_pass_nothing_seen": { "planning_s": median(times), "views": views },
+    }))
+}

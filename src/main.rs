@@ -233,6 +233,16 @@ enum BenchCommand {
         #[arg(long, default_value_t = 2_000_000)]
         rays: usize,
     },
+    /// Planning time of both coverage planners (and the second pass) on a scenario's map,
+    /// region and annotations.
+    Coverage {
+        /// Scenario whose world, start and [coverage] to plan with.
+        #[arg(default_value = "scenarios/office-coverage.toml")]
+        scenario: PathBuf,
+        /// Plans of each planner; the median time is reported.
+        #[arg(long, default_value_t = 5)]
+        repeats: usize,
+    },
     /// Time per keyframe of the RGB-D map: keyframe making and each registration method.
     Rgbd {
         /// Scenario with an [rgbd_map] to measure.
@@ -801,6 +811,13 @@ fn real_main() -> Result<()> {
         } => {
             let s = scenario::Scenario::load(&scenario)?;
             let r = bench::bench(&s, duration, rays.max(682))?;
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+        Command::Bench {
+            command: BenchCommand::Coverage { scenario, repeats },
+        } => {
+            let s = scenario::Scenario::load(&scenario)?;
+            let r = bench::bench_coverage(&s, repeats)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
         Command::Bench {

@@ -798,6 +798,7 @@ pub fn run_report(
         body += "</figure>\n";
     }
     body += &rgbd_section(dir, summary);
+    body += &coverage_section(dir, summary);
     body += "<h2>Metrics</h2>\n";
     let rows: Vec<Vec<String>> = summary["metrics"]
         .as_object()
@@ -856,6 +857,73 @@ fn rgbd_section(dir: &Path, summary: &Value) -> String {
             "<figure>\n<img class=\"slice\" src=\"data:image/png;base64,{}\" alt=\"the first method's laser-height slice (red) over the true 2D map\" style=\"max-width: 100%\">\n<figcaption>The first method's points at the laser's height (red) over the world's 2D map.</figcaption>\n</figure>\n",
             base64::engine::general_purpose::STANDARD.encode(png)
         );
+    }
+    out
+}
+
+/// The coverage section: the route's and the second pass's figures, the painted map
+/// (`coverage.png` in `dir`) and coverage over time; empty for a run without a coverage route.
+fn coverage_section(dir: &Path, summary: &Value) -> String {
+    let c = &summary["coverage"];
+    if c.is_null() {
+        return String::new();
+    }
+    let metrics = &summary["metrics"];
+    let keys = [
+        ("coverage.footprint", "footprint (driven)"),
+        ("coverage.route.footprint", "footprint (planned)"),
+        ("coverage.camera.walls", "camera: walls"),
+        ("coverage.camera.floor", "camera: floor"),
+        ("coverage.camera.furniture", "camera: furniture"),
+        ("coverage.route.length_m", "route (m)"),
+        ("coverage.route.time_s", "time model (s)"),
+        ("coverage.driven_m", "driven (m)"),
+        (
+            "coverage.second_pass.walls_before",
+            "walls before the second pass",
+        ),
+        ("coverage.second_pass.walls_gain", "walls gained by it"),
+        ("coverage.second_pass.extra_m", "its extra distance (m)"),
+    ];
+    let rows: Vec<Vec<String>> = keys
+        .iter()
+        .filter(|(k, _)| metrics.get(*k).is_some())
+        .map(|(k, name)| vec![escape(name), number(&metrics[*k])])
+        .collect();
+    let mut out = format!(
+        "<h2>Coverage ({})</h2>\n",
+        escape(c["planner"].as_str().unwrap_or(""))
+    );
+    out += &table("coverage", &["figure", "value"], &rows);
+    if let Ok(png) = std::fs::read(dir.join("coverage.png")) {
+        out += &format!(
+            "<figure>\n<img class=\"coverage\" src=\"data:image/png;base64,{}\" alt=\"the map painted by coverage\" style=\"max-width: 100%\">\n<figcaption>Floor swept green, reachable floor not swept orange; walls and furniture the camera saw blue, not seen red; the planned route dark blue, the second route magenta, the driven path black.</figcaption>\n</figure>\n",
+            base64::engine::general_purpose::STANDARD.encode(png)
+        );
+    }
+    let series = c["series"].as_array().cloned().unwrap_or_default();
+    let line = |key: &str, name: &str, colour: &'static str| Series {
+        name: name.into(),
+        colour,
+        points: series
+            .iter()
+            .filter_map(|p| Some([p["t"].as_f64()?, p[key].as_f64()?]))
+            .collect(),
+        markers: false,
+    };
+    if !series.is_empty() {
+        out += "<figure>\n";
+        out += &line_chart(
+            "Coverage over time",
+            "time (s)",
+            "share",
+            &[
+                line("footprint", "footprint", "#1a9641"),
+                line("camera_walls", "camera: walls", "#2c7bb6"),
+                line("camera_floor", "camera: floor", "#fdae61"),
+            ],
+        );
+        out += "</figure>\n";
     }
     out
 }

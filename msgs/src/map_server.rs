@@ -397,25 +397,20 @@ fn cell_value(m: &MapMeta, v: u8, opaque: bool) -> i8 {
 mod tests {
     use super::*;
 
-    fn dir() -> PathBuf {
-        let d = std::env::temp_dir().join(format!(
-            "futago-map-server-{}-{:?}",
-            std::process::id(),
-            std::thread::current().id()
-        ));
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    fn dir() -> tempfile::TempDir {
+        tempfile::tempdir().unwrap()
     }
 
     /// What futago writes, map_server's reader reads back cell for cell.
     #[test]
     fn a_written_map_reads_back_the_same() {
-        let d = dir();
+        let tmp = dir();
+        let d = tmp.path();
         let mut g = OccupancyGrid::new(0.05, [-1.25, 3.5], 7, 4);
         for (k, c) in g.cells.iter_mut().enumerate() {
             *c = [0, 100, -1][k % 3];
         }
-        g.write_map_server(&d, "m").unwrap();
+        g.write_map_server(d, "m").unwrap();
         let back = read(&d.join("m.yaml")).unwrap();
         assert_eq!(back, g);
     }
@@ -424,7 +419,8 @@ mod tests {
     /// map_server's formula, the top row last.
     #[test]
     fn plain_pgm_scale_mode_and_negate_follow_map_server() {
-        let d = dir();
+        let tmp = dir();
+        let d = tmp.path();
         std::fs::write(
             d.join("s.pgm"),
             "P2\n# a comment\n3 2\n65535\n0 65535 32768\n65535 0 13107\n",
@@ -445,7 +441,8 @@ mod tests {
 
     #[test]
     fn bad_maps_name_the_file_and_key() {
-        let d = dir();
+        let tmp = dir();
+        let d = tmp.path();
         std::fs::write(d.join("b.pgm"), "P5\n4 4\n255\nab").unwrap();
         let cases = [
             (
