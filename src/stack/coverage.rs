@@ -97,9 +97,9 @@ struct SecondPass {
 
 /// The node when the scenario's controller is `coverage`.
 pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
-    if !matches!(s.controller, ControllerConfig::Coverage(_)) {
+    let ControllerConfig::Coverage(control) = &s.controller else {
         return Ok(None);
-    }
+    };
     let height = super::driver::navigation_height(s);
     let map = super::world_map(s, s.spec.navigation.map_resolution, height)
         .context("navigation.map_resolution")?;
@@ -144,9 +144,6 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         }
     }
     let planned_footprint = planned.share();
-    let ControllerConfig::Coverage(control) = &s.controller else {
-        unreachable!("checked above")
-    };
     let second = match (&camera, s.spec.coverage.second_pass.enabled) {
         (Some(_), true) => Some(SecondPass {
             config: s.spec.coverage.second_pass.clone(),
