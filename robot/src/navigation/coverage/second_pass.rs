@@ -120,11 +120,6 @@ impl WallSight {
             self.seen[b as usize * self.grid.width + a as usize] = true;
         }
     }
-
-    /// Whether the wall cell `(i, j)` was seen.
-    pub fn saw(&self, i: usize, j: usize) -> bool {
-        self.seen[j * self.grid.width + i]
-    }
 }
 
 /// The wall cells to see: occupied cells with a free 4-neighbour, within `view_max` of a
@@ -132,8 +127,7 @@ impl WallSight {
 pub fn wanted_walls(field: &Field, view_max: f64) -> Vec<bool> {
     let g = &field.grid;
     let (w, h) = (g.width, g.height);
-    let reach: Vec<bool> = field.reachable.clone();
-    let d2 = crate::geometry::grid::squared_edt(&reach, w, h);
+    let d2 = crate::geometry::grid::squared_edt(&field.reachable, w, h);
     let limit = (view_max / g.resolution).powi(2);
     (0..w * h)
         .map(|k| {
