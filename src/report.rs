@@ -875,6 +875,15 @@ fn coverage_section(dir: &Path, summary: &Value) -> String {
         ("coverage.camera.walls", "camera: walls"),
         ("coverage.camera.floor", "camera: floor"),
         ("coverage.camera.furniture", "camera: furniture"),
+        ("coverage.camera.rooms.walls", "camera: walls of rooms"),
+        (
+            "coverage.camera.corridors.walls",
+            "camera: walls of corridors",
+        ),
+        (
+            "coverage.camera.regions.walls_min",
+            "camera: walls of the worst region",
+        ),
         ("coverage.route.length_m", "route (m)"),
         ("coverage.route.time_s", "time model (s)"),
         ("coverage.driven_m", "driven (m)"),
@@ -895,6 +904,58 @@ fn coverage_section(dir: &Path, summary: &Value) -> String {
         escape(c["planner"].as_str().unwrap_or(""))
     );
     out += &table("coverage", &["figure", "value"], &rows);
+    let share = |v: &Value| {
+        v.as_f64()
+            .map_or("–".to_string(), |x| format!("{:.1} %", 100.0 * x))
+    };
+    let regions: Vec<Vec<String>> = c["regions"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .enumerate()
+        .filter(|(_, r)| {
+            r["walls_m2"].as_f64().unwrap_or(0.0) + r["floor_m2"].as_f64().unwrap_or(0.0) > 0.0
+        })
+        .map(|(k, r)| {
+            let centre = &r["centre"];
+            vec![
+                k.to_string(),
+                escape(r["kind"].as_str().unwrap_or("")),
+                format!(
+                    "{:.1}, {:.1}",
+                    centre[0].as_f64().unwrap_or(0.0),
+                    centre[1].as_f64().unwrap_or(0.0)
+                ),
+                number(&r["area_m2"]),
+                if r["reachable"].as_bool() == Some(true) {
+                    "yes"
+                } else {
+                    "no"
+                }
+                .into(),
+                number(&r["walls_m2"]),
+                share(&r["camera_walls"]),
+                share(&r["camera_floor"]),
+            ]
+        })
+        .collect();
+    if !regions.is_empty() {
+        out += "<h3>Camera coverage by region</h3>\n";
+        out += &table(
+            "coverage-regions",
+            &[
+                "region",
+                "kind",
+                "centre (m)",
+                "floor (m²)",
+                "reachable",
+                "walls (m²)",
+                "walls seen",
+                "floor seen",
+            ],
+            &regions,
+        );
+    }
     if let Ok(png) = std::fs::read(dir.join("coverage.png")) {
         out += &format!(
             "<figure>\n<img class=\"coverage\" src=\"data:image/png;base64,{}\" alt=\"the map painted by coverage\" style=\"max-width: 100%\">\n<figcaption>Floor swept green, reachable floor not swept orange; walls and furniture the camera saw blue, not seen red; the planned route dark blue, the second route magenta, the driven path black.</figcaption>\n</figure>\n",

@@ -33,11 +33,20 @@ const OFFSET: [f64; 3] = [0.0137, 0.0219, 0.0271];
 /// The surface classes scored.
 pub const CLASSES: [&str; 3] = ["floor", "walls", "furniture"];
 
-/// The true surfaces, voxelised, with each class's area per voxel.
+/// The true surfaces, voxelised, with each class's area per voxel, and per region of the
+/// floor where the surfaces were labelled by region.
 pub struct Surfaces {
     area: FxHashMap<[i32; 3], [f64; 3]>,
     total: [f64; 3],
+    /// Each class's area per (voxel, region).
+    regional: FxHashMap<([i32; 3], u32), [f64; 3]>,
+    /// Each region's area of each class.
+    region_total: Vec<[f64; 3]>,
 }
+
+/// How far from a face, along its outward normal, its region is looked up, m: into the free
+/// cell beside a wall's face rather than the wall's own.
+const REGION_PROBE: f64 = 0.03;
 
 fn key(p: [f64; 3]) -> [i32; 3] {
     [0, 1, 2].map(|k| ((p[k] - OFFSET[k]) / VOXEL).floor() as i32)
@@ -46,12 +55,15 @@ fn key(p: [f64; 3]) -> [i32; 3] {
 impl Surfaces {
     /// The world's static surfaces at or below `top` (m) where `keep(x, y)` holds (the area
     /// to cover): the floor slab's upper face, the walls' upright faces and the other static
-    /// objects' upright faces.
-    pub fn from_world(world: &World, top: f64, keep: impl Fn([f64; 2]) -> bool) -> Surfaces {
-        let mut s = Surfaces {
-            area: FxHashMap::default(),
-            total: [0.0; 3],
-        };
+    /// objects' upright faces. `region(x, y)` labels each piece with the region of the floor
+    /// it faces (looked up a little way out along its normal), or none.
+    pub fn from_world(
+        world: &World,
+        top: f64,
+        keep: impl Fn([f64; 2]) -> bool,
+        region: impl Fn([f64; 2]) -> Option<usize>,
+    ) -> Surfaces {
+        let mut s = Surfaces::empty();
         for o in &world.objects {
             if !matches!(o.motion, futago_sim::world::Motion::Static) || o.name == "ceiling" {
                 continue;
@@ -78,14 +90,28 @@ impl Surfaces {
                         continue;
                     };
                     let [a, b, c] = [a, b, c].map(|v| [v.x as f64, v.y as f64, v.z as f64]);
-                    s.add_triangle(a, b, c, class, top, &keep);
+                    let probe = [n.x as f64 / area2 as f64, n.y as f64 / area2 as f64]
+                        .map(|u| u * REGION_PROBE);
+                    let label = |p: [f64; 2]| region([p[0] + probe[0], p[1] + probe[1]]);
+                    s.add_triangle(a, b, c, class, top, &keep, &label);
                 }
             }
         }
         s
     }
 
-    /// Samples a triangle every [`SAMPLE_STEP`] and adds its area below `top` to `class`.
+    fn empty() -> Surfaces {
+        Surfaces {
+            area: FxHashMap::default(),
+            total: [0.0; 3],
+            regional: FxHashMap::default(),
+            region_total: Vec::new(),
+        }
+    }
+
+    /// Samples a triangle every [`SAMPLE_STEP`] and adds its area below `top` to `class`, and
+    /// to the region `label` gives each sample.
+    #[allow(clippy::too_many_arguments)]
     fn add_triangle(
         &mut self,
         a: [f64; 3],
@@ -94,6 +120,7 @@ impl Surfaces {
         class: usize,
         top: f64,
         keep: &impl Fn([f64; 2]) -> bool,
+        label: &impl Fn([f64; 2]) -> Option<usize>,
     ) {
         let e = |p: [f64; 3], q: [f64; 3]| {
             ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2)).sqrt()
@@ -130,8 +157,16 @@ impl Surfaces {
                     if p[2] > top || !keep([p[0], p[1]]) {
                         continue;
                     }
-                    self.area.entry(key(p)).or_insert([0.0; 3])[class] += each;
+                    let k = key(p);
+                    self.area.entry(k).or_insert([0.0; 3])[class] += each;
                     self.total[class] += each;
+                    if let Some(r) = label([p[0], p[1]]) {
+                        self.regional.entry((k, r as u32)).or_insert([0.0; 3])[class] += each;
+                        if self.region_total.len() <= r {
+                            self.region_total.resize(r + 1, [0.0; 3]);
+                        }
+                        self.region_total[r][class] += each;
+                    }
                 }
             }
         }
@@ -168,6 +203,21 @@ impl Surfaces {
                 0.0
             },
         )
+    }
+
+    /// Per region (by number, up to the highest labelled): each class's area, and the area
+    /// of it in the voxels of `seen`, m².
+    pub fn region_areas(&self, seen: &CameraCoverage) -> Vec<([f64; 3], [f64; 3])> {
+        let mut out: Vec<([f64; 3], [f64; 3])> =
+            self.region_total.iter().map(|t| (*t, [0.0; 3])).collect();
+        for ((k, r), a) in &self.regional {
+            if seen.voxels.contains(k) {
+                for (o, x) in out[*r as usize].1.iter_mut().zip(a) {
+                    *o += x;
+                }
+            }
+        }
+        out
     }
 
     /// Whether voxel `k` holds surface of `class`.
@@ -298,18 +348,17 @@ mod tests {
     /// covers half of it.
     #[test]
     fn a_triangle_pair_is_sampled_to_its_area_and_half_seen_is_half() {
-        let mut s = Surfaces {
-            area: FxHashMap::default(),
-            total: [0.0; 3],
-        };
+        // Two regions: x < 0.5 m and beyond.
+        let left_right = |p: [f64; 2]| Some(usize::from(p[0] >= 0.5));
+        let mut s = Surfaces::empty();
         let (a, b, c, d) = (
             [0.0, 0.0, 0.0],
             [2.0, 0.0, 0.0],
             [2.0, 1.0, 0.0],
             [0.0, 1.0, 0.0],
         );
-        s.add_triangle(a, b, c, 0, 1.0, &|_| true);
-        s.add_triangle(a, c, d, 0, 1.0, &|_| true);
+        s.add_triangle(a, b, c, 0, 1.0, &|_| true, &left_right);
+        s.add_triangle(a, c, d, 0, 1.0, &|_| true, &left_right);
         assert!((s.total()[0] - 2.0).abs() < 1e-9, "{:?}", s.total());
         // Seen: every voxel whose centre has x < 1.
         let mut seen = CameraCoverage::default();
@@ -329,11 +378,21 @@ mod tests {
         // The voxel column straddling x = 1 (from 0.9637 to 1.0137) counts whole: up to
         // 0.0137 m × 1 m more.
         assert!((1.0 - 1e-9..=1.0 + 0.0137 + 1e-6).contains(&got), "{got}");
+        // By region: the left 0.5 m (0.5 m²) all seen; of the rest (1.5 m²), the 0.5 m up to
+        // x = 1 m (and the straddling column).
+        let by = s.region_areas(&seen);
+        assert_eq!(by.len(), 2);
+        assert!(
+            (by[0].0[0] - 0.5).abs() < 1e-9 && (by[0].1[0] - 0.5).abs() < 1e-9,
+            "{by:?}"
+        );
+        assert!((by[1].0[0] - 1.5).abs() < 1e-9, "{by:?}");
+        assert!(
+            (0.5 - 1e-9..=0.5 + 0.0137 + 1e-6).contains(&by[1].1[0]),
+            "{by:?}"
+        );
         // A wall below `top` only: a 1 m high face cut at 0.5 m counts half.
-        let mut w = Surfaces {
-            area: FxHashMap::default(),
-            total: [0.0; 3],
-        };
+        let mut w = Surfaces::empty();
         w.add_triangle(
             [0.0, 0.0, 0.0],
             [1.0, 0.0, 0.0],
@@ -341,6 +400,7 @@ mod tests {
             1,
             0.5,
             &|_| true,
+            &|_| None,
         );
         w.add_triangle(
             [0.0, 0.0, 0.0],
@@ -349,6 +409,7 @@ mod tests {
             1,
             0.5,
             &|_| true,
+            &|_| None,
         );
         assert!((w.total()[1] - 0.5).abs() < 0.02, "{:?}", w.total());
     }

@@ -11,6 +11,7 @@ pub mod map;
 pub mod mot;
 pub mod planes;
 pub mod pollution;
+pub mod regions;
 pub mod trajectory;
 
 use std::collections::BTreeMap;

@@ -17,6 +17,7 @@
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::coverage::{CLASSES, CameraCoverage, Footprint, Surfaces};
+use crate::ground_truth::regions::{CORRIDOR_WIDTH, Kind, Regions};
 use crate::scenario::{ControllerConfig, Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, Pose2, Time};
@@ -58,6 +59,9 @@ pub struct CoverageNode {
     planned_footprint: f64,
     camera: Option<ScoredCamera>,
     surfaces: Option<Surfaces>,
+    /// The floor's corridors and rooms, and which of them hold floor the robot can reach.
+    regions: Regions,
+    reachable_regions: Vec<bool>,
     seen: CameraCoverage,
     footprint: Footprint,
     next_frame: Time,
@@ -114,13 +118,19 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         name: c.name.clone(),
         range: (c.range_min, c.range_max),
     });
+    // Corridors and rooms, on the whole map (the region to cover would narrow the space
+    // where its edge cuts it).
+    let regions = Regions::new(&map, CORRIDOR_WIDTH);
     let surfaces = cam.map(|c| {
         let half_vfov = (c.depth.height as f64 / (2.0 * c.depth.fy)).atan();
         let top = c.mount.translation.z as f64 + c.range_max * half_vfov.tan();
         let region = &s.spec.coverage.region;
-        Surfaces::from_world(&s.world, top, |p| {
-            region.is_empty() || coverage::inside_polygon(region, p)
-        })
+        Surfaces::from_world(
+            &s.world,
+            top,
+            |p| region.is_empty() || coverage::inside_polygon(region, p),
+            |p| regions.at(p),
+        )
     });
     // The floor to cover: the world's, less what the user left out (the region's outside and
     // the annotations).
@@ -144,6 +154,15 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         }
     }
     let planned_footprint = planned.share();
+    let mut reachable_regions = vec![false; regions.regions().len()];
+    let g = footprint.grid();
+    for (k, state) in footprint.states().iter().enumerate() {
+        if *state > 0
+            && let Some(r) = regions.at(g.cell_center(k % g.width, k / g.width))
+        {
+            reachable_regions[r] = true;
+        }
+    }
     let second = match (&camera, s.spec.coverage.second_pass.enabled) {
         (Some(_), true) => Some(SecondPass {
             config: s.spec.coverage.second_pass.clone(),
@@ -170,6 +189,8 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         planned_footprint,
         camera,
         surfaces,
+        regions,
+        reachable_regions,
         seen: CameraCoverage::default(),
         footprint,
         next_frame: Time::ZERO,
@@ -210,6 +231,13 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
                 .chain(&["all"])
                 .map(|c| format!("coverage.camera.{c}")),
         );
+        // By kind of region (where the world has that kind), and the worst region's walls.
+        for kind in ["rooms", "corridors"] {
+            for class in ["walls", "floor"] {
+                names.push(format!("coverage.camera.{kind}.{class}"));
+            }
+        }
+        names.push("coverage.camera.regions.walls_min".into());
         if s.coverage.second_pass.enabled {
             names.extend(
                 [
@@ -286,7 +314,56 @@ impl SecondPass {
     }
 }
 
+/// A region's walls count towards the worst region's figure from this area on, m²: a room
+/// cut by the edge of the region to cover, or a nook, would make it noise.
+const MIN_REGION_WALLS: f64 = 1.0;
+
 impl CoverageNode {
+    /// The camera's coverage by region: per region its (walls, floor) area and seen area;
+    /// per kind (rooms, corridors) the seen shares of walls and floor; and the lowest
+    /// seen share of walls among the regions with reachable floor and at least
+    /// [`MIN_REGION_WALLS`] of walls.
+    #[allow(clippy::type_complexity)]
+    fn by_region(
+        &self,
+    ) -> Option<(
+        Vec<([f64; 3], [f64; 3])>,
+        Vec<(Kind, [f64; 2])>,
+        Option<f64>,
+    )> {
+        let s = self.surfaces.as_ref()?;
+        let areas = s.region_areas(&self.seen);
+        let mut kinds = Vec::new();
+        for kind in [Kind::Room, Kind::Corridor] {
+            let (mut total, mut got) = ([0.0; 2], [0.0; 2]);
+            for (r, (t, g)) in areas.iter().enumerate() {
+                if self.regions.regions()[r].kind == kind {
+                    for (k, class) in [1, 0].into_iter().enumerate() {
+                        total[k] += t[class];
+                        got[k] += g[class];
+                    }
+                }
+            }
+            if total[0] + total[1] > 0.0 {
+                let share = |k: usize| {
+                    if total[k] > 0.0 {
+                        got[k] / total[k]
+                    } else {
+                        0.0
+                    }
+                };
+                kinds.push((kind, [share(0), share(1)]));
+            }
+        }
+        let worst = areas
+            .iter()
+            .enumerate()
+            .filter(|(r, (t, _))| self.reachable_regions[*r] && t[1] >= MIN_REGION_WALLS)
+            .map(|(_, (t, g))| g[1] / t[1])
+            .min_by(f64::total_cmp);
+        Some((areas, kinds, worst))
+    }
+
     fn sample(&mut self, now: Time) {
         let (walls, floor, all) = match &self.surfaces {
             Some(s) => {
@@ -533,8 +610,32 @@ impl Node for CoverageNode {
                 .with_context(|| format!("writing {SECOND_ROUTE_FILE}"))?;
             files.push(SECOND_ROUTE_FILE.to_string());
         }
+        let regions: Vec<Value> = match self.by_region() {
+            Some((areas, ..)) => self
+                .regions
+                .regions()
+                .iter()
+                .enumerate()
+                .filter_map(|(r, region)| {
+                    let (t, g) = areas.get(r)?;
+                    let share = |c: usize| (t[c] > 0.0).then(|| g[c] / t[c]);
+                    Some(json!({
+                        "kind": region.kind,
+                        "area_m2": region.area_m2,
+                        "centre": region.centre,
+                        "reachable": self.reachable_regions[r],
+                        "walls_m2": t[1],
+                        "floor_m2": t[0],
+                        "camera_walls": share(1),
+                        "camera_floor": share(0),
+                    }))
+                })
+                .collect(),
+            None => Vec::new(),
+        };
         let summary = json!({
             "planner": self.route.planner.name(),
+            "regions": regions,
             "second_pass": second,
             "route": self.route.stats,
             "route_done_s": self.done_at.map(|t| t.secs()),
@@ -575,6 +676,19 @@ impl Node for CoverageNode {
                 m.insert(format!("coverage.camera.{name}"), by[c].unwrap_or(0.0));
             }
             m.insert("coverage.camera.all", all);
+            if let Some((_, kinds, worst)) = self.by_region() {
+                for (kind, [walls, floor]) in kinds {
+                    let name = match kind {
+                        Kind::Room => "rooms",
+                        Kind::Corridor => "corridors",
+                    };
+                    m.insert(format!("coverage.camera.{name}.walls"), walls);
+                    m.insert(format!("coverage.camera.{name}.floor"), floor);
+                }
+                if let Some(w) = worst {
+                    m.insert("coverage.camera.regions.walls_min", w);
+                }
+            }
             if let Some(second) = &self.second {
                 // Without a second route (nothing missed, or the first never finished), the
                 // figures before it are those at the end.
