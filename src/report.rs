@@ -894,10 +894,27 @@ fn coverage_section(dir: &Path, summary: &Value) -> String {
         ("coverage.second_pass.walls_gain", "walls gained by it"),
         ("coverage.second_pass.extra_m", "its extra distance (m)"),
     ];
+    // A kind of region the area holds none of scores 1; the table says so instead.
+    let scored = |kind: &str| {
+        c["regions"].as_array().is_some_and(|r| {
+            r.iter()
+                .any(|x| x["kind"] == kind && x["scored"].as_bool() == Some(true))
+        })
+    };
     let rows: Vec<Vec<String>> = keys
         .iter()
         .filter(|(k, _)| metrics.get(*k).is_some())
-        .map(|(k, name)| vec![escape(name), number(&metrics[*k])])
+        .map(|(k, name)| {
+            let none = [("rooms", "room"), ("corridors", "corridor")]
+                .iter()
+                .any(|(p, kind)| k.starts_with(&format!("coverage.camera.{p}.")) && !scored(kind));
+            let value = if none {
+                "none in the area".to_string()
+            } else {
+                number(&metrics[*k])
+            };
+            vec![escape(name), value]
+        })
         .collect();
     let mut out = format!(
         "<h2>Coverage ({})</h2>\n",
@@ -927,7 +944,8 @@ fn coverage_section(dir: &Path, summary: &Value) -> String {
                     centre[1].as_f64().unwrap_or(0.0)
                 ),
                 number(&r["area_m2"]),
-                if r["reachable"].as_bool() == Some(true) {
+                share(&r["reachable_share"]),
+                if r["scored"].as_bool() == Some(true) {
                     "yes"
                 } else {
                     "no"
@@ -949,6 +967,7 @@ fn coverage_section(dir: &Path, summary: &Value) -> String {
                 "centre (m)",
                 "floor (m²)",
                 "reachable",
+                "scored",
                 "walls (m²)",
                 "walls seen",
                 "floor seen",

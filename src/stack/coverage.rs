@@ -17,7 +17,7 @@
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::coverage::{CLASSES, CameraCoverage, Footprint, Surfaces};
-use crate::ground_truth::regions::{CORRIDOR_WIDTH, Kind, Regions};
+use crate::ground_truth::regions::{CORRIDOR_WIDTH, Kind, MIN_AREA_FACTOR, Regions};
 use crate::scenario::{ControllerConfig, Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, Pose2, Time};
@@ -59,9 +59,11 @@ pub struct CoverageNode {
     planned_footprint: f64,
     camera: Option<ScoredCamera>,
     surfaces: Option<Surfaces>,
-    /// The floor's corridors and rooms, and which of them hold floor the robot can reach.
+    /// The floor's corridors and rooms, the share of each one's floor the robot's footprint
+    /// can reach, and whether that makes it one the route is asked to cover.
     regions: Regions,
-    reachable_regions: Vec<bool>,
+    reachable_share: Vec<f64>,
+    scored_regions: Vec<bool>,
     seen: CameraCoverage,
     footprint: Footprint,
     next_frame: Time,
@@ -154,15 +156,33 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         }
     }
     let planned_footprint = planned.share();
-    let mut reachable_regions = vec![false; regions.regions().len()];
+    let mut reachable_m2 = vec![0.0; regions.regions().len()];
     let g = footprint.grid();
     for (k, state) in footprint.states().iter().enumerate() {
         if *state > 0
             && let Some(r) = regions.at(g.cell_center(k % g.width, k / g.width))
         {
-            reachable_regions[r] = true;
+            reachable_m2[r] += g.resolution * g.resolution;
         }
     }
+    let reachable_share: Vec<f64> = regions
+        .regions()
+        .iter()
+        .zip(&reachable_m2)
+        .map(|(r, a)| {
+            if r.area_m2 > 0.0 {
+                (a / r.area_m2).min(1.0)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let min_reachable_m2 = MIN_AREA_FACTOR * CORRIDOR_WIDTH * CORRIDOR_WIDTH;
+    let scored_regions = reachable_share
+        .iter()
+        .zip(&reachable_m2)
+        .map(|(&s, &a)| s >= MIN_REACHABLE_SHARE || a >= min_reachable_m2)
+        .collect();
     let second = match (&camera, s.spec.coverage.second_pass.enabled) {
         (Some(_), true) => Some(SecondPass {
             config: s.spec.coverage.second_pass.clone(),
@@ -190,7 +210,8 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         camera,
         surfaces,
         regions,
-        reachable_regions,
+        reachable_share,
+        scored_regions,
         seen: CameraCoverage::default(),
         footprint,
         next_frame: Time::ZERO,
@@ -314,15 +335,26 @@ impl SecondPass {
     }
 }
 
-/// A region's walls count towards the worst region's figure from this area on, m²: a room
-/// cut by the edge of the region to cover, or a nook, would make it noise.
+/// A region's walls count towards the worst region's figure from this area on, m²: a nook
+/// would make it noise.
 const MIN_REGION_WALLS: f64 = 1.0;
+
+/// A corridor or room is one the route is asked to cover, and is scored by region, when at
+/// least this share of its floor lies within the footprint's reach, or at least as much floor
+/// as the smallest region has (2.9 m², a 1.2 m corridor 2.4 m long). Regions are found on the
+/// whole map (the edge of the region to cover would narrow the space it cuts); one that lies
+/// mostly outside that edge, or behind an annotation, keeps only a sliver of floor and the far
+/// faces of its walls inside, which no route over the covered floor can see. The footprint
+/// reaches most of a room it can enter (all but a band of its clearance along the walls); in a
+/// real map's clutter, a long corridor merged with rooms the robot cannot enter may keep less
+/// than half, but many square metres.
+const MIN_REACHABLE_SHARE: f64 = 0.5;
 
 impl CoverageNode {
     /// The camera's coverage by region: per region its (walls, floor) area and seen area;
-    /// per kind (rooms, corridors) the seen shares of walls and floor; and the lowest
-    /// seen share of walls among the regions with reachable floor and at least
-    /// [`MIN_REGION_WALLS`] of walls.
+    /// per kind (rooms, corridors) the seen shares of walls and floor over the scored regions
+    /// ([`MIN_REACHABLE_SHARE`]), 1 where there is none to see; and the lowest seen share of walls among the scored regions
+    /// with at least [`MIN_REGION_WALLS`] of walls.
     #[allow(clippy::type_complexity)]
     fn by_region(
         &self,
@@ -337,28 +369,28 @@ impl CoverageNode {
         for kind in [Kind::Room, Kind::Corridor] {
             let (mut total, mut got) = ([0.0; 2], [0.0; 2]);
             for (r, (t, g)) in areas.iter().enumerate() {
-                if self.regions.regions()[r].kind == kind {
+                if self.scored_regions[r] && self.regions.regions()[r].kind == kind {
                     for (k, class) in [1, 0].into_iter().enumerate() {
                         total[k] += t[class];
                         got[k] += g[class];
                     }
                 }
             }
-            if total[0] + total[1] > 0.0 {
-                let share = |k: usize| {
-                    if total[k] > 0.0 {
-                        got[k] / total[k]
-                    } else {
-                        0.0
-                    }
-                };
-                kinds.push((kind, [share(0), share(1)]));
-            }
+            // Where the area holds no scored surface of a kind and class, nothing of it was
+            // missed: the share is 1 (so the metric exists whatever the map, as declared).
+            let share = |k: usize| {
+                if total[k] > 0.0 {
+                    got[k] / total[k]
+                } else {
+                    1.0
+                }
+            };
+            kinds.push((kind, [share(0), share(1)]));
         }
         let worst = areas
             .iter()
             .enumerate()
-            .filter(|(r, (t, _))| self.reachable_regions[*r] && t[1] >= MIN_REGION_WALLS)
+            .filter(|(r, (t, _))| self.scored_regions[*r] && t[1] >= MIN_REGION_WALLS)
             .map(|(_, (t, g))| g[1] / t[1])
             .min_by(f64::total_cmp);
         Some((areas, kinds, worst))
@@ -623,7 +655,8 @@ impl Node for CoverageNode {
                         "kind": region.kind,
                         "area_m2": region.area_m2,
                         "centre": region.centre,
-                        "reachable": self.reachable_regions[r],
+                        "reachable_share": self.reachable_share[r],
+                        "scored": self.scored_regions[r],
                         "walls_m2": t[1],
                         "floor_m2": t[0],
                         "camera_walls": share(1),

@@ -56,6 +56,14 @@ pub struct MclConfig {
     /// with probability max(0, 1 − w_fast / w_slow).
     pub alpha_slow: f64,
     pub alpha_fast: f64,
+    /// The filter takes a scan only once odometry has moved `update_min_d` m or turned
+    /// `update_min_a` rad since the last scan it took (ROS amcl's rule). Scans of a robot
+    /// that stands still repeat the same evidence: weighting and resampling on each of them
+    /// as if independent, with no motion noise to spread the set, collapse it onto whichever
+    /// pose the map's small errors favour (a leg the map rasterises wider than it is), and
+    /// lower the likelihood averages that decide augmented MCL's random particles.
+    pub update_min_d: f64,
+    pub update_min_a: f64,
 }
 
 impl Default for MclConfig {
@@ -81,6 +89,10 @@ impl Default for MclConfig {
             max_particles: 5000,
             alpha_slow: 0.001,
             alpha_fast: 0.1,
+            // One cell of seed 000's 50 mm map, and the turn that moves a beam's end at 1 m
+            // by a cell.
+            update_min_d: 0.05,
+            update_min_a: 0.05,
         }
     }
 }
@@ -127,6 +139,8 @@ impl MclConfig {
                 ("kld_bin_angle", self.kld_bin_angle, 1e-3, PI),
                 ("alpha_slow", self.alpha_slow, 0.0, 1.0),
                 ("alpha_fast", self.alpha_fast, 0.0, 1.0),
+                ("update_min_d", self.update_min_d, 0.0, 100.0),
+                ("update_min_a", self.update_min_a, 0.0, PI),
             ],
         )?;
         if self.z_hit + self.z_short + self.z_max + self.z_rand <= 0.0 {
@@ -233,6 +247,8 @@ pub struct Mcl {
     last_odometry: Option<Pose2>,
     w_slow: f64,
     w_fast: f64,
+    /// The odometry and the estimate at the last scan the filter took (`update_min_d`).
+    last_update: Option<(Pose2, Estimate)>,
 }
 
 fn gauss(rng: &mut ChaCha8Rng) -> f64 {
@@ -251,6 +267,7 @@ impl Mcl {
             last_odometry: None,
             w_slow: 0.0,
             w_fast: 0.0,
+            last_update: None,
         };
         m.particles = (0..config.particles).map(|_| m.random_pose()).collect();
         m.weights = vec![1.0 / config.particles as f64; config.particles];
@@ -260,6 +277,7 @@ impl Mcl {
     /// Spreads the particles around `pose` with standard deviations (m, m, rad).
     pub fn set_pose(&mut self, pose: Pose2, sigma: [f64; 3]) {
         let n = self.config.particles;
+        self.last_update = None;
         self.particles = (0..n)
             .map(|_| {
                 Pose2::new(
@@ -362,7 +380,28 @@ impl Mcl {
 
     /// One filter step: motion from `odometry` (the robot's odometry pose), then the scan
     /// (taken by the laser at `mount` on the robot), resampling, and the estimate.
+    /// Where odometry has moved less than `update_min_d` and turned less than `update_min_a`
+    /// since the last scan taken, the scan is not taken: the particles stay, and the
+    /// estimate is the last one carried by odometry.
     pub fn update(&mut self, odometry: &Pose2, scan: &LaserScan, mount: &Pose2) -> Estimate {
+        if let Some((at, last)) = &self.last_update {
+            let moved = at.between(odometry);
+            if moved.x.hypot(moved.y) < self.config.update_min_d
+                && moved.theta.abs() < self.config.update_min_a
+            {
+                return Estimate {
+                    pose: last.pose.compose(&moved),
+                    ..*last
+                };
+            }
+        }
+        let estimate = self.take(odometry, scan, mount);
+        self.last_update = Some((*odometry, estimate));
+        estimate
+    }
+
+    /// Takes a scan: motion, weighting, resampling and the estimate.
+    fn take(&mut self, odometry: &Pose2, scan: &LaserScan, mount: &Pose2) -> Estimate {
         self.predict(odometry);
         let c = self.config;
         // The beams used: one every `beam_step`.
@@ -783,8 +822,11 @@ mod tests {
     /// the estimate stays on the robot, not dragged towards the middle of the room by them.
     #[test]
     fn random_particles_do_not_drag_the_estimate() {
+        // The robot stands still; the filter takes every scan all the same.
         let config = MclConfig {
             model: SensorModel::LikelihoodField,
+            update_min_d: 0.0,
+            update_min_a: 0.0,
             ..MclConfig::default()
         };
         let reference = MclMap::new(room());
@@ -816,6 +858,74 @@ mod tests {
         // The injected particles are there (the set's mean moves), the estimate is not moved.
         assert!(spread > 0.3, "no random particles were injected: {spread}");
         assert!(worst < 0.1, "{worst}");
+    }
+
+    /// A robot that stands still: the filter takes its first scan and then no more until
+    /// odometry moves, so the set keeps its spread; taking every scan of the standing robot
+    /// collapses the set (resampling with no motion noise), which is what the rule prevents.
+    #[test]
+    fn a_standing_robot_does_not_collapse_the_set() {
+        let reference = MclMap::new(room());
+        let truth = Pose2::new(3.0, 2.0, 0.4);
+        // Distinct particles in the set.
+        let distinct = |mcl: &Mcl| -> usize {
+            let mut d: Vec<(u64, u64, u64)> = mcl
+                .particles()
+                .iter()
+                .map(|p| (p.x.to_bits(), p.y.to_bits(), p.theta.to_bits()))
+                .collect();
+            d.sort_unstable();
+            d.dedup();
+            d.len()
+        };
+        // Distinct particles after the first scan and after forty more of the standing robot.
+        let spread = |update_min_d: f64, update_min_a: f64| -> (usize, usize, Estimate) {
+            let config = MclConfig {
+                update_min_d,
+                update_min_a,
+                kld: false,
+                ..MclConfig::default()
+            };
+            let mut mcl = Mcl::new(config, MclMap::new(room()), 5);
+            mcl.set_pose(truth, [0.05, 0.05, 0.02]);
+            let odo = Pose2::new(1.0, -2.0, 0.3);
+            let z = scan(&reference, &truth);
+            let mut est = mcl.update(&odo, &z, &Pose2::IDENTITY);
+            let first = distinct(&mcl);
+            for _ in 0..40 {
+                est = mcl.update(&odo, &z, &Pose2::IDENTITY);
+            }
+            (first, distinct(&mcl), est)
+        };
+        let (first, kept, est) = spread(0.05, 0.05);
+        assert_eq!(first, kept);
+        // Taking every scan: each resampling with no motion noise loses particles, and
+        // forty of them leave a fraction of the first set.
+        let (first, collapsed, _) = spread(0.0, 0.0);
+        assert!(collapsed * 4 < first, "{collapsed} of {first}");
+        assert!(est.pose.distance(&truth) < 0.1, "{est:?}");
+        // Motion past the threshold makes the filter take the next scan and carry the estimate.
+        let config = MclConfig::default();
+        let mut mcl = Mcl::new(config, MclMap::new(room()), 5);
+        mcl.set_pose(truth, [0.05, 0.05, 0.02]);
+        let z = scan(&reference, &truth);
+        let first = mcl.update(&Pose2::IDENTITY, &z, &Pose2::IDENTITY);
+        let before = mcl.particles().to_vec();
+        let small = Pose2::new(0.02, 0.0, 0.01);
+        let carried = mcl.update(&small, &z, &Pose2::IDENTITY);
+        assert_eq!(before, mcl.particles(), "a scan 2 cm on was taken");
+        assert!(carried.pose.distance(&first.pose.compose(&small)) < 1e-12);
+        let moved = truth.compose(&Pose2::new(0.3, 0.0, 0.0));
+        mcl.update(
+            &Pose2::new(0.3, 0.0, 0.0),
+            &scan(&reference, &moved),
+            &Pose2::IDENTITY,
+        );
+        assert_ne!(
+            before,
+            mcl.particles(),
+            "the scan after moving 0.3 m was not taken"
+        );
     }
 
     fn drive(model: SensorModel, global: bool) {

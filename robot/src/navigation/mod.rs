@@ -439,6 +439,16 @@ impl Navigator {
             self.follower = None;
         }
         if self.follower.is_none() && !self.plan(now, &input.pose) {
+            // No path reaches the route's next points from the pose the robot believes it
+            // has (one inside a wall's margin): the estimate is likely off. Standing gives
+            // the localiser nothing new (MCL takes scans only as the robot moves), so the
+            // robot turns in place, as Nav2's spin recovery does, and plans again as it turns.
+            if matches!(self.task, Task::Route(_)) && !matches!(self.mode, Mode::Done) {
+                return DriveCommand::Drive {
+                    velocity: self.config.turn_speed,
+                    radius: Radius::InPlaceCcw,
+                };
+            }
             return DriveCommand::STOP;
         }
         let Some(f) = self.follower.as_mut() else {
@@ -666,7 +676,7 @@ impl Navigator {
                 };
                 // A point no path reaches is given up when a later one is reached; when none
                 // of the next few is, the trouble is where the robot is (a localisation
-                // error): it stands and tries again, and gives nothing up.
+                // error): it turns in place and tries again, and gives nothing up.
                 for ahead in 0..ROUTE_LOOKAHEAD {
                     let k = self.route_next + ahead;
                     let Some(&goal) = route.get(k) else { break };
@@ -781,6 +791,19 @@ mod tests {
         (nav, Pose2::new(1.0, 1.0, 0.0), 0.05)
     }
 
+    /// The navigator's input at tick `k` of `dt` s with only a pose: no bump, scan, map or
+    /// people.
+    fn plain_input(k: usize, dt: f64, pose: Pose2) -> NavInput<'static> {
+        NavInput {
+            now: Time::from_secs(k as f64 * dt),
+            pose,
+            bumps: BumpsAndDrops::default(),
+            scan: None,
+            map: None,
+            people: &[],
+        }
+    }
+
     fn scan_with_return_at(distance: f64) -> LaserScan {
         LaserScan {
             frame: "front".into(),
@@ -806,14 +829,7 @@ mod tests {
         let dt = 0.05;
         let mut visited = Vec::new();
         for k in 0..4000 {
-            let cmd = nav.update(&NavInput {
-                now: Time::from_secs(k as f64 * dt),
-                pose,
-                bumps: BumpsAndDrops::default(),
-                scan: None,
-                map: None,
-                people: &[],
-            });
+            let cmd = nav.update(&plain_input(k, dt, pose));
             let (v, w) = unicycle(&cmd);
             pose = pose.compose(&Pose2::new(v * dt, 0.0, w * dt));
             if (pose.x - 5.0).hypot(pose.y - 3.0) < 0.2 {
@@ -887,14 +903,7 @@ mod tests {
         let mut pushed = false;
         let mut near = vec![false; route.len()];
         for k in 0..8000 {
-            let cmd = nav.update(&NavInput {
-                now: Time::from_secs(k as f64 * dt),
-                pose,
-                bumps: BumpsAndDrops::default(),
-                scan: None,
-                map: None,
-                people: &[],
-            });
+            let cmd = nav.update(&plain_input(k, dt, pose));
             let (v, w) = unicycle(&cmd);
             pose = pose.compose(&Pose2::new(v * dt, 0.0, w * dt));
             for (n, p) in route.iter().enumerate() {
@@ -917,6 +926,32 @@ mod tests {
         // A new route starts it again.
         nav.set_route(vec![[4.0, 3.0], [4.0, 4.0]]);
         assert!(!nav.finished());
+    }
+
+    /// A pose estimate inside a wall's margin, from which no path reaches the route: the
+    /// robot turns in place (giving the localiser new views) instead of standing, gives no
+    /// route point up, and drives the route once the estimate is back on the free floor.
+    #[test]
+    fn a_route_unreachable_from_the_estimate_turns_the_robot_in_place() {
+        let route: Vec<[f64; 2]> = vec![[1.0, 1.0], [4.0, 1.0]];
+        let (mut nav, _, dt) = route_in_room(&route);
+        let lost = Pose2::new(0.06, 2.0, 0.0);
+        for k in 0..40 {
+            let cmd = nav.update(&plain_input(k, dt, lost));
+            let (v, w) = unicycle(&cmd);
+            assert!(v.abs() < 1e-9 && w > 0.0, "{cmd:?}");
+        }
+        assert_eq!(nav.stats().route_points_skipped, 0);
+        let mut pose = Pose2::new(1.0, 1.2, 0.0);
+        for k in 40..4000 {
+            let (v, w) = unicycle(&nav.update(&plain_input(k, dt, pose)));
+            pose = pose.compose(&Pose2::new(v * dt, 0.0, w * dt));
+            if nav.finished() {
+                break;
+            }
+        }
+        assert!(nav.finished(), "{:?}", nav.stats());
+        assert!((pose.x - 4.0).hypot(pose.y - 1.0) < 0.2, "{pose:?}");
     }
 
     /// A wall the map does not hold across the way to a route point (x = 2.5 m, below
