@@ -33,6 +33,11 @@ pub enum KinectPreset {
     KinectV1,
     /// Seed 000's use: 320×240 depth, the retail 1.2–3.5 m play space.
     Seed000,
+    /// MESA SR4000 time-of-flight camera (seed 002): 176×144, 43.6° × 34.6°, 0.1–5.0 m, the
+    /// figures commonly quoted from MESA's datasheet (issue 17); its intensity image stands
+    /// in for colour at the same size. Its ±1 cm is `noise = { model = "gaussian", sigma =
+    /// 0.01 }`.
+    Sr4000,
 }
 
 /// Depth noise model.
@@ -46,6 +51,9 @@ pub enum NoiseModel {
     Nguyen,
     /// ICL-NUIM's disparity-quantised model (simkinect).
     IclNuim,
+    /// Independent Gaussian noise of `sigma` on every pixel's depth (a time-of-flight camera's
+    /// datasheet accuracy taken as 1σ).
+    Gaussian,
 }
 
 /// Noise parameters (the ICL-NUIM ones; Nguyen's are fixed by the paper).
@@ -61,6 +69,8 @@ pub struct NoiseConfig {
     pub jitter: f64,
     /// Drop pixels whose neighbourhood is inconsistent (ICL-NUIM's dot-pattern filter).
     pub edge_filter: bool,
+    /// Standard deviation of the Gaussian model, m.
+    pub sigma: f64,
 }
 
 impl Default for NoiseConfig {
@@ -71,6 +81,7 @@ impl Default for NoiseConfig {
             disparity_step: 0.125,
             jitter: 0.5,
             edge_filter: true,
+            sigma: 0.01,
         }
     }
 }
@@ -158,13 +169,14 @@ impl KinectConfig {
     pub fn resolve(&self, file: &Path, key: &str) -> Result<KinectSpec, SpecError> {
         let k = |s: &str| format!("{key}.{s}");
         crate::config::check_name(file, &k("name"), &self.name)?;
-        let (depth_size, range) = match self.preset {
-            KinectPreset::KinectV1 => ([640, 480], (0.8, 4.0)),
-            KinectPreset::Seed000 => ([320, 240], (1.2, 3.5)),
+        let (depth_size, rgb_size, range, fov) = match self.preset {
+            KinectPreset::KinectV1 => ([640, 480], [640, 480], (0.8, 4.0), [57.0, 43.0]),
+            KinectPreset::Seed000 => ([320, 240], [640, 480], (1.2, 3.5), [57.0, 43.0]),
+            KinectPreset::Sr4000 => ([176, 144], [176, 144], (0.1, 5.0), [43.6, 34.6]),
         };
-        let rgb_size = self.rgb_size.unwrap_or([640, 480]);
+        let rgb_size = self.rgb_size.unwrap_or(rgb_size);
         let depth_size = self.depth_size.unwrap_or(depth_size);
-        let [fh, fv] = self.fov_deg.unwrap_or([57.0, 43.0]);
+        let [fh, fv] = self.fov_deg.unwrap_or(fov);
         check_range(file, &k("fov_deg[0]"), fh, 1.0, 170.0, "degrees")?;
         check_range(file, &k("fov_deg[1]"), fv, 1.0, 170.0, "degrees")?;
         let intr = |name: &str, [w, h]: [u32; 2]| {
@@ -197,6 +209,7 @@ impl KinectConfig {
             "px",
         )?;
         check_range(file, &k("noise.jitter"), n.jitter, 0.0, 10.0, "px")?;
+        check_range(file, &k("noise.sigma"), n.sigma, 0.0, 1.0, "m")?;
         check_mount(file, key, self.xyz, self.rpy_deg)?;
         let mount = mount_pose(self.xyz, self.rpy_deg);
         Ok(KinectSpec {
@@ -223,6 +236,13 @@ impl KinectSpec {
             NoiseModel::None => {}
             NoiseModel::Nguyen => nguyen(depth, &self.depth, rng),
             NoiseModel::IclNuim => icl_nuim(depth, &self.depth, &self.noise, rng),
+            NoiseModel::Gaussian => {
+                for z in &mut depth.data {
+                    if *z > 0.0 {
+                        *z += (self.noise.sigma * normal(rng)) as f32;
+                    }
+                }
+            }
         }
         let (lo, hi) = (self.range_min as f32, self.range_max as f32);
         for z in &mut depth.data {
@@ -636,5 +656,45 @@ mod tests {
             .unwrap();
         assert_eq!((s.depth.width, s.depth.height), (320, 240));
         assert_eq!((s.range_min, s.range_max), (1.2, 3.5));
+    }
+
+    /// The SR4000 preset: seed 002's 176×144 at the datasheet's 43.6° × 34.6° and 0.1–5 m;
+    /// its Gaussian noise has the configured σ and cuts to the range.
+    #[test]
+    fn the_sr4000_preset_and_its_gaussian_noise() {
+        let mut c = KinectConfig::preset(KinectPreset::Sr4000);
+        c.noise.model = NoiseModel::Gaussian;
+        c.noise.sigma = 0.01;
+        let s = c.resolve(Path::new("s.toml"), "camera[0]").unwrap();
+        assert_eq!((s.depth.width, s.depth.height), (176, 144));
+        assert_eq!((s.rgb.width, s.rgb.height), (176, 144));
+        assert_eq!((s.range_min, s.range_max), (0.1, 5.0));
+        let fov = 2.0 * (176.0 / 2.0 / s.depth.fx).atan();
+        assert!(
+            (fov.to_degrees() - 43.6).abs() < 1e-9,
+            "{}",
+            fov.to_degrees()
+        );
+        let mut d = plane(2.0, 176, 144);
+        s.apply_noise(&mut d, &mut stream(3, "camera"));
+        let n = d.data.len() as f64;
+        let mean = d.data.iter().map(|z| *z as f64).sum::<f64>() / n;
+        let sd = (d
+            .data
+            .iter()
+            .map(|z| (*z as f64 - mean).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        assert!(
+            (mean - 2.0).abs() < 0.001 && (sd - 0.01).abs() < 0.001,
+            "{mean} {sd}"
+        );
+        let mut far = plane(6.0, 176, 144);
+        s.apply_noise(&mut far, &mut stream(3, "camera"));
+        assert!(far.data.iter().all(|z| *z == 0.0));
+        c.noise.sigma = -1.0;
+        let e = c.resolve(Path::new("s.toml"), "camera[0]").unwrap_err();
+        assert!(e.to_string().contains("camera[0].noise.sigma"), "{e}");
     }
 }
