@@ -82,6 +82,10 @@ preset = "seed000"
 [localization]
 laser = "front"
 
+[depth_localization]
+camera = "kinect"
+size = [80, 60]
+
 [slam]
 laser = "front"
 

@@ -265,6 +265,24 @@ enum BenchCommand {
         #[arg(long, default_value_t = 200)]
         updates: usize,
     },
+    /// Seed 002's depth-camera MCL: time per frame (one batched render of every particle,
+    /// the likelihood, resampling) for each particle count and render size.
+    DepthMcl {
+        #[arg(long, default_value = "worlds/office.toml")]
+        world: PathBuf,
+        /// Spawn the camera stands over.
+        #[arg(long, default_value = "dock")]
+        spawn: String,
+        /// Particle counts, comma-separated.
+        #[arg(long, value_delimiter = ',', default_value = "50,200,500,2000")]
+        particles: Vec<usize>,
+        /// Render sizes WxH, comma-separated (the SR4000's 176x144 and smaller).
+        #[arg(long, value_delimiter = ',', default_value = "176x144,88x72,44x36")]
+        sizes: Vec<String>,
+        /// Frames timed per combination.
+        #[arg(long, default_value_t = 20)]
+        frames: usize,
+    },
     /// People detection and tracking per scan (a URG-04LX before walking people) and the
     /// simulator's real-time factor among a crowd.
     People {
@@ -311,18 +329,19 @@ enum BenchCommand {
     },
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32)> {
+/// `WIDTHxHEIGHT` of option `flag`.
+fn parse_size(flag: &str, s: &str) -> Result<(u32, u32)> {
     let (w, h) = s
         .split_once(['x', 'X'])
-        .with_context(|| format!("--batch-size: expected WIDTHxHEIGHT, found `{s}`"))?;
+        .with_context(|| format!("{flag}: expected WIDTHxHEIGHT, found `{s}`"))?;
     let w: u32 = w
         .trim()
         .parse()
-        .with_context(|| format!("--batch-size: `{w}` is not a pixel count"))?;
+        .with_context(|| format!("{flag}: `{w}` is not a pixel count"))?;
     let h: u32 = h
         .trim()
         .parse()
-        .with_context(|| format!("--batch-size: `{h}` is not a pixel count"))?;
+        .with_context(|| format!("{flag}: `{h}` is not a pixel count"))?;
     Ok((w, h))
 }
 
@@ -865,6 +884,37 @@ fn real_main() -> Result<()> {
         }
         Command::Bench {
             command:
+                BenchCommand::DepthMcl {
+                    world,
+                    spawn,
+                    particles,
+                    sizes,
+                    frames,
+                },
+        } => {
+            let w = world_cmd::load(&world)?;
+            let start = w
+                .spawn(&spawn)
+                .with_context(|| format!("world `{}` has no spawn `{spawn}`", w.name))?;
+            let sizes = sizes
+                .iter()
+                .map(|s| match parse_size("--sizes", s)? {
+                    (w, h) if (1..=176).contains(&w) && (1..=144).contains(&h) => Ok([w, h]),
+                    _ => Err(anyhow::anyhow!(
+                        "--sizes: expected at most 176x144, found `{s}`"
+                    )),
+                })
+                .collect::<Result<Vec<_>>>()?;
+            if particles.iter().any(|n| !(1..=100_000).contains(n))
+                || !(1..=100_000).contains(&frames)
+            {
+                anyhow::bail!("expected 1 to 100000 particles and frames");
+            }
+            let r = bench::bench_depth_mcl(&w, start, &particles, &sizes, frames)?;
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+        Command::Bench {
+            command:
                 BenchCommand::Sensors {
                     world,
                     poses,
@@ -884,7 +934,7 @@ fn real_main() -> Result<()> {
                     frames,
                     batch,
                     batches,
-                    batch_size: parse_size(&batch_size)?,
+                    batch_size: parse_size("--batch-size", &batch_size)?,
                     rays: rays.max(682),
                 },
             )?;

@@ -76,6 +76,8 @@ pub struct ScenarioSpec {
     pub people: PeopleConfig,
     /// Monte Carlo localisation on the world's map, from its laser's scans.
     pub localization: Option<LocalizationSpec>,
+    /// Monte Carlo localisation of a depth camera in the world's 3D model (seed 002).
+    pub depth_localization: Option<DepthLocalizationSpec>,
     /// Laser SLAM in the loop, from its laser's scans; typed by [`slam_config`].
     pub slam: Option<toml::Table>,
     /// A 3D map from a camera's RGB-D keyframes, placed by a 2D pose and the floor; typed by
@@ -196,6 +198,33 @@ pub struct LocalizationSpec {
     pub initial_sigma: [f64; 3],
     #[serde(default)]
     pub mcl: MclConfig,
+}
+
+/// The depth-camera localiser of a run (seed 002): MCL of one camera in the world's mesh,
+/// handed to the stack as its 3D model.
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepthLocalizationSpec {
+    /// The camera it localises (by name; may be left out when the scenario has one).
+    #[serde(default)]
+    pub camera: Option<String>,
+    /// Frames the filter takes per second (seed 002 took 125 ms a frame: 8 Hz).
+    #[serde(default = "default_depth_localization_rate")]
+    pub rate: f64,
+    /// Render size [width, height], px: the particles' views and the measured depth
+    /// re-projected to it; none: the camera's depth size.
+    #[serde(default)]
+    pub size: Option<[u32; 2]>,
+    /// Carry the particles by the robot's odometry; false: seed 002's carrier without it
+    /// (the random walk alone).
+    #[serde(default)]
+    pub odometry: bool,
+    #[serde(default)]
+    pub mcl: futago_robot::localization::depth_mcl::DepthMclConfig,
+}
+
+fn default_depth_localization_rate() -> f64 {
+    8.0
 }
 
 fn default_map_resolution() -> f64 {
@@ -864,6 +893,65 @@ impl Scenario {
         // The localiser reads its laser by the resolved name.
         if let Some(l) = spec.localization.as_mut() {
             l.laser = localization_laser.clone();
+        }
+        if let Some(d) = spec.depth_localization.as_mut() {
+            if cameras.is_empty() {
+                return Err(SpecError::new(
+                    path,
+                    "depth_localization",
+                    "depth-camera localisation needs a [[camera]]; the scenario has none",
+                ));
+            }
+            let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
+            let name = match &d.camera {
+                Some(n) if names.contains(&n.as_str()) => n.clone(),
+                Some(n) => {
+                    return Err(SpecError::new(
+                        path,
+                        "depth_localization.camera",
+                        format!("no camera is named `{n}`; the scenario's cameras are {names:?}"),
+                    ));
+                }
+                None if names.len() == 1 => names[0].to_string(),
+                None => {
+                    return Err(SpecError::new(
+                        path,
+                        "depth_localization.camera",
+                        format!(
+                            "the scenario has {} cameras {names:?}: name one",
+                            names.len()
+                        ),
+                    ));
+                }
+            };
+            let cam = cameras.iter().find(|c| c.name == name).ok_or_else(|| {
+                SpecError::new(path, "depth_localization.camera", "no such camera")
+            })?;
+            if cam.joint.is_some() {
+                return Err(SpecError::new(
+                    path,
+                    "depth_localization.camera",
+                    format!(
+                        "camera `{name}` rides on a joint; the localiser needs one fixed to the base"
+                    ),
+                ));
+            }
+            check_range(path, "depth_localization.rate", d.rate, 0.1, 100.0, "Hz")?;
+            if let Some([w, h]) = d.size {
+                for (k, v, most) in [(0, w, cam.depth.width), (1, h, cam.depth.height)] {
+                    if v == 0 || v > most {
+                        return Err(SpecError::new(
+                            path,
+                            format!("depth_localization.size[{k}]"),
+                            format!("expected 1 to the camera's {most} px, found {v}"),
+                        ));
+                    }
+                }
+            }
+            d.mcl
+                .validate("depth_localization.mcl")
+                .map_err(|(k, m)| SpecError::new(path, k, m))?;
+            d.camera = Some(name);
         }
         let slam = match &spec.slam {
             None => None,

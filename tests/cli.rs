@@ -2282,3 +2282,49 @@ fn agents_leave_their_ground_truth_and_sensors_ride_joints() {
     assert_eq!(lidars.len(), 2);
     assert!(lidars[1]["scans"].as_u64().unwrap() >= 115, "{}", lidars[1]);
 }
+
+/// Seed 002's depth-camera localiser in the loop: a few seconds of `office-depth-mcl` write a
+/// filter estimate per frame at its rate, the seed's path error stays within its 7 cm against
+/// the simulated truth, and bad tables are refused before anything runs.
+#[test]
+fn the_depth_camera_localiser_runs_in_the_loop() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let sc = "scenarios/office-depth-mcl.toml";
+    let o = futago(&["run", sc, "--duration", "4", "--out", out.to_str().unwrap()]);
+    ok(&o);
+    let s = summary(&out);
+    let d = &s["depth_localization"];
+    // 8 Hz for 4 s.
+    let frames = d["frames"].as_u64().unwrap();
+    assert!((31..=33).contains(&frames), "{d}");
+    let lines = std::fs::read_to_string(out.join("depth_localization.txt")).unwrap();
+    assert_eq!(lines.lines().count() as u64, frames);
+    let median = s["metrics"]["depth_localization.path_error.median_m"]
+        .as_f64()
+        .unwrap();
+    assert!(median <= 0.07, "{d}");
+    assert!(s["metrics"]["depth_localization.ate.mean_m"].is_number());
+    for (set, expect) in [
+        ("camera=[]", "depth-camera localisation needs a [[camera]]"),
+        (
+            "depth_localization.camera=\"nope\"",
+            "no camera is named `nope`",
+        ),
+        (
+            "depth_localization.size=[500, 10]",
+            "depth_localization.size[0]",
+        ),
+        (
+            "depth_localization.mcl.beta=0",
+            "depth_localization.mcl.beta",
+        ),
+    ] {
+        refused_before_running(
+            &["run", sc, "--set", set],
+            &tmp.path().join("fresh"),
+            expect,
+            Some(1),
+        );
+    }
+}

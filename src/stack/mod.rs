@@ -25,6 +25,7 @@
 
 pub mod bus;
 pub mod coverage;
+pub mod depth_localization;
 pub mod driver;
 pub mod localization;
 pub mod people;
@@ -242,6 +243,10 @@ pub const MODULES: &[Module] = &[
     Module {
         build: |s, seed, _| boxed(localization::node(s, seed)),
         metric_names: localization::metric_names,
+    },
+    Module {
+        build: |s, seed, _| boxed(depth_localization::node(s, seed)),
+        metric_names: depth_localization::metric_names,
     },
     Module {
         build: |s, _, _| boxed(slam::node(s)),
