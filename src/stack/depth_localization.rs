@@ -26,6 +26,9 @@ use std::time::Instant;
 /// The estimates of the robot's planar pose (TUM), one per frame.
 pub const DEPTH_LOCALIZATION_FILE: &str = "depth_localization.txt";
 
+/// Spacing of the true path's points, m (well below the seed's 0.07 m).
+const PATH_STEP: f64 = 0.01;
+
 /// The depth-camera localiser in the loop.
 pub struct DepthLocalizationNode {
     mcl: DepthMcl,
@@ -43,7 +46,7 @@ pub struct DepthLocalizationNode {
     lines: String,
     /// Per frame: the estimated and true positions (x, y), and the filter's wall time, s.
     frames: Vec<([f64; 2], [f64; 2], f64)>,
-    /// The true path, a point per frame and per truth sample (for the seed's measure).
+    /// The true path, a point every [`PATH_STEP`] (for the seed's measure).
     path: Vec<[f64; 2]>,
     summary: Option<serde_json::Value>,
 }
@@ -183,7 +186,16 @@ impl Node for DepthLocalizationNode {
     }
 
     fn on_truth(&mut self, bus: &Bus) -> Result<()> {
-        self.path.push([bus.truth.x, bus.truth.y]);
+        // A point every centimetre of the path: a standing robot adds none, and the distances
+        // at the end stay a pass over the path per frame.
+        let p = [bus.truth.x, bus.truth.y];
+        if self
+            .path
+            .last()
+            .is_none_or(|l| (p[0] - l[0]).hypot(p[1] - l[1]) >= PATH_STEP)
+        {
+            self.path.push(p);
+        }
         Ok(())
     }
 
