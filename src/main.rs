@@ -329,6 +329,18 @@ enum BenchCommand {
     },
 }
 
+/// A bench's world and the pose of its spawn `spawn`.
+fn world_at_spawn(
+    world: &std::path::Path,
+    spawn: &str,
+) -> Result<(futago_sim::world::World, futago_msgs::Pose2)> {
+    let w = world_cmd::load(world)?;
+    let start = w
+        .spawn(spawn)
+        .with_context(|| format!("world `{}` has no spawn `{spawn}`", w.name))?;
+    Ok((w, start))
+}
+
 /// `WIDTHxHEIGHT` of option `flag`.
 fn parse_size(flag: &str, s: &str) -> Result<(u32, u32)> {
     let (w, h) = s
@@ -856,10 +868,7 @@ fn real_main() -> Result<()> {
                     crowd,
                 },
         } => {
-            let w = world_cmd::load(&world)?;
-            let start = w
-                .spawn(&spawn)
-                .with_context(|| format!("world `{}` has no spawn `{spawn}`", w.name))?;
+            let (w, start) = world_at_spawn(&world, &spawn)?;
             if people > 1000 || crowd > 1000 || !(1..=100_000).contains(&scans) {
                 anyhow::bail!("expected at most 1000 people and crowd, and 1 to 100000 scans");
             }
@@ -875,10 +884,7 @@ fn real_main() -> Result<()> {
                     updates,
                 },
         } => {
-            let w = world_cmd::load(&world)?;
-            let start = w
-                .spawn(&spawn)
-                .with_context(|| format!("world `{}` has no spawn `{spawn}`", w.name))?;
+            let (w, start) = world_at_spawn(&world, &spawn)?;
             let r = bench::bench_mcl(&w, start, particles.max(1), updates)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
@@ -892,10 +898,7 @@ fn real_main() -> Result<()> {
                     frames,
                 },
         } => {
-            let w = world_cmd::load(&world)?;
-            let start = w
-                .spawn(&spawn)
-                .with_context(|| format!("world `{}` has no spawn `{spawn}`", w.name))?;
+            let (w, start) = world_at_spawn(&world, &spawn)?;
             let sizes = sizes
                 .iter()
                 .map(|s| match parse_size("--sizes", s)? {
