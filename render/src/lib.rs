@@ -263,6 +263,81 @@ struct Draw {
     indices: std::ops::Range<u32>,
 }
 
+/// Side of the square cells of the plane (m) by which static geometry is grouped for culling.
+const CHUNK_SIZE: f32 = 1.0;
+
+/// Static triangles whose centroids share a [`CHUNK_SIZE`] cell of the plane, with the box
+/// that bounds them: a view draws only the chunks whose boxes meet its frustum. Vertex work
+/// is most of a batched depth render on a software rasteriser (it runs on one thread), and
+/// a narrow camera sees a small share of a building.
+#[derive(Debug, Clone)]
+struct Chunk {
+    indices: std::ops::Range<u32>,
+    min: Vec3,
+    max: Vec3,
+}
+
+/// The six planes `(n, d)` of a view-projection's frustum (wgpu clip space: |x|, |y| ≤ w,
+/// 0 ≤ z ≤ w), each with the inside where `n·p + d ≥ 0`.
+fn frustum_planes(view_proj: &Mat4) -> [glam::Vec4; 6] {
+    let r = |i| view_proj.row(i);
+    [
+        r(3) + r(0),
+        r(3) - r(0),
+        r(3) + r(1),
+        r(3) - r(1),
+        r(2),
+        r(3) - r(2),
+    ]
+}
+
+/// Whether the box `min..max` lies wholly outside one of `planes` (then no part of it can be
+/// drawn; a box that straddles planes is kept).
+fn outside(planes: &[glam::Vec4; 6], min: Vec3, max: Vec3) -> bool {
+    planes.iter().any(|p| {
+        let far = Vec3::new(
+            if p.x >= 0.0 { max.x } else { min.x },
+            if p.y >= 0.0 { max.y } else { min.y },
+            if p.z >= 0.0 { max.z } else { min.z },
+        );
+        p.truncate().dot(far) + p.w < 0.0
+    })
+}
+
+/// Groups the triangles `tris` (indices into `vertices`) by the cell of their centroids and
+/// appends them to `indices`, cell by cell.
+fn chunk_triangles(vertices: &[Vertex], indices: &mut Vec<u32>, tris: &[u32]) -> Vec<Chunk> {
+    let mut cells: std::collections::BTreeMap<(i64, i64), Vec<[u32; 3]>> = Default::default();
+    let at = |i: u32| Vec3::from_array(vertices[i as usize].position);
+    for t in tris.chunks_exact(3) {
+        let c = (at(t[0]) + at(t[1]) + at(t[2])) / 3.0;
+        let key = (
+            (c.y / CHUNK_SIZE).floor() as i64,
+            (c.x / CHUNK_SIZE).floor() as i64,
+        );
+        cells.entry(key).or_default().push([t[0], t[1], t[2]]);
+    }
+    cells
+        .into_values()
+        .map(|tris| {
+            let start = indices.len() as u32;
+            let (mut min, mut max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            for t in &tris {
+                for &i in t {
+                    min = min.min(at(i));
+                    max = max.max(at(i));
+                }
+                indices.extend_from_slice(t);
+            }
+            Chunk {
+                indices: start..indices.len() as u32,
+                min,
+                max,
+            }
+        })
+        .collect()
+}
+
 /// Appends `mesh` (moved by `pose` if given) to the geometry; returns its index range.
 fn push_mesh(
     vertices: &mut Vec<Vertex>,
@@ -322,8 +397,12 @@ pub struct Renderer {
     indices: wgpu::Buffer,
     /// Colour draws: static runs per material, then movable parts.
     draws: Vec<Draw>,
-    /// Depth-only draws: all static geometry in one run, then one run per movable body.
+    /// Depth-only geometry: static triangles by cell, culled per view, then one run per
+    /// movable body.
+    chunks: Vec<Chunk>,
     depth_draws: Vec<Draw>,
+    /// Frustum planes of the cameras last written.
+    frusta: Vec<[glam::Vec4; 6]>,
     /// Transform slot of each body (0 for static bodies).
     body_slots: Vec<u32>,
     targets: HashMap<(bool, u32, u32), Targets>,
@@ -527,15 +606,10 @@ impl Renderer {
                 }),
             }
         }
-        let static_end = draws.last().map(|d| d.indices.end).unwrap_or(0);
+        let static_end = draws.last().map(|d| d.indices.end).unwrap_or(0) as usize;
+        let static_tris = indices[..static_end].to_vec();
+        let chunks = chunk_triangles(&vertices, &mut indices, &static_tris);
         let mut depth_draws = vec![];
-        if static_end > 0 {
-            depth_draws.push(Draw {
-                material: 0,
-                slot: 0,
-                indices: 0..static_end,
-            });
-        }
         let mut body_slots = vec![0u32; scene.bodies.len()];
         let mut slot = 0;
         for (bi, b) in scene.bodies.iter().enumerate() {
@@ -707,7 +781,9 @@ impl Renderer {
             vertices: vertex_buffer,
             indices: index_buffer,
             draws,
+            chunks,
             depth_draws,
+            frusta: Vec::new(),
             body_slots,
             targets: HashMap::new(),
         };
@@ -786,7 +862,7 @@ impl Renderer {
     }
 
     /// Uploads one camera uniform per pose, growing the buffer as needed.
-    fn write_cameras(&mut self, intr: &Intrinsics, cameras: &[Pose]) {
+    fn write_cameras(&mut self, intr: &Intrinsics, cameras: &[Pose], far: f32) {
         let n = cameras.len() as u32;
         if n > self.camera_capacity {
             self.camera_capacity = n.next_power_of_two();
@@ -800,14 +876,17 @@ impl Renderer {
                 std::mem::size_of::<CameraUniform>() as u64,
             );
         }
-        let proj = projection(intr, NEAR_PLANE, FAR_PLANE);
+        let proj = projection(intr, NEAR_PLANE, far);
         let stride = self.uniform_stride as usize;
         let mut data = vec![0u8; stride * cameras.len()];
+        self.frusta.clear();
         for (i, c) in cameras.iter().enumerate() {
             let view = optical_from_body(c).inverse().to_mat4();
             let l = self.lighting;
+            let view_proj = proj * view;
+            self.frusta.push(frustum_planes(&view_proj));
             let u = CameraUniform {
-                view_proj: (proj * view).to_cols_array(),
+                view_proj: view_proj.to_cols_array(),
                 view: view.to_cols_array(),
                 light: [
                     l.towards_light.x,
@@ -920,16 +999,36 @@ impl Renderer {
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
         let stride = self.uniform_stride;
+        let mut depth_draws: Vec<Draw> = Vec::new();
         for &((x, y), cam) in views {
             pass.set_viewport(x as f32, y as f32, tile.0 as f32, tile.1 as f32, 0.0, 1.0);
             pass.set_scissor_rect(x, y, tile.0, tile.1);
+            // The static chunks this view can see, neighbouring runs merged, then the movable
+            // bodies.
+            depth_draws.clear();
+            let planes = &self.frusta[cam as usize];
+            for c in self
+                .chunks
+                .iter()
+                .filter(|c| !outside(planes, c.min, c.max))
+            {
+                match depth_draws.last_mut() {
+                    Some(d) if d.indices.end == c.indices.start => d.indices.end = c.indices.end,
+                    _ => depth_draws.push(Draw {
+                        material: 0,
+                        slot: 0,
+                        indices: c.indices.clone(),
+                    }),
+                }
+            }
+            depth_draws.extend(self.depth_draws.iter().cloned());
             let phases: &[(&wgpu::RenderPipeline, &[Draw])] = if color {
                 &[
-                    (&self.z_pipeline, &self.depth_draws),
+                    (&self.z_pipeline, &depth_draws),
                     (&self.color_pipeline, &self.draws),
                 ]
             } else {
-                &[(&self.depth_pipeline, &self.depth_draws)]
+                &[(&self.depth_pipeline, &depth_draws)]
             };
             for (k, &(pipeline, draws)) in phases.iter().enumerate() {
                 let shaded = color && k == 1;
@@ -1032,7 +1131,7 @@ impl Renderer {
         camera: &Pose,
     ) -> Result<(RgbImage, DepthImage), RenderError> {
         intr.validate().map_err(RenderError::Config)?;
-        self.write_cameras(intr, std::slice::from_ref(camera));
+        self.write_cameras(intr, std::slice::from_ref(camera), FAR_PLANE);
         let (w, h) = (intr.width, intr.height);
         self.run((true, w, h), (w, h), &[((0, 0), 0)], |color, depth, row| {
             let color = color.expect("colour target requested");
@@ -1071,7 +1170,7 @@ impl Renderer {
         camera: &Pose,
     ) -> Result<DepthImage, RenderError> {
         let mut data = Vec::new();
-        self.render_depth_batch(intr, std::slice::from_ref(camera), &mut data)?;
+        self.render_depth_batch(intr, std::slice::from_ref(camera), FAR_PLANE, &mut data)?;
         Ok(DepthImage {
             width: intr.width,
             height: intr.height,
@@ -1080,15 +1179,25 @@ impl Renderer {
     }
 
     /// Renders one depth image per camera pose into `out` (replaced): `cameras.len()` images of
-    /// `width × height` in order, contiguous. The views are tiled into atlases as large as the
-    /// GPU allows and drawn in one submission.
+    /// `width × height` in order, contiguous. Surfaces farther than `far` (m, along the optical
+    /// axis; at most [`FAR_PLANE`]) are not drawn (0), and geometry beyond it costs nothing:
+    /// give a depth camera's range, and a batch of views from inside a building draws only
+    /// what lies within it. The views are tiled into atlases as large as the GPU allows and
+    /// drawn in one submission.
     pub fn render_depth_batch(
         &mut self,
         intr: &Intrinsics,
         cameras: &[Pose],
+        far: f32,
         out: &mut Vec<f32>,
     ) -> Result<(), RenderError> {
         intr.validate().map_err(RenderError::Config)?;
+        if !(far > NEAR_PLANE * 2.0 && far <= FAR_PLANE) {
+            return Err(RenderError::Config(format!(
+                "far plane {far} m is out of range: expected {} to {FAR_PLANE} m",
+                NEAR_PLANE * 2.0
+            )));
+        }
         out.clear();
         if cameras.is_empty() {
             return Ok(());
@@ -1100,7 +1209,7 @@ impl Renderer {
                 "image size {w}×{h} exceeds this GPU's {max}-pixel texture limit"
             )));
         }
-        self.write_cameras(intr, cameras);
+        self.write_cameras(intr, cameras, far);
         let n = cameras.len() as u32;
         let cols = (max / w).min(n).max(1);
         let rows = n.div_ceil(cols).min(max / h).max(1);
@@ -1139,6 +1248,31 @@ impl Renderer {
 mod tests {
     use super::*;
     use crate::mesh::UvMap;
+
+    /// A camera at the origin looking down +x with a 90° × 90° view drawn to 5 m: boxes
+    /// behind it, off to a side, or past the far plane are culled; boxes in view or
+    /// straddling a plane are kept.
+    #[test]
+    fn frusta_cull_only_boxes_wholly_outside() {
+        let intr = Intrinsics::from_fov(64, 64, 90f64.to_radians(), 90f64.to_radians()).unwrap();
+        let view = optical_from_body(&Pose::IDENTITY).inverse().to_mat4();
+        let planes = frustum_planes(&(projection(&intr, NEAR_PLANE, 5.0) * view));
+        let at = |c: Vec3, h: f32| outside(&planes, c - Vec3::splat(h), c + Vec3::splat(h));
+        assert!(!at(Vec3::new(3.0, 0.0, 0.0), 0.2), "ahead");
+        assert!(at(Vec3::new(-3.0, 0.0, 0.0), 0.2), "behind");
+        assert!(at(Vec3::new(2.0, 3.0, 0.0), 0.2), "left of the 45° edge");
+        assert!(at(Vec3::new(2.0, 0.0, -3.0), 0.2), "below");
+        assert!(at(Vec3::new(6.0, 0.0, 0.0), 0.5), "past the far plane");
+        assert!(
+            !at(Vec3::new(5.2, 0.0, 0.0), 0.5),
+            "straddling the far plane"
+        );
+        assert!(
+            !at(Vec3::new(2.0, 2.1, 0.0), 0.2),
+            "straddling the left edge"
+        );
+        assert!(!at(Vec3::ZERO, 10.0), "around the camera");
+    }
 
     #[test]
     fn a_lost_device_is_reported_not_hung_on() {

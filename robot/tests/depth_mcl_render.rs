@@ -64,7 +64,7 @@ fn the_renderer_draws_the_filters_poses() {
     ]
     .map(|s| s.pose());
     let mut out = Vec::new();
-    DepthModel::render_batch(&mut r, &k, &poses, &mut out).unwrap();
+    DepthModel::render_batch(&mut r, &k, &poses, 20.0, &mut out).unwrap();
     let centre = (18 * 45 + 22) as usize;
     let px = 45 * 37;
     assert!((out[centre] - 9.0).abs() < 1e-3, "{}", out[centre]);
@@ -73,6 +73,10 @@ fn the_renderer_draws_the_filters_poses() {
         "{}",
         out[px + centre]
     );
+    // Drawn to 5 m, the end wall 9 m ahead is gone and the side wall 2 m away stays.
+    DepthModel::render_batch(&mut r, &k, &poses, 5.0, &mut out).unwrap();
+    assert_eq!(out[centre], 0.0);
+    assert!((out[px + centre] - 2.0).abs() < 1e-3);
 }
 
 /// Seed 002's filter (200 particles, α 0.1, β 0.01, x, y and yaw) on the renderer: the camera
@@ -93,8 +97,8 @@ fn the_seeds_filter_tracks_on_the_renderer() {
         truth.position[0] += 0.05;
         truth.position[1] = 2.0 + 0.1 * (k as f64 * 0.2).sin();
         truth.rpy[2] = 0.2 + 0.1 * (k as f64 * 0.15).sin();
-        DepthModel::render_batch(&mut r, &intr(), &[truth.pose()], &mut measured).unwrap();
-        let est = mcl.update(&mut r, &intr(), &measured, None).unwrap();
+        DepthModel::render_batch(&mut r, &intr(), &[truth.pose()], 20.0, &mut measured).unwrap();
+        let est = mcl.update(&mut r, &intr(), &measured, 20.0, None).unwrap();
         errors.push(
             (est.state.position[0] - truth.position[0])
                 .hypot(est.state.position[1] - truth.position[1]),

@@ -252,7 +252,8 @@ fn batches_equal_single_renders_and_movable_bodies_follow_their_poses() {
         })
         .collect();
     let mut batch = Vec::new();
-    r.render_depth_batch(&intr, &eyes, &mut batch).unwrap();
+    r.render_depth_batch(&intr, &eyes, futago_render::FAR_PLANE, &mut batch)
+        .unwrap();
     let n = (intr.width * intr.height) as usize;
     assert_eq!(batch.len(), eyes.len() * n);
     for (i, e) in eyes.iter().enumerate() {
@@ -269,6 +270,23 @@ fn batches_equal_single_renders_and_movable_bodies_follow_their_poses() {
             "view {i} of the batch differs from its single render by {worst}"
         );
     }
+    // Drawn to 2.5 m, each view is the full view less what lies beyond (the chunks culled
+    // past the far plane took nothing nearer with them).
+    let mut near = Vec::new();
+    r.render_depth_batch(&intr, &eyes, 2.5, &mut near).unwrap();
+    let mut cut = 0;
+    for (a, b) in batch.iter().zip(&near) {
+        if (a - 2.5).abs() < 1e-3 {
+            continue;
+        }
+        if *a > 2.5 {
+            assert_eq!(*b, 0.0, "a surface at {a} m drawn past the far plane");
+            cut += 1;
+        } else {
+            assert!((a - b).abs() <= 1e-4 * a, "{a} drawn as {b}");
+        }
+    }
+    assert!(cut > 1000, "only {cut} pixels lay beyond 2.5 m");
 }
 
 #[test]

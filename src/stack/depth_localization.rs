@@ -37,6 +37,8 @@ pub struct DepthLocalizationNode {
     /// The camera's depth intrinsics and those of the render.
     depth: Intrinsics,
     render: Intrinsics,
+    /// The camera's range, m (the model is drawn a little past it).
+    range: f64,
     /// The camera's body frame on the base, planar part.
     mount2: Pose2,
     odometry: bool,
@@ -105,6 +107,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         camera: cam.name.clone(),
         depth: cam.depth,
         render,
+        range: cam.range_max,
         mount2: super::camera_on_base(cam),
         odometry: spec.odometry,
         period: Duration::from_secs(1.0 / spec.rate),
@@ -231,7 +234,13 @@ impl Node for DepthLocalizationNode {
         let t0 = Instant::now();
         let est = self
             .mcl
-            .update(&mut self.renderer, &self.render, &measured, motion.as_ref())
+            .update(
+                &mut self.renderer,
+                &self.render,
+                &measured,
+                self.range,
+                motion.as_ref(),
+            )
             .map_err(|e| anyhow::anyhow!("depth_localization: {e}"))?;
         let spent = t0.elapsed().as_secs_f64();
         // The base under the estimated camera (planar).

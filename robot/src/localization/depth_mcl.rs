@@ -33,12 +33,13 @@ use serde::Deserialize;
 
 /// Renders predicted depth images of a model: one per camera pose, in order, contiguous, each
 /// `intr.width × intr.height`, depth along the optical axis in metres and 0 where nothing is
-/// drawn. Poses are camera body frames (REP 103) in the model's frame.
+/// drawn within `far` m. Poses are camera body frames (REP 103) in the model's frame.
 pub trait DepthModel {
     fn render_batch(
         &mut self,
         intr: &Intrinsics,
         poses: &[Pose3],
+        far: f64,
         out: &mut Vec<f32>,
     ) -> Result<(), String>;
 }
@@ -48,13 +49,20 @@ impl DepthModel for futago_render::Renderer {
         &mut self,
         intr: &Intrinsics,
         poses: &[Pose3],
+        far: f64,
         out: &mut Vec<f32>,
     ) -> Result<(), String> {
         let cameras: Vec<futago_render::Pose> = poses.iter().map(render_pose).collect();
-        self.render_depth_batch(intr, &cameras, out)
+        let far = far.min(futago_render::FAR_PLANE as f64) as f32;
+        self.render_depth_batch(intr, &cameras, far, out)
             .map_err(|e| e.to_string())
     }
 }
+
+/// How far past the camera's range the model is drawn, in multiples of α: a pixel measured
+/// within range where a particle's model lies beyond this would score at most
+/// α/(α + 10α) ≈ 0.09 of a perfect match, and scores 0 instead.
+const RANGE_MARGIN_ALPHAS: f64 = 10.0;
 
 /// A message pose as the renderer's (single-precision) pose.
 pub fn render_pose(p: &Pose3) -> futago_render::Pose {
@@ -237,15 +245,22 @@ impl DepthMcl {
 
     /// One frame: motion (the planar increment of the camera's body frame since the last
     /// frame, where the carrier has odometry), the random walk, the batched render, the
-    /// likelihood of `measured` (a depth image of `intr`, e.g. from [`reproject`]), the
-    /// estimate and resampling.
+    /// likelihood of `measured` (a depth image of `intr`, e.g. from [`reproject`], from a
+    /// camera that measures out to `range` m), the estimate and resampling. The model is
+    /// drawn out to the range plus 10 α.
     pub fn update<M: DepthModel>(
         &mut self,
         model: &mut M,
         intr: &Intrinsics,
         measured: &[f32],
+        range: f64,
         motion: Option<&Pose2>,
     ) -> Result<DepthEstimate, String> {
+        if !(range > 0.0 && range.is_finite()) {
+            return Err(format!(
+                "camera range {range} m: expected a positive distance"
+            ));
+        }
         let pixels = (intr.width * intr.height) as usize;
         if measured.len() != pixels {
             return Err(format!(
@@ -258,7 +273,8 @@ impl DepthMcl {
         self.predict(motion);
         self.poses.clear();
         self.poses.extend(self.particles.iter().map(|p| p.pose()));
-        model.render_batch(intr, &self.poses, &mut self.rendered)?;
+        let far = range + RANGE_MARGIN_ALPHAS * self.config.alpha;
+        model.render_batch(intr, &self.poses, far, &mut self.rendered)?;
         if self.rendered.len() != pixels * self.particles.len() {
             return Err(format!(
                 "the model rendered {} values for {} particles of {pixels} pixels",
@@ -502,19 +518,24 @@ mod tests {
             &mut self,
             intr: &Intrinsics,
             poses: &[Pose3],
+            far: f64,
             out: &mut Vec<f32>,
         ) -> Result<(), String> {
             out.clear();
             for p in poses {
                 for v in 0..intr.height {
                     for u in 0..intr.width {
-                        out.push(self.depth(p, intr, u, v));
+                        let z = self.depth(p, intr, u, v);
+                        out.push(if z as f64 <= far { z } else { 0.0 });
                     }
                 }
             }
             Ok(())
         }
     }
+
+    /// The range of the cameras in the tests, m: longer than the room.
+    const RANGE: f64 = 20.0;
 
     fn intr() -> Intrinsics {
         Intrinsics::from_fov(44, 36, 43.6f64.to_radians(), 34.6f64.to_radians()).unwrap()
@@ -525,7 +546,7 @@ mod tests {
         BoxRoom {
             pillars: room.pillars,
         }
-        .render_batch(&intr(), &[pose.pose()], &mut out)
+        .render_batch(&intr(), &[pose.pose()], RANGE, &mut out)
         .unwrap();
         out
     }
@@ -569,7 +590,7 @@ mod tests {
         };
         let mut d = Vec::new();
         BoxRoom { pillars: true }
-            .render_batch(&big, &[pose.pose()], &mut d)
+            .render_batch(&big, &[pose.pose()], RANGE, &mut d)
             .unwrap();
         let img = DepthImage {
             width: 176,
@@ -612,7 +633,7 @@ mod tests {
             truth.position[1] = 2.0 + 0.1 * (k as f64 * 0.2).sin();
             truth.rpy[2] = 0.2 + 0.1 * (k as f64 * 0.15).sin();
             let z = render(&room, &truth);
-            let est = mcl.update(&mut room, &intr(), &z, None).unwrap();
+            let est = mcl.update(&mut room, &intr(), &z, RANGE, None).unwrap();
             errors.push(
                 (est.state.position[0] - truth.position[0])
                     .hypot(est.state.position[1] - truth.position[1]),
@@ -680,7 +701,7 @@ mod tests {
                 0.1 * (t * 0.1).sin(),
             ];
             let z = render(&room, &truth);
-            let est = mcl.update(&mut room, &intr(), &z, None).unwrap();
+            let est = mcl.update(&mut room, &intr(), &z, RANGE, None).unwrap();
             let d: f64 = (0..3)
                 .map(|i| (est.state.position[i] - truth.position[i]).powi(2))
                 .sum::<f64>()
@@ -723,12 +744,14 @@ mod tests {
         let mut mcl = DepthMcl::new(config, start, 1);
         let mut room = BoxRoom { pillars: true };
         let z = render(&room, &start);
-        let est = mcl.update(&mut room, &intr(), &z, None).unwrap();
+        let est = mcl.update(&mut room, &intr(), &z, RANGE, None).unwrap();
         for k in 0..3 {
             assert!((est.state.position[k] - start.position[k]).abs() < 1e-12);
         }
         assert!(est.sd.iter().all(|s| *s < 1e-6), "{:?}", est.sd);
-        let e = mcl.update(&mut room, &intr(), &[1.0; 3], None).unwrap_err();
+        let e = mcl
+            .update(&mut room, &intr(), &[1.0; 3], RANGE, None)
+            .unwrap_err();
         assert!(e.contains("expected 44×36"), "{e}");
     }
 }
