@@ -197,6 +197,33 @@ pub fn simulate_with(
         .iter()
         .map(|c| consumers(&streams, &format!("camera/{}", c.name)))
         .collect();
+    // A camera an agent carries is not on the robot: only nodes that take its frames for what
+    // they are (the depth localiser scores the camera itself; the recorder writes them) may
+    // consume it.
+    for (c, takers) in s.cameras.iter().zip(&camera_nodes) {
+        if let Some(agent) = &c.carrier {
+            for &i in takers {
+                let n = nodes[i].node.name();
+                if !matches!(n, "depth_localization" | "record") {
+                    anyhow::bail!(
+                        "camera `{}` is carried by agent `{agent}`, not the robot; the `{n}` node \
+                         takes camera frames as the robot's",
+                        c.name
+                    );
+                }
+            }
+        }
+    }
+    // The agent carrying each camera, if not the robot (index into the agents).
+    let camera_carriers: Vec<Option<usize>> = s
+        .cameras
+        .iter()
+        .map(|c| {
+            c.carrier
+                .as_ref()
+                .and_then(|a| s.movers.agents.iter().position(|k| &k.name == a))
+        })
+        .collect();
 
     let mut sim = Simulation::new(
         &s.world,
@@ -342,9 +369,21 @@ pub fn simulate_with(
                         *posed.insert(poses[poses.len() - 1])
                     }
                 };
-                // A camera on a joint: its mount is on the joint's frame.
-                let base = match camera_joints[c] {
-                    Some(j) => base * sim.joints()[j].transform(),
+                // A camera on a joint: its mount is on the joint's frame; on an agent: on the
+                // agent's frame on the floor; then its carrier's sway.
+                let base = match (camera_joints[c], camera_carriers[c]) {
+                    (Some(j), _) => base * sim.joints()[j].transform(),
+                    (None, Some(a)) => {
+                        let p = sim.agent_poses()[a].1;
+                        futago_sim::render::Pose::from_parts(
+                            glam::Vec3::new(p.x as f32, p.y as f32, 0.0),
+                            glam::Quat::from_rotation_z(p.theta as f32),
+                        )
+                    }
+                    (None, None) => base,
+                };
+                let base = match &cam.spec.sway {
+                    Some(sway) => base * sway.pose(now),
                     None => base,
                 };
                 cam.take();

@@ -819,6 +819,18 @@ impl Scenario {
                 ));
             }
         }
+        let agent_names: Vec<&str> = spec.agent.iter().map(|a| a.name.as_str()).collect();
+        for (i, c) in spec.camera.iter().enumerate() {
+            if let Some(a) = &c.carrier
+                && !agent_names.contains(&a.as_str())
+            {
+                return Err(SpecError::new(
+                    path,
+                    format!("camera[{i}].carrier"),
+                    format!("no agent is named `{a}`; the scenario's agents are {agent_names:?}"),
+                ));
+            }
+        }
         spec.crowd.validate(path)?;
         let mut walker_names: Vec<&str> = spec.agent.iter().map(|a| a.name.as_str()).collect();
         walker_names.push("robot");
@@ -933,6 +945,15 @@ impl Scenario {
                     "depth_localization.camera",
                     format!(
                         "camera `{name}` rides on a joint; the localiser needs one fixed to the base"
+                    ),
+                ));
+            }
+            if let (Some(a), true) = (&cam.carrier, d.odometry) {
+                return Err(SpecError::new(
+                    path,
+                    "depth_localization.odometry",
+                    format!(
+                        "camera `{name}` is carried by agent `{a}`, which has no odometry: set odometry = false"
                     ),
                 ));
             }

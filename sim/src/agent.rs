@@ -52,6 +52,11 @@ pub struct AgentConfig {
     /// sRGB colour in [0, 1].
     #[serde(default = "colour")]
     pub color: [f64; 3],
+    /// Radius of the arcs that round the path's corners, m (0: turns on the spot). Where
+    /// the legs are short the arc shrinks to end at their midpoints. The corner a loop closes
+    /// on (its first point) stays sharp.
+    #[serde(default)]
+    pub turn_radius: f64,
 }
 
 fn radius() -> f64 {
@@ -102,17 +107,21 @@ impl AgentConfig {
         check_range(file, &k("start_time"), self.start_time, 0.0, 1e6, "s")?;
         check_range(file, &k("radius"), self.radius, 0.01, 5.0, "m")?;
         check_range(file, &k("height"), self.height, 0.01, 10.0, "m")?;
+        check_range(file, &k("turn_radius"), self.turn_radius, 0.0, 100.0, "m")?;
         for c in self.color {
             check_range(file, &k("color"), c, 0.0, 1.0, "(sRGB in [0, 1])")?;
         }
         Ok(())
     }
 
-    /// The points walked, in order, for one pass: closed for `loop`.
+    /// The points walked, in order, for one pass: closed for `loop`, the corners rounded.
     fn legs(&self) -> Vec<[f64; 2]> {
         let mut p = self.path.clone();
         if self.mode == PathMode::Loop {
             p.push(self.path[0]);
+        }
+        if self.turn_radius > 0.0 {
+            p = round_corners(&p, self.turn_radius);
         }
         p
     }
@@ -167,6 +176,56 @@ impl AgentConfig {
     }
 }
 
+/// Largest turn of one chord of a rounded corner, rad (2°).
+const ARC_STEP: f64 = 0.035;
+
+/// The polyline `p` with each interior corner replaced by a circular arc of radius `r`
+/// (chords of at most [`ARC_STEP`] of turn), tangent to both legs; the arc shrinks where a
+/// leg is shorter than twice its tangent length.
+fn round_corners(p: &[[f64; 2]], r: f64) -> Vec<[f64; 2]> {
+    let mut out = vec![p[0]];
+    for i in 1..p.len().saturating_sub(1) {
+        let (a, b, c) = (p[i - 1], p[i], p[i + 1]);
+        let (l1, l2) = (
+            (b[0] - a[0]).hypot(b[1] - a[1]),
+            (c[0] - b[0]).hypot(c[1] - b[1]),
+        );
+        if l1 < 1e-9 || l2 < 1e-9 {
+            out.push(b);
+            continue;
+        }
+        let d1 = [(b[0] - a[0]) / l1, (b[1] - a[1]) / l1];
+        let d2 = [(c[0] - b[0]) / l2, (c[1] - b[1]) / l2];
+        let cross = d1[0] * d2[1] - d1[1] * d2[0];
+        let turn = cross.atan2(d1[0] * d2[0] + d1[1] * d2[1]);
+        if turn.abs() < 1e-6 || turn.abs() > std::f64::consts::PI - 1e-3 {
+            out.push(b);
+            continue;
+        }
+        let half = (turn.abs() / 2.0).tan();
+        let t = (r * half).min(l1 / 2.0).min(l2 / 2.0);
+        let radius = t / half;
+        // The arc's centre is on the inside of the turn, `radius` from the first tangent point.
+        let start = [b[0] - d1[0] * t, b[1] - d1[1] * t];
+        let side = turn.signum();
+        let centre = [
+            start[0] - side * d1[1] * radius,
+            start[1] + side * d1[0] * radius,
+        ];
+        let a0 = (start[1] - centre[1]).atan2(start[0] - centre[0]);
+        let steps = (turn.abs() / ARC_STEP).ceil().max(1.0) as usize;
+        for s in 0..=steps {
+            let ang = a0 + turn * s as f64 / steps as f64;
+            out.push([
+                centre[0] + radius * ang.cos(),
+                centre[1] + radius * ang.sin(),
+            ]);
+        }
+    }
+    out.push(p[p.len() - 1]);
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -181,7 +240,51 @@ mod tests {
             radius: radius(),
             height: height(),
             color: colour(),
+            turn_radius: 0.0,
         }
+    }
+
+    /// A right-angle corner rounded with a 1 m arc: the path leaves the first leg 1 m before
+    /// the corner, stays 1 m from the arc's centre, turns its heading smoothly (no chord turns
+    /// more than 2°), and is shorter than the sharp path by 2 − π/2 m.
+    #[test]
+    fn rounded_corners_are_arcs_tangent_to_both_legs() {
+        let mut a = agent(PathMode::Once);
+        a.start_time = 0.0;
+        a.turn_radius = 1.0;
+        a.validate(Path::new("s.toml"), "agent[0]").unwrap();
+        let sharp = 7.0;
+        assert!((a.length() - (sharp - 2.0 + std::f64::consts::FRAC_PI_2)).abs() < 1e-3);
+        let t = Time::from_secs;
+        let p = a.pose_at(t(2.9));
+        assert!(
+            (p.x - 2.9).abs() < 1e-9 && p.y == 0.0 && p.theta == 0.0,
+            "{p:?}"
+        );
+        let mut last = a.pose_at(t(0.0));
+        for i in 1..=700 {
+            let p = a.pose_at(t(i as f64 * 0.01));
+            if p.x > 3.0 && p.y < 1.0 {
+                let r = (p.x - 3.0).hypot(p.y - 1.0);
+                assert!((r - 1.0).abs() < 1e-3, "{p:?} is {r} m from the centre");
+            }
+            let turn = futago_msgs::wrap_angle(p.theta - last.theta).abs();
+            assert!(turn <= ARC_STEP + 1e-9, "heading jumps {turn} at {p:?}");
+            last = p;
+        }
+        // Legs shorter than twice the tangent length shrink the arc to their midpoints.
+        a.path = vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]];
+        let p = round_corners(&a.path, 5.0);
+        assert!(
+            (p[1][0] - 0.5).abs() < 1e-9 && p[1][1].abs() < 1e-9,
+            "{:?}",
+            p[1]
+        );
+        let end = p[p.len() - 2];
+        assert!(
+            (end[0] - 1.0).abs() < 1e-9 && (end[1] - 0.5).abs() < 1e-9,
+            "{end:?}"
+        );
     }
 
     #[test]

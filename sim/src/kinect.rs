@@ -116,6 +116,14 @@ pub struct KinectConfig {
     /// `rpy_deg` are then its mount at the joint's zero angle.
     #[serde(default)]
     pub joint: Option<String>,
+    /// The agent (`[[agent]]` name) that carries the camera instead of the robot: a person
+    /// with a hand-held camera or pushing a wagon. `xyz` and `rpy_deg` are then its mount on
+    /// the agent's frame (on the floor, x where it walks). Such a camera has no odometry.
+    #[serde(default)]
+    pub carrier: Option<String>,
+    /// The carrier's wobble, between its frame and the mount.
+    #[serde(default)]
+    pub sway: Option<crate::sway::SwayConfig>,
 }
 
 fn default_name() -> String {
@@ -144,6 +152,9 @@ pub struct KinectSpec {
     pub mount: Pose,
     /// The joint it rides on, if any.
     pub joint: Option<String>,
+    /// The agent that carries it, if not the robot.
+    pub carrier: Option<String>,
+    pub sway: Option<crate::sway::SwayConfig>,
 }
 
 impl KinectConfig {
@@ -162,6 +173,8 @@ impl KinectConfig {
             rate: None,
             noise: NoiseConfig::default(),
             joint: None,
+            carrier: None,
+            sway: None,
         }
     }
 
@@ -211,6 +224,16 @@ impl KinectConfig {
         check_range(file, &k("noise.jitter"), n.jitter, 0.0, 10.0, "px")?;
         check_range(file, &k("noise.sigma"), n.sigma, 0.0, 1.0, "m")?;
         check_mount(file, key, self.xyz, self.rpy_deg)?;
+        if let Some(s) = &self.sway {
+            s.validate(file, &k("sway"))?;
+        }
+        if self.carrier.is_some() && self.joint.is_some() {
+            return Err(SpecError::new(
+                file,
+                k("carrier"),
+                "a camera rides on a joint of the robot or on a carrier, not both",
+            ));
+        }
         let mount = mount_pose(self.xyz, self.rpy_deg);
         Ok(KinectSpec {
             name: self.name.clone(),
@@ -222,6 +245,8 @@ impl KinectConfig {
             noise: *n,
             mount,
             joint: self.joint.clone(),
+            carrier: self.carrier.clone(),
+            sway: self.sway,
         })
     }
 }

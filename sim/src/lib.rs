@@ -6,6 +6,7 @@
 //! - [`create`]: the iRobot Create's drive, wheel traction and odometry;
 //! - [`joint`]: turntables and tilt units on the base that carry sensors;
 //! - [`agent`]: moving bodies besides the robot (carts, cylinders walking a path);
+//! - [`sway`]: the wobble of a sensor's carrier (a pushed wagon, a hand-held camera);
 //! - [`people`]: pedestrians on two legs, moved by a social-force model;
 //! - [`kinect`]: the Kinect v1 RGB-D camera model and its depth noise;
 //! - [`lidar`]: ray-cast laser range finders;
@@ -25,6 +26,7 @@ pub mod lidar;
 pub mod noise;
 pub mod people;
 pub mod sim;
+pub mod sway;
 pub mod world;
 
 /// The camera renderer, its own crate ([`futago_render`]) so that the robot stack can draw

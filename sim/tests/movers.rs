@@ -126,6 +126,7 @@ fn walker(path: Vec<[f64; 2]>, mode: PathMode) -> AgentConfig {
         radius: 0.25,
         height: 1.7,
         color: [0.5, 0.3, 0.3],
+        turn_radius: 0.0,
     }
 }
 

@@ -459,6 +459,7 @@ fn cameras_see_walking_agents_where_the_lasers_do() {
             radius: 0.25,
             height: 1.7,
             color: [0.6, 0.3, 0.3],
+            turn_radius: 0.0,
         }],
         ..Default::default()
     };

@@ -93,6 +93,13 @@ pub struct DepthMclConfig {
     pub beta: f64,
     /// How particles move between frames on a carrier without odometry.
     pub motion: MotionModel,
+    /// The constant-velocity model's change of velocity per frame, standard deviations:
+    /// forward and leftward (m per frame, per frame) and yaw rate (rad per frame, per frame).
+    /// The defaults, 3 mm and 0.002 rad, are at 8 frames a second (σ / 0.125²) a change of
+    /// speed of 0.19 m/s² and of turn rate of 0.13 rad/s²: a carrier pushed at a steady pace.
+    /// A sharper velocity walk lets the seed's sharp weighting chase single frames and
+    /// overshoot (10 mm a frame per frame does, in the unit tests' featureless room).
+    pub velocity_sigma: [f64; 3],
 }
 
 /// The prediction step where no odometry is given.
@@ -100,16 +107,18 @@ pub struct DepthMclConfig {
 #[serde(rename_all = "snake_case")]
 pub enum MotionModel {
     /// Seed 002 eq. (5): each particle takes a Gaussian step of `sigma` about where it was.
+    /// The seed's weighting keeps only the particles within a few per cent of the best, so
+    /// the estimate follows the best of the particles drawn about the last one: a camera that
+    /// moves a σ or more a frame pulls ahead in the directions the depth constrains least
+    /// (along a corridor), and the estimate lags further and further behind.
     RandomWalk,
-    /// The step is centred on the estimate's motion in the plane (x, y, yaw) over the last
-    /// frame (a constant-velocity prediction, as camera trackers without odometry use), plus
-    /// the same Gaussian step. Height, roll and pitch are left to the random walk: a carrier
-    /// travels in the plane, and its camera's height and tilt sway about a mean, where carrying
-    /// the last frame's change overshoots. The
-    /// seed's weighting keeps only the particles within a few per cent of the best, so the
-    /// estimate follows the best of the particles drawn about the last one: with the random
-    /// walk, a camera that moves a σ or more a frame pulls ahead in the directions the depth
-    /// constrains least (along a corridor), and the lag grows.
+    /// Each particle also carries a planar velocity in its own frame (forward, leftward,
+    /// yaw rate, per frame), which it keeps from frame to frame, changed by a Gaussian step
+    /// of `velocity_sigma`; its pose moves by it, then takes the random walk. Resampling
+    /// keeps the velocities that put particles where the depth fits, so a camera carried at
+    /// a steady pace is followed along a corridor whose depth does not say where along it the
+    /// camera is. Height, roll and pitch are left to the random walk: a carrier travels in the
+    /// plane, and its camera's height and tilt sway about a mean.
     ConstantVelocity,
 }
 
@@ -121,6 +130,7 @@ impl Default for DepthMclConfig {
             alpha: 0.1,
             beta: 0.01,
             motion: MotionModel::RandomWalk,
+            velocity_sigma: [0.003, 0.003, 0.002],
         }
     }
 }
@@ -141,6 +151,14 @@ impl DepthMclConfig {
                 ("sigma[5]", s[5], 0.0, std::f64::consts::PI),
                 ("alpha", self.alpha, 1e-6, 100.0),
                 ("beta", self.beta, 1e-6, 100.0),
+                ("velocity_sigma[0]", self.velocity_sigma[0], 0.0, 10.0),
+                ("velocity_sigma[1]", self.velocity_sigma[1], 0.0, 10.0),
+                (
+                    "velocity_sigma[2]",
+                    self.velocity_sigma[2],
+                    0.0,
+                    std::f64::consts::PI,
+                ),
             ],
         )
     }
@@ -199,8 +217,9 @@ pub struct DepthMcl {
     rng: ChaCha8Rng,
     particles: Vec<CameraState>,
     weights: Vec<f64>,
-    /// The last two estimates (for the constant-velocity prediction), the latest last.
-    history: [Option<CameraState>; 2],
+    /// Each particle's planar velocity in its own frame (forward, left, yaw rate; per frame),
+    /// for the constant-velocity model.
+    velocities: Vec<[f64; 3]>,
     /// Scratch: the particles' renders and poses.
     rendered: Vec<f32>,
     poses: Vec<Pose3>,
@@ -220,16 +239,16 @@ impl DepthMcl {
             rng: ChaCha8Rng::seed_from_u64(seed),
             particles: vec![start; n],
             weights: vec![1.0 / n as f64; n],
-            history: [None, None],
+            velocities: vec![[0.0; 3]; n],
             rendered: Vec::new(),
             poses: Vec::new(),
         }
     }
 
     /// Spreads the particles around `start` with standard deviations per dimension (and
-    /// forgets the motion so far).
+    /// forgets their velocities).
     pub fn spread(&mut self, start: CameraState, sd: [f64; 6]) {
-        self.history = [None, None];
+        self.velocities.iter_mut().for_each(|v| *v = [0.0; 3]);
         for p in &mut self.particles {
             for k in 0..3 {
                 p.position[k] = start.position[k] + sd[k] * gauss(&mut self.rng);
@@ -289,29 +308,30 @@ impl DepthMcl {
             .collect();
         self.weigh(&scores);
         let estimate = self.estimate();
-        self.history = [self.history[1], Some(estimate.state)];
         self.resample();
         Ok(estimate)
     }
 
-    /// Odometry carried to the camera (in its body frame's plane), or without it the
-    /// estimate's last motion where the model is constant-velocity; then the random walk.
+    /// Odometry carried to the camera (in its body frame's plane), or without it each
+    /// particle's own velocity where the model is constant-velocity; then the random walk.
     fn predict(&mut self, motion: Option<&Pose2>) {
         let s = self.config.sigma;
-        let velocity = match (motion, self.config.motion, self.history) {
-            (None, MotionModel::ConstantVelocity, [Some(a), Some(b)]) => Some((
-                [b.position[0] - a.position[0], b.position[1] - a.position[1]],
-                [0.0, 0.0, wrap_angle(b.rpy[2] - a.rpy[2])],
-            )),
-            _ => None,
-        };
-        for p in &mut self.particles {
-            if let Some((dp, da)) = velocity {
-                p.position[0] += dp[0];
-                p.position[1] += dp[1];
-                p.rpy[2] = wrap_angle(p.rpy[2] + da[2]);
-            }
-            if let Some(m) = motion {
+        let vs = self.config.velocity_sigma;
+        let own = motion.is_none() && self.config.motion == MotionModel::ConstantVelocity;
+        for (p, v) in self.particles.iter_mut().zip(&mut self.velocities) {
+            let step = match motion {
+                Some(m) => Some(*m),
+                None if own => {
+                    for k in 0..3 {
+                        if vs[k] > 0.0 {
+                            v[k] += vs[k] * gauss(&mut self.rng);
+                        }
+                    }
+                    Some(Pose2::new(v[0], v[1], v[2]))
+                }
+                None => None,
+            };
+            if let Some(m) = step {
                 let yaw = p.rpy[2];
                 let (sy, cy) = yaw.sin_cos();
                 p.position[0] += cy * m.x - sy * m.y;
@@ -387,15 +407,18 @@ impl DepthMcl {
         let mut cum = self.weights[0];
         let mut i = 0;
         let mut out = Vec::with_capacity(n);
+        let mut velocities = Vec::with_capacity(n);
         for _ in 0..n {
             while r > cum && i + 1 < n {
                 i += 1;
                 cum += self.weights[i];
             }
             out.push(self.particles[i]);
+            velocities.push(self.velocities[i]);
             r += step;
         }
         self.particles = out;
+        self.velocities = velocities;
         self.weights = vec![step; n];
     }
 }
@@ -644,10 +667,10 @@ mod tests {
         (errors[errors.len() / 2], errors[errors.len() - 1], yaw)
     }
 
-    /// The seed's random walk (σ 5 cm) follows a camera moving 2 cm a frame within the seed's
-    /// 7 cm; at 5 cm a frame (a σ), its best particles fall behind along the room, where the
-    /// depth constrains them least, and the lag grows; the constant-velocity prediction keeps
-    /// up.
+    /// Among pillars, both models follow a camera moving 5 cm a frame (a σ of the walk) within
+    /// the seed's 7 cm. In a featureless box the seed's random walk falls behind along the
+    /// room, where the depth constrains it least, and the lag grows; particles that carry
+    /// their own velocity keep up.
     #[test]
     fn the_filter_tracks_a_moving_camera_without_odometry() {
         for m in [MotionModel::RandomWalk, MotionModel::ConstantVelocity] {
