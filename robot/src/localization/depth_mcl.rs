@@ -93,6 +93,19 @@ pub struct DepthMclConfig {
     pub beta: f64,
     /// How particles move between frames on a carrier without odometry.
     pub motion: MotionModel,
+    /// How particles are weighed on the depth.
+    pub likelihood: Likelihood,
+    /// The sensor model's σ of a pixel's depth about the model's, m: the camera's noise
+    /// (the SR4000's ±1 cm) and the model's own error (a surface scanned or mapped, a pose with
+    /// fewer degrees of freedom than the camera's) together.
+    pub pixel_sigma: f64,
+    /// The sensor model's share of pixels that fit nothing (a person, an object the model
+    /// lacks, a multipath return), spread evenly over the range.
+    pub outlier: f64,
+    /// The sensor model's count of independent measurements in an image: neighbouring pixels
+    /// see the same surface and share the model's errors, so the summed log-likelihood is
+    /// scaled to this many pixels, whatever the render size.
+    pub independent_pixels: f64,
     /// The constant-velocity model's change of velocity per frame, standard deviations:
     /// forward and leftward (m per frame, per frame) and yaw rate (rad per frame, per frame).
     /// The defaults, 3 mm and 0.002 rad, are at 8 frames a second (σ / 0.125²) a change of
@@ -100,6 +113,23 @@ pub struct DepthMclConfig {
     /// A sharper velocity walk lets the seed's sharp weighting chase single frames and
     /// overshoot (10 mm a frame per frame does, in the unit tests' featureless room).
     pub velocity_sigma: [f64; 3],
+}
+
+/// How a particle's depth render is turned into its weight.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Likelihood {
+    /// Seed 002 eqs. (8)–(10): `Σ α/(α + |Δz|)`, min–max normalised over the particles and
+    /// weighted by `exp(−(l̃ − 1)²/β²)`. The normalisation stretches whatever spread the
+    /// scores have to [0, 1], so where the depth says little (a stretch of plain corridor)
+    /// the sharp β picks the particles whose noise happened to fit best.
+    Seed,
+    /// A per-pixel sensor model (Thrun et al., Probabilistic Robotics §6.3, for depth
+    /// pixels): a Gaussian of `pixel_sigma` about the model's depth mixed with a uniform
+    /// `outlier` share over the range; the log-likelihoods summed over the pixels measured
+    /// and scaled to `independent_pixels`. A pixel where the model draws nothing is an
+    /// outlier. Where the depth says little the weights stay flat, and the particles spread.
+    Sensor,
 }
 
 /// The prediction step where no odometry is given.
@@ -131,6 +161,10 @@ impl Default for DepthMclConfig {
             beta: 0.01,
             motion: MotionModel::RandomWalk,
             velocity_sigma: [0.003, 0.003, 0.002],
+            likelihood: Likelihood::Seed,
+            pixel_sigma: 0.05,
+            outlier: 0.1,
+            independent_pixels: 400.0,
         }
     }
 }
@@ -151,6 +185,9 @@ impl DepthMclConfig {
                 ("sigma[5]", s[5], 0.0, std::f64::consts::PI),
                 ("alpha", self.alpha, 1e-6, 100.0),
                 ("beta", self.beta, 1e-6, 100.0),
+                ("pixel_sigma", self.pixel_sigma, 1e-4, 10.0),
+                ("outlier", self.outlier, 1e-6, 1.0),
+                ("independent_pixels", self.independent_pixels, 1.0, 1e8),
                 ("velocity_sigma[0]", self.velocity_sigma[0], 0.0, 10.0),
                 ("velocity_sigma[1]", self.velocity_sigma[1], 0.0, 10.0),
                 (
@@ -301,12 +338,28 @@ impl DepthMcl {
                 self.particles.len()
             ));
         }
-        let scores: Vec<f64> = self
-            .rendered
-            .chunks_exact(pixels)
-            .map(|predicted| score(measured, predicted, self.config.alpha))
-            .collect();
-        self.weigh(&scores);
+        let c = &self.config;
+        match c.likelihood {
+            Likelihood::Seed => {
+                let scores: Vec<f64> = self
+                    .rendered
+                    .chunks_exact(pixels)
+                    .map(|predicted| score(measured, predicted, c.alpha))
+                    .collect();
+                self.weigh(&scores);
+            }
+            Likelihood::Sensor => {
+                let model = SensorModel::new(c.pixel_sigma, c.outlier, range);
+                let valid = measured.iter().filter(|m| **m > 0.0).count().max(1);
+                let scale = c.independent_pixels / valid as f64;
+                let logs: Vec<f64> = self
+                    .rendered
+                    .chunks_exact(pixels)
+                    .map(|predicted| scale * model.log_likelihood(measured, predicted))
+                    .collect();
+                self.weigh_logs(&logs);
+            }
+        }
         let estimate = self.estimate();
         self.resample();
         Ok(estimate)
@@ -346,6 +399,17 @@ impl DepthMcl {
                     p.rpy[k] = wrap_angle(p.rpy[k] + s[k + 3] * gauss(&mut self.rng));
                 }
             }
+        }
+    }
+
+    /// Weights from log-likelihoods (the largest is 1 before normalising, so none underflow
+    /// all together).
+    fn weigh_logs(&mut self, logs: &[f64]) {
+        let top = logs.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        self.weights = logs.iter().map(|l| (l - top).exp()).collect();
+        let sum: f64 = self.weights.iter().sum();
+        for w in &mut self.weights {
+            *w /= sum;
         }
     }
 
@@ -420,6 +484,85 @@ impl DepthMcl {
         self.particles = out;
         self.velocities = velocities;
         self.weights = vec![step; n];
+    }
+}
+
+/// The per-pixel sensor model of [`Likelihood::Sensor`].
+#[derive(Debug, Clone)]
+pub struct SensorModel {
+    /// ln((1 − ε)/(σ√(2π))), 1/(2σ²) and ln(ε/R).
+    hit: f64,
+    inv_2s2: f64,
+    miss: f64,
+    /// ln p by |Δz| in steps of [`SensorModel::STEP`] up to where it is `miss` to 1e-13.
+    table: Vec<f32>,
+}
+
+impl SensorModel {
+    /// The table's step, m: a hundredth of a centimetre-σ.
+    const STEP: f64 = 1e-4;
+
+    /// σ (m), the outlier share ε and the camera's range R (m).
+    pub fn new(sigma: f64, outlier: f64, range: f64) -> SensorModel {
+        let mut m = SensorModel {
+            hit: ((1.0 - outlier) / (sigma * (2.0 * std::f64::consts::PI).sqrt())).ln(),
+            inv_2s2: 1.0 / (2.0 * sigma * sigma),
+            miss: (outlier / range).ln(),
+            table: Vec::new(),
+        };
+        // Past this |Δz| the Gaussian lies 30 nats under the outlier term.
+        let reach = ((m.hit - m.miss + 30.0).max(0.0) / m.inv_2s2).sqrt();
+        let n = (reach / Self::STEP).ceil() as usize + 2;
+        m.table = (0..n)
+            .map(|i| m.exact(i as f64 * Self::STEP) as f32)
+            .collect();
+        m
+    }
+
+    /// ln p at a depth difference `d`, computed.
+    fn exact(&self, d: f64) -> f64 {
+        let g = self.hit - d * d * self.inv_2s2;
+        // ln(eᵍ + eᵐ) without overflow; past 30 nats apart the smaller adds under 1e-13.
+        let (a, b) = if g > self.miss {
+            (g, self.miss)
+        } else {
+            (self.miss, g)
+        };
+        if a - b > 30.0 {
+            a
+        } else {
+            a + (b - a).exp().ln_1p()
+        }
+    }
+
+    /// ln p at `d` from the table, linearly interpolated.
+    fn lookup(&self, d: f32) -> f32 {
+        let x = d.abs() / Self::STEP as f32;
+        let i = x as usize;
+        if i + 1 >= self.table.len() {
+            return self.miss as f32;
+        }
+        let f = x - i as f32;
+        self.table[i] + f * (self.table[i + 1] - self.table[i])
+    }
+
+    /// ln p(z | ẑ) of one pixel measured at `z` where the model draws `z_hat` (0: nothing).
+    pub fn pixel(&self, z: f32, z_hat: f32) -> f32 {
+        if z_hat <= 0.0 {
+            self.miss as f32
+        } else {
+            self.lookup(z - z_hat)
+        }
+    }
+
+    /// Σ ln p over the pixels measured (`measured` > 0).
+    pub fn log_likelihood(&self, measured: &[f32], predicted: &[f32]) -> f64 {
+        measured
+            .iter()
+            .zip(predicted)
+            .filter(|(m, _)| **m > 0.0)
+            .map(|(&m, &p)| self.pixel(m, p) as f64)
+            .sum()
     }
 }
 
@@ -594,6 +737,28 @@ mod tests {
         assert!((y[0] - 0.5f64.cos()).abs() < 1e-12 && (y[1] - 0.5f64.sin()).abs() < 1e-12);
     }
 
+    /// The sensor model by hand: σ 0.05 m, ε 0.1, R 5 m. A pixel on the model scores
+    /// ln(0.9/(0.05√(2π)) + 0.02); one 2σ off, ln(0.9 e⁻²/(0.05√(2π)) + 0.02); one far off or where
+    /// the model draws nothing, ln 0.02.
+    #[test]
+    fn the_sensor_model_is_a_gaussian_with_outliers() {
+        let m = SensorModel::new(0.05, 0.1, 5.0);
+        let peak = 0.9 / (0.05 * (2.0 * std::f64::consts::PI).sqrt());
+        let near = (peak + 0.02).ln();
+        let two = (peak * (-2.0f64).exp() + 0.02).ln();
+        assert!((m.pixel(2.0, 2.0) as f64 - near).abs() < 1e-5);
+        assert!(
+            (m.pixel(2.1, 2.0) as f64 - two).abs() < 1e-4,
+            "{}",
+            m.pixel(2.1, 2.0)
+        );
+        assert!((m.pixel(1.9, 2.0) as f64 - two).abs() < 1e-4);
+        assert!((m.pixel(4.0, 2.0) as f64 - 0.02f64.ln()).abs() < 1e-6);
+        assert!((m.pixel(2.0, 0.0) as f64 - 0.02f64.ln()).abs() < 1e-6);
+        let l = m.log_likelihood(&[2.0, 2.0, 0.0], &[2.0, 0.0, 2.0]);
+        assert!((l - (near + 0.02f64.ln())).abs() < 1e-5);
+    }
+
     /// Eq. (8) by hand: α/(α + |Δz|) for Δz = 0, 0.1 and no model surface, one pixel not
     /// measured.
     #[test]
@@ -639,14 +804,18 @@ mod tests {
     /// tracking from a known start as the camera moves `step` m a frame down the room with no
     /// odometry, swaying 10 cm in y and 0.1 rad in yaw like a pushed wagon.
     fn track(pillars: bool, motion: MotionModel, step: f64) -> (f64, f64, f64) {
+        let config = DepthMclConfig {
+            motion,
+            ..DepthMclConfig::default()
+        };
+        track_with(pillars, config, step)
+    }
+
+    fn track_with(pillars: bool, config: DepthMclConfig, step: f64) -> (f64, f64, f64) {
         let mut room = BoxRoom { pillars };
         let start = CameraState {
             position: [1.0, 2.0, 1.0],
             rpy: [0.0, 0.0, 0.2],
-        };
-        let config = DepthMclConfig {
-            motion,
-            ..DepthMclConfig::default()
         };
         let mut mcl = DepthMcl::new(config, start, 3);
         let mut truth = start;
@@ -685,6 +854,24 @@ mod tests {
         assert!(median > 0.3, "the random walk kept up: median {median}");
         let (median, ..) = track(false, MotionModel::ConstantVelocity, 0.05);
         assert!(median < 0.07, "median {median}");
+    }
+
+    /// The per-pixel sensor model in place of the seed's weighting also tracks the camera
+    /// within the seed's 7 cm, with either motion model, among pillars.
+    #[test]
+    fn the_sensor_model_tracks_a_moving_camera() {
+        for motion in [MotionModel::RandomWalk, MotionModel::ConstantVelocity] {
+            let config = DepthMclConfig {
+                motion,
+                likelihood: Likelihood::Sensor,
+                ..DepthMclConfig::default()
+            };
+            let (median, worst, yaw) = track_with(true, config, 0.05);
+            assert!(
+                median < 0.07 && worst < 0.15 && yaw < 3f64.to_radians(),
+                "{motion:?}: median {median}, worst {worst}, yaw {yaw}"
+            );
+        }
     }
 
     /// In six degrees of freedom the filter (the seed's random walk, 400 particles) also
