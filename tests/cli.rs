@@ -2352,16 +2352,21 @@ fn a_camera_on_a_pushed_wagon_is_localised_and_scored_as_itself() {
         .collect();
     assert!((31..=33).contains(&rows.len()), "{}", rows.len());
     for r in &rows {
-        // The agent walks from (1, 0) east at 0.35 m/s; the camera is 0.5 m ahead of it.
+        // The agent walks from (1, 0) east at 0.35 m/s; the camera is 0.5 m ahead of it and
+        // 0.9 m up. The sway (5 mm in y and z; 0.5° of roll and pitch and 1° of yaw about the
+        // agent's frame on the floor) moves it at most 0.9 sin 0.5° ≈ 7.9 mm in x,
+        // 5 + 0.5 sin 1° + 0.9 sin 0.5° ≈ 21.6 mm in y and 5 + 0.5 sin 0.5° ≈ 9.4 mm in z.
         let x = 1.0 + 0.35 * r[0] + 0.5;
         assert!(
-            (r[1] - x).abs() < 0.006,
+            (r[1] - x).abs() < 0.009,
             "x {} at t {}, expected {x}",
             r[1],
             r[0]
         );
-        assert!(r[2].abs() < 0.006 && (r[3] - 0.9).abs() < 0.006, "{r:?}");
+        assert!(r[2].abs() < 0.022 && (r[3] - 0.9).abs() < 0.0105, "{r:?}");
     }
+    // It does sway: more than a millimetre off the straight line somewhere.
+    assert!(rows.iter().any(|r| r[2].abs() > 0.001), "no sway");
     let m = &s["metrics"];
     for k in [
         "depth_localization.camera.position.median_m",

@@ -97,9 +97,18 @@ pub fn recorders(s: &Scenario, dir: &Path) -> Result<Vec<Box<dyn Node>>> {
     Ok(out)
 }
 
-/// The metrics of the recorded odometry trajectory.
-pub fn metric_names(_s: &ScenarioSpec) -> Vec<String> {
-    crate::ground_truth::trajectory_metric_names("odometry")
+/// The metrics of the recorded odometry trajectory. A robot whose controller is `idle` never
+/// travels the metre the relative pose error is taken over, so it has none.
+pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
+    let names = crate::ground_truth::trajectory_metric_names("odometry");
+    if s.controller.get("type").and_then(|t| t.as_str()) == Some("idle") {
+        names
+            .into_iter()
+            .filter(|n| !n.starts_with("odometry.rpe_1m."))
+            .collect()
+    } else {
+        names
+    }
 }
 
 /// What a TUM recorder writes: the true pose at the ground-truth rate, or the odometry
