@@ -575,7 +575,7 @@ pub fn bench_depth_mcl(
 ) -> Result<Value> {
     use futago_msgs::camera::Intrinsics;
     use futago_robot::localization::depth_mcl::{
-        CameraState, DepthMcl, DepthMclConfig, DepthModel, reproject,
+        CameraState, DepthMcl, DepthMclConfig, DepthModel, model_far, reproject,
     };
     let mut renderer =
         futago_render::Renderer::new(&world.scene()).context("starting the renderer")?;
@@ -624,7 +624,7 @@ pub fn bench_depth_mcl(
             let t = Instant::now();
             for _ in 0..frames.max(1) {
                 renderer
-                    .render_batch(&k, &poses, SR4000_RANGE + 10.0 * config.alpha, &mut out)
+                    .render_batch(&k, &poses, model_far(SR4000_RANGE, config.alpha), &mut out)
                     .map_err(|e| anyhow::anyhow!("{e}"))?;
             }
             let render_ms = t.elapsed().as_secs_f64() * 1e3 / frames.max(1) as f64;

@@ -64,6 +64,12 @@ impl DepthModel for futago_render::Renderer {
 /// α/(α + 10α) ≈ 0.09 of a perfect match, and scores 0 instead.
 const RANGE_MARGIN_ALPHAS: f64 = 10.0;
 
+/// The depth to which the filter draws its model for a camera of range `range` (m) and the
+/// likelihood kernel's `alpha`: the range plus 10 α.
+pub fn model_far(range: f64, alpha: f64) -> f64 {
+    range + RANGE_MARGIN_ALPHAS * alpha
+}
+
 /// A message pose as the renderer's (single-precision) pose.
 pub fn render_pose(p: &Pose3) -> futago_render::Pose {
     let [x, y, z, w] = p.rotation;
@@ -257,6 +263,8 @@ pub struct DepthMcl {
     /// Each particle's planar velocity in its own frame (forward, left, yaw rate; per frame),
     /// for the constant-velocity model.
     velocities: Vec<[f64; 3]>,
+    /// The sensor model's table, for the camera range it was made for.
+    sensor: Option<(f64, SensorModel)>,
     /// Scratch: the particles' renders and poses.
     rendered: Vec<f32>,
     poses: Vec<Pose3>,
@@ -277,6 +285,7 @@ impl DepthMcl {
             particles: vec![start; n],
             weights: vec![1.0 / n as f64; n],
             velocities: vec![[0.0; 3]; n],
+            sensor: None,
             rendered: Vec::new(),
             poses: Vec::new(),
         }
@@ -329,7 +338,7 @@ impl DepthMcl {
         self.predict(motion);
         self.poses.clear();
         self.poses.extend(self.particles.iter().map(|p| p.pose()));
-        let far = range + RANGE_MARGIN_ALPHAS * self.config.alpha;
+        let far = model_far(range, self.config.alpha);
         model.render_batch(intr, &self.poses, far, &mut self.rendered)?;
         if self.rendered.len() != pixels * self.particles.len() {
             return Err(format!(
@@ -349,7 +358,11 @@ impl DepthMcl {
                 self.weigh(&scores);
             }
             Likelihood::Sensor => {
-                let model = SensorModel::new(c.pixel_sigma, c.outlier, range);
+                if self.sensor.as_ref().is_none_or(|(r, _)| *r != range) {
+                    let m = SensorModel::new(c.pixel_sigma, c.outlier, range);
+                    self.sensor = Some((range, m));
+                }
+                let model = &self.sensor.as_ref().expect("made above").1;
                 let valid = measured.iter().filter(|m| **m > 0.0).count().max(1);
                 let scale = c.independent_pixels / valid as f64;
                 let logs: Vec<f64> = self
