@@ -198,13 +198,12 @@ pub fn simulate_with(
         .map(|c| consumers(&streams, &format!("camera/{}", c.name)))
         .collect();
     // A camera an agent carries is not on the robot: only nodes that take its frames for what
-    // they are (the depth localiser scores the camera itself; the recorder writes them) may
-    // consume it.
+    // they are may consume it.
     for (c, takers) in s.cameras.iter().zip(&camera_nodes) {
         if let Some(agent) = &c.carrier {
             for &i in takers {
                 let n = nodes[i].node.name();
-                if !matches!(n, "depth_localization" | "record") {
+                if !nodes[i].node.takes_carried_cameras() {
                     anyhow::bail!(
                         "camera `{}` is carried by agent `{agent}`, not the robot; the `{n}` node \
                          takes camera frames as the robot's",

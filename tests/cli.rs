@@ -2382,6 +2382,31 @@ fn a_camera_on_a_pushed_wagon_is_localised_and_scored_as_itself() {
             .unwrap()
             < 0.07
     );
+    // The dataset writer takes a carried camera's frames with their true optical poses.
+    let data = tmp.path().join("dataset");
+    let o = futago(&[
+        "run",
+        sc,
+        "--duration",
+        "1",
+        "--set",
+        "output.rgbd_dataset=true",
+        "--out",
+        data.to_str().unwrap(),
+    ]);
+    ok(&o);
+    let gt = std::fs::read_to_string(data.join("sr4000").join("groundtruth.txt")).unwrap();
+    let first: Vec<f64> = gt
+        .lines()
+        .find(|l| !l.starts_with('#'))
+        .unwrap()
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        (first[1] - 1.5).abs() < 0.01 && (first[3] - 0.9).abs() < 0.0105,
+        "{first:?}"
+    );
     for (set, expect) in [
         ("depth_localization.odometry=true", "which has no odometry"),
         (

@@ -98,11 +98,10 @@ fn carried(s: &ScenarioSpec) -> bool {
     let Some(d) = &s.depth_localization else {
         return false;
     };
-    let name = d.camera.clone().unwrap_or_default();
+    // Validation has named the camera by now.
     s.camera
         .iter()
-        .find(|c| c.name == name)
-        .or_else(|| (s.camera.len() == 1).then(|| &s.camera[0]))
+        .find(|c| Some(&c.name) == d.camera.as_ref())
         .is_some_and(|c| c.carrier.is_some())
 }
 
@@ -307,6 +306,11 @@ impl Node for DepthLocalizationNode {
 
     fn wants_frame(&self, camera: &str, bus: &Bus) -> bool {
         camera == self.camera && bus.now >= self.next
+    }
+
+    /// It scores the camera's own pose, whatever carries it.
+    fn takes_carried_cameras(&self) -> bool {
+        true
     }
 
     fn on_frame(

@@ -85,6 +85,13 @@ pub trait Node {
         false
     }
 
+    /// Whether the node takes camera frames for what they are (their pixels and true optical
+    /// pose), so that a camera an agent carries, not the robot, suits it. Nodes that place
+    /// frames by the robot's pose and the camera's mount on it do not.
+    fn takes_carried_cameras(&self) -> bool {
+        false
+    }
+
     /// A frame of camera `camera`, which the node asked for.
     fn on_frame(
         &mut self,

@@ -390,6 +390,11 @@ impl Node for RgbdDatasetRecorder {
         "record.rgbd_dataset"
     }
 
+    /// It writes each frame with its true optical pose, whatever carries the camera.
+    fn takes_carried_cameras(&self) -> bool {
+        true
+    }
+
     fn streams(&self) -> Streams {
         Streams {
             consumes: self
