@@ -221,6 +221,10 @@ pub struct DepthLocalizationSpec {
     pub odometry: bool,
     #[serde(default)]
     pub mcl: futago_robot::localization::depth_mcl::DepthMclConfig,
+    /// The model the filter renders: the world's mesh (exact or perturbed), or a mesh or
+    /// point cloud file (`file`, relative to the scenario; resolved when the scenario loads).
+    #[serde(default)]
+    pub model: futago_robot::localization::model::ModelConfig,
 }
 
 fn default_depth_localization_rate() -> f64 {
@@ -972,6 +976,33 @@ impl Scenario {
             d.mcl
                 .validate("depth_localization.mcl")
                 .map_err(|(k, m)| SpecError::new(path, k, m))?;
+            d.model
+                .validate("depth_localization.model")
+                .map_err(|(k, m)| SpecError::new(path, k, m))?;
+            if let Some(file) = &d.model.file {
+                let resolved = path.parent().unwrap_or(Path::new(".")).join(file);
+                let ext = resolved
+                    .extension()
+                    .and_then(|e| e.to_str())
+                    .map(str::to_ascii_lowercase);
+                if !matches!(ext.as_deref(), Some("ply" | "glb" | "gltf")) {
+                    return Err(SpecError::new(
+                        path,
+                        "depth_localization.model.file",
+                        format!("{file}: expected a .ply, .glb or .gltf file"),
+                    ));
+                }
+                if !resolved.is_file() {
+                    return Err(SpecError::new(
+                        path,
+                        "depth_localization.model.file",
+                        format!("model file {} does not exist", resolved.display()),
+                    ));
+                }
+                // Absolute, so the spec reads the same wherever it is checked again.
+                let resolved = std::fs::canonicalize(&resolved).unwrap_or(resolved);
+                d.model.file = Some(resolved.to_string_lossy().into_owned());
+            }
             d.camera = Some(name);
         }
         let slam = match &spec.slam {

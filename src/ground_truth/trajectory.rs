@@ -265,6 +265,45 @@ pub fn rpe(pairs: &[(Isometry3<f64>, Isometry3<f64>)], delta: Delta) -> (Vec<f64
     (trans, rot)
 }
 
+/// A localiser has recovered from a kidnapping when its position error is below this, m…
+pub const RECOVERED_M: f64 = 0.3;
+/// …and stays so for this long, s.
+pub const RECOVERED_HOLD_S: f64 = 5.0;
+
+/// Seconds from each event time until the position error (`errors`: time s, error m, in time
+/// order) fell below [`RECOVERED_M`] and stayed there for [`RECOVERED_HOLD_S`] (`None`: never,
+/// or not for long enough before the run ended).
+pub fn recovery_times(errors: &[(f64, f64)], events: &[f64]) -> Vec<Option<f64>> {
+    events
+        .iter()
+        .map(|&t0| {
+            let after: Vec<&(f64, f64)> = errors.iter().filter(|e| e.0 >= t0).collect();
+            (0..after.len())
+                .find(|&k| {
+                    after[k].1 < RECOVERED_M
+                        && after[k..]
+                            .iter()
+                            .take_while(|e| e.0 <= after[k].0 + RECOVERED_HOLD_S)
+                            .all(|e| e.1 < RECOVERED_M)
+                        && after
+                            .last()
+                            .is_some_and(|e| e.0 >= after[k].0 + RECOVERED_HOLD_S)
+                })
+                .map(|k| after[k].0 - t0)
+        })
+        .collect()
+}
+
+/// The worst recovery over `events`; one not recovered by `end` counts the rest of the run (a
+/// lower bound).
+pub fn worst_recovery(errors: &[(f64, f64)], events: &[f64], end: f64) -> f64 {
+    events
+        .iter()
+        .zip(recovery_times(errors, events))
+        .map(|(t, r)| r.unwrap_or(end - t))
+        .fold(0.0, f64::max)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -364,5 +403,22 @@ mod tests {
             assert!((e - 0.1).abs() < 1e-12, "{e}");
         }
         assert!(r.iter().all(|e| e.abs() < 1e-12));
+    }
+
+    /// Recovery by hand: errors at 1 Hz, large until 13 s, below 0.3 m from 13 s on; an event
+    /// at 10 s recovers after 3 s. A dip at 11 s that lasts under 5 s does not count. An event
+    /// whose good stretch is cut short by the run's end has not recovered.
+    #[test]
+    fn recovery_is_the_first_lasting_return_below_the_threshold() {
+        let errors: Vec<(f64, f64)> = (0..30)
+            .map(|t| {
+                let e = if t == 11 || t >= 13 { 0.1 } else { 2.0 };
+                (t as f64, e)
+            })
+            .collect();
+        assert_eq!(recovery_times(&errors, &[10.0]), vec![Some(3.0)]);
+        assert_eq!(recovery_times(&errors[..16], &[10.0]), vec![None]);
+        assert_eq!(worst_recovery(&errors[..16], &[10.0], 16.0), 6.0);
+        assert_eq!(worst_recovery(&errors, &[0.0, 10.0], 30.0), 13.0);
     }
 }

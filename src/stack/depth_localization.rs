@@ -1,8 +1,12 @@
 //! The depth-camera localiser node (seed 002): Monte Carlo localisation of one camera in a 3D
 //! model, every particle's depth rendered in one batch through the stack's own renderer.
 //!
-//! The model is the world's mesh handed to the stack as a model (the "laser-scanned model" of
-//! seed 002, here exact); the filter never reads the simulator's state. At its rate the node
+//! The model is handed to the stack as a mesh (`depth_localization.model`): by default the
+//! world's mesh, exact (the "laser-scanned model" of seed 002); the world's mesh resampled and
+//! displaced (a stand-in for a scanned model); or a file: a user's glTF or PLY mesh, or a map
+//! futago's own mapper built (the RGB-D map's point cloud, meshed as surfels, or its planar
+//! polygons: Fallon et al.'s setting, a map made by a robot). The filter never reads the
+//! simulator's state. At its rate the node
 //! takes a frame of its camera, re-projects the measured depth to the render size, moves the
 //! particles (by the robot's odometry carried to the camera where `odometry` is set, else the
 //! filter's motion model alone), updates, and, for a camera on the robot, publishes the
@@ -29,6 +33,7 @@ use futago_msgs::camera::Intrinsics;
 use futago_msgs::tum::{Stamped, format_line};
 use futago_msgs::{Duration, Pose2, Pose3, Time};
 use futago_robot::localization::depth_mcl::{CameraState, DepthMcl, DepthMclConfig, reproject};
+use futago_robot::localization::model::{self, ModelConfig};
 use futago_sim::noise::stream;
 use glam::{DQuat, DVec3};
 use serde_json::json;
@@ -79,6 +84,8 @@ pub struct DepthLocalizationNode {
     lines: String,
     frames: Vec<FrameRecord>,
     summary: Option<serde_json::Value>,
+    /// What the model is (for the summary).
+    model: serde_json::Value,
 }
 
 /// The body pose of a camera whose optical frame has pose `optical`.
@@ -121,8 +128,9 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         Some([w, h]) => cam.depth.scaled(w, h),
         None => cam.depth,
     };
-    let renderer = futago_render::Renderer::new(&s.world.scene())
-        .context("depth_localization: rendering the model")?;
+    let (scene, model) = model_scene(s, &spec.model, seed)?;
+    let renderer =
+        futago_render::Renderer::new(&scene).context("depth_localization: rendering the model")?;
     Ok(Some(DepthLocalizationNode {
         mcl: None,
         config: spec.mcl,
@@ -140,7 +148,84 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         lines: String::new(),
         frames: Vec::new(),
         summary: None,
+        model,
     }))
+}
+
+/// The model's scene and a description of it for the summary.
+fn model_scene(
+    s: &Scenario,
+    spec: &ModelConfig,
+    seed: u64,
+) -> Result<(futago_render::Scene, serde_json::Value)> {
+    let key = "depth_localization.model.file";
+    // Every body of a scene at its initial pose, in the world frame.
+    let flatten = |scene: &futago_render::Scene| {
+        scene
+            .bodies
+            .iter()
+            .flat_map(|b| {
+                b.parts
+                    .iter()
+                    .map(|p| p.mesh.transformed(b.pose.rotation, b.pose.translation, 1.0))
+            })
+            .collect::<Vec<_>>()
+    };
+    let (meshes, source) = match &spec.file {
+        None if spec.perturb.is_none() => {
+            let scene = s.world.scene();
+            let triangles: usize = flatten(&scene).iter().map(|m| m.triangle_count()).sum();
+            let v = json!({ "source": "world", "triangles": triangles });
+            return Ok((scene, v));
+        }
+        None => (flatten(&s.world.scene()), "world".to_string()),
+        Some(file) => {
+            let path = Path::new(file);
+            let ext = path
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(str::to_ascii_lowercase);
+            let meshes = if ext.as_deref() == Some("ply") {
+                let g = futago_msgs::ply::read(path).map_err(|e| anyhow::anyhow!("{key}: {e}"))?;
+                if g.triangles.is_empty() {
+                    vec![model::surfels(&g.vertices, spec.surfel)]
+                } else {
+                    vec![model::mesh_of(&g.vertices, &g.triangles)]
+                }
+            } else {
+                futago_sim::world::gltf_io::load(path)
+                    .map_err(|e| anyhow::anyhow!("{key}: {e}"))?
+                    .parts
+                    .into_iter()
+                    .map(|p| p.mesh)
+                    .collect()
+            };
+            (meshes, file.clone())
+        }
+    };
+    let meshes: Vec<futago_render::TriMesh> = match &spec.perturb {
+        Some(p) => {
+            use rand::Rng;
+            let field_seed: u64 = stream(seed, "depth_localization.model").random();
+            meshes
+                .iter()
+                .map(|m| model::perturbed(m, p.spacing, p.noise, field_seed))
+                .collect()
+        }
+        None => meshes,
+    };
+    let triangles: usize = meshes.iter().map(|m| m.triangle_count()).sum();
+    if triangles == 0 {
+        anyhow::bail!(
+            "{key}: the model {source} has no surface to render (no faces, and no points that form a surface)"
+        );
+    }
+    let v = json!({
+        "source": source,
+        "triangles": triangles,
+        "perturb": spec.perturb.map(|p| json!({ "spacing_m": p.spacing, "noise_m": p.noise })),
+    });
+    Ok((model::scene(meshes), v))
 }
 
 /// The metrics this node scores: the camera's (always) and, for a camera on the robot, the
@@ -431,6 +516,7 @@ impl Node for DepthLocalizationNode {
             "frames": self.frames.len(),
             "render": [self.render.width, self.render.height],
             "carrier": if self.mount2.is_some() { "robot" } else { "agent" },
+            "model": self.model,
             "frame_ms": frame_ms,
             "path_error": {
                 "median_m": median,

@@ -19,10 +19,9 @@ use std::path::Path;
 /// The localiser's estimates (TUM), at each update.
 pub const LOCALIZATION_FILE: &str = "localization.txt";
 
-/// A localiser has recovered from a kidnapping when its error is below this, m…
-const RECOVERED_M: f64 = 0.3;
-/// …and stays so for this long, s.
-const RECOVERED_HOLD_S: f64 = 5.0;
+use crate::ground_truth::trajectory::{
+    RECOVERED_HOLD_S, RECOVERED_M, recovery_times, worst_recovery,
+};
 
 /// MCL in the loop.
 pub struct LocalizationNode {
@@ -99,37 +98,9 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
 }
 
 impl LocalizationNode {
-    /// Seconds from each event time until the error fell below `RECOVERED_M` and stayed there
-    /// for `RECOVERED_HOLD_S` (`None`: never).
-    fn recovery(&self, events: &[f64]) -> Vec<Option<f64>> {
-        events
-            .iter()
-            .map(|&t0| {
-                let after: Vec<&(f64, f64, f64)> =
-                    self.errors.iter().filter(|e| e.0 >= t0).collect();
-                (0..after.len())
-                    .find(|&k| {
-                        after[k].1 < RECOVERED_M
-                            && after[k..]
-                                .iter()
-                                .take_while(|e| e.0 <= after[k].0 + RECOVERED_HOLD_S)
-                                .all(|e| e.1 < RECOVERED_M)
-                            && after
-                                .last()
-                                .is_some_and(|e| e.0 >= after[k].0 + RECOVERED_HOLD_S)
-                    })
-                    .map(|k| after[k].0 - t0)
-            })
-            .collect()
-    }
-
-    /// The worst recovery over `ts`; one not recovered by `end` counts the rest of the run (a
-    /// lower bound).
-    fn worst(&self, ts: &[f64], end: f64) -> f64 {
-        ts.iter()
-            .zip(self.recovery(ts))
-            .map(|(t, r)| r.unwrap_or(end - t))
-            .fold(0.0, f64::max)
+    /// (time s, position error m) at each update.
+    fn position_errors(&self) -> Vec<(f64, f64)> {
+        self.errors.iter().map(|e| (e.0, e.1)).collect()
     }
 }
 
@@ -206,15 +177,15 @@ impl Node for LocalizationNode {
         });
         if !self.events.is_empty() {
             v["kidnappings"] =
-                json!(self.events.iter().zip(self.recovery(&self.events)).map(|(t, r)| json!({
+                json!(self.events.iter().zip(recovery_times(&self.position_errors(), &self.events)).map(|(t, r)| json!({
                 "time_s": t,
                 "recovered_after_s": r,
                 "recovered_when": format!("error < {RECOVERED_M} m for {RECOVERED_HOLD_S} s"),
             })).collect::<Vec<_>>());
-            v["recovery_s"] = json!(self.worst(&self.events, end));
+            v["recovery_s"] = json!(worst_recovery(&self.position_errors(), &self.events, end));
         }
         if self.global {
-            v["convergence_s"] = json!(self.worst(&[0.0], end));
+            v["convergence_s"] = json!(worst_recovery(&self.position_errors(), &[0.0], end));
         }
         self.summary = Some(v.clone());
         Ok(Report {

@@ -4,4 +4,5 @@
 
 pub mod depth_mcl;
 pub mod mcl;
+pub mod model;
 pub mod odometry;
