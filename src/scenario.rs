@@ -219,6 +219,10 @@ pub struct DepthLocalizationSpec {
     /// (the random walk alone).
     #[serde(default)]
     pub odometry: bool,
+    /// Start from anywhere in the model's free space (`mcl.max_particles` particles, any
+    /// yaw) instead of the camera's true pose; scored by `depth_localization.convergence_s`.
+    #[serde(default)]
+    pub global: bool,
     #[serde(default)]
     pub mcl: futago_robot::localization::depth_mcl::DepthMclConfig,
     /// The model the filter renders: the world's mesh (exact or perturbed), or a mesh or

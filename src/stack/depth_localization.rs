@@ -27,6 +27,9 @@
 
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth, tum_line};
 use crate::ground_truth::Metrics;
+use crate::ground_truth::trajectory::{
+    RECOVERED_HOLD_S, RECOVERED_M, recovery_times, worst_recovery,
+};
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::camera::Intrinsics;
@@ -53,6 +56,11 @@ const PATH_STEP: f64 = 0.01;
 /// Interval of the relative pose error, s.
 const RPE_INTERVAL: f64 = 1.0;
 
+/// Cells of the free space particles are drawn in, m, and the band about the camera's height
+/// that a surface must cross to take a cell, m.
+const FREE_CELL: f64 = 0.25;
+const FREE_BAND: f64 = 0.1;
+
 /// One frame's estimate and truth.
 struct FrameRecord {
     time: Time,
@@ -60,6 +68,9 @@ struct FrameRecord {
     truth: CameraState,
     /// The filter's wall time, s.
     spent: f64,
+    /// Particles after resampling, and hypotheses searched (recovery).
+    particles: usize,
+    searched: usize,
 }
 
 /// The depth-camera localiser in the loop.
@@ -86,6 +97,12 @@ pub struct DepthLocalizationNode {
     summary: Option<serde_json::Value>,
     /// What the model is (for the summary).
     model: serde_json::Value,
+    /// The model's meshes in its frame, kept until the first frame when the filter draws
+    /// particles anywhere (augmented MCL, a global start), to find the free space.
+    meshes: Option<Vec<futago_render::TriMesh>>,
+    global: bool,
+    /// Kidnapping times, s (the scenario's events).
+    events: Vec<f64>,
 }
 
 /// The body pose of a camera whose optical frame has pose `optical`.
@@ -128,7 +145,8 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         Some([w, h]) => cam.depth.scaled(w, h),
         None => cam.depth,
     };
-    let (scene, model) = model_scene(s, &spec.model, seed)?;
+    let (scene, model, meshes) = model_scene(s, &spec.model, seed)?;
+    let draws_anywhere = spec.global || spec.mcl.alpha_slow > 0.0 || spec.mcl.alpha_fast > 0.0;
     let renderer =
         futago_render::Renderer::new(&scene).context("depth_localization: rendering the model")?;
     Ok(Some(DepthLocalizationNode {
@@ -149,6 +167,9 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         frames: Vec::new(),
         summary: None,
         model,
+        meshes: draws_anywhere.then_some(meshes),
+        global: spec.global,
+        events: s.spec.event.iter().map(|e| e.time).collect(),
     }))
 }
 
@@ -157,7 +178,11 @@ fn model_scene(
     s: &Scenario,
     spec: &ModelConfig,
     seed: u64,
-) -> Result<(futago_render::Scene, serde_json::Value)> {
+) -> Result<(
+    futago_render::Scene,
+    serde_json::Value,
+    Vec<futago_render::TriMesh>,
+)> {
     let key = "depth_localization.model.file";
     // Every body of a scene at its initial pose, in the world frame.
     let flatten = |scene: &futago_render::Scene| {
@@ -174,9 +199,10 @@ fn model_scene(
     let (meshes, source) = match &spec.file {
         None if spec.perturb.is_none() => {
             let scene = s.world.scene();
-            let triangles: usize = flatten(&scene).iter().map(|m| m.triangle_count()).sum();
+            let meshes = flatten(&scene);
+            let triangles: usize = meshes.iter().map(|m| m.triangle_count()).sum();
             let v = json!({ "source": "world", "triangles": triangles });
-            return Ok((scene, v));
+            return Ok((scene, v, meshes));
         }
         None => (flatten(&s.world.scene()), "world".to_string()),
         Some(file) => {
@@ -225,7 +251,7 @@ fn model_scene(
         "triangles": triangles,
         "perturb": spec.perturb.map(|p| json!({ "spacing_m": p.spacing, "noise_m": p.noise })),
     });
-    Ok((model::scene(meshes), v))
+    Ok((model::scene(meshes.clone()), v, meshes))
 }
 
 /// The metrics this node scores: the camera's (always) and, for a camera on the robot, the
@@ -252,6 +278,14 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
         names.push(format!("depth_localization.camera.rpe_1s.{k}"));
     }
     names.push("depth_localization.frame_ms".into());
+    if let Some(d) = &s.depth_localization {
+        if !s.event.is_empty() && !carried(s) {
+            names.push("depth_localization.recovery_s".into());
+        }
+        if d.global {
+            names.push("depth_localization.convergence_s".into());
+        }
+    }
     names
 }
 
@@ -422,10 +456,27 @@ impl Node for DepthLocalizationNode {
         self.last_odometry = Some(odo);
         let measured = reproject(&frame.frame.depth, &self.depth, &self.render);
         let t0 = Instant::now();
-        let (config, seed) = (self.config, self.seed);
-        let est = self
-            .mcl
-            .get_or_insert_with(|| DepthMcl::new(config, truth, seed))
+        if self.mcl.is_none() {
+            let mut mcl = DepthMcl::new(self.config, truth, self.seed);
+            if let Some(meshes) = self.meshes.take() {
+                let inside = [truth.position[0], truth.position[1]];
+                let free = model::free_cells(
+                    &meshes,
+                    truth.position[2],
+                    FREE_BAND,
+                    FREE_CELL,
+                    Some(inside),
+                )
+                .map_err(|e| anyhow::anyhow!("depth_localization: the model's free space: {e}"))?;
+                mcl.set_free_space(free, FREE_CELL);
+                if self.global {
+                    mcl.start_global();
+                }
+            }
+            self.mcl = Some(mcl);
+        }
+        let mcl = self.mcl.as_mut().expect("made above");
+        let est = mcl
             .update(
                 &mut self.renderer,
                 &self.render,
@@ -435,6 +486,7 @@ impl Node for DepthLocalizationNode {
             )
             .map_err(|e| anyhow::anyhow!("depth_localization: {e}"))?;
         let spent = t0.elapsed().as_secs_f64();
+        let (particles, searched) = (mcl.particles().len(), mcl.searched());
         if let Some(mount) = self.mount2 {
             // The base under the estimated camera (planar).
             let c = est.state;
@@ -453,11 +505,13 @@ impl Node for DepthLocalizationNode {
             estimate: est.state,
             truth,
             spent,
+            particles,
+            searched,
         });
         Ok(())
     }
 
-    fn finish(&mut self, _bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
+    fn finish(&mut self, bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
         let mut report = Report::default();
         if let Some(dir) = out {
             let (mut est, mut truth) = (String::new(), String::new());
@@ -512,7 +566,15 @@ impl Node for DepthLocalizationNode {
         let n = self.frames.len().max(1) as f64;
         let frame_ms = self.frames.iter().map(|f| f.spent).sum::<f64>() / n * 1000.0;
         let (median, sigma, within) = path_error(&d).unwrap_or(nan3);
-        let v = json!({
+        let errors: Vec<(f64, f64)> = self
+            .frames
+            .iter()
+            .zip(&position)
+            .map(|(f, e)| (f.time.secs(), *e))
+            .collect();
+        let end = bus.now.secs();
+        let counts: Vec<usize> = self.frames.iter().map(|f| f.particles).collect();
+        let mut v = json!({
             "frames": self.frames.len(),
             "render": [self.render.width, self.render.height],
             "carrier": if self.mount2.is_some() { "robot" } else { "agent" },
@@ -529,7 +591,31 @@ impl Node for DepthLocalizationNode {
                 "rotation": { "median_deg": r50, "p95_deg": r95, "max_deg": rmax },
                 "rpe_1s": { "trans_rmse_m": rpe_t, "rot_rmse_deg": rpe_r.to_degrees() },
             },
+            "particles": {
+                "mean": counts.iter().sum::<usize>() as f64 / n,
+                "max": counts.iter().max(),
+                "frames_searching": self.frames.iter().filter(|f| f.searched > 0).count(),
+                "searched_max": self.frames.iter().map(|f| f.searched).max(),
+            },
         });
+        // Kidnappings move the robot, so they are scored for a camera it carries.
+        if !self.events.is_empty() && self.mount2.is_some() {
+            v["kidnappings"] = json!(
+                self.events
+                    .iter()
+                    .zip(recovery_times(&errors, &self.events))
+                    .map(|(t, r)| json!({
+                        "time_s": t,
+                        "recovered_after_s": r,
+                        "recovered_when": format!("camera position error < {RECOVERED_M} m for {RECOVERED_HOLD_S} s"),
+                    }))
+                    .collect::<Vec<_>>()
+            );
+            v["recovery_s"] = json!(worst_recovery(&errors, &self.events, end));
+        }
+        if self.global {
+            v["convergence_s"] = json!(worst_recovery(&errors, &[0.0], end));
+        }
         self.summary = Some(v.clone());
         report.summary.push(("depth_localization".into(), v));
         Ok(report)
@@ -562,8 +648,10 @@ impl Node for DepthLocalizationNode {
                     }
                 }
             }
-            if let Some(x) = v["frame_ms"].as_f64() {
-                m.insert("depth_localization.frame_ms".to_string(), x);
+            for k in ["frame_ms", "recovery_s", "convergence_s"] {
+                if let Some(x) = v[k].as_f64() {
+                    m.insert(format!("depth_localization.{k}"), x);
+                }
             }
         }
         Ok(m)
@@ -587,6 +675,8 @@ mod tests {
             estimate,
             truth,
             spent: 0.0,
+            particles: 1,
+            searched: 0,
         }
     }
 

@@ -509,13 +509,17 @@ impl Mcl {
                     i += 1;
                     cum += self.weights[i];
                 }
+                let p = self.particles[i];
+                // Past the last particle (KLD asks more than there were) the wheel turns
+                // again; the draw is taken first, or the wheel's last draw would be the first
+                // particle whatever the weights.
                 r += step;
                 if r > 1.0 {
                     r -= 1.0;
                     i = 0;
                     cum = self.weights[0];
                 }
-                self.particles[i]
+                p
             };
             bins.insert((
                 (p.x / c.kld_bin).floor() as i64,
@@ -653,7 +657,7 @@ pub fn kld_bound(k: usize, err: f64, z: f64) -> usize {
 
 /// Quantile of the standard normal distribution (Acklam's rational approximation, |error| <
 /// 1.2e-9), for KLD-sampling's bound.
-fn normal_quantile(p: f64) -> f64 {
+pub fn normal_quantile(p: f64) -> f64 {
     let a = [
         -3.969683028665376e1,
         2.209460984245205e2,
