@@ -4,8 +4,8 @@
 //! The model is handed to the stack as a mesh (`depth_localization.model`): by default the
 //! world's mesh, exact (the "laser-scanned model" of seed 002); the world's mesh resampled and
 //! displaced (a stand-in for a scanned model); or a file: a user's glTF or PLY mesh, or a map
-//! futago's own mapper built (the RGB-D map's point cloud, meshed as surfels, or its planar
-//! polygons: Fallon et al.'s setting, a map made by a robot). The filter never reads the
+//! futago's own mapper built (Fallon et al.'s setting, a map made by a robot: the RGB-D map's
+//! point cloud, meshed as surfels, or its planar polygons). The filter never reads the
 //! simulator's state. At its rate the node
 //! takes a frame of its camera, re-projects the measured depth to the render size, moves the
 //! particles (by the robot's odometry carried to the camera where `odometry` is set, else the
@@ -145,8 +145,8 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         Some([w, h]) => cam.depth.scaled(w, h),
         None => cam.depth,
     };
-    let (scene, model, meshes) = model_scene(s, &spec.model, seed)?;
     let draws_anywhere = spec.global || spec.mcl.alpha_slow > 0.0 || spec.mcl.alpha_fast > 0.0;
+    let (scene, model, meshes) = model_scene(s, &spec.model, seed, draws_anywhere)?;
     let renderer =
         futago_render::Renderer::new(&scene).context("depth_localization: rendering the model")?;
     Ok(Some(DepthLocalizationNode {
@@ -167,21 +167,23 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         frames: Vec::new(),
         summary: None,
         model,
-        meshes: draws_anywhere.then_some(meshes),
+        meshes,
         global: spec.global,
         events: s.spec.event.iter().map(|e| e.time).collect(),
     }))
 }
 
-/// The model's scene and a description of it for the summary.
+/// The model's scene, a description of it for the summary, and, when `keep`, its meshes in
+/// the model's frame (for the free space).
 fn model_scene(
     s: &Scenario,
     spec: &ModelConfig,
     seed: u64,
+    keep: bool,
 ) -> Result<(
     futago_render::Scene,
     serde_json::Value,
-    Vec<futago_render::TriMesh>,
+    Option<Vec<futago_render::TriMesh>>,
 )> {
     let key = "depth_localization.model.file";
     // Every body of a scene at its initial pose, in the world frame.
@@ -202,7 +204,7 @@ fn model_scene(
             let meshes = flatten(&scene);
             let triangles: usize = meshes.iter().map(|m| m.triangle_count()).sum();
             let v = json!({ "source": "world", "triangles": triangles });
-            return Ok((scene, v, meshes));
+            return Ok((scene, v, keep.then_some(meshes)));
         }
         None => (flatten(&s.world.scene()), "world".to_string()),
         Some(file) => {
@@ -251,7 +253,8 @@ fn model_scene(
         "triangles": triangles,
         "perturb": spec.perturb.map(|p| json!({ "spacing_m": p.spacing, "noise_m": p.noise })),
     });
-    Ok((model::scene(meshes.clone()), v, meshes))
+    let kept = keep.then(|| meshes.clone());
+    Ok((model::scene(meshes), v, kept))
 }
 
 /// The metrics this node scores: the camera's (always) and, for a camera on the robot, the

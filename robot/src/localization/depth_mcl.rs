@@ -1234,6 +1234,20 @@ mod tests {
         assert!(e.contains("expected 44×36"), "{e}");
     }
 
+    /// The box room's cells of 0.25 m whose centres lie 0.3 m inside the walls.
+    fn room_free_cells() -> Vec<[f64; 2]> {
+        let mut free = Vec::new();
+        for i in 0..40 {
+            for j in 0..16 {
+                let c = [0.125 + 0.25 * i as f64, 0.125 + 0.25 * j as f64];
+                if c[0] > 0.3 && c[0] < 9.7 && c[1] > 0.3 && c[1] < 3.7 {
+                    free.push(c);
+                }
+            }
+        }
+        free
+    }
+
     /// A kidnapping: a camera tracked at rest near one end of the room (odometry: no motion)
     /// is carried 6.7 m to the other end and turned round. With recovery (hypotheses drawn in
     /// the room's free cells as the fit drops, refined by the search), the filter finds it
@@ -1250,16 +1264,7 @@ mod tests {
             position: [8.2, 1.8, 1.0],
             rpy: [0.0, 0.0, std::f64::consts::PI - 0.2],
         };
-        // The room's cells of 0.25 m whose centres lie 0.3 m inside the walls.
-        let mut free = Vec::new();
-        for i in 0..40 {
-            for j in 0..16 {
-                let c = [0.125 + 0.25 * i as f64, 0.125 + 0.25 * j as f64];
-                if c[0] > 0.3 && c[0] < 9.7 && c[1] > 0.3 && c[1] < 3.7 {
-                    free.push(c);
-                }
-            }
-        }
+        let free = room_free_cells();
         let run = |recover: bool| {
             let config = DepthMclConfig {
                 particles: 200,
@@ -1312,15 +1317,7 @@ mod tests {
             position: [6.4, 1.2, 1.0],
             rpy: [0.0, 0.0, 2.5],
         };
-        let mut free = Vec::new();
-        for i in 0..40 {
-            for j in 0..16 {
-                let c = [0.125 + 0.25 * i as f64, 0.125 + 0.25 * j as f64];
-                if c[0] > 0.3 && c[0] < 9.7 && c[1] > 0.3 && c[1] < 3.7 {
-                    free.push(c);
-                }
-            }
-        }
+        let free = room_free_cells();
         let config = DepthMclConfig {
             alpha_slow: 0.001,
             alpha_fast: 0.1,
