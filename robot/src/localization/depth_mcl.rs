@@ -1234,6 +1234,11 @@ mod tests {
         assert!(e.contains("expected 44×36"), "{e}");
     }
 
+    /// The SR4000's field of view at 22×18 px, for the tests that render many hypotheses.
+    fn small_intr() -> Intrinsics {
+        Intrinsics::from_fov(22, 18, 43.6f64.to_radians(), 34.6f64.to_radians()).unwrap()
+    }
+
     /// The box room's cells of 0.25 m whose centres lie 0.3 m inside the walls.
     fn room_free_cells() -> Vec<[f64; 2]> {
         let mut free = Vec::new();
@@ -1254,8 +1259,7 @@ mod tests {
     /// again within 5 frames; the seed's tracking filter alone stays lost.
     #[test]
     fn augmented_mcl_recovers_from_a_kidnapping() {
-        let small =
-            Intrinsics::from_fov(22, 18, 43.6f64.to_radians(), 34.6f64.to_radians()).unwrap();
+        let small = small_intr();
         let start = CameraState {
             position: [1.5, 2.0, 1.0],
             rpy: [0.0, 0.0, 0.1],
@@ -1311,8 +1315,7 @@ mod tests {
     /// hint of where it is, and the random walk closes in within 8 frames (1 s at 8 Hz).
     #[test]
     fn a_global_start_finds_the_camera() {
-        let small =
-            Intrinsics::from_fov(22, 18, 43.6f64.to_radians(), 34.6f64.to_radians()).unwrap();
+        let small = small_intr();
         let truth = CameraState {
             position: [6.4, 1.2, 1.0],
             rpy: [0.0, 0.0, 2.5],
