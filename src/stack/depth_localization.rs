@@ -216,7 +216,11 @@ fn model_scene(
             let meshes = if ext.as_deref() == Some("ply") {
                 let g = futago_msgs::ply::read(path).map_err(|e| anyhow::anyhow!("{key}: {e}"))?;
                 if g.triangles.is_empty() {
-                    vec![model::surfels(&g.vertices, spec.surfel)]
+                    vec![if spec.merge_planes {
+                        model::planar_surfels(&g.vertices, spec.surfel)
+                    } else {
+                        model::surfels(&g.vertices, spec.surfel)
+                    }]
                 } else {
                     vec![model::mesh_of(&g.vertices, &g.triangles)]
                 }
