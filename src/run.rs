@@ -404,11 +404,13 @@ pub fn simulate_with(
                 }
             }
         }
-        for (l, scan) in out.scans {
+        for ((l, scan), hits) in out.scans.into_iter().zip(&out.hits) {
             scans[l] += 1;
             let name = &s.lidars[l].0.name;
             for &i in &laser_nodes[l] {
                 nodes[i].call(|node| node.on_scan(name, &scan, &mut bus))?;
+                // Truth for scorers: not timed as the node's work.
+                nodes[i].node.on_scan_truth(name, hits);
             }
         }
         // Control at the rate of the Create's sensor stream.

@@ -39,6 +39,26 @@ pub enum LidarPreset {
     Seed000,
 }
 
+/// What a laser beam hit: the truth behind a range, for scorers (the stack never sees it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum BeamHit {
+    /// Nothing within range, or no return (dropout, or noise past the range).
+    Nothing,
+    /// The world's fixed geometry or one of its objects.
+    Static,
+    /// An agent (a carrier on a scripted path), by its index in the scenario.
+    Agent(u32),
+    /// A person's body, by their slot in the crowd.
+    Person(u32),
+}
+
+impl BeamHit {
+    /// Whether the beam hit something that moves by itself (an agent or a person).
+    pub fn is_mover(self) -> bool {
+        matches!(self, BeamHit::Agent(_) | BeamHit::Person(_))
+    }
+}
+
 /// Resolved scanner parameters.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LidarSpec {
@@ -272,6 +292,8 @@ pub struct Lidar {
     /// Index of the next scan to start.
     next_scan: i64,
     scan: Option<LaserScan>,
+    /// What each beam of the scan in progress hit.
+    hits: Vec<BeamHit>,
     /// Unit beam directions in the laser frame.
     directions: Vec<Vec3>,
 }
@@ -293,6 +315,7 @@ impl Lidar {
             rng,
             next_scan: 0,
             scan: None,
+            hits: Vec::new(),
             directions,
             spec,
         }
@@ -305,13 +328,15 @@ impl Lidar {
 
     /// Called after every physics step at time `now` with the laser's world pose: casts the
     /// beams that fall due (with `cast(origin, direction, max_range)` returning the distance to
-    /// the first hit) and returns a scan when its last beam is done.
+    /// the first hit and what was hit) and returns a scan when its last beam is done, with
+    /// what each beam hit (truth for scorers: a beam that returned nothing, by dropout or
+    /// noise past the range, hit [`BeamHit::Nothing`]).
     pub fn update(
         &mut self,
         now: Time,
         laser_pose: &Pose,
-        mut cast: impl FnMut(Vec3, Vec3, f32) -> Option<f32>,
-    ) -> Option<LaserScan> {
+        mut cast: impl FnMut(Vec3, Vec3, f32) -> Option<(f32, BeamHit)>,
+    ) -> Option<(LaserScan, Vec<BeamHit>)> {
         if self.scan.is_none() {
             let start = self.scan_time(self.next_scan);
             if now < start {
@@ -349,7 +374,11 @@ impl Lidar {
             // Draw the same random numbers whatever the beam hits, so streams stay aligned.
             let n: f64 = StandardNormal.sample(&mut self.rng);
             let drop = self.rng.random::<f64>() < self.dropout;
-            let r = match hit {
+            let what = match hit {
+                Some((_, w)) if !drop => w,
+                _ => BeamHit::Nothing,
+            };
+            let r = match hit.map(|h| h.0) {
                 _ if drop => f32::INFINITY,
                 None => f32::INFINITY,
                 Some(d) => {
@@ -365,9 +394,15 @@ impl Lidar {
                 }
             };
             scan.ranges.push(r);
+            self.hits.push(if r.is_finite() {
+                what
+            } else {
+                BeamHit::Nothing
+            });
         }
         if scan.ranges.len() == self.spec.beams {
-            self.scan.take()
+            let hits = std::mem::replace(&mut self.hits, Vec::with_capacity(self.spec.beams));
+            self.scan.take().map(|s| (s, hits))
         } else {
             None
         }
@@ -429,13 +464,15 @@ mod tests {
         let casts = std::cell::Cell::new(0);
         let cast = |_: Vec3, _: Vec3, _: f32| {
             casts.set(casts.get() + 1);
-            Some(1.0)
+            Some((1.0, BeamHit::Static))
         };
         assert!(l.update(Time::from_secs(0.0), &pose, cast).is_none());
         let mut t = 0.0;
         let scan = loop {
             t += 0.005;
-            if let Some(s) = l.update(Time::from_secs(t), &pose, cast) {
+            if let Some((s, hits)) = l.update(Time::from_secs(t), &pose, cast) {
+                assert_eq!(hits.len(), s.ranges.len());
+                assert!(hits.iter().all(|h| *h == BeamHit::Static));
                 break s;
             }
         };

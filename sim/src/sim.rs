@@ -9,7 +9,7 @@ use crate::agent::AgentConfig;
 use crate::config::{SpecError, check_range};
 use crate::create::{CreateConfig, CreateDrive, GRAVITY, PlanarVelocity, wheel_traction};
 use crate::joint::{Joint, JointConfig};
-use crate::lidar::{Lidar, LidarConfig};
+use crate::lidar::{BeamHit, Lidar, LidarConfig};
 use crate::noise::stream;
 use crate::people::{
     Crowd, CrowdConfig, FlowConfig, PARKED_Z, PersonConfig, PersonTruth, Surroundings,
@@ -58,6 +58,8 @@ impl PhysicsConfig {
 pub struct StepOutput {
     /// Completed laser scans, with the index of their laser.
     pub scans: Vec<(usize, LaserScan)>,
+    /// What each beam of `scans[k]` hit: truth for scorers, never for the stack.
+    pub hits: Vec<Vec<BeamHit>>,
     /// The Create's sensor stream, when a packet fell due.
     pub odometry: Option<Odometry>,
     pub bumps: Option<BumpsAndDrops>,
@@ -110,6 +112,8 @@ pub struct Simulation {
     /// The people, and each slot's bodies: torso with head, left leg, right leg.
     crowd: Crowd,
     people_bodies: Vec<[RigidBodyHandle; 3]>,
+    /// What a beam that hits each agent's or person's body hit.
+    movers: std::collections::HashMap<RigidBodyHandle, BeamHit>,
     /// Whether the robot touched a person in the last step.
     touching_person: bool,
     /// Rigid body of each world object (fixed bodies for static ones).
@@ -303,7 +307,19 @@ impl Simulation {
             .collect();
         // Note: rapier fills its broad phase (which ray casts use) in the first step; wheel
         // drops are therefore first sampled with the first sensor packet.
+        let movers = agents
+            .iter()
+            .enumerate()
+            .map(|(i, (_, h))| (*h, BeamHit::Agent(i as u32)))
+            .chain(
+                people_bodies
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(i, hs)| hs.iter().map(move |h| (*h, BeamHit::Person(i as u32)))),
+            )
+            .collect();
         Simulation {
+            movers,
             physics: p,
             dt,
             time: Time::ZERO,
@@ -695,11 +711,18 @@ impl Simulation {
                 Some(j) => base * self.joints[j].transform() * l.mount,
                 None => base * l.mount,
             };
-            if let Some(scan) = l.update(self.time, &laser_pose, |o, d, max| {
+            let movers = &self.movers;
+            let colliders = &self.physics.colliders;
+            if let Some((scan, hits)) = l.update(self.time, &laser_pose, |o, d, max| {
                 rays += 1;
-                qp.cast_ray(&Ray::new(o, d), max, true).map(|(_, t)| t)
+                qp.cast_ray(&Ray::new(o, d), max, true).map(|(c, t)| {
+                    let body = colliders.get(c).and_then(|c| c.parent());
+                    let what = body.and_then(|b| movers.get(&b).copied());
+                    (t, what.unwrap_or(BeamHit::Static))
+                })
             }) {
                 out.scans.push((i, scan));
+                out.hits.push(hits);
             }
         }
         self.counters.laser_rays += rays;

@@ -9,7 +9,7 @@ use futago_msgs::{LaserScan, Pose2, Time};
 use futago_sim::agent::{AgentConfig, PathMode};
 use futago_sim::create::CreateConfig;
 use futago_sim::joint::{JointConfig, JointMode};
-use futago_sim::lidar::{LidarConfig, LidarPreset};
+use futago_sim::lidar::{BeamHit, LidarConfig, LidarPreset};
 use futago_sim::{Movers, Simulation, World};
 
 fn with_movers(world: &World, lidars: &[LidarConfig], movers: &Movers, start: Pose2) -> Simulation {
@@ -31,10 +31,20 @@ fn joint(name: &str, mode: JointMode, axis: [f64; 3], rate: f64) -> JointConfig 
 
 /// Steps until a scan comes; returns it with the joints' angles at that step.
 fn next_scan(s: &mut Simulation) -> (LaserScan, Vec<f64>) {
+    let (scan, _, angles) = next_scan_and_hits(s);
+    (scan, angles)
+}
+
+/// The next scan, what each of its beams hit, and the joints' angles.
+fn next_scan_and_hits(s: &mut Simulation) -> (LaserScan, Vec<BeamHit>, Vec<f64>) {
     for _ in 0..2000 {
         let out = s.step(None);
-        if let Some((_, scan)) = out.scans.into_iter().next() {
-            return (scan, s.joints().iter().map(|j| j.angle()).collect());
+        if let (Some((_, scan)), Some(hits)) = (out.scans.into_iter().next(), out.hits.first()) {
+            return (
+                scan,
+                hits.clone(),
+                s.joints().iter().map(|j| j.angle()).collect(),
+            );
         }
     }
     panic!("no scan in 10 s");
@@ -143,7 +153,7 @@ fn an_agent_walks_its_path_and_blocks_the_laser() {
     let mut s = with_movers(&world, &[ideal(LidarPreset::Urg04lx)], &movers, start);
     let mut crossed = false;
     for _ in 0..60 {
-        let (scan, _) = next_scan(&mut s);
+        let (scan, what, _) = next_scan_and_hits(&mut s);
         let (name, pose) = s.agent_poses()[0];
         assert_eq!(name, "walker");
         assert_eq!(pose, agent.pose_at(s.time()));
@@ -166,8 +176,10 @@ fn an_agent_walks_its_path_and_blocks_the_laser() {
                 (r - want).abs() < 0.01,
                 "agent at {pose:?}: range {r} vs {want}"
             );
+            assert_eq!(what[mid], BeamHit::Agent(0), "the beam hit the agent");
         } else if (pose.y - y_hit).abs() > 0.35 {
             assert!((r - 5.0).abs() < 0.01, "agent at {pose:?}: range {r}");
+            assert_eq!(what[mid], BeamHit::Static, "the beam hit the wall");
         }
     }
     assert!(crossed, "the agent never crossed the beam");

@@ -8,7 +8,7 @@ use common::*;
 use futago_msgs::{DriveCommand, LaserScan, Pose2};
 use futago_sim::agent::PathMode;
 use futago_sim::create::CreateConfig;
-use futago_sim::lidar::LidarPreset;
+use futago_sim::lidar::{BeamHit, LidarPreset};
 use futago_sim::people::{CrowdConfig, FlowConfig, PersonConfig};
 use futago_sim::{Movers, Simulation, World};
 
@@ -27,9 +27,15 @@ fn standing(name: &str, at: [f64; 2], heading_deg: f64) -> PersonConfig {
 }
 
 fn next_scan(s: &mut Simulation) -> LaserScan {
+    next_scan_and_hits(s).0
+}
+
+/// The next scan and what each of its beams hit.
+fn next_scan_and_hits(s: &mut Simulation) -> (LaserScan, Vec<BeamHit>) {
     for _ in 0..2000 {
-        if let Some((_, scan)) = s.step(None).scans.into_iter().next() {
-            return scan;
+        let out = s.step(None);
+        if let (Some((_, scan)), Some(hits)) = (out.scans.into_iter().next(), out.hits.first()) {
+            return (scan, hits.clone());
         }
     }
     panic!("no scan in 10 s");
@@ -63,7 +69,7 @@ fn a_laser_at_shin_height_sees_a_standing_person_as_two_legs() {
     );
     let c = CrowdConfig::default();
     for _ in 0..5 {
-        let scan = next_scan(&mut s);
+        let (scan, what) = next_scan_and_hits(&mut s);
         let people = s.people();
         assert_eq!(people.len(), 1);
         let p = people[0].pose;
@@ -95,12 +101,14 @@ fn a_laser_at_shin_height_sees_a_standing_person_as_two_legs() {
                         "beam {i}: {r} m, the leg's circle at {t} m"
                     );
                     on_leg[k] += 1;
+                    assert_eq!(what[i], BeamHit::Person(0), "beam {i} hit a leg");
                 }
                 None => {
                     // Between the legs the beam runs on to the far wall (x = 6).
                     let between = (a.sin() * 2.0 + start.y - 3.0).abs() < 0.04;
                     if between {
                         assert!((r as f64 - 5.0 / a.cos()).abs() < 0.01, "beam {i}: {r}");
+                        assert_eq!(what[i], BeamHit::Static, "beam {i} hit the wall");
                         gap += 1;
                     }
                 }

@@ -108,6 +108,11 @@ pub trait Node {
         Ok(())
     }
 
+    /// What each beam of the scan of laser `laser` just handed to [`Node::on_scan`] hit:
+    /// truth, for scorers only (a mapper that scores its map against the labels of what it
+    /// measured); a stack module never acts on it.
+    fn on_scan_truth(&mut self, _laser: &str, _hits: &[futago_sim::lidar::BeamHit]) {}
+
     /// A control tick (also one at time zero, before the first step).
     fn on_control(&mut self, _bus: &mut Bus) -> Result<()> {
         Ok(())

@@ -1,6 +1,8 @@
 //! Building maps: 2D occupancy grids from laser scans ([`occupancy`]), scan matching
 //! ([`icp`], [`correlative`]), graph SLAM ([`slam`], [`pose_graph`]), and seed 000's 3D map
-//! from RGB-D keyframes ([`rgbd_map`], with [`registration`]'s RGBD-ICP and [`polygons`]).
+//! from RGB-D keyframes ([`rgbd_map`], with [`registration`]'s RGBD-ICP and [`polygons`]);
+//! seed 004's voxel map of occupied, free and unknown space with free-space carving
+//! ([`voxels`]).
 
 pub mod correlative;
 pub mod icp;
@@ -10,3 +12,4 @@ pub mod pose_graph;
 pub mod registration;
 pub mod rgbd_map;
 pub mod slam;
+pub mod voxels;
