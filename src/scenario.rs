@@ -14,7 +14,7 @@ use futago_robot::mapping::rgbd_map::RgbdMapConfig;
 use futago_robot::mapping::slam::SlamConfig;
 use futago_robot::navigation::NavigationConfig;
 use futago_robot::navigation::coverage::CoverageConfig;
-use futago_robot::navigation::{CoverConfig, ExploreConfig, NavigateConfig};
+use futago_robot::navigation::{CoverConfig, ExploreConfig, NavigateConfig, RouteConfig};
 use futago_robot::tracking::PeopleConfig;
 use futago_sim::agent::AgentConfig;
 use futago_sim::config::{SpecError, check_name, check_range, load_toml};
@@ -430,17 +430,20 @@ pub enum ControllerConfig {
     /// Drive a coverage route planned on the known map
     /// ([`futago_robot::navigation::coverage`], parameters in `[coverage]`).
     Coverage(CoverConfig),
+    /// Drive the routes a stack node publishes ([`futago_robot::navigation::RouteConfig`]).
+    Route(RouteConfig),
 }
 
 impl ControllerConfig {
     /// The `type` names, in declaration order.
-    pub const TYPES: [&'static str; 6] = [
+    pub const TYPES: [&'static str; 7] = [
         "idle",
         "segments",
         "waypoints",
         "navigate",
         "explore",
         "coverage",
+        "route",
     ];
 
     /// Checks values a controller cannot run with; returns `(key, expectation)` on error.
@@ -449,6 +452,16 @@ impl ControllerConfig {
             ControllerConfig::Idle
             | ControllerConfig::Explore(_)
             | ControllerConfig::Coverage(_) => Ok(()),
+            ControllerConfig::Route(r) => {
+                if r.topic.is_empty() || r.topic.contains(char::is_whitespace) {
+                    Err((
+                        "topic".into(),
+                        "a topic name without spaces, e.g. \"scan3d\"".into(),
+                    ))
+                } else {
+                    Ok(())
+                }
+            }
             ControllerConfig::Segments(s) => s.validate(),
             ControllerConfig::Waypoints(w) => w.validate(),
             ControllerConfig::Navigate(n) => n.validate(),
@@ -463,7 +476,8 @@ impl ControllerConfig {
             ControllerConfig::Waypoints(w) => Some(Script::Waypoints(w.clone())),
             ControllerConfig::Navigate(_)
             | ControllerConfig::Explore(_)
-            | ControllerConfig::Coverage(_) => None,
+            | ControllerConfig::Coverage(_)
+            | ControllerConfig::Route(_) => None,
         }
     }
 }
@@ -519,6 +533,7 @@ pub fn controller_config(path: &Path, table: &toml::Table) -> Result<ControllerC
         "navigate" => Ok(ControllerConfig::Navigate(typed(path, rest)?)),
         "explore" => Ok(ControllerConfig::Explore(typed(path, rest)?)),
         "coverage" => Ok(ControllerConfig::Coverage(typed(path, rest)?)),
+        "route" => Ok(ControllerConfig::Route(typed(path, rest)?)),
         other => Err(SpecError::new(
             path,
             "controller.type",
@@ -589,6 +604,7 @@ impl ControllerConfig {
             ControllerConfig::Navigate(c) => toml::Table::try_from(c),
             ControllerConfig::Explore(c) => toml::Table::try_from(c),
             ControllerConfig::Coverage(c) => toml::Table::try_from(c),
+            ControllerConfig::Route(c) => toml::Table::try_from(c),
         };
         let mut t = typed.unwrap_or_default();
         let names = ControllerConfig::TYPES;
@@ -599,6 +615,7 @@ impl ControllerConfig {
             ControllerConfig::Navigate(_) => names[3],
             ControllerConfig::Explore(_) => names[4],
             ControllerConfig::Coverage(_) => names[5],
+            ControllerConfig::Route(_) => names[6],
         };
         t.insert("type".into(), toml::Value::String(ty.into()));
         t
@@ -1166,6 +1183,7 @@ impl Scenario {
             ControllerConfig::Navigate(_)
                 | ControllerConfig::Explore(_)
                 | ControllerConfig::Coverage(_)
+                | ControllerConfig::Route(_)
         );
         let driver_laser = match (&controller_laser, navigates) {
             (Some(_), false) => {

@@ -42,9 +42,9 @@ pub struct DriverNode {
     localizes: bool,
     /// How many goals a navigator was given (none for other drivers and for exploration).
     goals: Option<usize>,
-    /// A route driver (`coverage`): the stamp of the last route taken from `path/coverage`,
-    /// and whether it has been driven to its end.
-    route: Option<(Option<Time>, bool)>,
+    /// A route driver (`coverage`, `route`): the topic its routes come on (`path/TOPIC`), the
+    /// stamp of the last route taken, and whether it has been driven to its end.
+    route: Option<(String, Option<Time>, bool)>,
 }
 
 /// The height of the band of the world's map that goal and route navigation plan on: the
@@ -82,6 +82,17 @@ impl DriverNode {
                     Some(navigation_map()?),
                 )),
                 pose_source: Some(c.pose_source),
+                odometry: OdometryIntegrator::new(s.start),
+                last: None,
+            },
+            ControllerConfig::Route(r) => Driver::Navigator {
+                // The routes come on `path/TOPIC`.
+                nav: Box::new(Navigator::new(
+                    spec.navigation,
+                    Task::Route(Vec::new()),
+                    Some(navigation_map()?),
+                )),
+                pose_source: Some(r.pose_source),
                 odometry: OdometryIntegrator::new(s.start),
                 last: None,
             },
@@ -125,7 +136,11 @@ impl DriverNode {
                 },
                 _ => None,
             },
-            route: matches!(s.controller, ControllerConfig::Coverage(_)).then_some((None, false)),
+            route: match &s.controller {
+                ControllerConfig::Coverage(_) => Some(("coverage".into(), None, false)),
+                ControllerConfig::Route(r) => Some((r.topic.clone(), None, false)),
+                _ => None,
+            },
         })
     }
 }
@@ -141,8 +156,8 @@ impl Node for DriverNode {
         if matches!(self.driver, Driver::Navigator { .. }) {
             consumes.push("people/tracked".into());
         }
-        if self.route.is_some() {
-            consumes.push("path/coverage".into());
+        if let Some((topic, ..)) = &self.route {
+            consumes.push(format!("path/{topic}"));
         }
         let mut periods = Vec::new();
         match &self.driver {
@@ -200,8 +215,8 @@ impl Node for DriverNode {
                     odometry.integrate(o);
                 }
                 // A new route to drive.
-                if let Some((seen, done)) = &mut self.route
-                    && let Some((t, points)) = bus.path("coverage")
+                if let Some((topic, seen, done)) = &mut self.route
+                    && let Some((t, points)) = bus.path(topic)
                     && seen.is_none_or(|s| t > s)
                 {
                     *seen = Some(t);
@@ -255,7 +270,7 @@ impl Node for DriverNode {
         };
         self.pending.clear();
         bus.command = cmd;
-        if let (Some((_, done)), Driver::Navigator { nav, .. }) = (&mut self.route, &self.driver)
+        if let (Some((_, _, done)), Driver::Navigator { nav, .. }) = (&mut self.route, &self.driver)
             && !*done
             && nav.finished()
         {

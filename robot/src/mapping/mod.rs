@@ -1,8 +1,8 @@
 //! Building maps: 2D occupancy grids from laser scans ([`occupancy`]), scan matching
 //! ([`icp`], [`correlative`]), graph SLAM ([`slam`], [`pose_graph`]), and seed 000's 3D map
 //! from RGB-D keyframes ([`rgbd_map`], with [`registration`]'s RGBD-ICP and [`polygons`]);
-//! seed 004's voxel map of occupied, free and unknown space with free-space carving
-//! ([`voxels`]).
+//! seed 004's stop-and-scan 3D mapping with a turntable laser ([`turntable`]) and its voxel
+//! map of occupied, free and unknown space with free-space carving ([`voxels`]).
 
 pub mod correlative;
 pub mod icp;
@@ -12,4 +12,5 @@ pub mod pose_graph;
 pub mod registration;
 pub mod rgbd_map;
 pub mod slam;
+pub mod turntable;
 pub mod voxels;

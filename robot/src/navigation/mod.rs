@@ -192,6 +192,19 @@ pub struct CoverConfig {
     pub pose_source: PoseSource,
 }
 
+/// `[controller] type = "route"`: drive each route a stack node publishes on `path/TOPIC`
+/// (seed 004's stop-and-scan mapper publishes the way to its next view), planning on the
+/// known map as the coverage controller does.
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RouteConfig {
+    /// Where the pose comes from.
+    #[serde(default = "localization")]
+    pub pose_source: PoseSource,
+    /// The topic the routes come on (`path/TOPIC`).
+    pub topic: String,
+}
+
 /// `[controller] type = "explore"`: frontier exploration on the map SLAM builds, on SLAM's
 /// pose (the scenario needs a `[slam]` table).
 #[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize, Default)]
