@@ -12,6 +12,7 @@ use futago_robot::control::script::{Script, SegmentsConfig, WaypointConfig};
 use futago_robot::localization::mcl::MclConfig;
 use futago_robot::mapping::rgbd_map::RgbdMapConfig;
 use futago_robot::mapping::slam::SlamConfig;
+use futago_robot::mapping::turntable::TurntableConfig;
 use futago_robot::navigation::NavigationConfig;
 use futago_robot::navigation::coverage::CoverageConfig;
 use futago_robot::navigation::{CoverConfig, ExploreConfig, NavigateConfig, RouteConfig};
@@ -83,6 +84,9 @@ pub struct ScenarioSpec {
     /// A 3D map from a camera's RGB-D keyframes, placed by a 2D pose and the floor; typed by
     /// [`rgbd_map_config`].
     pub rgbd_map: Option<toml::Table>,
+    /// Seed 004's stop-and-scan 3D map from a laser on a turntable; typed by
+    /// [`scan3d_config`].
+    pub scan3d: Option<toml::Table>,
     /// Navigation parameters, for the `navigate`, `explore` and `coverage` controllers.
     #[serde(default)]
     pub navigation: NavigationConfig,
@@ -300,6 +304,8 @@ pub struct Scenario {
     pub rgbd_map: Option<RgbdMapSpec>,
     /// The `[slam]` table, typed, its laser resolved.
     pub slam: Option<SlamSpec>,
+    /// The `[scan3d]` table, typed, its lasers and joint resolved.
+    pub scan3d: Option<Scan3dSpec>,
     /// The laser the navigator avoids obstacles with (`controller.laser`, or the only one).
     pub driver_laser: Option<String>,
 }
@@ -410,6 +416,62 @@ pub fn rgbd_map_config(path: &Path, table: &toml::Table) -> Result<RgbdMapSpec, 
         pose_source,
         camera,
         laser,
+        config,
+    })
+}
+
+/// `[scan3d]`: `laser` (the vertical laser on the turntable), `horizontal` (the laser that
+/// watches for movers), `pose_source` (default `slam`) and the mapper's own keys
+/// ([`TurntableConfig`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scan3dSpec {
+    pub laser: String,
+    pub horizontal: String,
+    /// The joint the vertical laser rides on (resolved from the laser).
+    pub joint: String,
+    pub pose_source: MapPose,
+    pub config: TurntableConfig,
+}
+
+/// Types the `[scan3d]` table, naming `scan3d.KEY` in errors (the lasers and the joint are
+/// checked against the scenario's in [`Scenario::load`]).
+pub fn scan3d_config(path: &Path, table: &toml::Table) -> Result<Scan3dSpec, SpecError> {
+    let mut rest = table.clone();
+    let laser = take_name(path, "scan3d", "laser", &mut rest)?.ok_or_else(|| {
+        SpecError::new(
+            path,
+            "scan3d.laser",
+            "expected the name of the laser on the turntable, e.g. laser = \"vertical\"",
+        )
+    })?;
+    let horizontal = take_name(path, "scan3d", "horizontal", &mut rest)?.ok_or_else(|| {
+        SpecError::new(
+            path,
+            "scan3d.horizontal",
+            "expected the name of the horizontal laser that watches for movers",
+        )
+    })?;
+    let pose_source = match rest.remove("pose_source") {
+        None => MapPose::Slam,
+        Some(v) => MapPose::deserialize(v.clone()).map_err(|_| {
+            SpecError::new(
+                path,
+                "scan3d.pose_source",
+                format!(
+                    "expected one of \"ground_truth\", \"odometry\", \"localization\", \"slam\"; found {v}"
+                ),
+            )
+        })?,
+    };
+    let config: TurntableConfig = typed_table(path, "scan3d", rest)?;
+    config
+        .validate("scan3d")
+        .map_err(|(k, m)| SpecError::new(path, k, m))?;
+    Ok(Scan3dSpec {
+        laser,
+        horizontal,
+        joint: String::new(),
+        pose_source,
         config,
     })
 }
@@ -682,6 +744,18 @@ impl Scenario {
                 m.insert("pose_source".into(), v);
             }
             t.insert("rgbd_map".into(), toml::Value::Table(m));
+        }
+        if let Some(r) = &self.scan3d {
+            let mut m = toml::Table::try_from(&r.config).unwrap_or_default();
+            m.insert("laser".into(), toml::Value::String(r.laser.clone()));
+            m.insert(
+                "horizontal".into(),
+                toml::Value::String(r.horizontal.clone()),
+            );
+            if let Ok(v) = toml::Value::try_from(r.pose_source) {
+                m.insert("pose_source".into(), v);
+            }
+            t.insert("scan3d".into(), toml::Value::Table(m));
         }
         let mut controller = self.controller.table();
         if let Some(l) = &self.driver_laser {
@@ -1210,8 +1284,17 @@ impl Scenario {
         let pose_source = match &controller {
             ControllerConfig::Waypoints(w) => Some(w.pose_source),
             ControllerConfig::Navigate(n) => Some(n.pose_source),
+            ControllerConfig::Coverage(c) => Some(c.pose_source),
+            ControllerConfig::Route(r) => Some(r.pose_source),
             _ => None,
         };
+        if pose_source == Some(PoseSource::Slam) && spec.slam.is_none() {
+            return Err(SpecError::new(
+                path,
+                "controller.pose_source",
+                "driving on SLAM's pose needs a [slam] table",
+            ));
+        }
         if pose_source == Some(PoseSource::Localization) && spec.localization.is_none() {
             return Err(SpecError::new(
                 path,
@@ -1313,6 +1396,74 @@ impl Scenario {
                 ));
             }
         }
+        let scan3d = match &spec.scan3d {
+            None => None,
+            Some(t) => {
+                let mut m = scan3d_config(path, t)?;
+                let names: Vec<&str> = lidars.iter().map(|(c, _)| c.name.as_str()).collect();
+                let find = |key: &str, n: &str| {
+                    lidars.iter().find(|(c, _)| c.name == n).ok_or_else(|| {
+                        SpecError::new(
+                            path,
+                            format!("scan3d.{key}"),
+                            format!("no laser is named `{n}`; the scenario's lasers are {names:?}"),
+                        )
+                    })
+                };
+                let (vertical, _) = find("laser", &m.laser)?;
+                let (horizontal, _) = find("horizontal", &m.horizontal)?;
+                let joint = vertical
+                    .joint
+                    .as_ref()
+                    .and_then(|j| spec.joint.iter().find(|k| &k.name == j))
+                    .ok_or_else(|| {
+                        SpecError::new(
+                            path,
+                            "scan3d.laser",
+                            format!(
+                                "laser `{}` rides on no joint: the 3D scan turns it on a turntable ([[joint]] with mode = \"command\", and the laser's joint = NAME)",
+                                m.laser
+                            ),
+                        )
+                    })?;
+                if joint.mode != futago_sim::joint::JointMode::Command {
+                    return Err(SpecError::new(
+                        path,
+                        "scan3d.laser",
+                        format!(
+                            "joint `{}` must be mode = \"command\": the mapper turns the table itself, one sweep per view",
+                            joint.name
+                        ),
+                    ));
+                }
+                if horizontal.joint.is_some() {
+                    return Err(SpecError::new(
+                        path,
+                        "scan3d.horizontal",
+                        format!(
+                            "laser `{}` rides on a joint; the mover detector needs one fixed to the base",
+                            m.horizontal
+                        ),
+                    ));
+                }
+                if m.pose_source == MapPose::Slam && spec.slam.is_none() {
+                    return Err(SpecError::new(
+                        path,
+                        "scan3d.pose_source",
+                        "placing the scans by SLAM's pose needs a [slam] table",
+                    ));
+                }
+                if m.pose_source == MapPose::Localization && spec.localization.is_none() {
+                    return Err(SpecError::new(
+                        path,
+                        "scan3d.pose_source",
+                        "placing the scans by the localiser's pose needs a [localization] table",
+                    ));
+                }
+                m.joint = joint.name.clone();
+                Some(m)
+            }
+        };
         let movers = Movers {
             joints: spec.joint.clone(),
             agents: spec.agent.clone(),
@@ -1332,6 +1483,7 @@ impl Scenario {
             overlays: Vec::new(),
             rgbd_map,
             slam,
+            scan3d,
             driver_laser,
         })
     }

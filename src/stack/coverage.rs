@@ -288,6 +288,7 @@ impl SecondPass {
             PoseSource::GroundTruth => bus.truth,
             PoseSource::Localization => bus.pose("localization").unwrap_or(bus.odometry),
             PoseSource::Odometry => bus.odometry,
+            PoseSource::Slam => bus.pose("slam").unwrap_or(bus.odometry),
         }
     }
 

@@ -40,6 +40,8 @@ pub struct DriverNode {
     /// Return-to-start errors per lap of a waypoint list (seed 000, Fig. 2.8).
     laps: Vec<Value>,
     localizes: bool,
+    /// A scripted controller that drives on SLAM's pose.
+    scripted_on_slam: bool,
     /// How many goals a navigator was given (none for other drivers and for exploration).
     goals: Option<usize>,
     /// A route driver (`coverage`, `route`): the topic its routes come on (`path/TOPIC`), the
@@ -129,6 +131,7 @@ impl DriverNode {
             pending: Vec::new(),
             laps: Vec::new(),
             localizes: spec.localization.is_some(),
+            scripted_on_slam: matches!(&s.controller, ControllerConfig::Waypoints(w) if w.pose_source == PoseSource::Slam),
             goals: match &s.controller {
                 ControllerConfig::Navigate(n) => match n.task() {
                     Task::Goals(g) => Some(g.len()),
@@ -172,7 +175,12 @@ impl Node for DriverNode {
                 pose_source: Some(PoseSource::Localization),
                 ..
             } => consumes.push("pose/localization".into()),
+            Driver::Navigator {
+                pose_source: Some(PoseSource::Slam),
+                ..
+            } => consumes.push("pose/slam".into()),
             Driver::Scripted(_) if self.localizes => consumes.push("pose/localization".into()),
+            Driver::Scripted(_) if self.scripted_on_slam => consumes.push("pose/slam".into()),
             _ => {}
         }
         Streams {
@@ -202,6 +210,7 @@ impl Node for DriverNode {
             bumps: bus.bumps,
             ground_truth: Some(bus.truth),
             localization,
+            slam: bus.pose("slam"),
         };
         let cmd = match &mut self.driver {
             Driver::Scripted(c) => c.update(&input),
@@ -227,6 +236,7 @@ impl Node for DriverNode {
                     Some(PoseSource::GroundTruth) => input.ground_truth,
                     Some(PoseSource::Localization) => input.localization,
                     Some(PoseSource::Odometry) => Some(odometry.pose),
+                    Some(PoseSource::Slam) => input.slam,
                     None => bus.pose("slam"),
                 }
                 .unwrap_or(odometry.pose);

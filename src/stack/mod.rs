@@ -31,6 +31,7 @@ pub mod localization;
 pub mod people;
 pub mod record;
 pub mod rgbd_map;
+pub mod scan3d;
 pub mod slam;
 
 pub use bus::Bus;
@@ -233,8 +234,8 @@ fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
 
 /// The stack's modules, in the order their nodes run in every phase: the recorders of the
 /// run's files (when it writes them), the people's truth and safety scores, the coverage
-/// planner and scorer, the driver, the localiser, SLAM, the RGB-D mapper. A
-/// new module is one line here; the loop and the metric checks read this table.
+/// planner and scorer, the driver, the localiser, SLAM, the RGB-D mapper, the stop-and-scan
+/// 3D mapper. A new module is one line here; the loop and the metric checks read this table.
 pub const MODULES: &[Module] = &[
     Module {
         build: |s, _, out| out.map_or(Ok(Vec::new()), |dir| record::recorders(s, dir)),
@@ -267,6 +268,10 @@ pub const MODULES: &[Module] = &[
     Module {
         build: |s, seed, _| boxed(rgbd_map::node(s, seed)),
         metric_names: rgbd_map::metric_names,
+    },
+    Module {
+        build: |s, _, _| boxed(scan3d::node(s)),
+        metric_names: scan3d::metric_names,
     },
 ];
 

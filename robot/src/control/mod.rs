@@ -19,4 +19,7 @@ pub enum PoseSource {
     /// The localiser's estimate (Monte Carlo localisation on the map), carried forward by
     /// odometry between its updates.
     Localization,
+    /// SLAM's estimate (`pose/slam`), carried forward by odometry between its updates: for a
+    /// robot that maps as it goes.
+    Slam,
 }

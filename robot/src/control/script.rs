@@ -284,6 +284,8 @@ pub struct ControlInput<'a> {
     pub ground_truth: Option<Pose2>,
     /// The localiser's current pose, when a localiser runs.
     pub localization: Option<Pose2>,
+    /// SLAM's current pose, when SLAM runs.
+    pub slam: Option<Pose2>,
 }
 
 /// A running scripted controller.
@@ -397,6 +399,7 @@ impl ScriptedController {
                     PoseSource::Odometry => self.odometry.pose,
                     PoseSource::GroundTruth => input.ground_truth.unwrap_or(self.odometry.pose),
                     PoseSource::Localization => input.localization.unwrap_or(self.odometry.pose),
+                    PoseSource::Slam => input.slam.unwrap_or(self.odometry.pose),
                 };
                 match self.follower.as_mut() {
                     Some(f) => {
@@ -427,6 +430,7 @@ mod tests {
             odometry: &[],
             bumps: BumpsAndDrops::default(),
             ground_truth: Some(truth),
+            slam: None,
             localization: None,
         })
     }

@@ -1,0 +1,545 @@
+//! The stop-and-scan 3D mapper in the loop (seed 004): it asks the driver for the route to
+//! each view (`path/scan3d`), turns the turntable (`joint/NAME`), hands the horizontal
+//! laser's scans to the mover detector and the vertical laser's to the mapper, and at the end
+//! writes the map and scores how it kept people out.
+//!
+//! Scoring uses what each beam truly hit (the simulator's labels, [`Node::on_scan_truth`]):
+//! every point a sweep measured, dropped or kept, is static (the building, its furniture) or
+//! dynamic (a person or an agent). Three ways of keeping the dynamic ones out are scored on
+//! the same run:
+//! - `pause`: the seed's, the kept scans as they are;
+//! - `carving`: every scan a sweep took (as if the robot never paused), with the points whose
+//!   voxels free-space carving found free removed (OctoMap's removal, the DynamicMap
+//!   benchmark's baseline);
+//! - `pause_carving`: the kept scans, carved.
+//!
+//! Each is scored by the DynamicMap benchmark's point measures (Zhang et al. 2023): static
+//! accuracy SA (the share of static points kept), dynamic accuracy DA (the share of dynamic
+//! points removed) and their geometric mean AA, matched voxel by voxel (see
+//! [`removal_scores`]); and by ERASOR's voxel measures at 0.2 m (Lim
+//! et al. 2021): preservation rate PR (static voxels still holding a static point), rejection
+//! rate RR (dynamic voxels left with no dynamic point) and their F1. SA is also given for the
+//! floor (points no higher than 0.1 m) and for the rest, so that removal that eats the floor
+//! shows.
+
+use super::{Bus, Node, Report, Streams, Truth};
+use crate::ground_truth::Metrics;
+use crate::scenario::{MapPose, Scenario, ScenarioSpec};
+use anyhow::{Context, Result};
+use futago_msgs::{LaserScan, Odometry, Pose2, Time};
+use futago_robot::mapping::turntable::{StopAndScan, TableMount};
+use futago_robot::mapping::voxels::VoxelMap;
+use futago_sim::lidar::BeamHit;
+use glam::{DAffine3, DQuat, DVec3};
+use rustc_hash::{FxHashMap, FxHashSet};
+use serde_json::json;
+use std::collections::VecDeque;
+use std::path::Path;
+
+/// The map as kept (binary PLY, world frame).
+pub const SCAN3D_MAP_FILE: &str = "scan3d_map.ply";
+/// Every point the sweeps measured, dropped scans too, coloured by what the beam hit
+/// (grey static, red a person or an agent).
+pub const SCAN3D_RAW_FILE: &str = "scan3d_raw.ply";
+/// The kept map after free-space carving.
+pub const SCAN3D_CARVED_FILE: &str = "scan3d_carved.ply";
+/// The seed's 2D grid, compressed from the carved voxel map (`map_server` files).
+pub const SCAN3D_GRID_STEM: &str = "scan3d_grid";
+/// The voxels of ERASOR's measures, m.
+const SCORE_VOXEL: f64 = 0.2;
+/// The voxels the point measures match a removal's output to the measured cloud in, m: the
+/// voxel maps' default side.
+const MATCH_VOXEL: f64 = 0.1;
+/// Points no higher than this are on the floor, m (the LMS200's 1.5 cm noise, twice, and
+/// more).
+const FLOOR_Z: f64 = 0.1;
+/// The height band the 2D grid is compressed from, m: above the floor to above the people.
+const GRID_BAND: (f64, f64) = (FLOOR_Z, 2.0);
+/// Joint readings kept for interpolating the table's angle.
+const JOINT_HISTORY: usize = 64;
+
+/// The mapper when the scenario has `[scan3d]`.
+pub fn node(s: &Scenario) -> Result<Option<Scan3dNode>> {
+    let Some(m) = &s.scan3d else {
+        return Ok(None);
+    };
+    let laser = |n: &str| {
+        s.lidars
+            .iter()
+            .find(|(c, _)| c.name == n)
+            .map(|(c, _)| c)
+            .with_context(|| format!("scan3d: no laser is named `{n}`"))
+    };
+    let vertical = laser(&m.laser)?;
+    let horizontal = laser(&m.horizontal)?;
+    let joint = s
+        .movers
+        .joints
+        .iter()
+        .find(|j| j.name == m.joint)
+        .with_context(|| format!("scan3d: no joint is named `{}`", m.joint))?;
+    let mount = vertical.mount();
+    let mount = TableMount {
+        axis: DVec3::from_array(joint.axis),
+        origin: DVec3::from_array(joint.origin),
+        laser: DAffine3::from_rotation_translation(
+            DQuat::from_xyzw(
+                mount.rotation.x as f64,
+                mount.rotation.y as f64,
+                mount.rotation.z as f64,
+                mount.rotation.w as f64,
+            )
+            .normalize(),
+            DVec3::new(
+                mount.translation.x as f64,
+                mount.translation.y as f64,
+                mount.translation.z as f64,
+            ),
+        ),
+    };
+    Ok(Some(Scan3dNode {
+        mapper: StopAndScan::new(m.config.clone(), mount),
+        vertical: m.laser.clone(),
+        horizontal: m.horizontal.clone(),
+        horizontal_mount: horizontal.planar_mount(),
+        joint: m.joint.clone(),
+        source: m.pose_source,
+        joint_history: VecDeque::new(),
+        placed: Vec::new(),
+        last_placed: None,
+        sweep_seconds: Vec::new(),
+        sweep_started: None,
+        scenario: s.spec.name.clone(),
+        has_movers: !(s.movers.agents.is_empty()
+            && s.movers.people.is_empty()
+            && s.movers.flows.is_empty()),
+    }))
+}
+
+/// A placed scan's points with what each beam hit.
+struct Labelled {
+    stamp: Time,
+    points: Vec<([f64; 3], bool)>,
+}
+
+/// Seed 004's mapper in the loop.
+pub struct Scan3dNode {
+    mapper: StopAndScan,
+    vertical: String,
+    horizontal: String,
+    horizontal_mount: Pose2,
+    joint: String,
+    source: MapPose,
+    /// The table's angle as its encoder reported it (time, rad).
+    joint_history: VecDeque<(Time, f64)>,
+    /// Every placed scan's points, each with whether a mover was hit (truth, for scoring).
+    placed: Vec<Labelled>,
+    /// The last vertical scan placed, waiting for its truth: its stamp and beam indices.
+    last_placed: Option<(Time, Vec<([f64; 3], usize)>)>,
+    /// Simulated seconds each view's sweep took, pauses included.
+    sweep_seconds: Vec<f64>,
+    sweep_started: Option<Time>,
+    scenario: String,
+    /// Whether anything in the world moves (the dynamic measures exist only then).
+    has_movers: bool,
+}
+
+impl Scan3dNode {
+    fn pose(&self, bus: &Bus) -> Pose2 {
+        match self.source {
+            MapPose::GroundTruth => bus.truth,
+            MapPose::Odometry => bus.odometry,
+            MapPose::Localization => bus.pose("localization").unwrap_or(bus.odometry),
+            MapPose::Slam => bus.pose("slam").unwrap_or(bus.odometry),
+        }
+    }
+
+    /// The table's angle at `t`, interpolated between encoder readings (the nearest at the
+    /// ends).
+    fn table_at(&self, t: Time) -> Option<f64> {
+        let h = &self.joint_history;
+        let k = h.iter().position(|(s, _)| *s >= t);
+        match k {
+            None => h.back().map(|x| x.1),
+            Some(0) => h.front().map(|x| x.1),
+            Some(k) => {
+                let (t0, a0) = h[k - 1];
+                let (t1, a1) = h[k];
+                let f = (t - t0).secs() / (t1 - t0).secs().max(1e-12);
+                Some(a0 + f * (a1 - a0))
+            }
+        }
+    }
+
+    fn table_now(&self, bus: &Bus) -> f64 {
+        bus.joints
+            .iter()
+            .find(|(n, _)| *n == self.joint)
+            .map_or(0.0, |(_, a)| *a)
+    }
+}
+
+impl Node for Scan3dNode {
+    fn name(&self) -> &'static str {
+        "scan3d"
+    }
+
+    fn streams(&self) -> Streams {
+        let mut consumes = vec![
+            "odometry".to_string(),
+            format!("scan/{}", self.vertical),
+            format!("scan/{}", self.horizontal),
+        ];
+        match self.source {
+            MapPose::Localization => consumes.push("pose/localization".into()),
+            MapPose::Slam => consumes.push("pose/slam".into()),
+            _ => {}
+        }
+        Streams {
+            consumes,
+            publishes: vec!["path/scan3d".into(), format!("joint/{}", self.joint)],
+            ..Streams::default()
+        }
+    }
+
+    fn on_odometry(&mut self, _o: &Odometry, bus: &mut Bus) -> Result<()> {
+        let a = self.table_now(bus);
+        self.joint_history.push_back((bus.now, a));
+        while self.joint_history.len() > JOINT_HISTORY {
+            self.joint_history.pop_front();
+        }
+        Ok(())
+    }
+
+    fn on_scan(&mut self, laser: &str, scan: &LaserScan, bus: &mut Bus) -> Result<()> {
+        if laser == self.horizontal {
+            let at = bus.odometry.compose(&self.horizontal_mount);
+            self.mapper.on_horizontal(scan, &at, bus.now);
+        } else if laser == self.vertical {
+            // The table's angle halfway through the scan's sweep.
+            let mid = scan.stamp
+                + futago_msgs::Duration::from_secs(
+                    scan.time_increment * scan.ranges.len() as f64 / 2.0,
+                );
+            let angle = self.table_at(mid).unwrap_or_else(|| self.table_now(bus));
+            self.last_placed = self
+                .mapper
+                .on_vertical(scan, angle)
+                .map(|p| (p.stamp, p.points.clone()));
+        }
+        Ok(())
+    }
+
+    fn on_scan_truth(&mut self, laser: &str, hits: &[BeamHit]) {
+        if laser != self.vertical {
+            return;
+        }
+        if let Some((stamp, points)) = self.last_placed.take() {
+            self.placed.push(Labelled {
+                stamp,
+                points: points
+                    .into_iter()
+                    .map(|(p, i)| (p, hits.get(i).is_some_and(|h| h.is_mover())))
+                    .collect(),
+            });
+        }
+    }
+
+    fn on_control(&mut self, bus: &mut Bus) -> Result<()> {
+        let pose = self.pose(bus);
+        let table = self.table_now(bus);
+        let was_sweeping = self.sweep_started.is_some();
+        let r = self.mapper.control(bus.now, pose, bus.route_done, table);
+        if let Some(route) = r.route {
+            bus.publish_path("scan3d", route);
+        }
+        if let Some(a) = r.table {
+            bus.joint_commands.push((self.joint.clone(), a));
+        }
+        use futago_robot::mapping::turntable::Phase;
+        let sweeping = matches!(
+            self.mapper.phase(),
+            Phase::Sweeping { .. } | Phase::Paused { .. }
+        );
+        match (was_sweeping, sweeping) {
+            (false, true) => self.sweep_started = Some(bus.now),
+            (true, false) => {
+                if let Some(t) = self.sweep_started.take() {
+                    self.sweep_seconds.push((bus.now - t).secs());
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn finished(&self) -> bool {
+        self.mapper.finished()
+    }
+
+    fn finish(&mut self, _bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
+        let (carved_kept, _) = self.mapper.voxel_maps();
+        let kept: Vec<[f64; 3]> = self
+            .mapper
+            .kept()
+            .iter()
+            .flat_map(|s| s.points.iter().map(|(p, _)| *p))
+            .collect();
+        let carved = carved_kept.keep_static(&kept);
+        let grid = carved_kept.project(GRID_BAND.0, GRID_BAND.1);
+        let stats = self.mapper.stats();
+        let summary = json!({
+            "views": stats.views,
+            "views_asked": self.mapper.views().len(),
+            "pauses": stats.pauses,
+            "pause_timeouts": stats.timeouts,
+            "scans_kept": stats.scans_kept,
+            "scans_dropped": stats.scans_dropped,
+            "points": kept.len(),
+            "points_carved": carved.len(),
+            "sweep_s": self.sweep_seconds,
+            "voxels_known": carved_kept.len(),
+            "view_poses": self.mapper.views().iter().map(|p| [p.x, p.y, p.theta]).collect::<Vec<_>>(),
+        });
+        let mut files = Vec::new();
+        if let Some(dir) = out {
+            let grey = |p: &[f64; 3]| (*p, [160, 160, 160]);
+            let comment = format!("futago scan3d map of {}", self.scenario);
+            let write = |name: &str, bytes: Vec<u8>| {
+                std::fs::write(dir.join(name), bytes).with_context(|| format!("writing {name}"))
+            };
+            write(
+                SCAN3D_MAP_FILE,
+                futago_msgs::ply::points(&kept.iter().map(grey).collect::<Vec<_>>(), &comment),
+            )?;
+            write(
+                SCAN3D_CARVED_FILE,
+                futago_msgs::ply::points(&carved.iter().map(grey).collect::<Vec<_>>(), &comment),
+            )?;
+            let raw: Vec<([f64; 3], [u8; 3])> = self
+                .placed
+                .iter()
+                .flat_map(|s| s.points.iter())
+                .map(|(p, m)| (*p, if *m { [220, 40, 40] } else { [160, 160, 160] }))
+                .collect();
+            write(
+                SCAN3D_RAW_FILE,
+                futago_msgs::ply::points(
+                    &raw,
+                    &format!("{comment}: every sweep's points, red on movers"),
+                ),
+            )?;
+            files.extend([
+                SCAN3D_MAP_FILE.to_string(),
+                SCAN3D_CARVED_FILE.to_string(),
+                SCAN3D_RAW_FILE.to_string(),
+            ]);
+            if let Some(g) = &grid {
+                g.write_map_server(dir, SCAN3D_GRID_STEM)
+                    .with_context(|| format!("writing {SCAN3D_GRID_STEM}.pgm and .yaml"))?;
+                files.extend([
+                    format!("{SCAN3D_GRID_STEM}.pgm"),
+                    format!("{SCAN3D_GRID_STEM}.yaml"),
+                ]);
+            }
+        }
+        Ok(Report {
+            summary: vec![("scan3d".into(), summary)],
+            files,
+            map: grid,
+            ..Report::default()
+        })
+    }
+
+    fn score(&self, _truth: &Truth) -> Result<Metrics> {
+        let mut m = Metrics::default();
+        let stats = self.mapper.stats();
+        m.insert("scan3d.views", stats.views as f64);
+        m.insert("scan3d.pauses", stats.pauses as f64);
+        // The points of every placed scan, by stamp, and which were kept.
+        let kept: FxHashSet<i64> = self.mapper.kept().iter().map(|s| s.stamp.0).collect();
+        let (carved_kept, carved_all) = self.mapper.voxel_maps();
+        let occupied = |map: &VoxelMap, p: &[f64; 3]| map.keeps(map.key(*p));
+        let methods: [(&str, Box<dyn Fn(&Labelled, &[f64; 3]) -> bool + '_>); 3] = [
+            (
+                "pause",
+                Box::new(|s: &Labelled, _: &[f64; 3]| kept.contains(&s.stamp.0)),
+            ),
+            (
+                "carving",
+                Box::new(|_: &Labelled, p: &[f64; 3]| occupied(carved_all, p)),
+            ),
+            (
+                "pause_carving",
+                Box::new(|s: &Labelled, p: &[f64; 3]| {
+                    kept.contains(&s.stamp.0) && occupied(carved_kept, p)
+                }),
+            ),
+        ];
+        for (name, keeps) in &methods {
+            let score = removal_scores(&self.placed, |s, p| keeps(s, p));
+            m.insert(&format!("scan3d.{name}.sa"), score.sa);
+            m.insert(&format!("scan3d.{name}.sa_floor"), score.sa_floor);
+            m.insert(&format!("scan3d.{name}.sa_structure"), score.sa_structure);
+            m.insert(&format!("scan3d.{name}.pr"), score.pr);
+            if self.has_movers {
+                m.insert(&format!("scan3d.{name}.da"), score.da);
+                m.insert(&format!("scan3d.{name}.aa"), (score.sa * score.da).sqrt());
+                m.insert(&format!("scan3d.{name}.rr"), score.rr);
+                let f1 = if score.pr + score.rr > 0.0 {
+                    2.0 * score.pr * score.rr / (score.pr + score.rr)
+                } else {
+                    0.0
+                };
+                m.insert(&format!("scan3d.{name}.f1"), f1);
+            }
+        }
+        Ok(m)
+    }
+}
+
+/// A removal's scores against the labels (shares in 0 … 1; a share of nothing is 1).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RemovalScores {
+    sa: f64,
+    sa_floor: f64,
+    sa_structure: f64,
+    da: f64,
+    pr: f64,
+    rr: f64,
+}
+
+/// Scores a removal that keeps the point `p` of scan `s` when `keeps(s, p)`.
+///
+/// The removal's output is matched to the measured cloud voxel by voxel, class by class: a
+/// static point is preserved when the output holds a static point in its voxel, and a
+/// dynamic point is removed when the output holds no dynamic point in its voxel. For SA and
+/// DA the voxels are the map's [`MATCH_VOXEL`]; for PR and RR they are ERASOR's 0.2 m, each
+/// voxel counted once. So the seed's pausing is not charged for the static points of the
+/// scans it dropped where it measured the same surface again, and carving, which keeps or
+/// drops whole voxels, is scored as it works.
+fn removal_scores(
+    scans: &[Labelled],
+    keeps: impl Fn(&Labelled, &[f64; 3]) -> bool,
+) -> RemovalScores {
+    let share = |k: usize, n: usize| if n == 0 { 1.0 } else { k as f64 / n as f64 };
+    let key = |p: &[f64; 3], size: f64| p.map(|c| (c / size).floor() as i64);
+    // The output's voxels, by class and voxel size.
+    let mut out: [FxHashSet<[i64; 3]>; 4] = Default::default();
+    for s in scans {
+        for (p, mover) in &s.points {
+            if keeps(s, p) {
+                let m = *mover as usize;
+                out[m].insert(key(p, MATCH_VOXEL));
+                out[2 + m].insert(key(p, SCORE_VOXEL));
+            }
+        }
+    }
+    let (mut st, mut st_kept, mut fl, mut fl_kept, mut dy, mut dy_kept) = (0, 0, 0, 0, 0, 0);
+    // ERASOR's voxels of each class: whether the output holds one of its class there.
+    let mut static_voxels: FxHashMap<[i64; 3], bool> = FxHashMap::default();
+    let mut dynamic_voxels: FxHashMap<[i64; 3], bool> = FxHashMap::default();
+    for s in scans {
+        for (p, mover) in &s.points {
+            let (fine, coarse) = (key(p, MATCH_VOXEL), key(p, SCORE_VOXEL));
+            if *mover {
+                dy += 1;
+                dy_kept += out[1].contains(&fine) as usize;
+                dynamic_voxels.insert(coarse, out[3].contains(&coarse));
+            } else {
+                let kept = out[0].contains(&fine) as usize;
+                st += 1;
+                st_kept += kept;
+                if p[2] <= FLOOR_Z {
+                    fl += 1;
+                    fl_kept += kept;
+                }
+                static_voxels.insert(coarse, out[2].contains(&coarse));
+            }
+        }
+    }
+    RemovalScores {
+        sa: share(st_kept, st),
+        sa_floor: share(fl_kept, fl),
+        sa_structure: share(st_kept - fl_kept, st - fl),
+        da: share(dy - dy_kept, dy),
+        pr: share(
+            static_voxels.values().filter(|k| **k).count(),
+            static_voxels.len(),
+        ),
+        rr: share(
+            dynamic_voxels.values().filter(|k| !**k).count(),
+            dynamic_voxels.len(),
+        ),
+    }
+}
+
+/// The metrics this node scores.
+pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
+    if s.scan3d.is_none() {
+        return Vec::new();
+    }
+    let movers = !(s.agent.is_empty() && s.person.is_empty() && s.flow.is_empty());
+    let mut names = vec!["scan3d.views".to_string(), "scan3d.pauses".to_string()];
+    for method in ["pause", "carving", "pause_carving"] {
+        let mut keys = vec!["sa", "sa_floor", "sa_structure", "pr"];
+        if movers {
+            keys.extend(["da", "aa", "rr", "f1"]);
+        }
+        names.extend(keys.iter().map(|k| format!("scan3d.{method}.{k}")));
+    }
+    names
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hand-counted: 4 static points (one on the floor) and 2 dynamic ones in two scans, in
+    /// voxels of their own; the removal keeps 3 static (the floor's among them) and 1
+    /// dynamic point. A third scan measures the dropped static point's voxel again: that
+    /// point then counts as preserved.
+    #[test]
+    fn removal_scores_count_by_hand() {
+        let mut scans = vec![
+            Labelled {
+                stamp: Time::from_secs(1.0),
+                points: vec![
+                    ([0.05, 0.05, 0.0], false),
+                    ([1.05, 0.05, 1.0], false),
+                    ([2.05, 0.05, 1.0], true),
+                ],
+            },
+            Labelled {
+                stamp: Time::from_secs(2.0),
+                points: vec![
+                    ([3.05, 0.05, 1.0], false),
+                    ([4.05, 0.05, 1.0], false),
+                    ([5.05, 0.05, 1.0], true),
+                ],
+            },
+        ];
+        // Drops the static point at x = 4.05 and the dynamic one at x = 2.05.
+        let drop = |_: &Labelled, p: &[f64; 3]| p[0] != 4.05 && p[0] != 2.05;
+        let s = removal_scores(&scans, drop);
+        assert_eq!(s.sa, 0.75);
+        assert_eq!(s.sa_floor, 1.0);
+        assert!((s.sa_structure - 2.0 / 3.0).abs() < 1e-12);
+        assert_eq!(s.da, 0.5);
+        // One voxel per point at 0.2 m too.
+        assert_eq!(s.pr, 0.75);
+        assert_eq!(s.rr, 0.5);
+        // Keeping everything: static all kept, nothing removed.
+        let all = removal_scores(&scans, |_, _| true);
+        assert_eq!((all.sa, all.da, all.pr, all.rr), (1.0, 0.0, 1.0, 0.0));
+        // The dropped static point's voxel measured again and kept.
+        scans.push(Labelled {
+            stamp: Time::from_secs(3.0),
+            points: vec![([4.02, 0.08, 1.03], false)],
+        });
+        let again = removal_scores(&scans, |_, p| p[0] != 4.05 && p[0] != 2.05);
+        assert_eq!(again.sa, 1.0);
+        assert_eq!(again.pr, 1.0);
+        assert_eq!(again.da, 0.5);
+    }
+}
