@@ -2506,3 +2506,112 @@ fn the_depth_localiser_takes_its_model_from_files() {
         );
     }
 }
+
+/// Seed 004's mapper in a short run: it drives to its first view, turns the table a full
+/// turn, writes its maps and grid, and scores every removal against the beams' truth (the
+/// shares lie in 0 … 1, and the kept map holds the sweep's points).
+#[test]
+fn the_turntable_mapper_scans_a_view_and_scores_its_removal() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let o = futago(&[
+        "run",
+        "scenarios/corridor-scan3d.toml",
+        "--duration",
+        "40",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    // The gates (six views) fail in 40 s; the run itself must not.
+    assert!(
+        o.status.code() == Some(0) || o.status.code() == Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let s = summary(&out);
+    assert!(
+        s["scan3d"]["views"].as_u64().unwrap() >= 1,
+        "{}",
+        s["scan3d"]
+    );
+    // A 12 s turn of an LMS200 at 37.5 Hz: about 450 vertical scans of up to 361 points.
+    let kept = s["scan3d"]["scans_kept"].as_u64().unwrap();
+    assert!((400..=500).contains(&kept), "{kept} scans kept");
+    assert!(s["scan3d"]["points"].as_u64().unwrap() > 100 * kept);
+    for f in [
+        "scan3d_map.ply",
+        "scan3d_carved.ply",
+        "scan3d_raw.ply",
+        "scan3d_grid.pgm",
+        "scan3d_grid.yaml",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let map = futago_msgs::ply::read(&out.join("scan3d_map.ply")).unwrap();
+    assert_eq!(
+        map.vertices.len() as u64,
+        s["scan3d"]["points"].as_u64().unwrap()
+    );
+    for method in ["pause", "carving", "pause_carving"] {
+        for k in ["sa", "sa_floor", "da", "aa", "pr", "rr", "f1"] {
+            let v = s["metrics"][format!("scan3d.{method}.{k}")]
+                .as_f64()
+                .unwrap();
+            assert!((0.0..=1.0).contains(&v), "scan3d.{method}.{k} = {v}");
+        }
+    }
+}
+
+/// A `[scan3d]` table whose lasers, joint or values are wrong is refused before anything
+/// runs, naming the key.
+#[test]
+fn a_turntable_scan_names_its_bad_lasers_joint_and_values() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("scenarios/corridor-scan3d.toml"))
+        .unwrap()
+        .replace(
+            "world = \"../worlds/corridor.toml\"",
+            &format!(
+                "world = \"{}\"",
+                root().join("worlds/corridor.toml").display()
+            ),
+        );
+    for (from, to, expect) in [
+        (
+            "range_max = 6.0\njoint = \"table\"",
+            "range_max = 6.0",
+            "scan3d.laser`: laser `vertical` rides on no joint",
+        ),
+        (
+            "mode = \"command\"",
+            "mode = \"continuous\"",
+            "joint `table` must be mode = \"command\"",
+        ),
+        (
+            "horizontal = \"horizontal\"",
+            "horizontal = \"nope\"",
+            "scan3d.horizontal`: no laser is named `nope`",
+        ),
+        (
+            "stops = [[2.0, 0.0],",
+            "voxels = { p_hit = 2.0 }\nstops = [[2.0, 0.0],",
+            "scan3d.voxels.p_hit",
+        ),
+        (
+            "stops = [[2.0, 0.0],",
+            "stops = [[1e9, 0.0],",
+            "scan3d.stops[0]",
+        ),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let path = tmp.path().join("s.toml");
+        std::fs::write(&path, text.replace(from, to)).unwrap();
+        refused_before_running(
+            &["run", path.to_str().unwrap()],
+            &tmp.path().join("fresh"),
+            expect,
+            None,
+        );
+    }
+}

@@ -116,6 +116,9 @@ pub fn node(s: &Scenario) -> Result<Option<Scan3dNode>> {
     }))
 }
 
+/// A placed scan's points (map frame) with the index of the beam that measured each.
+type BeamPoints = Vec<([f64; 3], usize)>;
+
 /// A placed scan's points with what each beam hit.
 struct Labelled {
     stamp: Time,
@@ -135,7 +138,7 @@ pub struct Scan3dNode {
     /// Every placed scan's points, each with whether a mover was hit (truth, for scoring).
     placed: Vec<Labelled>,
     /// The last vertical scan placed, waiting for its truth: its stamp and beam indices.
-    last_placed: Option<(Time, Vec<([f64; 3], usize)>)>,
+    last_placed: Option<(Time, BeamPoints)>,
     /// Simulated seconds each view's sweep took, pauses included.
     sweep_seconds: Vec<f64>,
     sweep_started: Option<Time>,
@@ -360,38 +363,26 @@ impl Node for Scan3dNode {
         let kept: FxHashSet<i64> = self.mapper.kept().iter().map(|s| s.stamp.0).collect();
         let (carved_kept, carved_all) = self.mapper.voxel_maps();
         let occupied = |map: &VoxelMap, p: &[f64; 3]| map.keeps(map.key(*p));
-        let methods: [(&str, Box<dyn Fn(&Labelled, &[f64; 3]) -> bool + '_>); 3] = [
-            (
-                "pause",
-                Box::new(|s: &Labelled, _: &[f64; 3]| kept.contains(&s.stamp.0)),
-            ),
-            (
-                "carving",
-                Box::new(|_: &Labelled, p: &[f64; 3]| occupied(carved_all, p)),
-            ),
-            (
-                "pause_carving",
-                Box::new(|s: &Labelled, p: &[f64; 3]| {
-                    kept.contains(&s.stamp.0) && occupied(carved_kept, p)
-                }),
-            ),
-        ];
-        for (name, keeps) in &methods {
-            let score = removal_scores(&self.placed, |s, p| keeps(s, p));
-            m.insert(&format!("scan3d.{name}.sa"), score.sa);
-            m.insert(&format!("scan3d.{name}.sa_floor"), score.sa_floor);
-            m.insert(&format!("scan3d.{name}.sa_structure"), score.sa_structure);
-            m.insert(&format!("scan3d.{name}.pr"), score.pr);
+        for name in ["pause", "carving", "pause_carving"] {
+            let score = removal_scores(&self.placed, |s, p| match name {
+                "pause" => kept.contains(&s.stamp.0),
+                "carving" => occupied(carved_all, p),
+                _ => kept.contains(&s.stamp.0) && occupied(carved_kept, p),
+            });
+            m.insert(format!("scan3d.{name}.sa"), score.sa);
+            m.insert(format!("scan3d.{name}.sa_floor"), score.sa_floor);
+            m.insert(format!("scan3d.{name}.sa_structure"), score.sa_structure);
+            m.insert(format!("scan3d.{name}.pr"), score.pr);
             if self.has_movers {
-                m.insert(&format!("scan3d.{name}.da"), score.da);
-                m.insert(&format!("scan3d.{name}.aa"), (score.sa * score.da).sqrt());
-                m.insert(&format!("scan3d.{name}.rr"), score.rr);
+                m.insert(format!("scan3d.{name}.da"), score.da);
+                m.insert(format!("scan3d.{name}.aa"), (score.sa * score.da).sqrt());
+                m.insert(format!("scan3d.{name}.rr"), score.rr);
                 let f1 = if score.pr + score.rr > 0.0 {
                     2.0 * score.pr * score.rr / (score.pr + score.rr)
                 } else {
                     0.0
                 };
-                m.insert(&format!("scan3d.{name}.f1"), f1);
+                m.insert(format!("scan3d.{name}.f1"), f1);
             }
         }
         Ok(m)
