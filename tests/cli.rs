@@ -609,11 +609,17 @@ fn every_shipped_scenario_loads_and_runs() {
             p.display(),
             produced.difference(&declared).collect::<Vec<_>>()
         );
+        // The relative pose error is taken over 1 m of travel: a slow robot (seed 004's
+        // 0.1 m/s) may not have driven that far in the 12 s, and then has none yet.
+        let travelled = s["robot"]["distance_travelled_m"].as_f64().unwrap();
+        let missing: Vec<&String> = declared
+            .difference(&produced)
+            .filter(|n| travelled >= 1.0 || !n.contains(".rpe_1m."))
+            .collect();
         assert!(
-            declared.is_subset(&produced),
-            "{}: declared but not produced: {:?}",
+            missing.is_empty(),
+            "{}: declared but not produced: {missing:?}",
             p.display(),
-            declared.difference(&produced).collect::<Vec<_>>()
         );
         // Every file the run wrote has its digest, but the summary and the report.
         let files = s["files"].as_object().unwrap();
