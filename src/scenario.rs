@@ -421,16 +421,29 @@ pub fn rgbd_map_config(path: &Path, table: &toml::Table) -> Result<RgbdMapSpec, 
 }
 
 /// `[scan3d]`: `laser` (the vertical laser on the turntable), `horizontal` (the laser that
-/// watches for movers), `pose_source` (default `slam`) and the mapper's own keys
-/// ([`TurntableConfig`]).
+/// watches for movers and, by default, localises), `pose_source` (default `line_icp`, the
+/// seed's) and the mapper's own keys ([`TurntableConfig`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scan3dSpec {
     pub laser: String,
     pub horizontal: String,
     /// The joint the vertical laser rides on (resolved from the laser).
     pub joint: String,
-    pub pose_source: MapPose,
+    pub pose_source: Scan3dPose,
     pub config: TurntableConfig,
+}
+
+/// Which pose places seed 004's scans: another node's or the truth, or the seed's own
+/// localisation on the horizontal laser (`line_icp`: odometry, then point-to-line ICP by
+/// Nelder–Mead, `scan3d.line_icp.*`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scan3dPose {
+    GroundTruth,
+    Odometry,
+    Localization,
+    Slam,
+    LineIcp,
 }
 
 /// Types the `[scan3d]` table, naming `scan3d.KEY` in errors (the lasers and the joint are
@@ -452,13 +465,13 @@ pub fn scan3d_config(path: &Path, table: &toml::Table) -> Result<Scan3dSpec, Spe
         )
     })?;
     let pose_source = match rest.remove("pose_source") {
-        None => MapPose::Slam,
-        Some(v) => MapPose::deserialize(v.clone()).map_err(|_| {
+        None => Scan3dPose::LineIcp,
+        Some(v) => Scan3dPose::deserialize(v.clone()).map_err(|_| {
             SpecError::new(
                 path,
                 "scan3d.pose_source",
                 format!(
-                    "expected one of \"ground_truth\", \"odometry\", \"localization\", \"slam\"; found {v}"
+                    "expected one of \"line_icp\", \"ground_truth\", \"odometry\", \"localization\", \"slam\"; found {v}"
                 ),
             )
         })?,
@@ -1446,14 +1459,14 @@ impl Scenario {
                         ),
                     ));
                 }
-                if m.pose_source == MapPose::Slam && spec.slam.is_none() {
+                if m.pose_source == Scan3dPose::Slam && spec.slam.is_none() {
                     return Err(SpecError::new(
                         path,
                         "scan3d.pose_source",
                         "placing the scans by SLAM's pose needs a [slam] table",
                     ));
                 }
-                if m.pose_source == MapPose::Localization && spec.localization.is_none() {
+                if m.pose_source == Scan3dPose::Localization && spec.localization.is_none() {
                     return Err(SpecError::new(
                         path,
                         "scan3d.pose_source",

@@ -24,9 +24,10 @@
 
 use super::{Bus, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
-use crate::scenario::{MapPose, Scenario, ScenarioSpec};
+use crate::scenario::{Scan3dPose, Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Odometry, Pose2, Time};
+use futago_robot::mapping::line_icp::LineIcp;
 use futago_robot::mapping::turntable::{StopAndScan, TableMount};
 use futago_robot::mapping::voxels::VoxelMap;
 use futago_sim::lidar::BeamHit;
@@ -98,6 +99,8 @@ pub fn node(s: &Scenario) -> Result<Option<Scan3dNode>> {
         ),
     };
     Ok(Some(Scan3dNode {
+        icp: (m.pose_source == Scan3dPose::LineIcp)
+            .then(|| LineIcp::new(m.config.line_icp, s.start, s.start)),
         mapper: StopAndScan::new(m.config.clone(), mount),
         vertical: m.laser.clone(),
         horizontal: m.horizontal.clone(),
@@ -109,6 +112,7 @@ pub fn node(s: &Scenario) -> Result<Option<Scan3dNode>> {
         last_placed: None,
         sweep_seconds: Vec::new(),
         sweep_started: None,
+        view_errors: Vec::new(),
         scenario: s.spec.name.clone(),
         has_movers: !(s.movers.agents.is_empty()
             && s.movers.people.is_empty()
@@ -128,11 +132,13 @@ struct Labelled {
 /// Seed 004's mapper in the loop.
 pub struct Scan3dNode {
     mapper: StopAndScan,
+    /// The seed's localiser, when it places the scans.
+    icp: Option<LineIcp>,
     vertical: String,
     horizontal: String,
     horizontal_mount: Pose2,
     joint: String,
-    source: MapPose,
+    source: Scan3dPose,
     /// The table's angle as its encoder reported it (time, rad).
     joint_history: VecDeque<(Time, f64)>,
     /// Every placed scan's points, each with whether a mover was hit (truth, for scoring).
@@ -142,6 +148,8 @@ pub struct Scan3dNode {
     /// Simulated seconds each view's sweep took, pauses included.
     sweep_seconds: Vec<f64>,
     sweep_started: Option<Time>,
+    /// Each view's placing pose against the truth: position (m) and heading (°) errors.
+    view_errors: Vec<(f64, f64)>,
     scenario: String,
     /// Whether anything in the world moves (the dynamic measures exist only then).
     has_movers: bool,
@@ -150,10 +158,18 @@ pub struct Scan3dNode {
 impl Scan3dNode {
     fn pose(&self, bus: &Bus) -> Pose2 {
         match self.source {
-            MapPose::GroundTruth => bus.truth,
-            MapPose::Odometry => bus.odometry,
-            MapPose::Localization => bus.pose("localization").unwrap_or(bus.odometry),
-            MapPose::Slam => bus.pose("slam").unwrap_or(bus.odometry),
+            Scan3dPose::GroundTruth => bus.truth,
+            Scan3dPose::Odometry => bus.odometry,
+            Scan3dPose::Localization => bus.pose("localization").unwrap_or(bus.odometry),
+            Scan3dPose::Slam => bus.pose("slam").unwrap_or(bus.odometry),
+            // The last estimate, carried to now by odometry.
+            Scan3dPose::LineIcp => match &self.icp {
+                Some(icp) => {
+                    let (pose, at) = icp.pose();
+                    pose.compose(&at.between(&bus.odometry))
+                }
+                None => bus.odometry,
+            },
         }
     }
 
@@ -194,8 +210,8 @@ impl Node for Scan3dNode {
             format!("scan/{}", self.horizontal),
         ];
         match self.source {
-            MapPose::Localization => consumes.push("pose/localization".into()),
-            MapPose::Slam => consumes.push("pose/slam".into()),
+            Scan3dPose::Localization => consumes.push("pose/localization".into()),
+            Scan3dPose::Slam => consumes.push("pose/slam".into()),
             _ => {}
         }
         Streams {
@@ -218,6 +234,9 @@ impl Node for Scan3dNode {
         if laser == self.horizontal {
             let at = bus.odometry.compose(&self.horizontal_mount);
             self.mapper.on_horizontal(scan, &at, bus.now);
+            if let Some(icp) = &mut self.icp {
+                icp.update(scan, &self.horizontal_mount, bus.odometry);
+            }
         } else if laser == self.vertical {
             // The table's angle halfway through the scan's sweep.
             let mid = scan.stamp
@@ -265,7 +284,13 @@ impl Node for Scan3dNode {
             Phase::Sweeping { .. } | Phase::Paused { .. }
         );
         match (was_sweeping, sweeping) {
-            (false, true) => self.sweep_started = Some(bus.now),
+            (false, true) => {
+                self.sweep_started = Some(bus.now);
+                // The pose the view's scans are placed by, against the truth (scoring).
+                let e = pose.between(&bus.truth);
+                self.view_errors
+                    .push((e.x.hypot(e.y), e.theta.abs().to_degrees()));
+            }
             (true, false) => {
                 if let Some(t) = self.sweep_started.take() {
                     self.sweep_seconds.push((bus.now - t).secs());
@@ -303,6 +328,7 @@ impl Node for Scan3dNode {
             "sweep_s": self.sweep_seconds,
             "voxels_known": carved_kept.len(),
             "view_poses": self.mapper.views().iter().map(|p| [p.x, p.y, p.theta]).collect::<Vec<_>>(),
+            "view_errors": self.view_errors.iter().map(|(p, h)| json!({ "position_m": p, "heading_deg": h })).collect::<Vec<_>>(),
         });
         let mut files = Vec::new();
         if let Some(dir) = out {

@@ -16,6 +16,7 @@
 //! (`route`), turns the table to the angle it asks for (`table`) and hands it the scans.
 
 use crate::config::ConfigError;
+use crate::mapping::line_icp::LineIcpConfig;
 use crate::mapping::voxels::{VoxelConfig, VoxelMap};
 use crate::perception::motion::{MotionConfig, TemporalDifference};
 use futago_msgs::{LaserScan, Pose2, Time};
@@ -49,6 +50,8 @@ pub struct TurntableConfig {
     pub motion: MotionConfig,
     /// The voxel maps.
     pub voxels: VoxelConfig,
+    /// The seed's localisation, when the scans are placed by it.
+    pub line_icp: LineIcpConfig,
 }
 
 impl Default for TurntableConfig {
@@ -63,6 +66,7 @@ impl Default for TurntableConfig {
             max_wait: 60.0,
             motion: MotionConfig::default(),
             voxels: VoxelConfig::default(),
+            line_icp: LineIcpConfig::default(),
         }
     }
 }
@@ -90,6 +94,8 @@ impl TurntableConfig {
         }
         self.motion
             .validate(&crate::config::below(prefix, "motion"))?;
+        self.line_icp
+            .validate(&crate::config::below(prefix, "line_icp"))?;
         self.voxels
             .validate(&crate::config::below(prefix, "voxels"))
     }

@@ -1,0 +1,477 @@
+//! Seed 004's localisation (§3, eq. 1): odometry gives the first guess, and a point-to-line
+//! ICP of the horizontal laser's scan against the scans before it refines it, minimised by the
+//! downhill simplex (Nelder and Mead 1965), which needs no derivatives.
+//!
+//! Each point `s` of the scan, moved by the pose, is matched with the two nearest points
+//! `m_j`, `m_k` of the reference; its error is its squared distance to the line through them,
+//! `((R s + t − m_j) · (m_k − m_j)⊥)² / |m_k − m_j|²` (eq. 1 read with dot products). What
+//! the seed leaves open is chosen here and configurable:
+//! - the reference is a map of the scans taken so far, a new one added every `keyframe`
+//!   metres or radians of travel, thinned to one point per `cell` (scan-to-map, not
+//!   scan-to-scan, so that errors do not add up as fast), and a scan is matched once
+//!   odometry has moved `min_motion` since the last match;
+//! - neighbours are found in buckets of side `max_distance`, within it; a point with
+//!   fewer than two, or whose error exceeds `max_distance²`, adds `max_distance²` (a truncated
+//!   cost, so that people and unmapped space do not pull the pose);
+//! - the correspondences are found again at every evaluation of the cost, so the simplex
+//!   minimises the whole ICP objective rather than one linearisation of it;
+//! - the simplex starts `step` (x, y, yaw) around the guess and stops when its values span
+//!   less than `tolerance` or after `max_evaluations`.
+//!
+//! Written here: the Nelder–Mead crates do not fit a fixed three-parameter problem any better
+//! than the thirty lines below.
+
+use crate::config::ConfigError;
+use futago_msgs::{LaserScan, Pose2};
+use rustc_hash::FxHashMap;
+use serde::{Deserialize, Serialize};
+
+/// Parameters of the seed's localiser (`…line_icp.*`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LineIcpConfig {
+    /// Hash cell and thinning cell of the reference, m.
+    pub cell: f64,
+    /// Farthest a correspondence may be, m, and the truncation of the cost.
+    pub max_distance: f64,
+    /// Travel between keyframes added to the reference: metres, radians.
+    pub keyframe: [f64; 2],
+    /// The simplex's first steps around the guess: x, y (m) and yaw (rad).
+    pub step: [f64; 3],
+    /// Stop when the simplex's costs span less than this (mean squared error, m²).
+    pub tolerance: f64,
+    pub max_evaluations: usize,
+    /// Beams beyond this range are not used, m.
+    pub max_range: f64,
+    /// A scan is matched only once odometry has moved this far since the last match: metres,
+    /// radians (a standing robot's pose is carried by odometry, and matching every scan of
+    /// a 37.5 Hz laser at 0.1 m/s would cost much and gain nothing).
+    pub min_motion: [f64; 2],
+    /// ... or once this long has passed since it, s: a standing robot can be pushed (by a
+    /// person walking into it) without its wheels knowing.
+    pub max_interval: f64,
+}
+
+impl Default for LineIcpConfig {
+    fn default() -> Self {
+        LineIcpConfig {
+            cell: 0.05,
+            max_distance: 0.3,
+            keyframe: [0.3, 0.2],
+            step: [0.05, 0.05, 0.03],
+            tolerance: 1e-9,
+            max_evaluations: 400,
+            max_range: 6.0,
+            min_motion: [0.02, 0.02],
+            max_interval: 0.5,
+        }
+    }
+}
+
+impl LineIcpConfig {
+    /// Checks values, naming `PREFIX.KEY`.
+    pub fn validate(&self, prefix: &str) -> Result<(), ConfigError> {
+        crate::config::check_ranges(
+            prefix,
+            &[
+                ("cell", self.cell, 0.005, 1.0),
+                ("max_distance", self.max_distance, 0.01, 5.0),
+                ("keyframe", self.keyframe[0], 0.0, 100.0),
+                ("keyframe", self.keyframe[1], 0.0, 10.0),
+                ("step", self.step[0], 1e-4, 5.0),
+                ("step", self.step[1], 1e-4, 5.0),
+                ("step", self.step[2], 1e-5, 1.0),
+                ("tolerance", self.tolerance, 0.0, 1.0),
+                ("max_evaluations", self.max_evaluations as f64, 10.0, 1e6),
+                ("max_range", self.max_range, 0.1, 100.0),
+                ("min_motion", self.min_motion[0], 0.0, 10.0),
+                ("min_motion", self.min_motion[1], 0.0, 3.2),
+                ("max_interval", self.max_interval, 0.0, 3600.0),
+            ],
+        )
+    }
+}
+
+/// The downhill simplex minimum of `f` over three parameters from `x0`, the simplex spanning
+/// `step` along each axis: reflection 1, expansion 2, contraction ½, shrink ½. Returns the
+/// best point, its value and the evaluations used.
+pub fn nelder_mead(
+    mut f: impl FnMut([f64; 3]) -> f64,
+    x0: [f64; 3],
+    step: [f64; 3],
+    tolerance: f64,
+    max_evaluations: usize,
+) -> ([f64; 3], f64, usize) {
+    let mut pts: Vec<([f64; 3], f64)> = Vec::with_capacity(4);
+    pts.push((x0, f(x0)));
+    for i in 0..3 {
+        let mut x = x0;
+        x[i] += step[i];
+        pts.push((x, f(x)));
+    }
+    let mut evals = 4;
+    let along = |a: [f64; 3], b: [f64; 3], t: f64| -> [f64; 3] {
+        [0, 1, 2].map(|i| a[i] + t * (b[i] - a[i]))
+    };
+    while evals < max_evaluations {
+        pts.sort_by(|a, b| a.1.total_cmp(&b.1));
+        if pts[3].1 - pts[0].1 <= tolerance {
+            break;
+        }
+        let c = [0, 1, 2].map(|i| (pts[0].0[i] + pts[1].0[i] + pts[2].0[i]) / 3.0);
+        let worst = pts[3];
+        let r = along(c, worst.0, -1.0);
+        let fr = f(r);
+        evals += 1;
+        if fr < pts[0].1 {
+            let e = along(c, worst.0, -2.0);
+            let fe = f(e);
+            evals += 1;
+            pts[3] = if fe < fr { (e, fe) } else { (r, fr) };
+        } else if fr < pts[2].1 {
+            pts[3] = (r, fr);
+        } else {
+            // Contract towards the better of the worst and its reflection.
+            let (k, fk) = if fr < worst.1 {
+                let k = along(c, r, 0.5);
+                (k, f(k))
+            } else {
+                let k = along(c, worst.0, 0.5);
+                (k, f(k))
+            };
+            evals += 1;
+            if fk < worst.1.min(fr) {
+                pts[3] = (k, fk);
+            } else {
+                let best = pts[0].0;
+                for p in pts.iter_mut().skip(1) {
+                    p.0 = along(best, p.0, 0.5);
+                    p.1 = f(p.0);
+                }
+                evals += 3;
+            }
+        }
+    }
+    pts.sort_by(|a, b| a.1.total_cmp(&b.1));
+    (pts[0].0, pts[0].1, evals)
+}
+
+/// Points thinned to one per cell of side `cell`, kept in buckets of side `bucket` for the
+/// two nearest neighbours within a bucket's side.
+#[derive(Debug, Clone, Default)]
+pub struct Reference {
+    cell: f64,
+    bucket: f64,
+    taken: rustc_hash::FxHashSet<[i64; 2]>,
+    buckets: FxHashMap<[i64; 2], Vec<[f64; 2]>>,
+}
+
+impl Reference {
+    pub fn new(cell: f64, bucket: f64) -> Reference {
+        Reference {
+            cell,
+            bucket: bucket.max(cell),
+            ..Reference::default()
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.taken.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.taken.is_empty()
+    }
+
+    fn key(p: [f64; 2], size: f64) -> [i64; 2] {
+        [(p[0] / size).floor() as i64, (p[1] / size).floor() as i64]
+    }
+
+    /// Adds the points, one per cell (a cell already holding a point takes no more).
+    pub fn add(&mut self, points: &[[f64; 2]]) {
+        for p in points {
+            if self.taken.insert(Self::key(*p, self.cell)) {
+                self.buckets
+                    .entry(Self::key(*p, self.bucket))
+                    .or_default()
+                    .push(*p);
+            }
+        }
+    }
+
+    /// The two points nearest `q` within `max` (nearest first), if there are two.
+    pub fn two_nearest(&self, q: [f64; 2], max: f64) -> Option<([f64; 2], [f64; 2])> {
+        let r = (max / self.bucket).ceil() as i64;
+        let k = Self::key(q, self.bucket);
+        let (mut a, mut b): ((f64, [f64; 2]), (f64, [f64; 2])) =
+            ((f64::INFINITY, [0.0; 2]), (f64::INFINITY, [0.0; 2]));
+        for dx in -r..=r {
+            for dy in -r..=r {
+                let Some(c) = self.buckets.get(&[k[0] + dx, k[1] + dy]) else {
+                    continue;
+                };
+                for p in c {
+                    let d = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+                    if d < a.0 {
+                        b = a;
+                        a = (d, *p);
+                    } else if d < b.0 {
+                        b = (d, *p);
+                    }
+                }
+            }
+        }
+        (b.0 <= max * max).then_some((a.1, b.1))
+    }
+}
+
+/// The mean truncated point-to-line error of `points` (in the base frame) moved by `pose`
+/// against `reference` (map frame), eq. 1.
+pub fn line_cost(reference: &Reference, points: &[[f64; 2]], pose: &Pose2, max: f64) -> f64 {
+    let cap = max * max;
+    let mut sum = 0.0;
+    for p in points {
+        let q = pose.transform_point(*p);
+        let e = match reference.two_nearest(q, max) {
+            Some((mj, mk)) => {
+                let d = [mk[0] - mj[0], mk[1] - mj[1]];
+                let len2 = d[0] * d[0] + d[1] * d[1];
+                if len2 < 1e-12 {
+                    (q[0] - mj[0]).powi(2) + (q[1] - mj[1]).powi(2)
+                } else {
+                    // (q − m_j) · (m_k − m_j)⊥, with v⊥ = (−v_y, v_x).
+                    let cross = (q[0] - mj[0]) * -d[1] + (q[1] - mj[1]) * d[0];
+                    cross * cross / len2
+                }
+            }
+            None => cap,
+        };
+        sum += e.min(cap);
+    }
+    sum / points.len().max(1) as f64
+}
+
+/// The seed's localiser: odometry carried by point-to-line ICP against a map of keyframes.
+pub struct LineIcp {
+    config: LineIcpConfig,
+    reference: Reference,
+    /// The pose estimate and the odometry pose at the last match.
+    pose: Pose2,
+    odometry: Pose2,
+    /// When the last match was.
+    matched: Option<futago_msgs::Time>,
+    /// Where the last keyframe was added.
+    keyframe: Option<Pose2>,
+    evaluations: usize,
+    scans: usize,
+}
+
+impl LineIcp {
+    /// A localiser that starts at `start` (map frame), with the odometry reading `odometry`.
+    pub fn new(config: LineIcpConfig, start: Pose2, odometry: Pose2) -> LineIcp {
+        LineIcp {
+            reference: Reference::new(config.cell, config.max_distance),
+            config,
+            pose: start,
+            odometry,
+            matched: None,
+            keyframe: None,
+            evaluations: 0,
+            scans: 0,
+        }
+    }
+
+    /// The estimate at the last match, and the odometry pose then.
+    pub fn pose(&self) -> (Pose2, Pose2) {
+        (self.pose, self.odometry)
+    }
+
+    /// Mean cost evaluations per scan so far.
+    pub fn mean_evaluations(&self) -> f64 {
+        self.evaluations as f64 / self.scans.max(1) as f64
+    }
+
+    /// A scan from the laser at `mount` on the base, taken at odometry pose `odometry`:
+    /// predicts by odometry, refines by ICP, and adds a keyframe when the robot has moved far
+    /// enough. Returns the estimate.
+    pub fn update(&mut self, scan: &LaserScan, mount: &Pose2, odometry: Pose2) -> Pose2 {
+        let moved = self.odometry.between(&odometry);
+        let guess = self.pose.compose(&moved);
+        if let Some(t) = self.matched
+            && moved.x.hypot(moved.y) < self.config.min_motion[0]
+            && moved.theta.abs() < self.config.min_motion[1]
+            && (scan.stamp - t).secs() < self.config.max_interval
+        {
+            return guess;
+        }
+        self.matched = Some(scan.stamp);
+        self.odometry = odometry;
+        let points: Vec<[f64; 2]> = scan
+            .ranges
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.is_finite() && **r > 0.0 && (**r as f64) <= self.config.max_range)
+            .map(|(i, r)| {
+                let a = scan.angle(i);
+                mount.transform_point([*r as f64 * a.cos(), *r as f64 * a.sin()])
+            })
+            .collect();
+        self.scans += 1;
+        self.pose = if self.reference.len() < 10 || points.len() < 10 {
+            guess
+        } else {
+            let c = &self.config;
+            let (x, _, evals) = nelder_mead(
+                |x| {
+                    line_cost(
+                        &self.reference,
+                        &points,
+                        &Pose2::new(x[0], x[1], x[2]),
+                        c.max_distance,
+                    )
+                },
+                [guess.x, guess.y, guess.theta],
+                c.step,
+                c.tolerance,
+                c.max_evaluations,
+            );
+            self.evaluations += evals;
+            Pose2::new(x[0], x[1], futago_msgs::wrap_angle(x[2]))
+        };
+        let far = self.keyframe.is_none_or(|k| {
+            let d = k.between(&self.pose);
+            d.x.hypot(d.y) >= self.config.keyframe[0] || d.theta.abs() >= self.config.keyframe[1]
+        });
+        if far {
+            let world: Vec<[f64; 2]> = points
+                .iter()
+                .map(|p| self.pose.transform_point(*p))
+                .collect();
+            self.reference.add(&world);
+            self.keyframe = Some(self.pose);
+        }
+        self.pose
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The simplex finds the minimum of a shifted, skewed bowl from a distant start.
+    #[test]
+    fn the_simplex_finds_a_bowls_minimum() {
+        let f = |x: [f64; 3]| {
+            (x[0] - 1.0).powi(2)
+                + 2.0 * (x[1] + 0.5).powi(2)
+                + 3.0 * (x[2] - 0.2).powi(2)
+                + 0.5 * (x[0] - 1.0) * (x[1] + 0.5)
+        };
+        let (x, v, n) = nelder_mead(f, [0.0, 0.0, 0.0], [0.1, 0.1, 0.1], 1e-14, 2000);
+        assert!(n < 2000, "{n} evaluations");
+        assert!(v < 1e-10, "{v}");
+        for (a, b) in x.iter().zip([1.0, -0.5, 0.2]) {
+            assert!((a - b).abs() < 1e-4, "{x:?}");
+        }
+    }
+
+    /// A point's cost is its squared distance to the line through its two nearest reference
+    /// points (hand-computed), and is capped where it has no two neighbours.
+    #[test]
+    fn the_cost_is_the_distance_to_the_neighbours_line() {
+        let mut r = Reference::new(0.05, 0.3);
+        r.add(&[[0.0, 0.0], [0.1, 0.1]]);
+        // (0.1, 0) lies √2/20 from the line y = x.
+        let c = line_cost(&r, &[[0.1, 0.0]], &Pose2::IDENTITY, 0.3);
+        assert!((c - 0.005).abs() < 1e-12, "{c}");
+        let far = line_cost(&r, &[[2.0, 0.0]], &Pose2::IDENTITY, 0.3);
+        assert!((far - 0.09).abs() < 1e-12);
+    }
+
+    /// A robot driving 8 m down a corridor with a door recess on each side, its odometry
+    /// turning 0.57° and creeping 2 % too far a step: the ICP estimate stays within 2 cm and
+    /// 0.5° of the truth (along the corridor, while its end wall is in range), while odometry
+    /// drifts off by metres.
+    #[test]
+    fn icp_holds_the_pose_odometry_loses() {
+        // Walls y = ±1.1 from x = 0 to 20 with 1 m recesses 0.25 deep, and an end wall at x = 0.
+        let segs: Vec<([f64; 2], [f64; 2])> = vec![
+            ([0.0, -1.1], [0.0, 1.1]),
+            ([0.0, 1.1], [4.0, 1.1]),
+            ([4.0, 1.1], [4.0, 1.35]),
+            ([4.0, 1.35], [5.0, 1.35]),
+            ([5.0, 1.35], [5.0, 1.1]),
+            ([5.0, 1.1], [20.0, 1.1]),
+            ([0.0, -1.1], [7.0, -1.1]),
+            ([7.0, -1.1], [7.0, -1.35]),
+            ([7.0, -1.35], [8.0, -1.35]),
+            ([8.0, -1.35], [8.0, -1.1]),
+            ([8.0, -1.1], [20.0, -1.1]),
+        ];
+        let scan_at = |pose: &Pose2| -> LaserScan {
+            let n = 361;
+            let ranges = (0..n)
+                .map(|i| {
+                    let a =
+                        pose.theta - std::f64::consts::FRAC_PI_2 + i as f64 * 0.5f64.to_radians();
+                    let (dx, dy) = (a.cos(), a.sin());
+                    let mut best = f64::INFINITY;
+                    for (p, q) in &segs {
+                        let (ex, ey) = (q[0] - p[0], q[1] - p[1]);
+                        let den = dx * ey - dy * ex;
+                        if den.abs() < 1e-12 {
+                            continue;
+                        }
+                        let (wx, wy) = (p[0] - pose.x, p[1] - pose.y);
+                        let t = (wx * ey - wy * ex) / den;
+                        let u = (wx * dy - wy * dx) / den;
+                        if t > 0.0 && (0.0..=1.0).contains(&u) {
+                            best = best.min(t);
+                        }
+                    }
+                    if best <= 6.0 {
+                        best as f32
+                    } else {
+                        f32::INFINITY
+                    }
+                })
+                .collect();
+            LaserScan {
+                frame: "h".into(),
+                stamp: futago_msgs::Time::ZERO,
+                angle_min: -std::f64::consts::FRAC_PI_2,
+                angle_increment: 0.5f64.to_radians(),
+                time_increment: 0.0,
+                range_min: 0.01,
+                range_max: 6.0,
+                ranges,
+            }
+        };
+        let start = Pose2::new(1.0, 0.0, 0.0);
+        let mut icp = LineIcp::new(LineIcpConfig::default(), start, start);
+        let (mut truth, mut odo) = (start, start);
+        // The first scan, standing, makes the first keyframe.
+        assert_eq!(icp.update(&scan_at(&start), &Pose2::IDENTITY, odo), start);
+        for _ in 0..160 {
+            truth = truth.compose(&Pose2::new(0.05, 0.0, 0.0));
+            // Odometry believes 5.1 cm and a 0.01 rad turn each step.
+            odo = odo.compose(&Pose2::new(0.051, 0.0, 0.01));
+            let est = icp.update(&scan_at(&truth), &Pose2::IDENTITY, odo);
+            let e = est.between(&truth);
+            // The walls always fix the lateral place and the heading; the place along the
+            // corridor is fixed while the end wall is within the laser's 6 m (to x = 7).
+            assert!(
+                e.y.abs() < 0.02 && e.theta.abs() < 0.5f64.to_radians(),
+                "at {truth:?}: estimate {est:?}"
+            );
+            if truth.x < 6.5 {
+                assert!(e.x.abs() < 0.02, "at {truth:?}: estimate {est:?}");
+            }
+        }
+        let drift = odo.between(&Pose2::new(truth.x, truth.y, truth.theta));
+        assert!(
+            drift.x.hypot(drift.y) > 1.0,
+            "odometry drifted only {drift:?}"
+        );
+    }
+}
