@@ -565,22 +565,7 @@ pub(crate) mod tests_support {
             .map(|k| {
                 let pose = pose_at(k as f64 * time_increment);
                 let a = pose.theta - 0.75 * std::f64::consts::PI + k as f64 * inc;
-                let (dx, dy) = (a.cos(), a.sin());
-                let mut best = f64::INFINITY;
-                for &(p, q) in segs {
-                    let (ex, ey) = (q[0] - p[0], q[1] - p[1]);
-                    let den = dx * ey - dy * ex;
-                    if den.abs() < 1e-12 {
-                        continue;
-                    }
-                    let (wx, wy) = (p[0] - pose.x, p[1] - pose.y);
-                    let t = (wx * ey - wy * ex) / den;
-                    let u = (wx * dy - wy * dx) / den;
-                    if t > 0.0 && (0.0..=1.0).contains(&u) {
-                        best = best.min(t);
-                    }
-                }
-                best as f32
+                cast(segs, [pose.x, pose.y], a) as f32
             })
             .collect();
         LaserScan {
@@ -593,6 +578,26 @@ pub(crate) mod tests_support {
             range_max: 30.0,
             ranges,
         }
+    }
+
+    /// Distance from `o` along bearing `a` to the nearest of the segments (∞ if none).
+    pub fn cast(segs: &[([f64; 2], [f64; 2])], o: [f64; 2], a: f64) -> f64 {
+        let (dx, dy) = (a.cos(), a.sin());
+        let mut best = f64::INFINITY;
+        for &(p, q) in segs {
+            let (ex, ey) = (q[0] - p[0], q[1] - p[1]);
+            let den = dx * ey - dy * ex;
+            if den.abs() < 1e-12 {
+                continue;
+            }
+            let (wx, wy) = (p[0] - o[0], p[1] - o[1]);
+            let t = (wx * ey - wy * ex) / den;
+            let u = (wx * dy - wy * dx) / den;
+            if t > 0.0 && (0.0..=1.0).contains(&u) {
+                best = best.min(t);
+            }
+        }
+        best
     }
 
     /// Distance from `p` to the nearest of the segments.

