@@ -318,7 +318,6 @@ impl Node for Scan3dNode {
         let stats = self.mapper.stats();
         let summary = json!({
             "views": stats.views,
-            "views_asked": self.mapper.views().len(),
             "pauses": stats.pauses,
             "pause_timeouts": stats.timeouts,
             "scans_kept": stats.scans_kept,
