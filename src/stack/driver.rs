@@ -10,7 +10,7 @@ use futago_msgs::{DriveCommand, Duration, LaserScan, Odometry, Pose2, Time};
 use futago_robot::control::PoseSource;
 use futago_robot::control::script::{ControlInput, ScriptedController};
 use futago_robot::localization::odometry::OdometryIntegrator;
-use futago_robot::navigation::{NavInput, Navigator, Task};
+use futago_robot::navigation::{CoverConfig, NavInput, Navigator, RouteConfig, Task};
 use futago_robot::tracking::people::TrackedPerson;
 use serde_json::{Value, json};
 use std::path::Path;
@@ -76,25 +76,15 @@ impl DriverNode {
                 odometry: OdometryIntegrator::new(s.start),
                 last: None,
             },
-            ControllerConfig::Coverage(c) => Driver::Navigator {
-                // The route comes on `path/coverage`.
+            // The routes come on `path/coverage` or `path/TOPIC`.
+            ControllerConfig::Coverage(CoverConfig { pose_source })
+            | ControllerConfig::Route(RouteConfig { pose_source, .. }) => Driver::Navigator {
                 nav: Box::new(Navigator::new(
                     spec.navigation,
                     Task::Route(Vec::new()),
                     Some(navigation_map()?),
                 )),
-                pose_source: Some(c.pose_source),
-                odometry: OdometryIntegrator::new(s.start),
-                last: None,
-            },
-            ControllerConfig::Route(r) => Driver::Navigator {
-                // The routes come on `path/TOPIC`.
-                nav: Box::new(Navigator::new(
-                    spec.navigation,
-                    Task::Route(Vec::new()),
-                    Some(navigation_map()?),
-                )),
-                pose_source: Some(r.pose_source),
+                pose_source: Some(*pose_source),
                 odometry: OdometryIntegrator::new(s.start),
                 last: None,
             },
