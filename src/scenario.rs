@@ -431,6 +431,20 @@ pub struct Scan3dSpec {
     pub joint: String,
     pub pose_source: Scan3dPose,
     pub config: TurntableConfig,
+    /// Lengths to measure in the map against the world (`[[scan3d.length]]`; scoring).
+    pub lengths: Vec<MapLength>,
+}
+
+/// A length of the building to measure in the 3D map, like seed 004's L1 and L2: from a
+/// point in free space (map frame, m) along a direction, the distance between the first
+/// surfaces on either side. The truth is cast in the world's static colliders.
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapLength {
+    /// Names the metrics `scan3d.length.NAME.*`: letters, digits, `_` and `-`.
+    pub name: String,
+    pub from: [f64; 3],
+    pub direction: [f64; 3],
 }
 
 /// Which pose places seed 004's scans: another node's or the truth, or the seed's own
@@ -476,6 +490,58 @@ pub fn scan3d_config(path: &Path, table: &toml::Table) -> Result<Scan3dSpec, Spe
             )
         })?,
     };
+    let lengths: Vec<MapLength> = match rest.remove("length") {
+        None => Vec::new(),
+        Some(v) => {
+            let mut t = toml::Table::new();
+            t.insert("length".into(), v);
+            #[derive(Deserialize)]
+            struct Lengths {
+                length: Vec<MapLength>,
+            }
+            typed_table::<Lengths>(path, "scan3d", t)?.length
+        }
+    };
+    for (i, l) in lengths.iter().enumerate() {
+        let key = |k: &str| format!("scan3d.length[{i}].{k}");
+        let ok_name = !l.name.is_empty()
+            && l.name.len() <= 64
+            && l.name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+        if !ok_name {
+            return Err(SpecError::new(
+                path,
+                key("name"),
+                format!(
+                    "expected 1-64 letters, digits, `_` or `-`; found {:?}",
+                    l.name
+                ),
+            ));
+        }
+        if lengths[..i].iter().any(|o| o.name == l.name) {
+            return Err(SpecError::new(
+                path,
+                key("name"),
+                format!("`{}` names two lengths", l.name),
+            ));
+        }
+        if !l.from.iter().all(|c| c.is_finite() && c.abs() <= 1e6) {
+            return Err(SpecError::new(
+                path,
+                key("from"),
+                format!("expected a point in the map frame, m; found {:?}", l.from),
+            ));
+        }
+        let n = l.direction.iter().map(|c| c * c).sum::<f64>().sqrt();
+        if !(n.is_finite() && n > 1e-9) {
+            return Err(SpecError::new(
+                path,
+                key("direction"),
+                format!("expected a non-zero vector; found {:?}", l.direction),
+            ));
+        }
+    }
     let config: TurntableConfig = typed_table(path, "scan3d", rest)?;
     config
         .validate("scan3d")
@@ -486,6 +552,7 @@ pub fn scan3d_config(path: &Path, table: &toml::Table) -> Result<Scan3dSpec, Spe
         joint: String::new(),
         pose_source,
         config,
+        lengths,
     })
 }
 

@@ -2569,6 +2569,72 @@ fn the_turntable_mapper_scans_a_view_and_scores_its_removal() {
     }
 }
 
+/// With no views given, the mapper scans where it starts, then plans the next view on the 2D
+/// grid of what it has mapped: a reachable place inside the region to map, clear of the
+/// pillars, towards the unknown; the coverage of the hall's true surfaces grows from the
+/// first view's, and the lengths are measured against the world's.
+#[test]
+fn the_turntable_mapper_plans_its_next_view_and_scores_its_coverage() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let o = futago(&[
+        "run",
+        "scenarios/hall-scan3d.toml",
+        "--duration",
+        "30",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(
+        o.status.code() == Some(0) || o.status.code() == Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let s = summary(&out);
+    let m = &s["scan3d"];
+    assert_eq!(m["views"].as_u64(), Some(1), "{m}");
+    let plans = m["planned_views"].as_array().unwrap();
+    assert_eq!(plans.len(), 1, "{m}");
+    let p = plans[0]["position"].as_array().unwrap();
+    let (x, y) = (p[0].as_f64().unwrap(), p[1].as_f64().unwrap());
+    // Inside the hall (the region), not where it stands, not on a pillar.
+    assert!(
+        (14.0..=34.0).contains(&x) && (-7.0..=7.0).contains(&y),
+        "{x}, {y}"
+    );
+    assert!((x - 24.0).hypot(y) > 1.0, "{x}, {y}");
+    for px in [18.0, 22.0, 26.0, 30.0] {
+        for py in [-4.0, 0.5, 4.0] {
+            assert!(
+                (x - px).hypot(y - py) > 0.6,
+                "{x}, {y} by the pillar at {px}, {py}"
+            );
+        }
+    }
+    assert!(plans[0]["new_cells"].as_u64().unwrap() >= 100);
+    // One view's coverage: some, far from all, of 700 m² of surfaces.
+    let c = s["metrics"]["scan3d.coverage"].as_f64().unwrap();
+    assert!(c > 0.05 && c < 0.5, "{c}");
+    let area = m["surface_area_m2"].as_f64().unwrap();
+    // The floor alone is 20 × 14 m less the pillars and furniture.
+    assert!(area > 280.0, "{area}");
+    assert_eq!(m["coverage_curve"].as_array().unwrap().len(), 1);
+    // The truth of each length is the world's: the hall's walls stand 14 m apart, 0.2 m
+    // thick; its pillars 4 m apart, 0.6 m wide.
+    let lengths = m["lengths"].as_array().unwrap();
+    let truth = |n: &str| {
+        lengths
+            .iter()
+            .find(|l| l["name"] == n)
+            .and_then(|l| l["truth_m"].as_f64())
+            .unwrap()
+    };
+    assert!((truth("width") - 13.8).abs() < 1e-4);
+    assert!((truth("pillars") - 3.4).abs() < 1e-4);
+    assert!((truth("length") - 19.8).abs() < 1e-4);
+}
+
 /// A `[scan3d]` table whose lasers, joint or values are wrong is refused before anything
 /// runs, naming the key.
 #[test]
@@ -2608,6 +2674,31 @@ fn a_turntable_scan_names_its_bad_lasers_joint_and_values() {
             "stops = [[2.0, 0.0],",
             "stops = [[1e9, 0.0],",
             "scan3d.stops[0]",
+        ),
+        (
+            "direction = [0.0, 1.0, 0.0]",
+            "direction = [0.0, 0.0, 0.0]",
+            "scan3d.length[0].direction",
+        ),
+        (
+            "direction = [0.0, 1.0, 0.0]\n",
+            "direction = [0.0, 1.0, 0.0]\n\n[[scan3d.length]]\nname = \"width\"\nfrom = [1.0, 0.0, 1.0]\ndirection = [1.0, 0.0, 0.0]\n",
+            "scan3d.length[1].name`: `width` names two lengths",
+        ),
+        (
+            "from = [4.0, 0.0, 1.5]",
+            "from = [4.0, 0.0, 1e9]",
+            "scan3d.length[0].from",
+        ),
+        (
+            "stops = [[2.0, 0.0],",
+            "planning = { region = [[0.0, 0.0], [1.0, 1.0]] }\nstops = [[2.0, 0.0],",
+            "scan3d.planning.region",
+        ),
+        (
+            "stops = [[2.0, 0.0],",
+            "planning = { planner = \"nearest\" }\nstops = [[2.0, 0.0],",
+            "scan3d.planning.planner",
         ),
     ] {
         assert!(text.contains(from), "{from}");

@@ -100,6 +100,17 @@ impl Surfaces {
         s
     }
 
+    /// Surfaces of the given triangles, each with its class (tests of the measures built on
+    /// them).
+    #[cfg(test)]
+    pub(crate) fn from_triangles(triangles: &[([[f64; 3]; 3], usize)]) -> Surfaces {
+        let mut s = Surfaces::empty();
+        for ([a, b, c], class) in triangles {
+            s.add_triangle(*a, *b, *c, *class, f64::INFINITY, &|_| true, &|_| None);
+        }
+        s
+    }
+
     fn empty() -> Surfaces {
         Surfaces {
             area: FxHashMap::default(),
@@ -218,6 +229,17 @@ impl Surfaces {
             }
         }
         out
+    }
+
+    /// Every voxel holding surface: its centre (m) and each class's area in it (m²), in no
+    /// particular order.
+    pub fn voxels(&self) -> impl Iterator<Item = ([f64; 3], [f64; 3])> + '_ {
+        self.area.iter().map(|(k, a)| {
+            (
+                [0, 1, 2].map(|d| OFFSET[d] + (k[d] as f64 + 0.5) * VOXEL),
+                *a,
+            )
+        })
     }
 
     /// Whether voxel `k` holds surface of `class`.

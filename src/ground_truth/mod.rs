@@ -5,6 +5,7 @@
 //! scorers and declare the names they produce; a new family is a new module here.
 
 pub mod cloud;
+pub mod completeness;
 pub mod coverage;
 pub mod detection;
 pub mod map;

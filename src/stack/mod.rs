@@ -270,7 +270,7 @@ pub const MODULES: &[Module] = &[
         metric_names: rgbd_map::metric_names,
     },
     Module {
-        build: |s, _, _| boxed(scan3d::node(s)),
+        build: |s, seed, _| boxed(scan3d::node(s, seed)),
         metric_names: scan3d::metric_names,
     },
 ];

@@ -24,6 +24,8 @@
 
 use super::{Bus, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
+use crate::ground_truth::completeness::{Completeness, length_along};
+use crate::ground_truth::coverage::Surfaces;
 use crate::scenario::{Scan3dPose, Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Odometry, Pose2, Time};
@@ -54,13 +56,30 @@ const MATCH_VOXEL: f64 = 0.1;
 /// Points no higher than this are on the floor, m (the LMS200's 1.5 cm noise, twice, and
 /// more).
 const FLOOR_Z: f64 = 0.1;
-/// The height band the 2D grid is compressed from, m: above the floor to above the people.
-const GRID_BAND: (f64, f64) = (FLOOR_Z, 2.0);
+/// A true surface counts as mapped when a map point lies this near, m: the voxel maps'
+/// side, 2.5 times the LMS200's 4 cm largest error.
+const COVERAGE_TOLERANCE: f64 = 0.1;
+/// The share of the true surfaces the coverage curve is read at (the 95 %).
+const COVERAGE_MARK: f64 = 0.95;
+/// The cell of the world grid the area to map is flooded on, m.
+const INTERIOR_CELL: f64 = 0.05;
+/// A surface belongs to the area to map when it lies this near floor the robot's centre can
+/// reach, m: the Create's radius and a margin, so that a wall's inner face (0.17 m from the
+/// nearest centre) counts and its outer face (a wall's 0.2 m thickness farther) does not.
+const INTERIOR_REACH: f64 = 0.3;
+/// A length's surfaces are the points within this of its line, m (keep lines twice this
+/// far from surfaces parallel to them) ...
+const LENGTH_RADIUS: f64 = 0.05;
+/// ... whose projections gather within this, m (the LMS200's ±4 cm) ...
+const LENGTH_WINDOW: f64 = 0.08;
+/// ... at least this many (a view's scans 0.8° apart, 0.5° beams, put about 10 points in
+/// the line's disc on a wall 2.5 m away).
+const LENGTH_MIN_POINTS: usize = 5;
 /// Joint readings kept for interpolating the table's angle.
 const JOINT_HISTORY: usize = 64;
 
 /// The mapper when the scenario has `[scan3d]`.
-pub fn node(s: &Scenario) -> Result<Option<Scan3dNode>> {
+pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
     let Some(m) = &s.scan3d else {
         return Ok(None);
     };
@@ -101,7 +120,24 @@ pub fn node(s: &Scenario) -> Result<Option<Scan3dNode>> {
     Ok(Some(Scan3dNode {
         icp: (m.pose_source == Scan3dPose::LineIcp)
             .then(|| LineIcp::new(m.config.line_icp, s.start, s.start)),
-        mapper: StopAndScan::new(m.config.clone(), mount),
+        mapper: StopAndScan::new(m.config.clone(), mount, seed),
+        completeness: surfaces_to_map(s, &m.config.planning.region)?,
+        lengths: m
+            .lengths
+            .iter()
+            .map(|l| {
+                let back = l.direction.map(|c| -c);
+                let cast = |d| futago_sim::world::export::cast_static(&s.world, l.from, d, 1e3);
+                let truth = cast(l.direction).zip(cast(back)).map(|(a, b)| a + b);
+                (l.clone(), truth)
+            })
+            .collect(),
+        curve: Vec::new(),
+        travel: 0.0,
+        last_truth: None,
+        views_scored: 0,
+        coverage_from: 0,
+        band: m.config.planning.band,
         vertical: m.laser.clone(),
         horizontal: m.horizontal.clone(),
         horizontal_mount: horizontal.planar_mount(),
@@ -153,6 +189,56 @@ pub struct Scan3dNode {
     scenario: String,
     /// Whether anything in the world moves (the dynamic measures exist only then).
     has_movers: bool,
+    /// The map's completeness against the true surfaces of the area to map.
+    completeness: Completeness,
+    /// The lengths to measure, with their truth (`None`: the world has no surface there).
+    lengths: Vec<(crate::scenario::MapLength, Option<f64>)>,
+    /// After each view: views, distance driven (m, true), coverage.
+    curve: Vec<(usize, f64, f64)>,
+    /// Distance driven so far (m, true) and the last true pose.
+    travel: f64,
+    last_truth: Option<Pose2>,
+    /// Views whose points the coverage has taken.
+    views_scored: usize,
+    /// Placed scans before this one the coverage has taken.
+    coverage_from: usize,
+    /// The height band the 2D grid is compressed from, m.
+    band: [f64; 2],
+}
+
+/// The true surfaces of the area to map: the world's floor, walls and furniture faces near
+/// floor the robot can reach from its start (within `region` when one is given).
+fn surfaces_to_map(s: &Scenario, region: &[[f64; 2]]) -> Result<Completeness> {
+    use futago_robot::navigation::coverage::{Field, ROBOT_RADIUS, inside_polygon};
+    let mut grid = futago_sim::world::export::occupancy_grid(
+        &s.world,
+        INTERIOR_CELL,
+        FLOOR_Z,
+        2.0,
+        INTERIOR_REACH,
+    )
+    .map_err(|e| anyhow::anyhow!("scan3d: {e}"))?;
+    if !region.is_empty() {
+        for j in 0..grid.height {
+            for i in 0..grid.width {
+                if !inside_polygon(region, grid.cell_center(i, j)) {
+                    grid.set(i, j, 100);
+                }
+            }
+        }
+    }
+    let start = [s.start.x, s.start.y];
+    let field = Field::new(&grid, ROBOT_RADIUS, start)
+        .map_err(|e| anyhow::anyhow!("scan3d: the area to map: {e}"))?;
+    let reach =
+        futago_robot::geometry::grid::squared_edt(&field.reachable, grid.width, grid.height);
+    let near = |p: [f64; 2]| {
+        grid.cell_of(p[0], p[1]).is_some_and(|(i, j)| {
+            reach[j * grid.width + i].sqrt() * INTERIOR_CELL <= INTERIOR_REACH
+        })
+    };
+    let surfaces = Surfaces::from_world(&s.world, f64::INFINITY, near, |_| None);
+    Ok(Completeness::new(&surfaces, COVERAGE_TOLERANCE))
 }
 
 impl Scan3dNode {
@@ -195,6 +281,67 @@ impl Scan3dNode {
             .iter()
             .find(|(n, _)| *n == self.joint)
             .map_or(0.0, |(_, a)| *a)
+    }
+}
+
+impl Scan3dNode {
+    /// Adds the static points of the views completed since the last call to the coverage,
+    /// and reads the curve.
+    fn score_views(&mut self) {
+        let views = self.mapper.stats().views;
+        if views == self.views_scored {
+            return;
+        }
+        let kept: FxHashSet<i64> = self.mapper.kept().iter().map(|s| s.stamp.0).collect();
+        // The placed scans not yet taken, kept in the map, static points only.
+        let from = self.coverage_from;
+        let points = self.placed[from..]
+            .iter()
+            .filter(|s| kept.contains(&s.stamp.0))
+            .flat_map(|s| s.points.iter().filter(|(_, m)| !m).map(|(p, _)| *p));
+        self.completeness.add(points);
+        self.coverage_from = self.placed.len();
+        self.views_scored = views;
+        self.curve
+            .push((views, self.travel, self.completeness.share()));
+    }
+
+    /// Each length's name, truth and measure in the carved map (m; `None` where there is no
+    /// surface).
+    fn measured_lengths(&self) -> Vec<(String, Option<f64>, Option<f64>)> {
+        if self.lengths.is_empty() {
+            return Vec::new();
+        }
+        let (carved_kept, _) = self.mapper.voxel_maps();
+        let kept: Vec<[f64; 3]> = self
+            .mapper
+            .kept()
+            .iter()
+            .flat_map(|s| s.points.iter().map(|(p, _)| *p))
+            .collect();
+        let map = carved_kept.keep_static(&kept);
+        self.lengths
+            .iter()
+            .map(|(l, truth)| {
+                let measured = length_along(
+                    &map,
+                    l.from,
+                    l.direction,
+                    LENGTH_RADIUS,
+                    LENGTH_WINDOW,
+                    LENGTH_MIN_POINTS,
+                );
+                (l.name.clone(), *truth, measured)
+            })
+            .collect()
+    }
+
+    /// The views and the distance driven when the coverage first reached [`COVERAGE_MARK`].
+    fn to_mark(&self) -> Option<(usize, f64)> {
+        self.curve
+            .iter()
+            .find(|c| c.2 >= COVERAGE_MARK)
+            .map(|c| (c.0, c.1))
     }
 }
 
@@ -268,6 +415,10 @@ impl Node for Scan3dNode {
     }
 
     fn on_control(&mut self, bus: &mut Bus) -> Result<()> {
+        if let Some(p) = self.last_truth {
+            self.travel += (bus.truth.x - p.x).hypot(bus.truth.y - p.y);
+        }
+        self.last_truth = Some(bus.truth);
         let pose = self.pose(bus);
         let table = self.table_now(bus);
         let was_sweeping = self.sweep_started.is_some();
@@ -298,6 +449,7 @@ impl Node for Scan3dNode {
             }
             _ => {}
         }
+        self.score_views();
         Ok(())
     }
 
@@ -314,7 +466,7 @@ impl Node for Scan3dNode {
             .flat_map(|s| s.points.iter().map(|(p, _)| *p))
             .collect();
         let carved = carved_kept.keep_static(&kept);
-        let grid = carved_kept.project(GRID_BAND.0, GRID_BAND.1);
+        let grid = carved_kept.project(self.band[0], self.band[1]);
         let stats = self.mapper.stats();
         let summary = json!({
             "views": stats.views,
@@ -328,6 +480,18 @@ impl Node for Scan3dNode {
             "voxels_known": carved_kept.len(),
             "view_poses": self.mapper.views().iter().map(|p| [p.x, p.y, p.theta]).collect::<Vec<_>>(),
             "view_errors": self.view_errors.iter().map(|(p, h)| json!({ "position_m": p, "heading_deg": h })).collect::<Vec<_>>(),
+            "planned_views": self.mapper.plans().iter().map(|v| json!({
+                "position": v.position,
+                "new_cells": v.new_cells,
+                "v1": v.terms[0], "v2": v.terms[1], "v3": v.terms[2],
+            })).collect::<Vec<_>>(),
+            "travel_m": self.travel,
+            "surface_area_m2": self.completeness.area(),
+            "coverage_by_class": self.completeness.shares().into_iter().collect::<std::collections::BTreeMap<_, _>>(),
+            "coverage_curve": self.curve.iter().map(|(v, t, c)| json!({ "views": v, "travel_m": t, "coverage": c })).collect::<Vec<_>>(),
+            "views_to_95": self.to_mark().map(|m| m.0),
+            "travel_to_95_m": self.to_mark().map(|m| m.1),
+            "lengths": self.measured_lengths().into_iter().map(|(n, t, m)| json!({ "name": n, "truth_m": t, "measured_m": m })).collect::<Vec<_>>(),
         });
         let mut files = Vec::new();
         if let Some(dir) = out {
@@ -384,6 +548,19 @@ impl Node for Scan3dNode {
         let stats = self.mapper.stats();
         m.insert("scan3d.views", stats.views as f64);
         m.insert("scan3d.pauses", stats.pauses as f64);
+        m.insert("scan3d.coverage", self.completeness.share());
+        m.insert("scan3d.travel_m", self.travel);
+        let mark = self.to_mark();
+        m.insert("scan3d.views_to_95", mark.map_or(f64::NAN, |x| x.0 as f64));
+        m.insert("scan3d.travel_to_95_m", mark.map_or(f64::NAN, |x| x.1));
+        for (name, truth, measured) in self.measured_lengths() {
+            let e = match (truth, measured) {
+                (Some(t), Some(v)) => v - t,
+                _ => f64::NAN,
+            };
+            m.insert(format!("scan3d.length.{name}.error_m"), e);
+            m.insert(format!("scan3d.length.{name}.abs_error_m"), e.abs());
+        }
         // The points of every placed scan, by stamp, and which were kept.
         let kept: FxHashSet<i64> = self.mapper.kept().iter().map(|s| s.stamp.0).collect();
         let (carved_kept, carved_all) = self.mapper.voxel_maps();
@@ -496,7 +673,28 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
         return Vec::new();
     }
     let movers = !(s.agent.is_empty() && s.person.is_empty() && s.flow.is_empty());
-    let mut names = vec!["scan3d.views".to_string(), "scan3d.pauses".to_string()];
+    let mut names: Vec<String> = [
+        "scan3d.views",
+        "scan3d.pauses",
+        "scan3d.coverage",
+        "scan3d.travel_m",
+        "scan3d.views_to_95",
+        "scan3d.travel_to_95_m",
+    ]
+    .map(String::from)
+    .to_vec();
+    // The lengths' names, as the table gives them (checked when the scenario loads).
+    let lengths = s
+        .scan3d
+        .as_ref()
+        .and_then(|t| t.get("length"))
+        .and_then(|v| v.as_array());
+    for l in lengths.into_iter().flatten() {
+        if let Some(name) = l.get("name").and_then(|n| n.as_str()) {
+            names.push(format!("scan3d.length.{name}.error_m"));
+            names.push(format!("scan3d.length.{name}.abs_error_m"));
+        }
+    }
     for method in ["pause", "carving", "pause_carving"] {
         let mut keys = vec!["sa", "sa_floor", "sa_structure", "pr"];
         if movers {

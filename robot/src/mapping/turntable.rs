@@ -18,18 +18,23 @@
 use crate::config::ConfigError;
 use crate::mapping::line_icp::LineIcpConfig;
 use crate::mapping::voxels::{VoxelConfig, VoxelMap};
+use crate::navigation::views::{View, ViewPlanningConfig, next_view};
 use crate::perception::motion::{MotionConfig, TemporalDifference};
 use futago_msgs::{LaserScan, Pose2, Time};
 use glam::{DAffine3, DQuat, DVec3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the stop-and-scan mapper (`scan3d.*`).
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TurntableConfig {
-    /// The views, in order (map frame, m). The seed chose each by view planning; here they
-    /// are given.
+    /// The views, in order (map frame, m). Empty: the robot scans where it starts, then
+    /// plans each next view on the map so far (`planning`), as the seed did.
     pub stops: Vec<[f64; 2]>,
+    /// View planning, when no `stops` are given.
+    pub planning: ViewPlanningConfig,
     /// The table's turn per view, degrees (360: the seed's full surround).
     pub sweep_deg: f64,
     /// Standing time at a view before the sweep, s (the base settles, the detector fills its
@@ -58,6 +63,7 @@ impl Default for TurntableConfig {
     fn default() -> Self {
         TurntableConfig {
             stops: Vec::new(),
+            planning: ViewPlanningConfig::default(),
             sweep_deg: 360.0,
             settle: 1.0,
             pause_for_movers: true,
@@ -94,6 +100,8 @@ impl TurntableConfig {
         }
         self.motion
             .validate(&crate::config::below(prefix, "motion"))?;
+        self.planning
+            .validate(&crate::config::below(prefix, "planning"))?;
         self.line_icp
             .validate(&crate::config::below(prefix, "line_icp"))?;
         self.voxels
@@ -198,19 +206,29 @@ pub struct StopAndScan {
     /// The views' poses as placed.
     views: Vec<Pose2>,
     stats: SweepStats,
+    /// Where each view is (given, or planned so far).
+    targets: Vec<[f64; 2]>,
+    /// The planned route to the next view, until it is asked for.
+    route: Option<Vec<[f64; 2]>>,
+    /// Each planned view, as the planner chose it.
+    plans: Vec<View>,
+    /// Draws the `random` view planner's choices.
+    rng: ChaCha8Rng,
 }
 
 impl StopAndScan {
-    pub fn new(config: TurntableConfig, mount: TableMount) -> StopAndScan {
-        let phase = if config.stops.is_empty() {
-            Phase::Done
-        } else {
-            Phase::Driving {
-                stop: 0,
-                asked: None,
-            }
+    /// The mapper with its views given (`config.stops`) or planned; `seed` seeds the random
+    /// view planner.
+    pub fn new(config: TurntableConfig, mount: TableMount, seed: u64) -> StopAndScan {
+        let phase = Phase::Driving {
+            stop: 0,
+            asked: None,
         };
         StopAndScan {
+            targets: config.stops.clone(),
+            route: None,
+            plans: Vec::new(),
+            rng: ChaCha8Rng::seed_from_u64(seed),
             detector: TemporalDifference::new(config.motion),
             carved_kept: VoxelMap::new(config.voxels),
             carved_all: VoxelMap::new(config.voxels),
@@ -252,6 +270,16 @@ impl StopAndScan {
         &self.views
     }
 
+    /// The planned views, as the planner chose them (none when the views were given).
+    pub fn plans(&self) -> &[View] {
+        &self.plans
+    }
+
+    /// Whether the views are planned rather than given.
+    pub fn planning(&self) -> bool {
+        self.config.stops.is_empty()
+    }
+
     /// A control tick at `now`: the robot's pose estimate (map frame), when the driver last
     /// finished a route, and the table's angle (rad).
     pub fn control(
@@ -264,7 +292,17 @@ impl StopAndScan {
         let mut out = Requests::default();
         match self.phase {
             Phase::Driving { stop, asked: None } => {
-                out.route = Some(vec![[pose.x, pose.y], self.config.stops[stop]]);
+                // A planned survey scans first where the robot starts.
+                if stop == 0 && self.planning() {
+                    self.targets.push([pose.x, pose.y]);
+                    self.phase = Phase::Settling { stop, since: now };
+                    return out;
+                }
+                out.route = Some(
+                    self.route
+                        .take()
+                        .unwrap_or_else(|| vec![[pose.x, pose.y], self.targets[stop]]),
+                );
                 self.phase = Phase::Driving {
                     stop,
                     asked: Some(now),
@@ -333,7 +371,10 @@ impl StopAndScan {
         }
         self.views.push(self.view_pose);
         self.stats.views += 1;
-        self.phase = if stop + 1 < self.config.stops.len() {
+        if self.planning() && self.stats.views < self.config.planning.max_views {
+            self.plan();
+        }
+        self.phase = if stop + 1 < self.targets.len() {
             Phase::Driving {
                 stop: stop + 1,
                 asked: None,
@@ -341,6 +382,22 @@ impl StopAndScan {
         } else {
             Phase::Done
         };
+    }
+
+    /// Plans the next view from the last one on the 2D grid compressed from the kept
+    /// scans' voxel map; plans nothing when no view would measure enough that is new.
+    fn plan(&mut self) {
+        let p = &self.config.planning;
+        let Some(grid) = self.carved_kept.project(p.band[0], p.band[1]) else {
+            return;
+        };
+        let at = [self.view_pose.x, self.view_pose.y];
+        let visited: Vec<[f64; 2]> = self.views.iter().map(|v| [v.x, v.y]).collect();
+        if let Some(view) = next_view(&grid, at, &visited, p, &mut self.rng) {
+            self.targets.push(view.position);
+            self.route = Some(view.route.clone());
+            self.plans.push(view);
+        }
     }
 
     /// A scan of the horizontal laser, whose pose in the odometry frame is `laser` (the
@@ -516,7 +573,7 @@ mod tests {
     /// the heading turned by φ, 0.5 m up. Then it drives to the next view, turning back.
     #[test]
     fn a_view_is_driven_to_swept_and_placed() {
-        let mut m = StopAndScan::new(config(vec![[2.0, 1.0], [4.0, 1.0]]), mount());
+        let mut m = StopAndScan::new(config(vec![[2.0, 1.0], [4.0, 1.0]]), mount(), 1);
         let t = Time::from_secs;
         let start = Pose2::new(0.0, 0.0, 0.0);
         let r = m.control(t(0.0), start, None, 0.0);
@@ -580,7 +637,7 @@ mod tests {
     /// without the dropped ones.
     #[test]
     fn a_mover_pauses_the_sweep_and_its_scans_are_taken_again() {
-        let mut m = StopAndScan::new(config(vec![[0.0, 0.0]]), mount());
+        let mut m = StopAndScan::new(config(vec![[0.0, 0.0]]), mount(), 1);
         let t = Time::from_secs;
         let p = Pose2::IDENTITY;
         m.control(t(0.0), p, None, 0.0);
@@ -633,6 +690,7 @@ mod tests {
                 ..config(vec![[0.0, 0.0]])
             },
             mount(),
+            1,
         );
         let t = Time::from_secs;
         let p = Pose2::IDENTITY;

@@ -278,9 +278,12 @@ impl VoxelMap {
 
     /// Seed 004's 2D grid (§6): the voxels from `z_min` up to `z_max` compressed along the
     /// height axis into cells of the voxels' side. A cell is occupied (100) when any of its
-    /// voxels in the band is, free (0) when none is and one is free, and unknown (−1)
-    /// otherwise; chairs and desks at different heights become obstacles in one plane, as
-    /// the seed says. The grid spans the measured voxels; `None` when none lies in the band.
+    /// voxels in the band is, free (0) when none is and one is free or the floor just below
+    /// the band was measured there, and unknown (−1) otherwise; chairs and desks at different
+    /// heights become obstacles in one plane, as the seed says. Measured floor counts as
+    /// free because rays are not carved within `miss_margin` of their hits: the band over
+    /// floor near walls and near the robot is rarely carved, though the floor's points show
+    /// it open. The grid spans the measured voxels; `None` when none lies in the band.
     pub fn project(&self, z_min: f64, z_max: f64) -> Option<OccupancyGrid> {
         let v = self.config.voxel;
         let (k0, k1) = ((z_min / v).floor() as i64, (z_max / v).ceil() as i64 - 1);
@@ -290,8 +293,15 @@ impl VoxelMap {
             .filter(|(k, _)| k[2] >= k0 && k[2] <= k1)
             .map(|(k, c)| (k, c.log_odds))
             .collect();
+        // The floor: occupied voxels up to two below the band.
+        let floor: Vec<&Key> = self
+            .cells
+            .iter()
+            .filter(|(k, c)| k[2] < k0 && k[2] >= k0 - 2 && c.log_odds > 0.0)
+            .map(|(k, _)| k)
+            .collect();
         let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
-        for (k, _) in &band {
+        for k in band.iter().map(|(k, _)| *k).chain(floor.iter().copied()) {
             for d in 0..2 {
                 lo[d] = lo[d].min(k[d]);
                 hi[d] = hi[d].max(k[d]);
@@ -307,6 +317,12 @@ impl VoxelMap {
             if l > 0.0 {
                 grid.set(i, j, 100);
             } else if grid.get(i, j) < 0 {
+                grid.set(i, j, 0);
+            }
+        }
+        for k in floor {
+            let (i, j) = ((k[0] - lo[0]) as usize, (k[1] - lo[1]) as usize);
+            if grid.get(i, j) < 0 {
                 grid.set(i, j, 0);
             }
         }
@@ -579,5 +595,14 @@ mod tests {
         assert_eq!(at(-0.55, 0.05), 0, "seen empty");
         assert!(at(1.05, 1.05) <= 0, "the ceiling is above the band");
         assert!(m.project(5.0, 6.0).is_none());
+        // Floor measured where no ray carved the band (the beam's last 0.5 m is not
+        // carved): free.
+        m.insert_scan([0.05, 0.05, 0.45], &[([0.55, -0.45, 0.02], true)]);
+        let g = m.project(0.1, 1.0).unwrap();
+        let (i, j) = (
+            ((0.55 - g.origin[0]) / g.resolution).floor() as usize,
+            ((-0.45 - g.origin[1]) / g.resolution).floor() as usize,
+        );
+        assert_eq!(g.get(i, j), 0, "the floor seen there");
     }
 }

@@ -14,6 +14,7 @@
 pub mod coverage;
 pub mod exploration;
 pub mod planner;
+pub mod views;
 pub mod yielding;
 
 use crate::control::PoseSource;

@@ -335,6 +335,64 @@ pub fn grid_path(
     start: [f64; 2],
     is_goal: impl Fn(usize, usize) -> bool,
 ) -> Option<Vec<[f64; 2]>> {
+    let w = grid.width;
+    let search = dijkstra(grid, distance, clearance, start, is_goal)?;
+    let s = search.start;
+    let parent = search.parent;
+    let goal = search.goal?;
+    let mut cells = vec![goal];
+    let mut k = goal;
+    while k != s {
+        k = parent[k];
+        cells.push(k);
+    }
+    cells.reverse();
+    let mut points: Vec<[f64; 2]> = cells
+        .iter()
+        .map(|&k| grid.cell_center(k % w, k / w))
+        .collect();
+    points[0] = start;
+    // Thin: keep a point only where the straight line from the last kept one to the next
+    // would come closer to obstacles than the cells it replaces do.
+    let mut out = vec![points[0]];
+    let mut anchor = 0;
+    let mut least = f64::INFINITY;
+    for k in 1..points.len() {
+        if k + 1 < points.len() {
+            least = least.min(distance_at(grid, distance, points[k + 1]));
+        }
+        let keep = (clearance.max(least - grid.resolution))
+            .min(PREFERRED_CLEARANCE)
+            .min(distance_at(grid, distance, points[anchor]));
+        if k + 1 < points.len() && line_clear(grid, distance, points[anchor], points[k + 1], keep) {
+            continue;
+        }
+        least = f64::INFINITY;
+        out.push(points[k]);
+        anchor = k;
+    }
+    Some(out)
+}
+
+/// What [`dijkstra`] found: the cost of every cell it settled (path length in cells, each
+/// step weighted by the clearance penalty; infinite where it did not reach), each cell's parent,
+/// the start's cell and the goal cell it stopped at.
+struct Search {
+    cost: Vec<f64>,
+    parent: Vec<usize>,
+    start: usize,
+    goal: Option<usize>,
+}
+
+/// Dijkstra over the cells [`grid_path`] may pass, from `start` until it settles a cell for
+/// which `is_goal` holds (or everything it can reach); `None` when `start` is off the grid.
+fn dijkstra(
+    grid: &OccupancyGrid,
+    distance: &[f32],
+    clearance: f64,
+    start: [f64; 2],
+    is_goal: impl Fn(usize, usize) -> bool,
+) -> Option<Search> {
     let (w, h) = (grid.width, grid.height);
     let (si, sj) = grid.cell_of(start[0], start[1])?;
     let passable = |i: usize, j: usize| {
@@ -398,39 +456,26 @@ pub fn grid_path(
             }
         }
     }
-    let goal = found?;
-    let mut cells = vec![goal];
-    let mut k = goal;
-    while k != s {
-        k = parent[k];
-        cells.push(k);
-    }
-    cells.reverse();
-    let mut points: Vec<[f64; 2]> = cells
-        .iter()
-        .map(|&k| grid.cell_center(k % w, k / w))
-        .collect();
-    points[0] = start;
-    // Thin: keep a point only where the straight line from the last kept one to the next
-    // would come closer to obstacles than the cells it replaces do.
-    let mut out = vec![points[0]];
-    let mut anchor = 0;
-    let mut least = f64::INFINITY;
-    for k in 1..points.len() {
-        if k + 1 < points.len() {
-            least = least.min(distance_at(grid, distance, points[k + 1]));
-        }
-        let keep = (clearance.max(least - grid.resolution))
-            .min(PREFERRED_CLEARANCE)
-            .min(distance_at(grid, distance, points[anchor]));
-        if k + 1 < points.len() && line_clear(grid, distance, points[anchor], points[k + 1], keep) {
-            continue;
-        }
-        least = f64::INFINITY;
-        out.push(points[k]);
-        anchor = k;
-    }
-    Some(out)
+    Some(Search {
+        cost,
+        parent,
+        start: s,
+        goal: found,
+    })
+}
+
+/// The cost of the cheapest path from `start` to every cell of `grid` ([`grid_path`]'s
+/// rules and costs: metres, each step weighted up to `1 + CLEARANCE_PENALTY` times near
+/// obstacles), row-major; infinite where no path reaches. Empty when `start` is off the grid.
+pub fn travel_costs(
+    grid: &OccupancyGrid,
+    distance: &[f32],
+    clearance: f64,
+    start: [f64; 2],
+) -> Vec<f64> {
+    dijkstra(grid, distance, clearance, start, |_, _| false)
+        .map(|s| s.cost.into_iter().map(|c| c * grid.resolution).collect())
+        .unwrap_or_default()
 }
 
 /// Clearance below which [`grid_path`] charges extra for a cell, m, and how much at most

@@ -5,7 +5,7 @@ use super::World;
 use futago_msgs::grid::OccupancyGrid;
 use glam::Vec3;
 use rapier3d::math::Pose;
-use rapier3d::parry::query::intersection_test;
+use rapier3d::parry::query::{Ray, intersection_test};
 use rapier3d::parry::shape::Cuboid;
 
 /// The most cells a ground-truth grid may have (2²⁸: 256 MiB; 4 km × 4 km at 25 cm).
@@ -85,6 +85,32 @@ pub fn occupancy_grid(
         }
     }
     Ok(grid)
+}
+
+/// The distance from `origin` along `direction` (normalised here) to the first static
+/// collider, m, up to `max`; `None` when nothing lies within `max` or `direction` is zero.
+/// Dynamic bodies are left out: this measures the building (a corridor's width, a hall's
+/// length), as [`occupancy_grid`] draws it.
+pub fn cast_static(world: &World, origin: [f64; 3], direction: [f64; 3], max: f64) -> Option<f64> {
+    let d = Vec3::new(
+        direction[0] as f32,
+        direction[1] as f32,
+        direction[2] as f32,
+    );
+    if !(d.length().is_finite() && d.length() > 0.0) {
+        return None;
+    }
+    let ray = Ray::new(
+        Vec3::new(origin[0] as f32, origin[1] as f32, origin[2] as f32),
+        d.normalize(),
+    );
+    world
+        .objects
+        .iter()
+        .filter(|o| o.motion == super::Motion::Static)
+        .filter_map(|o| o.shape.as_ref()?.cast_ray(&o.pose, &ray, max as f32, true))
+        .min_by(f32::total_cmp)
+        .map(|t| t as f64)
 }
 
 /// The world's render meshes at their initial poses as a binary little-endian PLY with
