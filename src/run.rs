@@ -631,6 +631,16 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             metrics.0.extend(m.0);
         }
         sum["gates"] = serde_json::to_value(crate::ground_truth::evaluate(&s.spec.gate, &metrics))?;
+        // Gates against other scenarios' runs are the suite's to check.
+        let versus: Vec<&crate::ground_truth::Gate> = s
+            .spec
+            .gate
+            .iter()
+            .filter(|g| g.scenario.is_some())
+            .collect();
+        if !versus.is_empty() {
+            sum["suite_gates"] = serde_json::to_value(versus)?;
+        }
         sum["metrics"] = serde_json::to_value(metrics)?;
         let mut performance = outcome.performance.clone();
         performance["renderer"] = json!(outcome.renderer);

@@ -1239,8 +1239,24 @@ impl Scenario {
                     ),
                 ));
             }
+            if let Some(other) = &g.scenario {
+                let plain = !other.is_empty()
+                    && other
+                        .chars()
+                        .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.');
+                if !plain || g.than.is_some() {
+                    return Err(SpecError::new(
+                        path,
+                        format!("gate[{i}].scenario"),
+                        format!(
+                            "expected the file stem of another scenario of the suite (its run's `{}` is the threshold; no `than`), found {other:?}",
+                            g.metric
+                        ),
+                    ));
+                }
+            }
             match (&g.value, &g.than) {
-                (None, None) => {
+                (None, None) if g.scenario.is_none() => {
                     return Err(SpecError::new(
                         path,
                         format!("gate[{i}].value"),

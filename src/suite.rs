@@ -81,6 +81,8 @@ struct Entry {
     sweep: Option<(String, u64)>,
     /// The run's summary, or the error that stopped it.
     result: Result<Value, String>,
+    /// The scenario's gates against other scenarios' runs (`[[gate]] scenario = …`).
+    versus: Vec<crate::ground_truth::Gate>,
 }
 
 /// One run to do: a scenario, and the seed of a sweep.
@@ -209,6 +211,14 @@ pub fn suite(
             name,
             sweep: job.seed.map(|k| (job.stem.clone(), k)),
             result,
+            versus: job
+                .scenario
+                .spec
+                .gate
+                .iter()
+                .filter(|g| g.scenario.is_some())
+                .cloned()
+                .collect(),
         }
     });
     bar.finish_and_clear();
@@ -219,18 +229,45 @@ pub fn suite(
     Ok(summary)
 }
 
-fn gates(e: &Entry) -> Vec<Value> {
-    match &e.result {
-        Ok(s) => s["gates"].as_array().cloned().unwrap_or_default(),
-        Err(_) => Vec::new(),
+/// A run's gates, with its gates against other scenarios' runs of the suite: the run of
+/// that scenario (its file's stem) with the same seed.
+fn gates(e: &Entry, entries: &[Entry]) -> Vec<Value> {
+    let Ok(s) = &e.result else {
+        return Vec::new();
+    };
+    let mut out = s["gates"].as_array().cloned().unwrap_or_default();
+    let metrics = |e: &Entry| -> Option<crate::ground_truth::Metrics> {
+        let m = e.result.as_ref().ok()?["metrics"].as_object()?.clone();
+        Some(crate::ground_truth::Metrics(
+            m.into_iter()
+                .filter_map(|(k, v)| Some((k, v.as_f64()?)))
+                .collect(),
+        ))
+    };
+    let stem = |e: &Entry| {
+        e.file
+            .file_stem()
+            .map(|f| f.to_string_lossy().to_string())
+            .unwrap_or_default()
+    };
+    let seed = |e: &Entry| e.sweep.as_ref().map(|(_, k)| *k);
+    let own = metrics(e).unwrap_or_default();
+    for g in &e.versus {
+        let other = entries
+            .iter()
+            .find(|o| Some(stem(o)) == g.scenario && seed(o) == seed(e))
+            .and_then(metrics);
+        let r = crate::ground_truth::evaluate_versus(g, &own, other.as_ref());
+        out.push(serde_json::to_value(r).unwrap_or_default());
     }
+    out
 }
 
 fn summarise(entries: &[Entry], shard: Option<Shard>, jobs: usize, wall: f64) -> Value {
     let results: Vec<Value> = entries
         .iter()
         .map(|e| {
-            let g = gates(e);
+            let g = gates(e, entries);
             let failed = g.iter().filter(|r| r["passed"] == false).count();
             json!({
                 "scenario": e.name,
@@ -541,6 +578,52 @@ mod tests {
         }
     }
 
+    /// A gate against another scenario reads that scenario's run with the same seed, and
+    /// fails (without stopping the suite) when there is none.
+    #[test]
+    fn a_suite_gate_ranks_one_run_against_anothers_with_the_same_seed() {
+        let run = |file: &str, seed: u64, views: f64, versus: bool| Entry {
+            file: format!("{file}.toml").into(),
+            name: format!("{file}/seed-{seed}"),
+            sweep: Some((file.into(), seed)),
+            result: Ok(json!({ "gates": [], "metrics": { "scan3d.views_to_95": views } })),
+            versus: if versus {
+                vec![crate::ground_truth::Gate {
+                    metric: "scan3d.views_to_95".into(),
+                    op: crate::ground_truth::Comparison::Less,
+                    value: None,
+                    than: None,
+                    scenario: Some("frontier".into()),
+                }]
+            } else {
+                Vec::new()
+            },
+        };
+        let entries = vec![
+            run("seed", 1, 10.0, true),
+            run("seed", 2, 12.0, true),
+            run("seed", 3, 9.0, true),
+            run("frontier", 1, 15.0, false),
+            run("frontier", 2, 11.0, false),
+        ];
+        let s = summarise(&entries, None, 2, 1.0);
+        let status: Vec<&str> = s["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["status"].as_str().unwrap())
+            .collect();
+        assert_eq!(status, ["passed", "failed", "failed", "passed", "passed"]);
+        let g = &s["results"][0]["gates"][0];
+        assert_eq!(g["threshold"].as_f64(), Some(15.0));
+        assert!(
+            s["results"][2]["gates"][0]["message"]
+                .as_str()
+                .unwrap()
+                .contains("not produced")
+        );
+    }
+
     #[test]
     fn junit_counts_and_escapes() {
         let entries = vec![
@@ -557,12 +640,14 @@ mod tests {
                           "message": "ok" }
                     ]
                 })),
+                versus: Vec::new(),
             },
             Entry {
                 file: "b.toml".into(),
                 name: "b".into(),
                 sweep: None,
                 result: Err("GPU <lost> & gone".into()),
+                versus: Vec::new(),
             },
         ];
         let s = summarise(&entries, None, 2, 3.0);

@@ -237,7 +237,9 @@ impl Comparison {
 
 /// `[[gate]]`: the run passes only if `metric op value` holds, or with `than`, `metric op
 /// than + value` (value 0 unless given): a gate that ranks one metric against another of the
-/// same run, e.g. one method's map against another's.
+/// same run, e.g. one method's map against another's. With `scenario`, `metric op (the same
+/// metric of that scenario's run) + value`: a gate of a suite, which ranks this scenario
+/// against a baseline's run with the same seed (a run alone does not check it).
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Gate {
@@ -247,6 +249,9 @@ pub struct Gate {
     pub value: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub than: Option<String>,
+    /// The scenario (its file's stem, in the same suite) whose run this one is ranked against.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenario: Option<String>,
 }
 
 /// A gate's outcome.
@@ -262,10 +267,12 @@ pub struct GateResult {
     pub message: String,
 }
 
-/// Checks `gates` against a run's metrics.
+/// Checks `gates` against a run's metrics (the gates of a suite, with `scenario`, left out:
+/// [`evaluate_versus`]).
 pub fn evaluate(gates: &[Gate], metrics: &Metrics) -> Vec<GateResult> {
     gates
         .iter()
+        .filter(|g| g.scenario.is_none())
         .map(|g| {
             let value = metrics.0.get(&g.metric).copied();
             let offset = g.value.unwrap_or(0.0);
@@ -314,9 +321,60 @@ pub fn evaluate(gates: &[Gate], metrics: &Metrics) -> Vec<GateResult> {
         .collect()
 }
 
+/// Checks a suite's gate (`scenario` set) against this run's metrics and those of the
+/// scenario's run (`None`: it did not run, or failed): `metric op other's metric + value`.
+pub fn evaluate_versus(g: &Gate, own: &Metrics, other: Option<&Metrics>) -> GateResult {
+    let name = format!("{}:{}", g.scenario.as_deref().unwrap_or_default(), g.metric);
+    let mut m = own.clone();
+    if let Some(v) = other.and_then(|o| o.0.get(&g.metric)) {
+        m.insert(name.clone(), *v);
+    }
+    let gate = Gate {
+        than: Some(name),
+        scenario: None,
+        ..g.clone()
+    };
+    let mut r = evaluate(&[gate], &m);
+    r.remove(0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A suite's gate ranks a metric against the same metric of another scenario's run,
+    /// fails when that run produced none, and is left out of a run's own gates.
+    #[test]
+    fn a_suite_gate_ranks_against_another_run() {
+        let mut own = Metrics::default();
+        own.insert("scan3d.views_to_95", 10.0);
+        let mut other = Metrics::default();
+        other.insert("scan3d.views_to_95", 15.0);
+        let g = Gate {
+            metric: "scan3d.views_to_95".into(),
+            op: Comparison::Less,
+            value: None,
+            than: None,
+            scenario: Some("hall-frontier".into()),
+        };
+        let r = evaluate_versus(&g, &own, Some(&other));
+        assert!(r.passed, "{}", r.message);
+        assert_eq!(r.threshold, 15.0);
+        assert!(
+            r.message.contains("hall-frontier:scan3d.views_to_95"),
+            "{}",
+            r.message
+        );
+        let worse = Gate {
+            value: Some(-6.0),
+            ..g.clone()
+        };
+        assert!(!evaluate_versus(&worse, &own, Some(&other)).passed);
+        let r = evaluate_versus(&g, &own, None);
+        assert!(!r.passed);
+        assert!(r.message.contains("not produced"), "{}", r.message);
+        assert!(evaluate(&[g], &own).is_empty());
+    }
 
     #[test]
     fn gates_pass_fail_and_say_by_how_much() {
@@ -329,30 +387,35 @@ mod tests {
                 op: Comparison::Less,
                 value: Some(0.05),
                 than: None,
+                scenario: None,
             },
             Gate {
                 metric: "slam.map.f1_2cell".into(),
                 op: Comparison::GreaterOrEqual,
                 value: Some(0.9),
                 than: None,
+                scenario: None,
             },
             Gate {
                 metric: "localization.ate.max_m".into(),
                 op: Comparison::Less,
                 value: Some(1.0),
                 than: None,
+                scenario: None,
             },
             Gate {
                 metric: "slam.ate.rmse_m".into(),
                 op: Comparison::Less,
                 value: None,
                 than: Some("odometry.ate.rmse_m".into()),
+                scenario: None,
             },
             Gate {
                 metric: "slam.ate.rmse_m".into(),
                 op: Comparison::Less,
                 value: Some(-0.05),
                 than: Some("odometry.ate.rmse_m".into()),
+                scenario: None,
             },
         ];
         m.insert("odometry.ate.rmse_m", 0.1);

@@ -72,9 +72,10 @@ const INTERIOR_REACH: f64 = 0.3;
 const LENGTH_RADIUS: f64 = 0.05;
 /// ... whose projections gather within this, m (the LMS200's ±4 cm) ...
 const LENGTH_WINDOW: f64 = 0.08;
-/// ... at least this many (a view's scans 0.8° apart, 0.5° beams, put about 10 points in
-/// the line's disc on a wall 2.5 m away).
-const LENGTH_MIN_POINTS: usize = 5;
+/// ... at least this many: a view's scans 0.8° apart with 0.5° beams put about 10 points in
+/// the line's disc on a wall 2.5 m away, but 2 at the 6 m range; three asks for a near view
+/// or two far ones, and more than the odd stray point.
+const LENGTH_MIN_POINTS: usize = 3;
 /// Joint readings kept for interpolating the table's angle.
 const JOINT_HISTORY: usize = 64;
 
