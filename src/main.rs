@@ -233,6 +233,16 @@ enum BenchCommand {
         #[arg(long, default_value_t = 2_000_000)]
         rays: usize,
     },
+    /// Seed 004's 3D scan by parts: a full turn of the turntable simulated, its scans placed,
+    /// the voxel maps updated, free-space carving, the next view planned.
+    Scan3d {
+        /// Scenario with a `[scan3d]`; the sweep is taken at its start.
+        #[arg(default_value = "scenarios/hall-scan3d.toml")]
+        scenario: PathBuf,
+        /// Sweeps, each with the next seed; the median time is reported.
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+    },
     /// Planning time of both coverage planners (and the second pass) on a scenario's map,
     /// region and annotations.
     Coverage {
@@ -842,6 +852,13 @@ fn real_main() -> Result<()> {
         } => {
             let s = scenario::Scenario::load(&scenario)?;
             let r = bench::bench(&s, duration, rays.max(682))?;
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+        Command::Bench {
+            command: BenchCommand::Scan3d { scenario, repeats },
+        } => {
+            let s = scenario::Scenario::load(&scenario)?;
+            let r = stack::scan3d::bench(&s, repeats)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
         Command::Bench {

@@ -91,33 +91,8 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
             .map(|(c, _)| c)
             .with_context(|| format!("scan3d: no laser is named `{n}`"))
     };
-    let vertical = laser(&m.laser)?;
     let horizontal = laser(&m.horizontal)?;
-    let joint = s
-        .movers
-        .joints
-        .iter()
-        .find(|j| j.name == m.joint)
-        .with_context(|| format!("scan3d: no joint is named `{}`", m.joint))?;
-    let mount = vertical.mount();
-    let mount = TableMount {
-        axis: DVec3::from_array(joint.axis),
-        origin: DVec3::from_array(joint.origin),
-        laser: DAffine3::from_rotation_translation(
-            DQuat::from_xyzw(
-                mount.rotation.x as f64,
-                mount.rotation.y as f64,
-                mount.rotation.z as f64,
-                mount.rotation.w as f64,
-            )
-            .normalize(),
-            DVec3::new(
-                mount.translation.x as f64,
-                mount.translation.y as f64,
-                mount.translation.z as f64,
-            ),
-        ),
-    };
+    let mount = node_mount(s, m)?;
     Ok(Some(Scan3dNode {
         icp: (m.pose_source == Scan3dPose::LineIcp)
             .then(|| LineIcp::new(m.config.line_icp, s.start, s.start)),
@@ -155,6 +130,41 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
             && s.movers.people.is_empty()
             && s.movers.flows.is_empty()),
     }))
+}
+
+/// The turntable's geometry: the joint's axis and origin, the vertical laser's mount.
+fn node_mount(s: &Scenario, m: &crate::scenario::Scan3dSpec) -> Result<TableMount> {
+    let vertical = s
+        .lidars
+        .iter()
+        .find(|(c, _)| c.name == m.laser)
+        .map(|(c, _)| c)
+        .with_context(|| format!("scan3d: no laser is named `{}`", m.laser))?;
+    let joint = s
+        .movers
+        .joints
+        .iter()
+        .find(|j| j.name == m.joint)
+        .with_context(|| format!("scan3d: no joint is named `{}`", m.joint))?;
+    let mount = vertical.mount();
+    Ok(TableMount {
+        axis: DVec3::from_array(joint.axis),
+        origin: DVec3::from_array(joint.origin),
+        laser: DAffine3::from_rotation_translation(
+            DQuat::from_xyzw(
+                mount.rotation.x as f64,
+                mount.rotation.y as f64,
+                mount.rotation.z as f64,
+                mount.rotation.w as f64,
+            )
+            .normalize(),
+            DVec3::new(
+                mount.translation.x as f64,
+                mount.translation.y as f64,
+                mount.translation.z as f64,
+            ),
+        ),
+    })
 }
 
 /// A placed scan's points (map frame) with the index of the beam that measured each.
@@ -590,6 +600,138 @@ impl Node for Scan3dNode {
         }
         Ok(m)
     }
+}
+
+/// Seed 004's 3D scan, timed by parts (`futago bench scan3d`): one full sweep of the
+/// scenario's turntable at its start, simulated (physics, both lasers, the people) with the
+/// robot standing; the sweep's scans placed; both voxel maps updated (the map update);
+/// free-space carving of the sweep's points (the removal); and the next view planned on the
+/// compressed grid. Wall seconds of each part, the median of `repeats`.
+pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
+    use futago_robot::mapping::turntable::Phase;
+    use std::time::Instant;
+    let m = s
+        .scan3d
+        .as_ref()
+        .context("the scenario has no [scan3d] to time")?;
+    let vertical = s
+        .lidars
+        .iter()
+        .position(|(c, _)| c.name == m.laser)
+        .context("scan3d.laser")?;
+    let joint = s
+        .movers
+        .joints
+        .iter()
+        .find(|j| j.name == m.joint)
+        .context("scan3d: the table's joint")?;
+    let median = |mut t: Vec<f64>| {
+        t.sort_by(f64::total_cmp);
+        t[t.len() / 2]
+    };
+    let (mut sim_s, mut place_s, mut update_s, mut removal_s, mut plan_s) =
+        (vec![], vec![], vec![], vec![], vec![]);
+    let (mut scans, mut points) = (0, 0);
+    for k in 0..repeats.max(1) {
+        let seed = s.spec.seed + k as u64;
+        let mut node = node(s, seed)?.context("scan3d")?;
+        // One view where the robot stands: no stops to drive to.
+        let mut config = m.config.clone();
+        config.stops = vec![[s.start.x, s.start.y]];
+        node.mapper = StopAndScan::new(config.clone(), node_mount(s, m)?, seed);
+        let mut sim = futago_sim::Simulation::new(
+            &s.world,
+            &s.spec.physics,
+            &s.spec.robot,
+            &s.lidars,
+            &s.movers,
+            s.start,
+            seed,
+        );
+        let t = Time::from_secs;
+        let pose = s.start;
+        // Asked for the route, driven it (standing there), settled: the sweep begins.
+        node.mapper.control(t(0.0), pose, None, 0.0);
+        node.mapper.control(t(0.1), pose, Some(t(0.1)), 0.0);
+        let r = node
+            .mapper
+            .control(t(0.1 + config.settle), pose, Some(t(0.1)), 0.0);
+        let to = r.table.context("the sweep did not begin")?;
+        sim.command_joint(&m.joint, to)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let angle = |sim: &futago_sim::Simulation| {
+            sim.joints()
+                .iter()
+                .find(|j| j.config.name == joint.name)
+                .map_or(0.0, |j| j.angle())
+        };
+        // Simulate the sweep, keeping the vertical scans with the table's angle.
+        let t0 = Instant::now();
+        let mut taken = Vec::new();
+        let limit = (config.sweep_deg / joint.rate_deg).abs() * 2.0 + 1.0;
+        let mut now = 0.0;
+        while (angle(&sim) - to).abs() > 1e-6 && now < limit {
+            let out = sim.step(None);
+            now += 1.0 / s.spec.physics.rate;
+            for (i, scan) in out.scans {
+                if i == vertical {
+                    taken.push((scan, angle(&sim)));
+                }
+            }
+        }
+        sim_s.push(t0.elapsed().as_secs_f64());
+        // Place them.
+        let t0 = Instant::now();
+        for (scan, a) in &taken {
+            node.mapper.on_vertical(scan, *a);
+        }
+        place_s.push(t0.elapsed().as_secs_f64());
+        // Complete the sweep: both voxel maps take its scans.
+        let t0 = Instant::now();
+        node.mapper.control(t(now), pose, None, to);
+        update_s.push(t0.elapsed().as_secs_f64());
+        if node.mapper.phase() != Phase::Done {
+            anyhow::bail!("the sweep did not complete in {limit} s");
+        }
+        let kept: Vec<[f64; 3]> = node
+            .mapper
+            .kept()
+            .iter()
+            .flat_map(|s| s.points.iter().map(|(p, _)| *p))
+            .collect();
+        let (carved_kept, _) = node.mapper.voxel_maps();
+        let t0 = Instant::now();
+        let carved = carved_kept.keep_static(&kept);
+        removal_s.push(t0.elapsed().as_secs_f64());
+        let t0 = Instant::now();
+        let band = config.planning.band;
+        let grid = carved_kept.project(band[0], band[1]);
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed);
+        let view = grid.as_ref().and_then(|g| {
+            futago_robot::navigation::views::next_view(
+                g,
+                [pose.x, pose.y],
+                &[[pose.x, pose.y]],
+                &config.planning,
+                &mut rng,
+            )
+        });
+        plan_s.push(t0.elapsed().as_secs_f64());
+        scans = taken.len();
+        points = kept.len();
+        let _ = (carved, view);
+    }
+    Ok(json!({
+        "scenario": s.spec.name,
+        "repeats": repeats.max(1),
+        "scans_per_sweep": scans,
+        "points_per_sweep": points,
+        "simulation_s": median(sim_s),
+        "placing_s": median(place_s),
+        "map_update_s": median(update_s),
+        "removal_s": median(removal_s),
+        "view_planning_s": median(plan_s),
+    }))
 }
 
 /// A removal's scores against the labels (shares in 0 … 1; a share of nothing is 1).
