@@ -433,6 +433,8 @@ pub struct Scan3dSpec {
     pub config: TurntableConfig,
     /// Lengths to measure in the map against the world (`[[scan3d.length]]`; scoring).
     pub lengths: Vec<MapLength>,
+    /// View planning, when no `stops` are given (`scan3d.planning.*`).
+    pub planning: futago_robot::navigation::views::ViewPlanningConfig,
 }
 
 /// A length of the building to measure in the 3D map, like seed 004's L1 and L2: from a
@@ -542,6 +544,21 @@ pub fn scan3d_config(path: &Path, table: &toml::Table) -> Result<Scan3dSpec, Spe
             ));
         }
     }
+    let planning = match rest.remove("planning") {
+        None => Default::default(),
+        Some(v) => {
+            let mut t = toml::Table::new();
+            t.insert("planning".into(), v);
+            #[derive(Deserialize)]
+            struct Planning {
+                planning: futago_robot::navigation::views::ViewPlanningConfig,
+            }
+            typed_table::<Planning>(path, "scan3d", t)?.planning
+        }
+    };
+    planning
+        .validate("scan3d.planning")
+        .map_err(|(k, m)| SpecError::new(path, k, m))?;
     let config: TurntableConfig = typed_table(path, "scan3d", rest)?;
     config
         .validate("scan3d")
@@ -553,6 +570,7 @@ pub fn scan3d_config(path: &Path, table: &toml::Table) -> Result<Scan3dSpec, Spe
         pose_source,
         config,
         lengths,
+        planning,
     })
 }
 
@@ -834,6 +852,14 @@ impl Scenario {
             );
             if let Ok(v) = toml::Value::try_from(r.pose_source) {
                 m.insert("pose_source".into(), v);
+            }
+            if let Ok(v) = toml::Value::try_from(&r.planning) {
+                m.insert("planning".into(), v);
+            }
+            if !r.lengths.is_empty()
+                && let Ok(v) = toml::Value::try_from(&r.lengths)
+            {
+                m.insert("length".into(), v);
             }
             t.insert("scan3d".into(), toml::Value::Table(m));
         }

@@ -30,10 +30,12 @@ use crate::scenario::{Scan3dPose, Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Odometry, Pose2, Time};
 use futago_robot::mapping::line_icp::LineIcp;
-use futago_robot::mapping::turntable::{StopAndScan, TableMount};
+use futago_robot::mapping::turntable::{Phase, StopAndScan, TableMount};
 use futago_robot::mapping::voxels::VoxelMap;
+use futago_robot::navigation::views::{View, ViewPlanningConfig, next_view};
 use futago_sim::lidar::BeamHit;
 use glam::{DAffine3, DQuat, DVec3};
+use rand_chacha::ChaCha8Rng;
 use rustc_hash::{FxHashMap, FxHashSet};
 use serde_json::json;
 use std::collections::VecDeque;
@@ -96,8 +98,11 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
     Ok(Some(Scan3dNode {
         icp: (m.pose_source == Scan3dPose::LineIcp)
             .then(|| LineIcp::new(m.config.line_icp, s.start, s.start)),
-        mapper: StopAndScan::new(m.config.clone(), mount, seed),
-        completeness: surfaces_to_map(s, &m.config.planning.region)?,
+        mapper: StopAndScan::new(m.config.clone(), mount),
+        planning: m.planning.clone(),
+        plans: Vec::new(),
+        rng: <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed),
+        completeness: surfaces_to_map(s, &m.planning.region)?,
         lengths: m
             .lengths
             .iter()
@@ -113,7 +118,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
         last_truth: None,
         views_scored: 0,
         coverage_from: 0,
-        band: m.config.planning.band,
+        band: m.planning.band,
         vertical: m.laser.clone(),
         horizontal: m.horizontal.clone(),
         horizontal_mount: horizontal.planar_mount(),
@@ -215,6 +220,11 @@ pub struct Scan3dNode {
     coverage_from: usize,
     /// The height band the 2D grid is compressed from, m.
     band: [f64; 2],
+    /// View planning, when the views are not given; the views planned; the random
+    /// planner's draws.
+    planning: ViewPlanningConfig,
+    plans: Vec<View>,
+    rng: ChaCha8Rng,
 }
 
 /// The true surfaces of the area to map: the world's floor, walls and furniture faces near
@@ -296,6 +306,31 @@ impl Scan3dNode {
 }
 
 impl Scan3dNode {
+    /// Plans the next view from the last one on the 2D grid compressed from the kept scans'
+    /// voxel map, and hands it to the mapper; ends the survey at `max_views`, or when no view
+    /// would measure enough that is new.
+    fn plan_view(&mut self) {
+        let views = self.mapper.views();
+        let view = (views.len() < self.planning.max_views)
+            .then(|| {
+                let (carved_kept, _) = self.mapper.voxel_maps();
+                let grid = carved_kept.project(self.band[0], self.band[1])?;
+                let last = views.last()?;
+                let visited: Vec<[f64; 2]> = views.iter().map(|v| [v.x, v.y]).collect();
+                next_view(
+                    &grid,
+                    [last.x, last.y],
+                    &visited,
+                    &self.planning,
+                    &mut self.rng,
+                )
+            })
+            .flatten();
+        self.mapper
+            .plan_view(view.as_ref().map(|v| (v.position, v.route.clone())));
+        self.plans.extend(view);
+    }
+
     /// Adds the static points of the views completed since the last call to the coverage,
     /// and reads the curve.
     fn score_views(&mut self) {
@@ -433,14 +468,17 @@ impl Node for Scan3dNode {
         let pose = self.pose(bus);
         let table = self.table_now(bus);
         let was_sweeping = self.sweep_started.is_some();
-        let r = self.mapper.control(bus.now, pose, bus.route_done, table);
+        let mut r = self.mapper.control(bus.now, pose, bus.route_done, table);
+        if matches!(self.mapper.phase(), Phase::Planning { .. }) {
+            self.plan_view();
+            r = self.mapper.control(bus.now, pose, bus.route_done, table);
+        }
         if let Some(route) = r.route {
             bus.publish_path("scan3d", route);
         }
         if let Some(a) = r.table {
             bus.joint_commands.push((self.joint.clone(), a));
         }
-        use futago_robot::mapping::turntable::Phase;
         let sweeping = matches!(
             self.mapper.phase(),
             Phase::Sweeping { .. } | Phase::Paused { .. }
@@ -491,7 +529,7 @@ impl Node for Scan3dNode {
             "voxels_known": carved_kept.len(),
             "view_poses": self.mapper.views().iter().map(|p| [p.x, p.y, p.theta]).collect::<Vec<_>>(),
             "view_errors": self.view_errors.iter().map(|(p, h)| json!({ "position_m": p, "heading_deg": h })).collect::<Vec<_>>(),
-            "planned_views": self.mapper.plans().iter().map(|v| json!({
+            "planned_views": self.plans.iter().map(|v| json!({
                 "position": v.position,
                 "new_cells": v.new_cells,
                 "v1": v.terms[0], "v2": v.terms[1], "v3": v.terms[2],
@@ -638,7 +676,7 @@ pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
         // One view where the robot stands: no stops to drive to.
         let mut config = m.config.clone();
         config.stops = vec![[s.start.x, s.start.y]];
-        node.mapper = StopAndScan::new(config.clone(), node_mount(s, m)?, seed);
+        node.mapper = StopAndScan::new(config.clone(), node_mount(s, m)?);
         let mut sim = futago_sim::Simulation::new(
             &s.world,
             &s.spec.physics,
@@ -704,7 +742,7 @@ pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
         let carved = carved_kept.keep_static(&kept);
         removal_s.push(t0.elapsed().as_secs_f64());
         let t0 = Instant::now();
-        let band = config.planning.band;
+        let band = m.planning.band;
         let grid = carved_kept.project(band[0], band[1]);
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed);
         let view = grid.as_ref().and_then(|g| {
@@ -712,7 +750,7 @@ pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
                 g,
                 [pose.x, pose.y],
                 &[[pose.x, pose.y]],
-                &config.planning,
+                &m.planning,
                 &mut rng,
             )
         });

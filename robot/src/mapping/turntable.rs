@@ -18,23 +18,18 @@
 use crate::config::ConfigError;
 use crate::mapping::line_icp::LineIcpConfig;
 use crate::mapping::voxels::{VoxelConfig, VoxelMap};
-use crate::navigation::views::{View, ViewPlanningConfig, next_view};
 use crate::perception::motion::{MotionConfig, TemporalDifference};
 use futago_msgs::{LaserScan, Pose2, Time};
 use glam::{DAffine3, DQuat, DVec3};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the stop-and-scan mapper (`scan3d.*`).
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TurntableConfig {
-    /// The views, in order (map frame, m). Empty: the robot scans where it starts, then
-    /// plans each next view on the map so far (`planning`), as the seed did.
+    /// The views, in order (map frame, m). Empty: the robot scans where it starts, and a
+    /// planner hands it each next view ([`StopAndScan::plan_view`]), as the seed did.
     pub stops: Vec<[f64; 2]>,
-    /// View planning, when no `stops` are given.
-    pub planning: ViewPlanningConfig,
     /// The table's turn per view, degrees (360: the seed's full surround).
     pub sweep_deg: f64,
     /// Standing time at a view before the sweep, s (the base settles, the detector fills its
@@ -63,7 +58,6 @@ impl Default for TurntableConfig {
     fn default() -> Self {
         TurntableConfig {
             stops: Vec::new(),
-            planning: ViewPlanningConfig::default(),
             sweep_deg: 360.0,
             settle: 1.0,
             pause_for_movers: true,
@@ -100,8 +94,6 @@ impl TurntableConfig {
         }
         self.motion
             .validate(&crate::config::below(prefix, "motion"))?;
-        self.planning
-            .validate(&crate::config::below(prefix, "planning"))?;
         self.line_icp
             .validate(&crate::config::below(prefix, "line_icp"))?;
         self.voxels
@@ -157,6 +149,8 @@ pub enum Phase {
         since: Time,
         moved: Time,
     },
+    /// Waiting for the next view `stop` to be planned ([`StopAndScan::plan_view`]).
+    Planning { stop: usize },
     /// Every view scanned.
     Done,
 }
@@ -210,16 +204,11 @@ pub struct StopAndScan {
     targets: Vec<[f64; 2]>,
     /// The planned route to the next view, until it is asked for.
     route: Option<Vec<[f64; 2]>>,
-    /// Each planned view, as the planner chose it.
-    plans: Vec<View>,
-    /// Draws the `random` view planner's choices.
-    rng: ChaCha8Rng,
 }
 
 impl StopAndScan {
-    /// The mapper with its views given (`config.stops`) or planned; `seed` seeds the random
-    /// view planner.
-    pub fn new(config: TurntableConfig, mount: TableMount, seed: u64) -> StopAndScan {
+    /// The mapper with its views given (`config.stops`) or, with none, planned.
+    pub fn new(config: TurntableConfig, mount: TableMount) -> StopAndScan {
         let phase = Phase::Driving {
             stop: 0,
             asked: None,
@@ -227,8 +216,6 @@ impl StopAndScan {
         StopAndScan {
             targets: config.stops.clone(),
             route: None,
-            plans: Vec::new(),
-            rng: ChaCha8Rng::seed_from_u64(seed),
             detector: TemporalDifference::new(config.motion),
             carved_kept: VoxelMap::new(config.voxels),
             carved_all: VoxelMap::new(config.voxels),
@@ -268,11 +255,6 @@ impl StopAndScan {
     /// The views' poses, as their scans were placed.
     pub fn views(&self) -> &[Pose2] {
         &self.views
-    }
-
-    /// The planned views, as the planner chose them (none when the views were given).
-    pub fn plans(&self) -> &[View] {
-        &self.plans
     }
 
     /// Whether the views are planned rather than given.
@@ -356,7 +338,7 @@ impl StopAndScan {
                     out.table = Some(back);
                 }
             }
-            Phase::Done => {}
+            Phase::Planning { .. } | Phase::Done => {}
         }
         out
     }
@@ -371,33 +353,32 @@ impl StopAndScan {
         }
         self.views.push(self.view_pose);
         self.stats.views += 1;
-        if self.planning() && self.stats.views < self.config.planning.max_views {
-            self.plan();
-        }
         self.phase = if stop + 1 < self.targets.len() {
             Phase::Driving {
                 stop: stop + 1,
                 asked: None,
             }
+        } else if self.planning() {
+            Phase::Planning { stop: stop + 1 }
         } else {
             Phase::Done
         };
     }
 
-    /// Plans the next view from the last one on the 2D grid compressed from the kept
-    /// scans' voxel map; plans nothing when no view would measure enough that is new.
-    fn plan(&mut self) {
-        let p = &self.config.planning;
-        let Some(grid) = self.carved_kept.project(p.band[0], p.band[1]) else {
+    /// The next view for a mapper that plans its views (in [`Phase::Planning`]): where to
+    /// stand and the route there, or `None` to end the survey. Ignored in other phases.
+    pub fn plan_view(&mut self, view: Option<([f64; 2], Vec<[f64; 2]>)>) {
+        let Phase::Planning { stop } = self.phase else {
             return;
         };
-        let at = [self.view_pose.x, self.view_pose.y];
-        let visited: Vec<[f64; 2]> = self.views.iter().map(|v| [v.x, v.y]).collect();
-        if let Some(view) = next_view(&grid, at, &visited, p, &mut self.rng) {
-            self.targets.push(view.position);
-            self.route = Some(view.route.clone());
-            self.plans.push(view);
-        }
+        self.phase = match view {
+            Some((at, route)) => {
+                self.targets.push(at);
+                self.route = Some(route);
+                Phase::Driving { stop, asked: None }
+            }
+            None => Phase::Done,
+        };
     }
 
     /// A scan of the horizontal laser, whose pose in the odometry frame is `laser` (the
@@ -573,7 +554,7 @@ mod tests {
     /// the heading turned by φ, 0.5 m up. Then it drives to the next view, turning back.
     #[test]
     fn a_view_is_driven_to_swept_and_placed() {
-        let mut m = StopAndScan::new(config(vec![[2.0, 1.0], [4.0, 1.0]]), mount(), 1);
+        let mut m = StopAndScan::new(config(vec![[2.0, 1.0], [4.0, 1.0]]), mount());
         let t = Time::from_secs;
         let start = Pose2::new(0.0, 0.0, 0.0);
         let r = m.control(t(0.0), start, None, 0.0);
@@ -637,7 +618,7 @@ mod tests {
     /// without the dropped ones.
     #[test]
     fn a_mover_pauses_the_sweep_and_its_scans_are_taken_again() {
-        let mut m = StopAndScan::new(config(vec![[0.0, 0.0]]), mount(), 1);
+        let mut m = StopAndScan::new(config(vec![[0.0, 0.0]]), mount());
         let t = Time::from_secs;
         let p = Pose2::IDENTITY;
         m.control(t(0.0), p, None, 0.0);
@@ -681,6 +662,35 @@ mod tests {
         assert_eq!(m.stats().timeouts, 0);
     }
 
+    /// With no views given, the mapper scans where it stands, then waits for a planner: a
+    /// planned view is driven to by the route given; no view ends the survey.
+    #[test]
+    fn a_planned_survey_scans_where_it_starts_and_waits_for_each_view() {
+        let mut m = StopAndScan::new(config(Vec::new()), mount());
+        let t = Time::from_secs;
+        let p = Pose2::new(1.0, 2.0, 0.0);
+        assert_eq!(m.control(t(0.0), p, None, 0.0).route, None);
+        assert!(matches!(m.phase(), Phase::Settling { stop: 0, .. }));
+        let to = m.control(t(1.0), p, None, 0.0).table.unwrap();
+        m.on_vertical(&scan(1.1, 2.0), 0.5);
+        m.control(t(13.0), p, None, to);
+        assert_eq!(m.phase(), Phase::Planning { stop: 1 });
+        assert_eq!(m.stats().views, 1);
+        assert_eq!(m.views(), &[p]);
+        // Nothing is asked for while the planner has not answered.
+        assert_eq!(m.control(t(13.5), p, None, to), Requests::default());
+        let route = vec![[1.0, 2.0], [3.0, 2.0], [3.0, 4.0]];
+        m.plan_view(Some(([3.0, 4.0], route.clone())));
+        assert_eq!(m.control(t(14.0), p, None, to).route, Some(route));
+        m.control(t(40.0), p, Some(t(39.0)), to);
+        let back = m.control(t(41.0), p, None, to).table.unwrap();
+        m.control(t(54.0), p, None, back);
+        assert_eq!(m.phase(), Phase::Planning { stop: 2 });
+        m.plan_view(None);
+        assert!(m.finished());
+        assert_eq!(m.stats().views, 2);
+    }
+
     /// A pause that never clears runs out after `max_wait`, and is counted.
     #[test]
     fn a_pause_that_never_clears_runs_out() {
@@ -690,7 +700,6 @@ mod tests {
                 ..config(vec![[0.0, 0.0]])
             },
             mount(),
-            1,
         );
         let t = Time::from_secs;
         let p = Pose2::IDENTITY;
