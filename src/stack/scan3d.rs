@@ -21,6 +21,13 @@
 //! rate RR (dynamic voxels left with no dynamic point) and their F1. SA is also given for the
 //! floor (points no higher than 0.1 m) and for the rest, so that removal that eats the floor
 //! shows.
+//!
+//! With no views given, the node plans each next view (`scan3d.planning`,
+//! [`futago_robot::navigation::views`]) on the grid compressed from the mapper's voxel map
+//! and hands it over. The map is also scored against the world's geometry: the share of the
+//! true surfaces it holds after each view, with the distance driven
+//! ([`crate::ground_truth::completeness`]), and lengths measured in it against the same
+//! lengths cast in the world's colliders (`[[scan3d.length]]`, the seed's L1 and L2).
 
 use super::{Bus, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
