@@ -359,12 +359,8 @@ impl Scan3dNode {
             .push((views, self.travel, self.completeness.share()));
     }
 
-    /// Each length's name, truth and measure in the carved map (m; `None` where there is no
-    /// surface).
-    fn measured_lengths(&self) -> Vec<(String, Option<f64>, Option<f64>)> {
-        if self.lengths.is_empty() {
-            return Vec::new();
-        }
+    /// The kept scans' points, and those of them carving keeps (the map as written).
+    fn maps(&self) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
         let (carved_kept, _) = self.mapper.voxel_maps();
         let kept: Vec<[f64; 3]> = self
             .mapper
@@ -372,12 +368,18 @@ impl Scan3dNode {
             .iter()
             .flat_map(|s| s.points.iter().map(|(p, _)| *p))
             .collect();
-        let map = carved_kept.keep_static(&kept);
+        let carved = carved_kept.keep_static(&kept);
+        (kept, carved)
+    }
+
+    /// Each length's name, truth and measure in the carved map `carved` (m; `None` where
+    /// there is no surface).
+    fn measured_lengths(&self, carved: &[[f64; 3]]) -> Vec<(String, Option<f64>, Option<f64>)> {
         self.lengths
             .iter()
             .map(|(l, truth)| {
                 let measured = length_along(
-                    &map,
+                    carved,
                     l.from,
                     l.direction,
                     LENGTH_RADIUS,
@@ -515,13 +517,7 @@ impl Node for Scan3dNode {
 
     fn finish(&mut self, _bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
         let (carved_kept, _) = self.mapper.voxel_maps();
-        let kept: Vec<[f64; 3]> = self
-            .mapper
-            .kept()
-            .iter()
-            .flat_map(|s| s.points.iter().map(|(p, _)| *p))
-            .collect();
-        let carved = carved_kept.keep_static(&kept);
+        let (kept, carved) = self.maps();
         let grid = carved_kept.project(self.band[0], self.band[1]);
         let stats = self.mapper.stats();
         let summary = json!({
@@ -547,7 +543,7 @@ impl Node for Scan3dNode {
             "coverage_curve": self.curve.iter().map(|(v, t, c)| json!({ "views": v, "travel_m": t, "coverage": c })).collect::<Vec<_>>(),
             "views_to_95": self.to_mark().map(|m| m.0),
             "travel_to_95_m": self.to_mark().map(|m| m.1),
-            "lengths": self.measured_lengths().into_iter().map(|(n, t, m)| json!({ "name": n, "truth_m": t, "measured_m": m })).collect::<Vec<_>>(),
+            "lengths": self.measured_lengths(&carved).into_iter().map(|(n, t, m)| json!({ "name": n, "truth_m": t, "measured_m": m })).collect::<Vec<_>>(),
         });
         let mut files = Vec::new();
         if let Some(dir) = out {
@@ -609,7 +605,12 @@ impl Node for Scan3dNode {
         let mark = self.to_mark();
         m.insert("scan3d.views_to_95", mark.map_or(f64::NAN, |x| x.0 as f64));
         m.insert("scan3d.travel_to_95_m", mark.map_or(f64::NAN, |x| x.1));
-        for (name, truth, measured) in self.measured_lengths() {
+        let carved = if self.lengths.is_empty() {
+            Vec::new()
+        } else {
+            self.maps().1
+        };
+        for (name, truth, measured) in self.measured_lengths(&carved) {
             let e = match (truth, measured) {
                 (Some(t), Some(v)) => v - t,
                 _ => f64::NAN,
