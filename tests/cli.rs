@@ -2513,6 +2513,26 @@ fn the_depth_localiser_takes_its_model_from_files() {
     }
 }
 
+/// Runs `scenario` for `duration` s into `out` and returns its summary. The run must end
+/// normally; its gates may fail (status 3), since a short run cannot meet them.
+fn short_run(scenario: &str, duration: &str, out: &Path) -> serde_json::Value {
+    let o = futago(&[
+        "run",
+        scenario,
+        "--duration",
+        duration,
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(
+        o.status.code() == Some(0) || o.status.code() == Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    summary(out)
+}
+
 /// Seed 004's mapper in a short run: it drives to its first view, turns the table a full
 /// turn, writes its maps and grid, and scores every removal against the beams' truth (the
 /// shares lie in 0 … 1, and the kept map holds the sweep's points).
@@ -2520,22 +2540,8 @@ fn the_depth_localiser_takes_its_model_from_files() {
 fn the_turntable_mapper_scans_a_view_and_scores_its_removal() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("run");
-    let o = futago(&[
-        "run",
-        "scenarios/corridor-scan3d.toml",
-        "--duration",
-        "40",
-        "--out",
-        out.to_str().unwrap(),
-        "-q",
-    ]);
     // The gates (six views) fail in 40 s; the run itself must not.
-    assert!(
-        o.status.code() == Some(0) || o.status.code() == Some(3),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let s = summary(&out);
+    let s = short_run("scenarios/corridor-scan3d.toml", "40", &out);
     assert!(
         s["scan3d"]["views"].as_u64().unwrap() >= 1,
         "{}",
@@ -2577,21 +2583,7 @@ fn the_turntable_mapper_scans_a_view_and_scores_its_removal() {
 fn the_turntable_mapper_plans_its_next_view_and_scores_its_coverage() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("run");
-    let o = futago(&[
-        "run",
-        "scenarios/hall-scan3d.toml",
-        "--duration",
-        "30",
-        "--out",
-        out.to_str().unwrap(),
-        "-q",
-    ]);
-    assert!(
-        o.status.code() == Some(0) || o.status.code() == Some(3),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let s = summary(&out);
+    let s = short_run("scenarios/hall-scan3d.toml", "30", &out);
     let m = &s["scan3d"];
     assert_eq!(m["views"].as_u64(), Some(1), "{m}");
     let plans = m["planned_views"].as_array().unwrap();
