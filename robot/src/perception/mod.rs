@@ -8,3 +8,4 @@ pub mod features;
 pub mod floor;
 pub mod legs;
 pub mod motion;
+pub mod sift;
