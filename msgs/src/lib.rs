@@ -10,6 +10,7 @@
 pub mod camera;
 pub mod carmen;
 pub mod grid;
+pub mod landmarks;
 pub mod map_server;
 pub mod ply;
 pub mod rosbag;

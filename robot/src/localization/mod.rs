@@ -3,6 +3,7 @@
 //! ([`depth_mcl`]).
 
 pub mod depth_mcl;
+pub mod landmarks;
 pub mod mcl;
 pub mod model;
 pub mod odometry;
