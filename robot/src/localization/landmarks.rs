@@ -572,7 +572,7 @@ pub fn match_landmarks(
         }
         if best.1 == usize::MAX
             || best.0 as f64 > config.max_distance
-            || (second.is_finite() && best.0 as f64 > config.ratio * second as f64)
+            || !crate::perception::trinocular::passes_ratio(best.0, second, config.ratio)
         {
             continue;
         }

@@ -7,6 +7,7 @@
 
 pub mod correlative;
 pub mod icp;
+pub mod landmark_map;
 pub mod line_icp;
 pub mod occupancy;
 pub mod polygons;

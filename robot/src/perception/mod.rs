@@ -9,3 +9,4 @@ pub mod floor;
 pub mod legs;
 pub mod motion;
 pub mod sift;
+pub mod trinocular;
