@@ -87,6 +87,10 @@ pub struct ScenarioSpec {
     /// Seed 004's stop-and-scan 3D map from a laser on a turntable; typed by
     /// [`scan3d_config`].
     pub scan3d: Option<toml::Table>,
+    /// Seed 001's visual landmark map from a trinocular camera.
+    pub visual_map: Option<crate::stack::visual_map::VisualMapSpec>,
+    /// Seed 001's monocular localisation in a landmark map.
+    pub visual_localization: Option<crate::stack::visual_localization::VisualLocalizationSpec>,
     /// Navigation parameters, for the `navigate`, `explore` and `coverage` controllers.
     #[serde(default)]
     pub navigation: NavigationConfig,
@@ -813,7 +817,11 @@ impl Scenario {
             .map(|(c, s)| KinectConfig {
                 rgb_size: Some([s.rgb.width, s.rgb.height]),
                 depth_size: Some([s.depth.width, s.depth.height]),
-                fov_deg: Some(c.fov_deg.unwrap_or([57.0, 43.0])),
+                // The preset's field of view, from its intrinsics (each preset has its own).
+                fov_deg: Some(c.fov_deg.unwrap_or([
+                    (2.0 * (s.rgb.width as f64 / 2.0 / s.rgb.fx).atan()).to_degrees(),
+                    (2.0 * (s.rgb.height as f64 / 2.0 / s.rgb.fy).atan()).to_degrees(),
+                ])),
                 range_min: Some(s.range_min),
                 range_max: Some(s.range_max),
                 rate: Some(s.rate),
@@ -1110,6 +1118,52 @@ impl Scenario {
         // The localiser reads its laser by the resolved name.
         if let Some(l) = spec.localization.as_mut() {
             l.laser = localization_laser.clone();
+        }
+        if let Some(v) = &spec.visual_map {
+            crate::stack::visual_map::check_rig(&v.cameras, &spec, &cameras)
+                .map_err(|m| SpecError::new(path, "visual_map.cameras", m))?;
+            v.validate()
+                .map_err(|(k, m)| SpecError::new(path, k, m))?;
+        }
+        if spec.visual_localization.is_some() && spec.localization.is_some() {
+            return Err(SpecError::new(
+                path,
+                "visual_localization",
+                "a scenario runs one localiser on `pose/localization`: [localization] or [visual_localization]",
+            ));
+        }
+        if let Some(v) = spec.visual_localization.as_mut() {
+            let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
+            let name = match &v.camera {
+                Some(n) if names.contains(&n.as_str()) => n.clone(),
+                None if names.len() == 1 => names[0].to_string(),
+                _ => {
+                    return Err(SpecError::new(
+                        path,
+                        "visual_localization.camera",
+                        format!("name one of the scenario's cameras {names:?}"),
+                    ));
+                }
+            };
+            let cam = cameras.iter().find(|c| c.name == name);
+            if cam.is_some_and(|c| c.joint.is_some() || c.carrier.is_some()) {
+                return Err(SpecError::new(
+                    path,
+                    "visual_localization.camera",
+                    format!("camera `{name}` must be fixed to the robot's base"),
+                ));
+            }
+            v.camera = Some(name);
+            v.validate().map_err(|(k, m)| SpecError::new(path, k, m))?;
+            let file = crate::stack::visual_localization::map_path(path, v);
+            if !file.is_file() {
+                return Err(SpecError::new(
+                    path,
+                    "visual_localization.map",
+                    format!("{}: no such file (a `landmarks.json` a [visual_map] run wrote)", file.display()),
+                ));
+            }
+            v.map = file;
         }
         if let Some(d) = spec.depth_localization.as_mut() {
             if cameras.is_empty() {
@@ -1417,11 +1471,14 @@ impl Scenario {
                 "driving on SLAM's pose needs a [slam] table",
             ));
         }
-        if pose_source == Some(PoseSource::Localization) && spec.localization.is_none() {
+        if pose_source == Some(PoseSource::Localization)
+            && spec.localization.is_none()
+            && spec.visual_localization.is_none()
+        {
             return Err(SpecError::new(
                 path,
                 "controller.pose_source",
-                "driving on the localiser's pose needs a [localization] table",
+                "driving on the localiser's pose needs a [localization] or [visual_localization] table",
             ));
         }
         if matches!(controller, ControllerConfig::Explore(_)) && spec.slam.is_none() {

@@ -38,6 +38,10 @@ pub enum KinectPreset {
     /// in for colour at the same size. Its ±1 cm is `noise = { model = "gaussian", sigma =
     /// 0.01 }`.
     Sr4000,
+    /// One camera of seed 001's Point Grey Digiclops trinocular head: 320×240 at 28 Hz. The
+    /// seed gives no focal length; futago takes 60° × 46.8° (square pixels). Depth, which the
+    /// camera does not measure, is rendered only for scoring, over 0.1–30 m.
+    Digiclops,
 }
 
 /// Depth noise model.
@@ -186,6 +190,7 @@ impl KinectConfig {
             KinectPreset::KinectV1 => ([640, 480], [640, 480], (0.8, 4.0), [57.0, 43.0]),
             KinectPreset::Seed000 => ([320, 240], [640, 480], (1.2, 3.5), [57.0, 43.0]),
             KinectPreset::Sr4000 => ([176, 144], [176, 144], (0.1, 5.0), [43.6, 34.6]),
+            KinectPreset::Digiclops => ([320, 240], [320, 240], (0.1, 30.0), [60.0, 46.8]),
         };
         let rgb_size = self.rgb_size.unwrap_or(rgb_size);
         let depth_size = self.depth_size.unwrap_or(depth_size);
@@ -209,7 +214,12 @@ impl KinectConfig {
             100.0,
             "m (above range_min)",
         )?;
-        let rate = self.rate.unwrap_or(30.0);
+        let default_rate = if self.preset == KinectPreset::Digiclops {
+            28.0
+        } else {
+            30.0
+        };
+        let rate = self.rate.unwrap_or(default_rate);
         check_range(file, &k("rate"), rate, 0.01, 1000.0, "Hz")?;
         let n = &self.noise;
         check_range(file, &k("noise.baseline"), n.baseline, 1e-3, 1.0, "m")?;

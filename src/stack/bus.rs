@@ -51,7 +51,7 @@ pub struct Bus {
     pub route_done: Option<Time>,
     history: VecDeque<(Time, Pose2)>,
     paths: BTreeMap<String, (Time, Path)>,
-    estimates: BTreeMap<String, Option<(Pose2, Pose2)>>,
+    estimates: BTreeMap<String, Option<(Pose2, Option<Pose2>)>>,
     maps: BTreeMap<String, (Time, Arc<OccupancyGrid>)>,
     subscriptions: BTreeMap<String, Option<Duration>>,
 }
@@ -144,14 +144,23 @@ impl Bus {
 
     /// Publishes estimate `pose` on `pose/TOPIC`, made when odometry read `at`.
     pub fn publish_pose(&mut self, topic: &str, pose: Pose2, at: Pose2) {
-        self.estimates.insert(topic.to_string(), Some((pose, at)));
+        self.estimates.insert(topic.to_string(), Some((pose, Some(at))));
     }
 
-    /// The estimate on `pose/TOPIC` now, carried from when it was made by odometry; odometry
+    /// Publishes estimate `pose` on `pose/TOPIC` to be taken as it is until the next one,
+    /// not carried by odometry: a localiser that runs without odometry (seed 001's camera
+    /// alone).
+    pub fn publish_pose_held(&mut self, topic: &str, pose: Pose2) {
+        self.estimates.insert(topic.to_string(), Some((pose, None)));
+    }
+
+    /// The estimate on `pose/TOPIC` now, carried from when it was made by odometry (unless it
+    /// was published held); odometry
     /// itself before the first estimate; `None` when no node publishes that topic.
     pub fn pose(&self, topic: &str) -> Option<Pose2> {
         self.estimates.get(topic).map(|e| match e {
-            Some((est, at)) => est.compose(&at.between(&self.odometry)),
+            Some((est, Some(at))) => est.compose(&at.between(&self.odometry)),
+            Some((est, None)) => *est,
             None => self.odometry,
         })
     }

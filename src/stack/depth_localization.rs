@@ -367,7 +367,7 @@ fn tum3(out: &mut String, t: Time, s: &CameraState) {
 }
 
 /// Distance from `p` to the polyline `path`, m.
-fn distance_to_path(p: [f64; 2], path: &[[f64; 2]]) -> f64 {
+pub(crate) fn distance_to_path(p: [f64; 2], path: &[[f64; 2]]) -> f64 {
     let seg = |a: [f64; 2], b: [f64; 2]| {
         let d = [b[0] - a[0], b[1] - a[1]];
         let l2 = d[0] * d[0] + d[1] * d[1];

@@ -120,7 +120,7 @@ impl DriverNode {
             map_seen: None,
             pending: Vec::new(),
             laps: Vec::new(),
-            localizes: spec.localization.is_some(),
+            localizes: spec.localization.is_some() || spec.visual_localization.is_some(),
             scripted_on_slam: matches!(&s.controller, ControllerConfig::Waypoints(w) if w.pose_source == PoseSource::Slam),
             goals: match &s.controller {
                 ControllerConfig::Navigate(n) => match n.task() {

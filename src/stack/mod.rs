@@ -33,6 +33,8 @@ pub mod record;
 pub mod rgbd_map;
 pub mod scan3d;
 pub mod slam;
+pub mod visual_localization;
+pub mod visual_map;
 
 pub use bus::Bus;
 
@@ -235,7 +237,8 @@ fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
 /// The stack's modules, in the order their nodes run in every phase: the recorders of the
 /// run's files (when it writes them), the people's truth and safety scores, the coverage
 /// planner and scorer, the driver, the localiser, SLAM, the RGB-D mapper, the stop-and-scan
-/// 3D mapper. A new module is one line here; the loop and the metric checks read this table.
+/// 3D mapper, seed 001's visual landmark mapper and monocular localiser. A new module is one
+/// line here; the loop and the metric checks read this table.
 pub const MODULES: &[Module] = &[
     Module {
         build: |s, _, out| out.map_or(Ok(Vec::new()), |dir| record::recorders(s, dir)),
@@ -272,6 +275,14 @@ pub const MODULES: &[Module] = &[
     Module {
         build: |s, seed, _| boxed(scan3d::node(s, seed)),
         metric_names: scan3d::metric_names,
+    },
+    Module {
+        build: |s, _, _| boxed(visual_map::node(s)),
+        metric_names: visual_map::metric_names,
+    },
+    Module {
+        build: |s, _, _| boxed(visual_localization::node(s)),
+        metric_names: visual_localization::metric_names,
     },
 ];
 

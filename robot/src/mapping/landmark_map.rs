@@ -95,7 +95,7 @@ impl MappingConfig {
 }
 
 /// What one frame did to the map.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct MappingStep {
     /// The camera's estimated planar pose.
     pub pose: Pose2,
@@ -106,6 +106,8 @@ pub struct MappingStep {
     pub added: usize,
     /// Matched points within the outlier cap at the pose.
     pub inliers: usize,
+    /// The points that became new landmarks, in the order they were added.
+    pub new_points: Vec<usize>,
 }
 
 /// The mapper: the map and the camera's last pose and its uncertainty.
@@ -289,7 +291,7 @@ impl LandmarkMapper {
                 l.missed += 1;
             }
         }
-        let mut added = 0;
+        let mut new_points = Vec::new();
         for m in &matches {
             if !matched_point[m.point] {
                 continue;
@@ -329,16 +331,17 @@ impl LandmarkMapper {
             };
             set_view(&mut l, direction_bin(centre, world), k);
             self.map.landmarks.push(l);
-            added += 1;
+            new_points.push(i);
         }
         self.pose = pose;
         MappingStep {
             pose,
             points: points.len(),
             candidates: view.len(),
-            matched: inliers,
-            added,
+            matched: matches.len(),
+            added: new_points.len(),
             inliers,
+            new_points,
         }
     }
 }
@@ -437,7 +440,7 @@ mod tests {
             let known = (f == 0).then_some(truth);
             let step = mapper.add_frame(&pts, &kps, known);
             if f > 0 {
-                assert!(step.matched > 20, "frame {f}: {step:?}");
+                assert!(step.inliers > 20, "frame {f}: {step:?}");
             }
             worst = worst.max(step.pose.distance(&truth));
             assert!((step.pose.theta - truth.theta).abs() < 1.5f64.to_radians(), "{f}: {step:?}");
