@@ -1122,8 +1122,7 @@ impl Scenario {
         if let Some(v) = &spec.visual_map {
             crate::stack::visual_map::check_rig(&v.cameras, &spec, &cameras)
                 .map_err(|m| SpecError::new(path, "visual_map.cameras", m))?;
-            v.validate()
-                .map_err(|(k, m)| SpecError::new(path, k, m))?;
+            v.validate().map_err(|(k, m)| SpecError::new(path, k, m))?;
         }
         if spec.visual_localization.is_some() && spec.localization.is_some() {
             return Err(SpecError::new(
@@ -1160,9 +1159,15 @@ impl Scenario {
                 return Err(SpecError::new(
                     path,
                     "visual_localization.map",
-                    format!("{}: no such file (a `landmarks.json` a [visual_map] run wrote)", file.display()),
+                    format!(
+                        "{}: no such file (a `landmarks.json` a [visual_map] run wrote)",
+                        file.display()
+                    ),
                 ));
             }
+            // Read now, so that a bad map is refused before anything runs.
+            futago_msgs::landmarks::LandmarkFile::read(&file)
+                .map_err(|e| SpecError::new(path, "visual_localization.map", e.to_string()))?;
             v.map = file;
         }
         if let Some(d) = spec.depth_localization.as_mut() {

@@ -2704,3 +2704,184 @@ fn a_turntable_scan_names_its_bad_lasers_joint_and_values() {
         );
     }
 }
+
+/// Seed 001's mapping pass in a short run: the trinocular rig's SIFT points become landmarks
+/// written as a map that reads back, each seen at least twice, with (almost) no false stereo
+/// matches against the true depth, and the seed's search keeping the pass within its window.
+#[test]
+fn the_trinocular_pass_writes_a_landmark_map() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let s = short_run("scenarios/lab-visual-map.toml", "6", &out);
+    let v = &s["visual_map"];
+    assert!(v["frames"].as_u64().unwrap() >= 29, "{v}");
+    assert!((v["baseline_m"].as_f64().unwrap() - 0.0996).abs() < 1e-9);
+    let file = futago_msgs::landmarks::LandmarkFile::read(&out.join("landmarks.json")).unwrap();
+    assert!(file.landmarks.len() > 100, "{}", file.landmarks.len());
+    assert_eq!(
+        file.landmarks.len() as u64,
+        v["landmarks_seen_twice"].as_u64().unwrap()
+    );
+    assert!(file.landmarks.iter().all(|l| l.observed >= 2));
+    // Inside the lab (x 0–13, y 0–7, z 0–2.7) give or take their depth error.
+    let inside = file
+        .landmarks
+        .iter()
+        .filter(|l| {
+            let [x, y, z] = l.position;
+            (-0.5..13.5).contains(&x) && (-0.5..7.5).contains(&y) && (-0.3..3.0).contains(&z)
+        })
+        .count();
+    assert!(
+        inside as f64 > 0.9 * file.landmarks.len() as f64,
+        "{inside}"
+    );
+    assert!(v["stereo"]["judged"].as_u64().unwrap() > 500, "{v}");
+    assert!(v["stereo"]["false_rate"].as_f64().unwrap() <= 0.01, "{v}");
+    // A pass that holds stays within one search window (±100 mm, ±10°) of the truth.
+    assert!(
+        v["pose"]["position"]["max_m"].as_f64().unwrap() < 0.1,
+        "{v}"
+    );
+    assert!(
+        v["pose"]["heading"]["max_deg"].as_f64().unwrap() < 10.0,
+        "{v}"
+    );
+}
+
+/// Seed 001's localisers in a short closed loop: the robot drives on the delegates' pose; every
+/// localiser stays within 5 cm and 5° of the truth on most frames, the delegates are fewer
+/// than the landmarks in view and match with fewer descriptor comparisons, and nothing is
+/// bumped.
+#[test]
+fn the_monocular_localisers_track_the_camera_in_the_landmark_map() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let s = short_run("scenarios/lab-visual-nav.toml", "12", &out);
+    let v = &s["visual_localization"];
+    assert!(v["frames"].as_u64().unwrap() >= 119, "{v}");
+    for l in ["all", "delegates", "summary", "pnp"] {
+        let share = v[l]["within_5cm_5deg"].as_f64().unwrap();
+        assert!(share >= 0.9, "{l}: {share}");
+        assert!(v[l]["matched"]["mean"].as_f64().unwrap() >= 10.0, "{l}");
+    }
+    let (all, del) = (&v["all"], &v["delegates"]);
+    assert!(
+        del["projected"]["mean"].as_f64().unwrap()
+            < 0.6 * all["projected"]["mean"].as_f64().unwrap(),
+        "{v}"
+    );
+    assert!(
+        del["comparisons"]["mean"].as_f64().unwrap()
+            < 0.6 * all["comparisons"]["mean"].as_f64().unwrap()
+    );
+    // The summary map keeps a third of the landmarks.
+    let (n, k) = (
+        v["landmarks"].as_f64().unwrap(),
+        v["summary_landmarks"].as_f64().unwrap(),
+    );
+    assert!((k / n - 1.0 / 3.0).abs() < 0.01, "{k} of {n}");
+    assert_eq!(v["bumps"].as_u64(), Some(0));
+    assert!(
+        s["robot"]["distance_travelled_m"].as_f64().unwrap() > 1.5,
+        "{}",
+        s["robot"]
+    );
+    let m = &s["metrics"];
+    assert!(
+        m["visual_localization.delegates.matching_work_ratio"]
+            .as_f64()
+            .unwrap()
+            > 1.5
+    );
+    // The driven estimate is written as a trajectory (TUM), one line a frame.
+    let tum = std::fs::read_to_string(out.join("visual_localization.txt")).unwrap();
+    assert_eq!(tum.lines().count() as u64, v["frames"].as_u64().unwrap());
+}
+
+/// A trinocular rig that is not an L, a missing or corrupt landmark map, and bad values are
+/// refused before anything runs, naming the key (and the file).
+#[test]
+fn seed_001_scenarios_name_their_bad_rigs_maps_and_values() {
+    let tmp = tempfile::tempdir().unwrap();
+    let abs = |text: String| {
+        text.replace(
+            "world = \"../worlds/lab.toml\"",
+            &format!("world = \"{}\"", root().join("worlds/lab.toml").display()),
+        )
+        .replace(
+            "map = \"../worlds/maps/lab-landmarks.json\"",
+            &format!(
+                "map = \"{}\"",
+                root().join("worlds/maps/lab-landmarks.json").display()
+            ),
+        )
+    };
+    let mapping =
+        abs(std::fs::read_to_string(root().join("scenarios/lab-visual-map.toml")).unwrap());
+    let nav = abs(std::fs::read_to_string(root().join("scenarios/lab-visual-nav.toml")).unwrap());
+    let corrupt = tmp.path().join("corrupt.json");
+    std::fs::write(
+        &corrupt,
+        r#"{"format": "futago-landmarks", "version": 1, "landmarks": [{"position": [1, 2, 3], "covariance": [1, 0, 0, 1, 0, 1], "observed": 2, "missed": 0, "views": [{"bin": 40, "contrast": 0.1, "descriptor": "00"}]}]}"#,
+    )
+    .unwrap();
+    let cases = [
+        (
+            &mapping,
+            "xyz = [0.1, 0.0, 0.5496]",
+            "xyz = [0.1, 0.0, 0.6]",
+            "visual_map.cameras`: the third camera (top) must sit straight above",
+        ),
+        (
+            &mapping,
+            "cameras = [\"right\", \"left\", \"top\"]",
+            "cameras = [\"right\", \"left\", \"nope\"]",
+            "visual_map.cameras`: no camera is named `nope`",
+        ),
+        (
+            &mapping,
+            "rate = 5.0\n\n[controller]",
+            "rate = 5.0\nstereo = { ratio = 2.0 }\n\n[controller]",
+            "visual_map.stereo.ratio",
+        ),
+        (
+            &nav,
+            "lab-landmarks.json",
+            "no-such-map.json",
+            "visual_localization.map`",
+        ),
+        (
+            &nav,
+            &format!(
+                "{}",
+                root().join("worlds/maps/lab-landmarks.json").display()
+            ),
+            &format!("{}", corrupt.display()),
+            "landmarks[0].views[0].bin",
+        ),
+        (
+            &nav,
+            "drive = \"delegates\"",
+            "drive = \"delegates\"\nmonocular = { selection = { alpha = 0.0 } }",
+            "visual_localization.monocular.selection.alpha",
+        ),
+        (
+            &nav,
+            "drive = \"delegates\"",
+            "drive = \"delegates\"\nmonocular = { search = { step_xy = 1e-6 } }",
+            "visual_localization.monocular.search",
+        ),
+    ];
+    for (text, from, to, expect) in cases {
+        assert!(text.contains(from), "{from}");
+        let path = tmp.path().join("s.toml");
+        std::fs::write(&path, text.replace(from, to)).unwrap();
+        refused_before_running(
+            &["run", path.to_str().unwrap()],
+            &tmp.path().join("fresh"),
+            expect,
+            None,
+        );
+    }
+}

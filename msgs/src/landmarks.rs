@@ -229,7 +229,11 @@ mod tests {
         bad(&|r| r.covariance[0] = -1.0, "landmarks[1].covariance");
         bad(&|r| r.position[2] = f64::NAN, "landmarks[1].position");
         bad(&|r| r.views.clear(), "landmarks[1].views");
-        std::fs::write(&p, r#"{"format": "futago-landmarks", "version": 1, "landmarks": [{"position": [1, 2]}]}"#).unwrap();
+        std::fs::write(
+            &p,
+            r#"{"format": "futago-landmarks", "version": 1, "landmarks": [{"position": [1, 2]}]}"#,
+        )
+        .unwrap();
         let e = LandmarkFile::read(&p).unwrap_err().to_string();
         assert!(e.contains("landmarks[0].position"), "{e}");
         let e = LandmarkFile::read(&dir.path().join("none.json"))

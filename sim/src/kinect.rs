@@ -75,6 +75,10 @@ pub struct NoiseConfig {
     pub edge_filter: bool,
     /// Standard deviation of the Gaussian model, m.
     pub sigma: f64,
+    /// Independent Gaussian noise on every colour sample, 8-bit levels (0: exact renders).
+    /// A camera's read and shot noise, for image features that would otherwise see
+    /// noise-free pixels; independent of `model`.
+    pub rgb_sigma: f64,
 }
 
 impl Default for NoiseConfig {
@@ -86,6 +90,7 @@ impl Default for NoiseConfig {
             jitter: 0.5,
             edge_filter: true,
             sigma: 0.01,
+            rgb_sigma: 0.0,
         }
     }
 }
@@ -233,6 +238,14 @@ impl KinectConfig {
         )?;
         check_range(file, &k("noise.jitter"), n.jitter, 0.0, 10.0, "px")?;
         check_range(file, &k("noise.sigma"), n.sigma, 0.0, 1.0, "m")?;
+        check_range(
+            file,
+            &k("noise.rgb_sigma"),
+            n.rgb_sigma,
+            0.0,
+            64.0,
+            "8-bit levels",
+        )?;
         check_mount(file, key, self.xyz, self.rpy_deg)?;
         if let Some(s) = &self.sway {
             s.validate(file, &k("sway"))?;
@@ -258,6 +271,20 @@ impl KinectConfig {
             carrier: self.carrier.clone(),
             sway: self.sway,
         })
+    }
+}
+
+impl KinectSpec {
+    /// Adds the colour noise (`noise.rgb_sigma`) in place; draws nothing when it is 0.
+    pub fn apply_rgb_noise(&self, rgb: &mut futago_msgs::camera::RgbImage, rng: &mut ChaCha8Rng) {
+        let s = self.noise.rgb_sigma;
+        if s <= 0.0 {
+            return;
+        }
+        for v in rgb.data.iter_mut() {
+            let n: f64 = StandardNormal.sample(rng);
+            *v = (*v as f64 + s * n).round().clamp(0.0, 255.0) as u8;
+        }
     }
 }
 
@@ -532,6 +559,10 @@ impl Kinect {
             (None, renderer.render_depth(&self.spec.depth, &camera)?)
         };
         self.spec.apply_noise(&mut depth, &mut self.rng);
+        let mut rgb = rgb;
+        if let Some(c) = rgb.as_mut() {
+            self.spec.apply_rgb_noise(c, &mut self.rng);
+        }
         Ok(RgbdFrame {
             stamp,
             rgb,
@@ -731,5 +762,46 @@ mod tests {
         c.noise.sigma = -1.0;
         let e = c.resolve(Path::new("s.toml"), "camera[0]").unwrap_err();
         assert!(e.to_string().contains("camera[0].noise.sigma"), "{e}");
+    }
+
+    /// Colour noise has its σ and no bias on a flat image, and σ = 0 draws nothing.
+    #[test]
+    fn colour_noise_has_its_sigma_and_zero_draws_nothing() {
+        let mut c = KinectConfig::preset(KinectPreset::Digiclops);
+        c.noise.rgb_sigma = 2.0;
+        let s = c.resolve(Path::new("s.toml"), "camera[0]").unwrap();
+        assert_eq!((s.rgb.width, s.rgb.height, s.rate), (320, 240, 28.0));
+        let flat = futago_msgs::camera::RgbImage {
+            width: 320,
+            height: 240,
+            data: vec![100; 320 * 240 * 3],
+        };
+        let mut img = flat.clone();
+        s.apply_rgb_noise(&mut img, &mut stream(4, "camera"));
+        let n = img.data.len() as f64;
+        let mean = img.data.iter().map(|v| *v as f64).sum::<f64>() / n;
+        let sd = (img
+            .data
+            .iter()
+            .map(|v| (*v as f64 - mean).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        // Rounding to levels adds 1/12 level² of variance.
+        let want = (4.0f64 + 1.0 / 12.0).sqrt();
+        assert!(
+            (mean - 100.0).abs() < 0.02 && (sd / want - 1.0).abs() < 0.02,
+            "{mean} {sd}"
+        );
+        c.noise.rgb_sigma = 0.0;
+        let s0 = c.resolve(Path::new("s.toml"), "camera[0]").unwrap();
+        let (mut a, mut r) = (flat.clone(), stream(4, "camera"));
+        s0.apply_rgb_noise(&mut a, &mut r);
+        assert_eq!(a, flat);
+        use rand::RngCore;
+        assert_eq!(r.next_u64(), stream(4, "camera").next_u64());
+        c.noise.rgb_sigma = -1.0;
+        let e = c.resolve(Path::new("s.toml"), "camera[0]").unwrap_err();
+        assert!(e.to_string().contains("camera[0].noise.rgb_sigma"), "{e}");
     }
 }

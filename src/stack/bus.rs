@@ -144,7 +144,8 @@ impl Bus {
 
     /// Publishes estimate `pose` on `pose/TOPIC`, made when odometry read `at`.
     pub fn publish_pose(&mut self, topic: &str, pose: Pose2, at: Pose2) {
-        self.estimates.insert(topic.to_string(), Some((pose, Some(at))));
+        self.estimates
+            .insert(topic.to_string(), Some((pose, Some(at))));
     }
 
     /// Publishes estimate `pose` on `pose/TOPIC` to be taken as it is until the next one,

@@ -35,6 +35,9 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 
+/// The driven estimate of the robot's pose, one TUM line a frame.
+pub const TRAJECTORY_FILE: &str = "visual_localization.txt";
+
 /// The localisers run side by side.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -156,6 +159,8 @@ pub struct VisualLocalizationNode {
     truths: Vec<(Time, Pose2)>,
     /// The robot base's true position at each frame.
     bases: Vec<[f64; 2]>,
+    /// The driven estimate of the robot's pose, TUM lines.
+    lines: String,
     records: Vec<[Record; 4]>,
     sift_s: f64,
     bumps: u64,
@@ -165,10 +170,7 @@ pub struct VisualLocalizationNode {
 
 /// The map file of a spec, resolved against the scenario's folder.
 pub fn map_path(scenario: &Path, spec: &VisualLocalizationSpec) -> PathBuf {
-    scenario
-        .parent()
-        .unwrap_or(Path::new("."))
-        .join(&spec.map)
+    scenario.parent().unwrap_or(Path::new(".")).join(&spec.map)
 }
 
 /// The node when the scenario has `[visual_localization]`.
@@ -184,7 +186,8 @@ pub fn node(s: &Scenario) -> Result<Option<VisualLocalizationNode>> {
         .with_context(|| format!("visual_localization.camera: no camera `{name}`"))?;
     // Resolved at load (relative to the scenario).
     let file = LandmarkFile::read(&spec.map).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let mut map = LandmarkMap::from_file(&file).map_err(|e| anyhow::anyhow!("{}: {e}", spec.map.display()))?;
+    let mut map = LandmarkMap::from_file(&file)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", spec.map.display()))?;
     map.landmarks
         .retain(|l| l.observed >= spec.min_observations);
     let summary_map = map.summarised(spec.summary_keep);
@@ -204,6 +207,7 @@ pub fn node(s: &Scenario) -> Result<Option<VisualLocalizationNode>> {
         poses: None,
         truths: Vec::new(),
         bases: Vec::new(),
+        lines: String::new(),
         records: Vec::new(),
         sift_s: 0.0,
         bumps: 0,
@@ -218,7 +222,10 @@ fn mean_sd(v: &[f64]) -> (f64, f64) {
     }
     let n = v.len() as f64;
     let m = v.iter().sum::<f64>() / n;
-    (m, (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt())
+    (
+        m,
+        (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt(),
+    )
 }
 
 impl Node for VisualLocalizationNode {
@@ -269,9 +276,33 @@ impl Node for VisualLocalizationNode {
         let c = &self.spec.monocular;
         let run = |l: Localiser, prior: &Pose2| -> Estimate {
             match l {
-                Localiser::All => localise(&self.map, &self.camera, &f, prior, c, Selection::All, Solver::Search),
-                Localiser::Delegates => localise(&self.map, &self.camera, &f, prior, c, Selection::Delegates, Solver::Search),
-                Localiser::Summary => localise(&self.summary_map, &self.camera, &f, prior, c, Selection::All, Solver::Search),
+                Localiser::All => localise(
+                    &self.map,
+                    &self.camera,
+                    &f,
+                    prior,
+                    c,
+                    Selection::All,
+                    Solver::Search,
+                ),
+                Localiser::Delegates => localise(
+                    &self.map,
+                    &self.camera,
+                    &f,
+                    prior,
+                    c,
+                    Selection::Delegates,
+                    Solver::Search,
+                ),
+                Localiser::Summary => localise(
+                    &self.summary_map,
+                    &self.camera,
+                    &f,
+                    prior,
+                    c,
+                    Selection::All,
+                    Solver::Search,
+                ),
                 Localiser::Pnp => localise(
                     &self.map,
                     &self.camera,
@@ -285,34 +316,36 @@ impl Node for VisualLocalizationNode {
                 ),
             }
         };
-        let estimates: [Record; 4] =
-            std::array::from_fn(|i| Record {
-                estimate: run(LOCALISERS[i], &priors[i]),
-            });
+        let estimates: [Record; 4] = std::array::from_fn(|i| Record {
+            estimate: run(LOCALISERS[i], &priors[i]),
+        });
         let poses = std::array::from_fn(|i| estimates[i].estimate.pose);
         self.poses = Some(poses);
-        let drive = LOCALISERS.iter().position(|l| *l == self.spec.drive).unwrap_or(1);
+        let drive = LOCALISERS
+            .iter()
+            .position(|l| *l == self.spec.drive)
+            .unwrap_or(1);
         // The robot's pose under the camera.
         let robot = poses[drive].compose(&self.mount.inverse());
         bus.publish_pose_held("localization", robot);
-        if std::env::var("VM_DEBUG").is_ok() {
-            let d = &estimates[1].estimate;
-            eprintln!(
-                "t {:.1} truth {:.2} {:.2} {:.1} del err {:+.3} {:+.3} {:+.1} view {} proj {} match {} inl {} | all {:+.3} {:+.1} m {}",
-                bus.now.secs(), truth.x, truth.y, truth.theta.to_degrees(),
-                d.pose.x - truth.x, d.pose.y - truth.y, futago_msgs::wrap_angle(d.pose.theta - truth.theta).to_degrees(),
-                d.in_view, d.projected, d.matched, d.inliers,
-                estimates[0].estimate.pose.distance(&truth), futago_msgs::wrap_angle(estimates[0].estimate.pose.theta - truth.theta).to_degrees(), estimates[0].estimate.matched,
-            );
-        }
+        super::tum_line(&mut self.lines, bus.now, &robot);
         self.truths.push((bus.now, truth));
         self.bases.push([bus.truth.x, bus.truth.y]);
         self.records.push(estimates);
         Ok(())
     }
 
-    fn finish(&mut self, _bus: &mut Bus, _out: Option<&Path>) -> Result<Report> {
+    fn finish(&mut self, _bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
         let mut report = Report::default();
+        if let Some(dir) = out {
+            let path = dir.join(TRAJECTORY_FILE);
+            std::fs::write(&path, &self.lines)
+                .with_context(|| format!("writing {}", path.display()))?;
+            report.files.push(TRAJECTORY_FILE.into());
+            report
+                .trajectories
+                .push(("visual localisation".into(), TRAJECTORY_FILE.into()));
+        }
         let n = self.records.len().max(1) as f64;
         let mut v = json!({
             "frames": self.records.len(),
@@ -345,7 +378,9 @@ impl Node for VisualLocalizationNode {
             for (r, (_, t)) in self.records.iter().zip(&self.truths) {
                 let p = r[i].estimate.pose;
                 let (dx, dy) = ((p.x - t.x).abs(), (p.y - t.y).abs());
-                let dh = futago_msgs::wrap_angle(p.theta - t.theta).abs().to_degrees();
+                let dh = futago_msgs::wrap_angle(p.theta - t.theta)
+                    .abs()
+                    .to_degrees();
                 ex.push(dx * 1000.0);
                 ey.push(dy * 1000.0);
                 eh.push(dh);
@@ -383,10 +418,16 @@ impl Node for VisualLocalizationNode {
                 }),
             );
         }
-        let all = perf["all"]["matching_ms"]["mean"].as_f64().unwrap_or(f64::NAN);
-        let del = perf["delegates"]["matching_ms"]["mean"].as_f64().unwrap_or(f64::NAN);
+        let all = perf["all"]["matching_ms"]["mean"]
+            .as_f64()
+            .unwrap_or(f64::NAN);
+        let del = perf["delegates"]["matching_ms"]["mean"]
+            .as_f64()
+            .unwrap_or(f64::NAN);
         perf.insert("matching_speedup".into(), json!(all / del));
-        report.summary.push(("visual_localization".into(), v.clone()));
+        report
+            .summary
+            .push(("visual_localization".into(), v.clone()));
         report.performance = perf;
         self.summary = Some(v);
         Ok(report)
@@ -403,7 +444,10 @@ impl Node for VisualLocalizationNode {
             let p = format!("visual_localization.{}", l.name());
             m.insert(format!("{p}.x_error_mm"), num(&s["x_error_mm"]["mean"]));
             m.insert(format!("{p}.y_error_mm"), num(&s["y_error_mm"]["mean"]));
-            m.insert(format!("{p}.heading_error_deg"), num(&s["heading_error_deg"]["mean"]));
+            m.insert(
+                format!("{p}.heading_error_deg"),
+                num(&s["heading_error_deg"]["mean"]),
+            );
             m.insert(format!("{p}.within_5cm_5deg"), num(&s["within_5cm_5deg"]));
             m.insert(format!("{p}.projected"), num(&s["projected"]["mean"]));
             m.insert(format!("{p}.comparisons"), num(&s["comparisons"]["mean"]));
@@ -423,8 +467,14 @@ impl Node for VisualLocalizationNode {
         );
         m.insert("visual_localization.bumps", self.bumps as f64);
         if !self.spec.route.is_empty() {
-            m.insert("visual_localization.path_error.mean_m", num(&v["path_error"]["mean_m"]));
-            m.insert("visual_localization.path_error.max_m", num(&v["path_error"]["max_m"]));
+            m.insert(
+                "visual_localization.path_error.mean_m",
+                num(&v["path_error"]["mean_m"]),
+            );
+            m.insert(
+                "visual_localization.path_error.max_m",
+                num(&v["path_error"]["max_m"]),
+            );
         }
         Ok(m)
     }
@@ -451,7 +501,10 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     out.push("visual_localization.delegates.matching_work_ratio".into());
     out.push("visual_localization.delegates.error_ratio".into());
     out.push("visual_localization.bumps".into());
-    if s.visual_localization.as_ref().is_some_and(|v| !v.route.is_empty()) {
+    if s.visual_localization
+        .as_ref()
+        .is_some_and(|v| !v.route.is_empty())
+    {
         out.push("visual_localization.path_error.mean_m".into());
         out.push("visual_localization.path_error.max_m".into());
     }

@@ -104,20 +104,23 @@ pub fn check_rig(
             .find(|(c, _)| c.name == n)
             .ok_or_else(|| {
                 let all: Vec<&str> = cams.iter().map(|c| c.name.as_str()).collect();
-                String::from(format!("no camera is named `{n}`; the scenario's cameras are {all:?}"),
-                )
+                String::from(format!(
+                    "no camera is named `{n}`; the scenario's cameras are {all:?}"
+                ))
             })
     };
     let mut found = Vec::new();
     for n in names {
         let (c, s) = find(n)?;
         if c.joint.is_some() || c.carrier.is_some() {
-            return Err(String::from(format!("camera `{n}` must be fixed to the robot's base"),
-            ));
+            return Err(String::from(format!(
+                "camera `{n}` must be fixed to the robot's base"
+            )));
         }
         if c.rpy_deg[0] != 0.0 || c.rpy_deg[1] != 0.0 {
-            return Err(String::from(format!("camera `{n}` must be levelled (roll and pitch 0): the state is planar"),
-            ));
+            return Err(String::from(format!(
+                "camera `{n}` must be levelled (roll and pitch 0): the state is planar"
+            )));
         }
         found.push((c, s));
     }
@@ -125,27 +128,27 @@ pub fn check_rig(
     for (c, s) in &found[1..] {
         if s.rgb != rs.rgb || s.rate != rs.rate || c.rpy_deg != r.rpy_deg {
             return Err(String::from(format!(
-                    "camera `{}` differs from `{}` in its colour intrinsics, rate or orientation",
-                    c.name, r.name
-                ),
-            ));
+                "camera `{}` differs from `{}` in its colour intrinsics, rate or orientation",
+                c.name, r.name
+            )));
         }
     }
-    let d = |c: &futago_sim::kinect::KinectConfig| {
-        DVec3::from_array(c.xyz) - DVec3::from_array(r.xyz)
-    };
+    let d =
+        |c: &futago_sim::kinect::KinectConfig| DVec3::from_array(c.xyz) - DVec3::from_array(r.xyz);
     // In the cameras' own frame (their yaw on the base).
     let yaw = r.rpy_deg[2].to_radians();
     let unrotate = |v: DVec3| DQuat::from_rotation_z(-yaw) * v;
     let (l, t) = (unrotate(d(found[1].0)), unrotate(d(found[2].0)));
     let b = l.y;
     if !(b > 0.005 && l.x.abs() < 1e-3 && l.z.abs() < 1e-3) {
-        return Err(String::from("the second camera (left) must sit straight to the left of the first (right), at least 5 mm",
+        return Err(String::from(
+            "the second camera (left) must sit straight to the left of the first (right), at least 5 mm",
         ));
     }
     if !(t.x.abs() < 1e-3 && t.y.abs() < 1e-3 && (t.z - b).abs() < 1e-3) {
-        return Err(String::from(format!("the third camera (top) must sit straight above the first (right) by the same baseline, {b:.4} m"),
-        ));
+        return Err(String::from(format!(
+            "the third camera (top) must sit straight above the first (right) by the same baseline, {b:.4} m"
+        )));
     }
     Ok(b)
 }
@@ -219,7 +222,13 @@ pub struct VisualMapNode {
 
 /// Whether a triangulated depth `z` (σ `sz`) is false against the true depths about pixel
 /// (u, v).
-fn is_false(depth: &futago_msgs::camera::DepthImage, u: f32, v: f32, z: f64, sz: f64) -> Option<bool> {
+fn is_false(
+    depth: &futago_msgs::camera::DepthImage,
+    u: f32,
+    v: f32,
+    z: f64,
+    sz: f64,
+) -> Option<bool> {
     let (u, v) = (u.round() as i64, v.round() as i64);
     let tol = (3.0 * sz).max(0.05);
     let mut any = false;
@@ -258,13 +267,8 @@ impl VisualMapNode {
         let (mut judged, mut false_matches) = (0, 0);
         for p in &points {
             let k = &right[p.keypoint];
-            if std::env::var("VM_DEBUG").is_ok() {
-                let t = depth.at(k.x.round() as u32, k.y.round() as u32) as f64;
-                if t > 0.0 {
-                    eprintln!("z {:.3} true {:.3} sigma {:.3} oct {}", p.position.z, t, p.covariance.z_axis.z.sqrt(), k.octave);
-                }
-            }
-            if let Some(f) = is_false(&depth, k.x, k.y, p.position.z, p.covariance.z_axis.z.sqrt()) {
+            if let Some(f) = is_false(&depth, k.x, k.y, p.position.z, p.covariance.z_axis.z.sqrt())
+            {
                 judged += 1;
                 false_matches += f as usize;
             }
@@ -273,19 +277,6 @@ impl VisualMapNode {
             .then_some(truth);
         let t1 = std::time::Instant::now();
         let step = self.mapper.add_frame(&points, &right, known);
-        if std::env::var("VM_DEBUG").is_ok() {
-            eprintln!(
-                "t {:.2} err x {:+.3} y {:+.3} th {:+.2} pts {} cand {} matched {} inl {}",
-                time.secs(),
-                step.pose.x - truth.x,
-                step.pose.y - truth.y,
-                (step.pose.theta - truth.theta).to_degrees(),
-                step.points,
-                step.candidates,
-                step.matched,
-                step.inliers
-            );
-        }
         self.mapping_s += t1.elapsed().as_secs_f64();
         // The truth of each new landmark: its keypoint's true depth from the true pose.
         let cam = self.mapper.camera;
@@ -294,7 +285,11 @@ impl VisualMapNode {
             let k = &right[points[i].keypoint];
             let (u, v) = (k.x.round() as i64, k.y.round() as i64);
             let inside = u >= 0 && v >= 0 && u < depth.width as i64 && v < depth.height as i64;
-            let z = if inside { depth.at(u as u32, v as u32) as f64 } else { 0.0 };
+            let z = if inside {
+                depth.at(u as u32, v as u32) as f64
+            } else {
+                0.0
+            };
             self.first_truth.push((z > 0.0).then(|| {
                 let o = cam.intrinsics.back_project(k.x as f64, k.y as f64, z);
                 r.transpose() * DVec3::from_array(o) + cam.centre(&truth)
@@ -349,10 +344,6 @@ impl Node for VisualMapNode {
         };
         let t0 = std::time::Instant::now();
         let img = grey(rgb.width, rgb.height, &rgb.data);
-        if std::env::var("VM_DEBUG").is_ok() && self.frames.len() == 10 {
-            img.save(format!("/tmp/vm/{camera}.png")).ok();
-            eprintln!("{camera} optical {:?}", frame.optical);
-        }
         let keypoints = sift::detect(&img, &self.spec.sift);
         self.sift_s += t0.elapsed().as_secs_f64();
         if i == 0 {
@@ -360,7 +351,11 @@ impl Node for VisualMapNode {
             self.true_depth = Some((bus.now, planar_of_optical(&frame.optical), depth));
         }
         self.pending[i] = Some((bus.now, keypoints));
-        if self.pending.iter().all(|p| p.as_ref().is_some_and(|(t, _)| *t == bus.now)) {
+        if self
+            .pending
+            .iter()
+            .all(|p| p.as_ref().is_some_and(|(t, _)| *t == bus.now))
+        {
             self.process(bus.now)?;
             self.next = bus.now + self.period;
         }
@@ -407,18 +402,25 @@ impl Node for VisualMapNode {
             .frames
             .iter()
             .fold((0, 0), |(a, b), f| (a + f.judged, b + f.false_matches));
-        let mut pos: Vec<f64> = self.frames.iter().map(|f| f.step.pose.distance(&f.truth)).collect();
+        let mut pos: Vec<f64> = self
+            .frames
+            .iter()
+            .map(|f| f.step.pose.distance(&f.truth))
+            .collect();
         let mut yaw: Vec<f64> = self
             .frames
             .iter()
-            .map(|f| futago_msgs::wrap_angle(f.step.pose.theta - f.truth.theta).abs().to_degrees())
+            .map(|f| {
+                futago_msgs::wrap_angle(f.step.pose.theta - f.truth.theta)
+                    .abs()
+                    .to_degrees()
+            })
             .collect();
         pos.sort_by(f64::total_cmp);
         yaw.sort_by(f64::total_cmp);
         let n = self.frames.len().max(1) as f64;
-        let mean = |f: &dyn Fn(&FrameRecord) -> usize| {
-            self.frames.iter().map(f).sum::<usize>() as f64 / n
-        };
+        let mean =
+            |f: &dyn Fn(&FrameRecord) -> usize| self.frames.iter().map(f).sum::<usize>() as f64 / n;
         let v = json!({
             "frames": self.frames.len(),
             "baseline_m": self.rig.baseline,
@@ -467,7 +469,10 @@ impl Node for VisualMapNode {
         };
         let num = |x: &serde_json::Value| x.as_f64().unwrap_or(f64::NAN);
         m.insert("visual_map.landmarks", num(&v["landmarks"]));
-        m.insert("visual_map.stereo.false_rate", num(&v["stereo"]["false_rate"]));
+        m.insert(
+            "visual_map.stereo.false_rate",
+            num(&v["stereo"]["false_rate"]),
+        );
         m.insert(
             "visual_map.landmark_error.median_m",
             num(&v["landmark_error"]["median_m"]),

@@ -150,8 +150,7 @@ impl LandmarkMap {
     /// modern map compression beside the seed's per-frame selection.
     pub fn summarised(&self, keep: f64) -> LandmarkMap {
         let mut order: Vec<usize> = (0..self.landmarks.len()).collect();
-        let best_contrast =
-            |l: &Landmark| l.views.iter().map(|v| v.contrast).fold(0f32, f32::max);
+        let best_contrast = |l: &Landmark| l.views.iter().map(|v| v.contrast).fold(0f32, f32::max);
         order.sort_by(|&a, &b| {
             let (la, lb) = (&self.landmarks[a], &self.landmarks[b]);
             lb.observed
@@ -206,10 +205,7 @@ impl Camera {
             return None;
         }
         let k = &self.intrinsics;
-        Some(DVec2::new(
-            k.fx * o.x / o.z + k.cx,
-            k.fy * o.y / o.z + k.cy,
-        ))
+        Some(DVec2::new(k.fx * o.x / o.z + k.cx, k.fy * o.y / o.z + k.cy))
     }
 
     /// Whether a pixel lies in the image.
@@ -288,7 +284,10 @@ impl SearchConfig {
     /// Every pose of the window about `prior` (offsets in the map frame), heading outermost.
     pub fn poses(&self, prior: &Pose2) -> impl Iterator<Item = Pose2> + '_ {
         let xy = Self::steps(self.half_xy, self.step_xy);
-        let yaw = Self::steps(self.half_yaw_deg.to_radians(), self.step_yaw_deg.to_radians());
+        let yaw = Self::steps(
+            self.half_yaw_deg.to_radians(),
+            self.step_yaw_deg.to_radians(),
+        );
         let prior = *prior;
         yaw.into_iter().flat_map(move |t| {
             let xy = xy.clone();
@@ -855,10 +854,7 @@ fn cholesky2(m: &DMat2) -> Option<DMat2> {
     let l21 = b / l11;
     let l22 = (d - l21 * l21).max(0.0).sqrt();
     // L = [[l11, 0], [l21, l22]]; U = Lᵀ.
-    Some(DMat2::from_cols(
-        DVec2::new(l11, 0.0),
-        DVec2::new(l21, l22),
-    ))
+    Some(DMat2::from_cols(DVec2::new(l11, 0.0), DVec2::new(l21, l22)))
 }
 
 /// Gauss–Newton on the whitened reprojection error of `m` from `start`.
@@ -928,7 +924,10 @@ pub fn pnp_ransac(
     };
     let inliers: Vec<&Prepared> = m
         .iter()
-        .filter(|p| reprojection_cost(camera, &pose, std::slice::from_ref(p), config.outlier) < config.outlier)
+        .filter(|p| {
+            reprojection_cost(camera, &pose, std::slice::from_ref(p), config.outlier)
+                < config.outlier
+        })
         .collect();
     if inliers.len() < 2 {
         return pose;
@@ -956,7 +955,9 @@ mod tests {
         let o = c.to_optical(&pose, DVec3::new(1.0, 5.0, 1.0));
         assert!((o - DVec3::new(0.0, -0.5, 3.0)).length() < 1e-12, "{o}");
         // To the camera's left (−x in the world when facing +y): the image's left half.
-        let px = c.pixel(c.to_optical(&pose, DVec3::new(0.0, 5.0, 0.5))).unwrap();
+        let px = c
+            .pixel(c.to_optical(&pose, DVec3::new(0.0, 5.0, 0.5)))
+            .unwrap();
         assert!(px.x < c.intrinsics.cx && (px.y - c.intrinsics.cy).abs() < 1e-9);
         assert_eq!(direction_bin(DVec3::ZERO, DVec3::new(1.0, 0.0, 0.0)), 18);
         assert_eq!(direction_bin(DVec3::ZERO, DVec3::new(-1.0, -1e-9, 0.0)), 0);
@@ -1044,7 +1045,8 @@ mod tests {
         let mut view = Vec::new();
         for i in 0..100 {
             let (u, v) = ((i % 10) as f64 * 30.0 + 5.0, (i / 10) as f64 * 20.0 + 5.0);
-            map.landmarks.push(landmark(i as u32 % 3, 1, (i % 7) as f32));
+            map.landmarks
+                .push(landmark(i as u32 % 3, 1, (i % 7) as f32));
             view.push(InView {
                 index: i,
                 pixel: DVec2::new(u, v),
@@ -1065,7 +1067,11 @@ mod tests {
         for s in &d {
             let col = s.index % 10;
             let row = s.index / 10;
-            let other = if row % 2 == 0 { s.index + 10 } else { s.index - 10 };
+            let other = if row % 2 == 0 {
+                s.index + 10
+            } else {
+                s.index - 10
+            };
             let (a, b) = (&map.landmarks[s.index], &map.landmarks[other]);
             assert!(
                 (a.success(), a.views[0].contrast) >= (b.success(), b.views[0].contrast),

@@ -207,7 +207,8 @@ impl LandmarkMapper {
         let c = self.camera.centre(pose);
         m.iter()
             .map(|(pm, info)| {
-                let q = points[pm.point].position - r * (self.map.landmarks[pm.landmark].position - c);
+                let q =
+                    points[pm.point].position - r * (self.map.landmarks[pm.landmark].position - c);
                 q.dot(*info * q).min(self.config.outlier)
             })
             .sum()
@@ -401,8 +402,12 @@ mod tests {
             }
             world.push((p, d));
         }
-        let mut mapper =
-            LandmarkMapper::new(camera, rig.baseline, MappingConfig::default(), Pose2::new(-1.0, 0.0, 0.0));
+        let mut mapper = LandmarkMapper::new(
+            camera,
+            rig.baseline,
+            MappingConfig::default(),
+            Pose2::new(-1.0, 0.0, 0.0),
+        );
         let mut worst: f64 = 0.0;
         for f in 0..40 {
             let truth = Pose2::new(-1.0 + 0.03 * f as f64, 0.0, (2.0 * f as f64).to_radians());
@@ -443,12 +448,20 @@ mod tests {
                 assert!(step.inliers > 20, "frame {f}: {step:?}");
             }
             worst = worst.max(step.pose.distance(&truth));
-            assert!((step.pose.theta - truth.theta).abs() < 1.5f64.to_radians(), "{f}: {step:?}");
+            assert!(
+                (step.pose.theta - truth.theta).abs() < 1.5f64.to_radians(),
+                "{f}: {step:?}"
+            );
         }
         assert!(worst < 0.03, "worst position error {worst}");
         // Landmarks seen in many frames were fused: their covariance shrank and they carry
         // their counters.
-        let seen: Vec<&Landmark> = mapper.map.landmarks.iter().filter(|l| l.observed >= 10).collect();
+        let seen: Vec<&Landmark> = mapper
+            .map
+            .landmarks
+            .iter()
+            .filter(|l| l.observed >= 10)
+            .collect();
         assert!(seen.len() > 50, "{}", seen.len());
         let mut near = 0;
         for l in &seen {
@@ -458,6 +471,10 @@ mod tests {
                 .fold(f64::INFINITY, f64::min);
             near += (best < 0.05) as usize;
         }
-        assert!(near as f64 > 0.9 * seen.len() as f64, "{near} of {}", seen.len());
+        assert!(
+            near as f64 > 0.9 * seen.len() as f64,
+            "{near} of {}",
+            seen.len()
+        );
     }
 }

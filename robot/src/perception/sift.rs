@@ -332,7 +332,8 @@ fn refine(
     let (mut x, mut y, mut l) = (x, y, level);
     for _ in 0..REFINE_STEPS {
         let d = |dl: isize, dx: isize, dy: isize| {
-            dog[(l as isize + dl) as usize].at((x as isize + dx) as usize, (y as isize + dy) as usize)
+            dog[(l as isize + dl) as usize]
+                .at((x as isize + dx) as usize, (y as isize + dy) as usize)
         };
         let v = d(0, 0, 0);
         let g = [

@@ -201,12 +201,7 @@ pub fn point(rig: &Rig, i: [f64; 4], sigma: [f64; 4]) -> (DVec3, DMat3) {
     let z = b / rho;
     let p = DVec3::new(u * z, v * z, z);
     // ∂Z/∂I = −b/ρ² ∂ρ/∂I.
-    let drho = [
-        0.5 / k.fx,
-        -0.5 / k.fx,
-        -0.5 / k.fy,
-        0.5 / k.fy,
-    ];
+    let drho = [0.5 / k.fx, -0.5 / k.fx, -0.5 / k.fy, 0.5 / k.fy];
     let dz: [f64; 4] = drho.map(|d| -b / (rho * rho) * d);
     let dx = [u * dz[0], u * dz[1] + z / k.fx, u * dz[2], u * dz[3]];
     let dy = [v * dz[0], v * dz[1], v * dz[2] + z / k.fy, v * dz[3]];
@@ -262,13 +257,20 @@ mod tests {
         let r = rig();
         let k = r.intrinsics;
         let truth = DVec3::new(0.4, -0.3, 2.5);
-        let (xr, yr) = (k.fx * truth.x / truth.z + k.cx, k.fy * truth.y / truth.z + k.cy);
+        let (xr, yr) = (
+            k.fx * truth.x / truth.z + k.cx,
+            k.fy * truth.y / truth.z + k.cy,
+        );
         let xl = xr + k.fx * r.baseline / truth.z;
         let yt = yr + k.fy * r.baseline / truth.z;
         let (p, c) = point(&r, [xl, xr, yr, yt], [0.5; 4]);
         assert!((p - truth).length() < 1e-9, "{p}");
         let want = truth.z * truth.z / (k.fx * r.baseline) * 0.5;
-        assert!((c.z_axis.z.sqrt() / want - 1.0).abs() < 0.02, "{} vs {want}", c.z_axis.z.sqrt());
+        assert!(
+            (c.z_axis.z.sqrt() / want - 1.0).abs() < 0.02,
+            "{} vs {want}",
+            c.z_axis.z.sqrt()
+        );
         // Lateral spread grows with depth and is correlated with depth by the ray's slope.
         assert!(c.z_axis.x * truth.x > 0.0 && c.z_axis.y * truth.y > 0.0);
     }
@@ -290,7 +292,11 @@ mod tests {
             let d = k.fx * r.baseline / p.z;
             right.push(kp(xr as f32, yr as f32, i as u8));
             left.push(kp((xr + d) as f32, yr as f32, i as u8));
-            top.push(kp(xr as f32, (yr + k.fy * r.baseline / p.z) as f32, i as u8));
+            top.push(kp(
+                xr as f32,
+                (yr + k.fy * r.baseline / p.z) as f32,
+                i as u8,
+            ));
         }
         // A look-alike of point 0 on its row in the left image.
         left.push(kp(right[0].x + 3.0, right[0].y, 0));
