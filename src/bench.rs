@@ -374,6 +374,51 @@ pub fn bench_rgbd(s: &Scenario, duration: Option<f64>) -> Result<Value> {
     }))
 }
 
+/// Seed 001's monocular localisation per frame, on the scenario's own run (one core): SIFT,
+/// and for each localiser the selection, the matching (the seed's timed step) and the pose
+/// search, their sum, and the delegates' matching speed-up over all landmarks.
+pub fn bench_visual(s: &Scenario, duration: Option<f64>) -> Result<Value> {
+    if s.spec.visual_localization.is_none() {
+        bail!("{}: the scenario has no [visual_localization]", s.spec.name);
+    }
+    let opts = RunOptions {
+        seed: None,
+        duration,
+        progress: false,
+        report: false,
+    };
+    let out = run_in_memory(s, &opts)?;
+    let m = &out.performance["nodes"]["visual_localization"];
+    let sift = m["sift_ms_per_frame"]
+        .as_f64()
+        .context("the run took no frame")?;
+    let mut localisers = serde_json::Map::new();
+    for name in ["all", "delegates", "summary", "pnp"] {
+        let l = &m[name];
+        let (sel, mat, sea) = (
+            l["selection_ms"].as_f64().unwrap_or(f64::NAN),
+            l["matching_ms"]["mean"].as_f64().unwrap_or(f64::NAN),
+            l["search_ms"].as_f64().unwrap_or(f64::NAN),
+        );
+        localisers.insert(
+            name.into(),
+            json!({
+                "selection_ms": sel,
+                "matching_ms": mat,
+                "search_ms": sea,
+                "frame_ms": sift + sel + mat + sea,
+            }),
+        );
+    }
+    Ok(json!({
+        "scenario": s.spec.name,
+        "frames": m["frames"],
+        "sift_ms": sift,
+        "localisers": localisers,
+        "matching_speedup": m["matching_speedup"],
+    }))
+}
+
 /// People detection and tracking per scan, and the simulator's speed among people. A robot
 /// stands at `start` with a URG-04LX (682 beams) at 0.25 m while `people` walk back and forth
 /// across its view, 0.6 m apart, from 1.5 m out; `scans` of its scans are collected, then the

@@ -4,7 +4,7 @@
 //! Each target starts from seeds the project itself provides: the shipped scenarios and
 //! worlds, the chair's GLB, and logs written by the project's own writers (a CARMEN log, a
 //! TUM trajectory, a relations file, a map_server map, an example ROS bag uncompressed, bz2 and
-//! lz4). An input is a
+//! lz4, the first landmarks of the lab's landmark map). An input is a
 //! seed with 1 to 8 stacked mutations: bit flips, random bytes, insertions, deletions,
 //! duplicated or spliced ranges, and, for text, numbers replaced by values at the edges of
 //! their types (0, −1, ±10³⁰⁰, NaN, 2³², 2⁶⁴ …), lines dropped, doubled or swapped. Every
@@ -118,6 +118,22 @@ fn map_seed() -> futago_msgs::grid::OccupancyGrid {
         *c = [0, 0, 100, -1, 0][k % 5];
     }
     g
+}
+
+/// A landmark map (seed 001), read and handed to the localiser's map.
+fn parse_landmarks(s: &Seed, _: &mut Worlds) {
+    if let Ok(f) = futago_msgs::landmarks::LandmarkFile::parse(&s.origin, &text(&s.bytes)) {
+        let _ = futago_robot::localization::landmarks::LandmarkMap::from_file(&f);
+    }
+}
+
+/// The first landmarks of the shipped lab map.
+fn landmarks_seed(root: &Path) -> Result<Vec<u8>> {
+    let path = root.join("worlds/maps/lab-landmarks.json");
+    let mut f =
+        futago_msgs::landmarks::LandmarkFile::read(&path).map_err(|e| anyhow::anyhow!("{e}"))?;
+    f.landmarks.truncate(20);
+    Ok(serde_json::to_vec(&f)?)
 }
 
 fn parse_relations(s: &Seed, _: &mut Worlds) {
@@ -306,6 +322,12 @@ pub fn targets(root: &Path) -> Result<Vec<Target>> {
             text: true,
             seeds: vec![made("fuzz.relations", relations_seed().into_bytes())],
             parse: parse_relations,
+        },
+        Target {
+            name: "landmarks",
+            text: true,
+            seeds: vec![made("fuzz-landmarks.json", landmarks_seed(root)?)],
+            parse: parse_landmarks,
         },
     ])
 }

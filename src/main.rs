@@ -144,7 +144,7 @@ enum Command {
         #[command(flatten)]
         overlays: OverlayArgs,
     },
-    /// Fuzz every parser (scenario, overlay, world, glTF, CARMEN, ROS bag, TUM, relations) with
+    /// Fuzz every parser (scenario, overlay, world, glTF, CARMEN, ROS bag, TUM, relations, landmark map) with
     /// mutated inputs from the project's own files; exits 1 if any input makes one panic, and
     /// writes those inputs to OUT/.
     Fuzz {
@@ -242,6 +242,16 @@ enum BenchCommand {
         /// Sweeps, each with the next seed; the median time is reported.
         #[arg(long, default_value_t = 3)]
         repeats: usize,
+    },
+    /// Seed 001's monocular localisation per frame: SIFT, and each localiser's selection,
+    /// matching and pose search, on the scenario's own run.
+    Visual {
+        /// Scenario with a [visual_localization] to measure.
+        #[arg(default_value = "scenarios/lab-visual-nav.toml")]
+        scenario: PathBuf,
+        /// Simulated seconds (overrides the scenario's duration).
+        #[arg(long)]
+        duration: Option<f64>,
     },
     /// Planning time of both coverage planners (and the second pass) on a scenario's map,
     /// region and annotations.
@@ -866,6 +876,13 @@ fn real_main() -> Result<()> {
         } => {
             let s = scenario::Scenario::load(&scenario)?;
             let r = bench::bench_coverage(&s, repeats)?;
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+        Command::Bench {
+            command: BenchCommand::Visual { scenario, duration },
+        } => {
+            let s = scenario::Scenario::load(&scenario)?;
+            let r = bench::bench_visual(&s, duration)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
         Command::Bench {

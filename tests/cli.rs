@@ -2885,3 +2885,26 @@ fn seed_001_scenarios_name_their_bad_rigs_maps_and_values() {
         );
     }
 }
+
+/// `futago bench visual` times seed 001's localisers per frame on a short run of the scenario:
+/// every part is measured, a frame costs at least its SIFT, and the speed-up is reported.
+#[test]
+fn bench_visual_times_the_localisers_by_parts() {
+    let o = futago(&["bench", "visual", "--duration", "2"]);
+    ok(&o);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v["frames"].as_u64().unwrap() >= 19, "{v}");
+    let sift = v["sift_ms"].as_f64().unwrap();
+    assert!(sift > 0.0);
+    for l in ["all", "delegates", "summary", "pnp"] {
+        let f = &v["localisers"][l];
+        for k in ["selection_ms", "matching_ms", "search_ms"] {
+            assert!(f[k].as_f64().unwrap() > 0.0, "{l} {k}: {v}");
+        }
+        assert!(f["frame_ms"].as_f64().unwrap() > sift);
+    }
+    assert!(v["matching_speedup"].as_f64().unwrap() > 1.0, "{v}");
+    let o = futago(&["bench", "visual", "scenarios/lab-visual-map.toml"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no [visual_localization]"));
+}

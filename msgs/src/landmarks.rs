@@ -123,7 +123,17 @@ impl LandmarkFile {
             ));
         }
         let text = std::fs::read_to_string(path).map_err(|x| e("", format!("cannot read: {x}")))?;
-        let de = &mut serde_json::Deserializer::from_str(&text);
+        Self::parse(path, &text)
+    }
+
+    /// Parses and checks the text of a landmark file; errors name `path`.
+    pub fn parse(path: &Path, text: &str) -> Result<LandmarkFile, LandmarkError> {
+        let e = |key: &str, m: String| LandmarkError {
+            file: path.to_path_buf(),
+            key: key.into(),
+            message: m,
+        };
+        let de = &mut serde_json::Deserializer::from_str(text);
         let file: LandmarkFile = serde_path_to_error::deserialize(de)
             .map_err(|x| e(&x.path().to_string(), x.inner().to_string()))?;
         if file.format != FORMAT {

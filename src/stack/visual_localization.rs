@@ -128,12 +128,8 @@ impl VisualLocalizationSpec {
                 "expected at least two finite points [x, y], m".into(),
             ));
         }
-        self.sift
-            .validate(&k("sift"))
-            .map_err(|(a, b)| (a.to_string(), b.to_string()))?;
-        self.monocular
-            .validate(&k("monocular"))
-            .map_err(|(a, b)| (a.to_string(), b.to_string()))
+        self.sift.validate(&k("sift"))?;
+        self.monocular.validate(&k("monocular"))
     }
 }
 
@@ -369,6 +365,7 @@ impl Node for VisualLocalizationNode {
             });
         }
         let mut perf = serde_json::Map::new();
+        perf.insert("frames".into(), json!(self.records.len()));
         perf.insert("sift_ms_per_frame".into(), json!(self.sift_s * 1000.0 / n));
         for (i, l) in LOCALISERS.iter().enumerate() {
             let mut ex = Vec::new();

@@ -104,33 +104,29 @@ pub fn check_rig(
             .find(|(c, _)| c.name == n)
             .ok_or_else(|| {
                 let all: Vec<&str> = cams.iter().map(|c| c.name.as_str()).collect();
-                String::from(format!(
-                    "no camera is named `{n}`; the scenario's cameras are {all:?}"
-                ))
+                format!("no camera is named `{n}`; the scenario's cameras are {all:?}")
             })
     };
     let mut found = Vec::new();
     for n in names {
         let (c, s) = find(n)?;
         if c.joint.is_some() || c.carrier.is_some() {
-            return Err(String::from(format!(
-                "camera `{n}` must be fixed to the robot's base"
-            )));
+            return Err(format!("camera `{n}` must be fixed to the robot's base"));
         }
         if c.rpy_deg[0] != 0.0 || c.rpy_deg[1] != 0.0 {
-            return Err(String::from(format!(
+            return Err(format!(
                 "camera `{n}` must be levelled (roll and pitch 0): the state is planar"
-            )));
+            ));
         }
         found.push((c, s));
     }
     let (r, rs) = found[0];
     for (c, s) in &found[1..] {
         if s.rgb != rs.rgb || s.rate != rs.rate || c.rpy_deg != r.rpy_deg {
-            return Err(String::from(format!(
+            return Err(format!(
                 "camera `{}` differs from `{}` in its colour intrinsics, rate or orientation",
                 c.name, r.name
-            )));
+            ));
         }
     }
     let d =
@@ -146,9 +142,9 @@ pub fn check_rig(
         ));
     }
     if !(t.x.abs() < 1e-3 && t.y.abs() < 1e-3 && (t.z - b).abs() < 1e-3) {
-        return Err(String::from(format!(
+        return Err(format!(
             "the third camera (top) must sit straight above the first (right) by the same baseline, {b:.4} m"
-        )));
+        ));
     }
     Ok(b)
 }
@@ -253,8 +249,7 @@ fn is_false(
 
 impl VisualMapNode {
     fn process(&mut self, time: Time) -> Result<()> {
-        let [Some((_, right)), Some((_, left)), Some((_, top))] =
-            std::mem::replace(&mut self.pending, [None, None, None])
+        let [Some((_, right)), Some((_, left)), Some((_, top))] = std::mem::take(&mut self.pending)
         else {
             return Ok(());
         };
@@ -520,11 +515,8 @@ impl VisualMapSpec {
                 format!("{}: expected 0.01 to 100 Hz", self.rate),
             ));
         }
-        let s = |r: Result<(), futago_robot::config::ConfigError>| {
-            r.map_err(|(a, b)| (a.to_string(), b.to_string()))
-        };
-        s(self.sift.validate("visual_map.sift"))?;
-        s(self.stereo.validate("visual_map.stereo"))?;
-        s(self.mapping.validate("visual_map.mapping"))
+        self.sift.validate("visual_map.sift")?;
+        self.stereo.validate("visual_map.stereo")?;
+        self.mapping.validate("visual_map.mapping")
     }
 }

@@ -1,6 +1,6 @@
 //! Where the robot is: dead reckoning from wheel odometry ([`odometry`]), Monte Carlo
-//! localisation on a known map ([`mcl`]), and of a depth camera in a 3D model
-//! ([`depth_mcl`]).
+//! localisation on a known map ([`mcl`]), of a depth camera in a 3D model ([`depth_mcl`]),
+//! and of a single camera in a map of visual landmarks ([`landmarks`], seed 001).
 
 pub mod depth_mcl;
 pub mod landmarks;

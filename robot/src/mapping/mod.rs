@@ -3,7 +3,8 @@
 //! from RGB-D keyframes ([`rgbd_map`], with [`registration`]'s RGBD-ICP and [`polygons`]);
 //! seed 004's localisation by point-to-line ICP and Nelder–Mead ([`line_icp`]), its
 //! stop-and-scan 3D mapping with a turntable laser ([`turntable`]) and its voxel
-//! map of occupied, free and unknown space with free-space carving ([`voxels`]).
+//! map of occupied, free and unknown space with free-space carving ([`voxels`]); seed 001's
+//! visual landmark map from a trinocular camera ([`landmark_map`]).
 
 pub mod correlative;
 pub mod icp;
