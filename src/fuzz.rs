@@ -583,7 +583,7 @@ mod tests {
     #[test]
     fn every_target_has_seeds_that_parse() {
         let targets = targets(&root()).unwrap();
-        assert_eq!(targets.len(), 10);
+        assert_eq!(targets.len(), 11);
         for t in &targets {
             assert!(!t.seeds.is_empty(), "{}", t.name);
         }
@@ -604,6 +604,10 @@ mod tests {
             let bag = rosbag::example_mounted(c, [0.0, 0.0, 0.0, 1.0]);
             assert_eq!(rosbag::read(&bag).unwrap().scans.len(), 1);
         }
+        let text = String::from_utf8(landmarks_seed(&root()).unwrap()).unwrap();
+        let f = futago_msgs::landmarks::LandmarkFile::parse(Path::new("l.json"), &text).unwrap();
+        assert_eq!(f.landmarks.len(), 20);
+        assert!(futago_robot::localization::landmarks::LandmarkMap::from_file(&f).is_ok());
     }
 
     #[test]
