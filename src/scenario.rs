@@ -1152,6 +1152,20 @@ impl Scenario {
                     format!("camera `{name}` must be fixed to the robot's base"),
                 ));
             }
+            let levelled = spec
+                .camera
+                .iter()
+                .find(|c| c.name == name)
+                .is_some_and(|c| c.rpy_deg[0] == 0.0 && c.rpy_deg[1] == 0.0);
+            if !levelled {
+                return Err(SpecError::new(
+                    path,
+                    "visual_localization.camera",
+                    format!(
+                        "camera `{name}` must be levelled (roll and pitch 0): the state is planar"
+                    ),
+                ));
+            }
             v.camera = Some(name);
             v.validate().map_err(|(k, m)| SpecError::new(path, k, m))?;
             let file = crate::stack::visual_localization::map_path(path, v);

@@ -2862,6 +2862,18 @@ fn seed_001_scenarios_name_their_bad_rigs_maps_and_values() {
         ),
         (
             &nav,
+            "xyz = [0.1, 0.0996, 0.45]",
+            "xyz = [0.1, 0.0996, 0.45]\nrpy_deg = [0.0, 10.0, 0.0]",
+            "visual_localization.camera`: camera `mono` must be levelled",
+        ),
+        (
+            &mapping,
+            "name = \"right\"\npreset = \"digiclops\"",
+            "name = \"right\"\npreset = \"digiclops\"\ndepth_size = [160, 120]",
+            "must have its depth_size equal to its rgb_size",
+        ),
+        (
+            &nav,
             "drive = \"delegates\"",
             "drive = \"delegates\"\nmonocular = { selection = { alpha = 0.0 } }",
             "visual_localization.monocular.selection.alpha",

@@ -6,6 +6,8 @@
 //! in each, matches and triangulates them (`perception::trinocular`), and hands the points
 //! to the mapper (`mapping::landmark_map`), which places the frame by the seed's exhaustive
 //! 3D search (`pose_source = "seed"`) or at the right camera's true pose (`"ground_truth"`).
+//! The first frame is placed at the true pose: the seed's map frame is its first camera
+//! frame, and this ties it to the world's, where the truth scores it.
 //!
 //! Scores, against the simulated truth:
 //! - the stereo false-match rate (the seed: 0 %): a triangulated point is false when its depth
@@ -121,6 +123,12 @@ pub fn check_rig(
         found.push((c, s));
     }
     let (r, rs) = found[0];
+    if rs.depth != rs.rgb {
+        return Err(format!(
+            "camera `{}` (right) must have its depth_size equal to its rgb_size: its true depth scores the stereo points pixel by pixel",
+            r.name
+        ));
+    }
     for (c, s) in &found[1..] {
         if s.rgb != rs.rgb || s.rate != rs.rate || c.rpy_deg != r.rpy_deg {
             return Err(format!(

@@ -901,6 +901,9 @@ pub fn pnp_ransac(
     config: &MonocularConfig,
 ) -> Pose2 {
     use rand::{Rng, SeedableRng};
+    if m.len() < 2 {
+        return *prior;
+    }
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut best: Option<(usize, f64, Pose2)> = None;
     for _ in 0..RANSAC_ITERATIONS {
