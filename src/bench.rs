@@ -331,6 +331,18 @@ pub fn bench_mcl(world: &World, start: Pose2, particles: usize, updates: usize) 
     Ok(Value::Object(out))
 }
 
+/// The scenario run in memory with its own seed, for `duration` simulated seconds (its own
+/// when none), without progress or report: the nodes' timings are in its performance block.
+fn run_quietly(s: &Scenario, duration: Option<f64>) -> Result<crate::run::Outcome> {
+    let opts = RunOptions {
+        seed: None,
+        duration,
+        progress: false,
+        report: false,
+    };
+    run_in_memory(s, &opts)
+}
+
 /// Processing time per keyframe of the RGB-D map: making a keyframe (floor RANSAC, levelling,
 /// features) and each method's registration with the building of its points and planes, on
 /// the scenario's own run (one core).
@@ -338,13 +350,7 @@ pub fn bench_rgbd(s: &Scenario, duration: Option<f64>) -> Result<Value> {
     if s.rgbd_map.is_none() {
         bail!("{}: the scenario has no [rgbd_map]", s.spec.name);
     }
-    let opts = RunOptions {
-        seed: None,
-        duration,
-        progress: false,
-        report: false,
-    };
-    let out = run_in_memory(s, &opts)?;
+    let out = run_quietly(s, duration)?;
     // The mapper's own timings, from its entry of the run's performance block.
     let m = &out.performance["nodes"]["rgbd_map"];
     let count = m["keyframes"]
@@ -381,13 +387,7 @@ pub fn bench_visual(s: &Scenario, duration: Option<f64>) -> Result<Value> {
     if s.spec.visual_localization.is_none() {
         bail!("{}: the scenario has no [visual_localization]", s.spec.name);
     }
-    let opts = RunOptions {
-        seed: None,
-        duration,
-        progress: false,
-        report: false,
-    };
-    let out = run_in_memory(s, &opts)?;
+    let out = run_quietly(s, duration)?;
     let m = &out.performance["nodes"]["visual_localization"];
     let sift = m["sift_ms_per_frame"]
         .as_f64()

@@ -66,6 +66,20 @@ fn refused_before_running(args: &[&str], fresh: &Path, expect: &str, code: Optio
     assert!(!fresh.exists(), "{a:?} ran something");
 }
 
+/// `text` with `from` replaced by `to`, written into `dir` and run: refused before anything
+/// runs, with `expect` in the error.
+fn edited_scenario_is_refused(dir: &Path, text: &str, from: &str, to: &str, expect: &str) {
+    assert!(text.contains(from), "{from}");
+    let path = dir.join("s.toml");
+    std::fs::write(&path, text.replace(from, to)).unwrap();
+    refused_before_running(
+        &["run", path.to_str().unwrap()],
+        &dir.join("fresh"),
+        expect,
+        None,
+    );
+}
+
 fn json_file(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -2693,15 +2707,7 @@ fn a_turntable_scan_names_its_bad_lasers_joint_and_values() {
             "scan3d.planning.planner",
         ),
     ] {
-        assert!(text.contains(from), "{from}");
-        let path = tmp.path().join("s.toml");
-        std::fs::write(&path, text.replace(from, to)).unwrap();
-        refused_before_running(
-            &["run", path.to_str().unwrap()],
-            &tmp.path().join("fresh"),
-            expect,
-            None,
-        );
+        edited_scenario_is_refused(tmp.path(), &text, from, to, expect);
     }
 }
 
@@ -2886,15 +2892,7 @@ fn seed_001_scenarios_name_their_bad_rigs_maps_and_values() {
         ),
     ];
     for (text, from, to, expect) in cases {
-        assert!(text.contains(from), "{from}");
-        let path = tmp.path().join("s.toml");
-        std::fs::write(&path, text.replace(from, to)).unwrap();
-        refused_before_running(
-            &["run", path.to_str().unwrap()],
-            &tmp.path().join("fresh"),
-            expect,
-            None,
-        );
+        edited_scenario_is_refused(tmp.path(), text, from, to, expect);
     }
 }
 
