@@ -133,12 +133,6 @@ impl VisualLocalizationSpec {
     }
 }
 
-/// One localiser's record of one frame.
-#[derive(Debug, Clone)]
-struct Record {
-    estimate: Estimate,
-}
-
 /// The localiser node.
 pub struct VisualLocalizationNode {
     spec: VisualLocalizationSpec,
@@ -148,7 +142,6 @@ pub struct VisualLocalizationNode {
     mount: Pose2,
     map: LandmarkMap,
     summary_map: LandmarkMap,
-    map_file: PathBuf,
     period: Duration,
     next: Time,
     poses: Option<[Pose2; 4]>,
@@ -157,7 +150,8 @@ pub struct VisualLocalizationNode {
     bases: Vec<[f64; 2]>,
     /// The driven estimate of the robot's pose, TUM lines.
     lines: String,
-    records: Vec<[Record; 4]>,
+    /// Each frame's estimates, in [`LOCALISERS`] order.
+    records: Vec<[Estimate; 4]>,
     sift_s: f64,
     bumps: u64,
     bumped: bool,
@@ -197,7 +191,6 @@ pub fn node(s: &Scenario) -> Result<Option<VisualLocalizationNode>> {
         mount: super::camera_on_base(cam),
         map,
         summary_map,
-        map_file: spec.map.clone(),
         period: Duration::from_secs(1.0 / spec.rate),
         next: Time::ZERO,
         poses: None,
@@ -312,10 +305,8 @@ impl Node for VisualLocalizationNode {
                 ),
             }
         };
-        let estimates: [Record; 4] = std::array::from_fn(|i| Record {
-            estimate: run(LOCALISERS[i], &priors[i]),
-        });
-        let poses = std::array::from_fn(|i| estimates[i].estimate.pose);
+        let estimates: [Estimate; 4] = std::array::from_fn(|i| run(LOCALISERS[i], &priors[i]));
+        let poses = std::array::from_fn(|i| estimates[i].pose);
         self.poses = Some(poses);
         let drive = LOCALISERS
             .iter()
@@ -345,7 +336,7 @@ impl Node for VisualLocalizationNode {
         let n = self.records.len().max(1) as f64;
         let mut v = json!({
             "frames": self.records.len(),
-            "map": self.map_file.display().to_string(),
+            "map": self.spec.map.display().to_string(),
             "landmarks": self.map.landmarks.len(),
             "summary_landmarks": self.summary_map.landmarks.len(),
             "drive": self.spec.drive,
@@ -373,7 +364,7 @@ impl Node for VisualLocalizationNode {
             let mut eh = Vec::new();
             let mut within = 0usize;
             for (r, (_, t)) in self.records.iter().zip(&self.truths) {
-                let p = r[i].estimate.pose;
+                let p = r[i].pose;
                 let (dx, dy) = ((p.x - t.x).abs(), (p.y - t.y).abs());
                 let dh = futago_msgs::wrap_angle(p.theta - t.theta)
                     .abs()
@@ -384,7 +375,7 @@ impl Node for VisualLocalizationNode {
                 within += (dx.hypot(dy) <= 0.05 && dh <= 5.0) as usize;
             }
             let per = |f: &dyn Fn(&Estimate) -> f64| -> Vec<f64> {
-                self.records.iter().map(|r| f(&r[i].estimate)).collect()
+                self.records.iter().map(|r| f(&r[i])).collect()
             };
             let (mx, sx) = mean_sd(&ex);
             let (my, sy) = mean_sd(&ey);
