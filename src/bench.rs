@@ -25,6 +25,7 @@ pub fn bench(s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> 
         duration,
         progress: false,
         report: false,
+        force: false,
     };
     let full = run_in_memory(s, &opts)?;
     let mut bare = s.clone();
@@ -339,6 +340,7 @@ fn run_quietly(s: &Scenario, duration: Option<f64>) -> Result<crate::run::Outcom
         duration,
         progress: false,
         report: false,
+        force: false,
     };
     run_in_memory(s, &opts)
 }

@@ -87,11 +87,15 @@ fn parse_gltf(s: &Seed, _: &mut Worlds) {
 }
 
 fn parse_carmen(s: &Seed, _: &mut Worlds) {
-    let _ = carmen::read(&text(&s.bytes));
+    let t = text(&s.bytes);
+    let _ = carmen::read(&t);
+    // And salvaging, as `futago replay` reads by default.
+    let _ = carmen::read_with(&t, &carmen::ReadOptions::default());
 }
 
 fn parse_bag(s: &Seed, _: &mut Worlds) {
     let _ = rosbag::read(&s.bytes);
+    let _ = rosbag::read_with(&s.bytes, &carmen::ReadOptions::default());
 }
 
 fn parse_tum(s: &Seed, _: &mut Worlds) {
@@ -562,14 +566,15 @@ pub fn run(targets: &[Target], inputs: u64, jobs: usize, seed: u64, max_findings
 }
 
 /// Writes each finding's input and message to `dir` (`TARGET-N.input`, `TARGET-N.txt`).
-pub fn write_findings(findings: &[Finding], dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    for (i, f) in findings.iter().enumerate() {
-        let stem = dir.join(format!("{}-{i}", f.target));
-        std::fs::write(stem.with_extension("input"), &f.input)?;
-        std::fs::write(stem.with_extension("txt"), &f.message)?;
-    }
-    Ok(())
+pub fn write_findings(findings: &[Finding], out: &Path, force: bool) -> Result<()> {
+    crate::run::write_atomically(out, force, "fuzz", |dir| {
+        for (i, f) in findings.iter().enumerate() {
+            let stem = dir.join(format!("{}-{i}", f.target));
+            std::fs::write(stem.with_extension("input"), &f.input)?;
+            std::fs::write(stem.with_extension("txt"), &f.message)?;
+        }
+        Ok(())
+    })
 }
 
 #[cfg(test)]

@@ -79,7 +79,14 @@ impl Node for Collector {
 /// Runs `scenario` over `seeds` collecting labelled segments, trains on all but the last seed
 /// with `rounds` stumps, scores on the last, and writes the model to `out` (JSON). Returns the
 /// summary that was printed.
-pub fn train(scenario: &Scenario, seeds: &[u64], rounds: usize, out: &Path) -> Result<Value> {
+pub fn train(
+    scenario: &Scenario,
+    seeds: &[u64],
+    rounds: usize,
+    out: &Path,
+    force: bool,
+) -> Result<Value> {
+    crate::output::check_file(out, force, is_model)?;
     if seeds.len() < 2 {
         bail!("train-legs needs at least two seeds: the last is held out for the score");
     }
@@ -108,6 +115,7 @@ pub fn train(scenario: &Scenario, seeds: &[u64], rounds: usize, out: &Path) -> R
             duration: None,
             progress: false,
             report: false,
+            force: false,
         };
         simulate_with(scenario, &opts, None, vec![Box::new(collector)])
             .with_context(|| format!("running {} with seed {seed}", scenario.spec.name))?;
@@ -178,6 +186,15 @@ pub fn train(scenario: &Scenario, seeds: &[u64], rounds: usize, out: &Path) -> R
     std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
     std::fs::rename(&tmp, out).with_context(|| format!("writing {}", out.display()))?;
     Ok(summary)
+}
+
+/// A model file that [`train`] wrote (its `what`), which a new training may replace.
+fn is_model(bytes: &[u8]) -> bool {
+    serde_json::from_slice::<Value>(bytes).is_ok_and(|v| {
+        v["what"]
+            .as_str()
+            .is_some_and(|w| w.starts_with("futago laser leg classifier"))
+    })
 }
 
 /// Reads a model file written by [`train`], checking it.

@@ -10,6 +10,7 @@ mod config_walk;
 mod fuzz;
 mod ground_truth;
 mod legs_train;
+mod output;
 mod overlay;
 mod relations;
 mod replay;
@@ -45,9 +46,14 @@ enum Command {
     Run {
         /// Scenario file (TOML).
         scenario: PathBuf,
-        /// Output folder, created or replaced whole [default: out/<scenario name>].
+        /// Output folder, created or replaced whole when futago wrote it [default:
+        /// out/<scenario name>].
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Replace the output even when it holds files futago did not write (never `/`, the
+        /// home folder, the current folder or its parents, or a folder with a `.git`).
+        #[arg(long)]
+        force: bool,
         /// Seed of every noise source (overrides the scenario's).
         #[arg(long)]
         seed: Option<u64>,
@@ -69,9 +75,14 @@ enum Command {
         /// Ground-truth relations (`t1 t2 x y z roll pitch yaw` per line).
         #[arg(long)]
         relations: Option<std::path::PathBuf>,
-        /// Output folder, created or replaced whole [default: out/replay/<log name>].
+        /// Output folder, created or replaced whole when futago wrote it [default:
+        /// out/replay/<log name>].
         #[arg(long)]
         out: Option<std::path::PathBuf>,
+        /// Replace the output even when it holds files futago did not write (never `/`, the
+        /// home folder, the current folder or its parents, or a folder with a `.git`).
+        #[arg(long)]
+        force: bool,
         /// SLAM parameters: a TOML file of the `[slam]` table's keys (method,
         /// keyframe_distance, icp.max_distance_start, graph.loop_min_score, …).
         #[arg(long)]
@@ -80,6 +91,16 @@ enum Command {
         /// (seed 000's baseline).
         #[arg(long)]
         method: Option<String>,
+        /// Refuse a damaged log (cut short, a chunk or line that does not parse) instead of
+        /// replaying what it holds and saying what was lost.
+        #[arg(long)]
+        strict: bool,
+        /// The bag's sensor_msgs/LaserScan topic, where it has several.
+        #[arg(long, value_name = "TOPIC")]
+        scan_topic: Option<String>,
+        /// The bag's nav_msgs/Odometry topic, where it has several.
+        #[arg(long, value_name = "TOPIC")]
+        odom_topic: Option<String>,
     },
     /// Train the laser leg classifier on a scenario's simulated scans (its people give the
     /// labels): AdaBoost on every seed but the last, scored on the last. Writes the model
@@ -93,9 +114,14 @@ enum Command {
         /// Boosting rounds (stumps).
         #[arg(long, default_value_t = 100)]
         rounds: usize,
-        /// Where to write the model.
+        /// Where to write the model (an existing file is replaced only when it is a futago
+        /// model).
         #[arg(long, default_value = "models/legs.json")]
         out: PathBuf,
+        /// Replace the output even when it holds files futago did not write (never `/`, the
+        /// home folder, the current folder or its parents, or a folder with a `.git`).
+        #[arg(long)]
+        force: bool,
         #[command(flatten)]
         overlays: OverlayArgs,
     },
@@ -116,6 +142,10 @@ enum Command {
         /// Output folder [default: out/suite].
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Replace the output even when it holds files futago did not write (never `/`, the
+        /// home folder, the current folder or its parents, or a folder with a `.git`).
+        #[arg(long)]
+        force: bool,
         #[command(flatten)]
         overlays: OverlayArgs,
     },
@@ -128,14 +158,13 @@ enum Command {
         scenario: PathBuf,
         #[command(flatten)]
         options: tune::TuneOptions,
-        /// Output folder, created or replaced whole [default: out/tune/<scenario name>].
+        /// Output folder, created or replaced whole when futago wrote it [default:
+        /// out/tune/<scenario name>].
         #[arg(long)]
         out: Option<PathBuf>,
         #[command(flatten)]
         overlays: OverlayArgs,
     },
-    /// Join the results of a suite's shards (their --out folders) into one suite.json and
-    /// junit.xml. Exits 3 when a gate failed, 1 when a run failed, as the suite would have.
     /// List the metrics a scenario's run produces (the names its gates, `than` and tuning
     /// objectives may use), one a line, as the stack's scorers declare them.
     Metrics {
@@ -160,6 +189,10 @@ enum Command {
         /// Where findings go [default: out/fuzz].
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Replace the output even when it holds files futago did not write (never `/`, the
+        /// home folder, the current folder or its parents, or a folder with a `.git`).
+        #[arg(long)]
+        force: bool,
         /// The project folder whose scenarios/ and worlds/ give the seeds.
         #[arg(long, default_value = ".")]
         root: PathBuf,
@@ -172,6 +205,8 @@ enum Command {
         #[command(flatten)]
         overlays: OverlayArgs,
     },
+    /// Join the results of a suite's shards (their --out folders) into one suite.json and
+    /// junit.xml. Exits 3 when a gate failed, 1 when a run failed, as the suite would have.
     Merge {
         /// The shards' output folders.
         #[arg(required = true)]
@@ -179,6 +214,10 @@ enum Command {
         /// Output folder [default: out/suite].
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Replace the output even when it holds files futago did not write (never `/`, the
+        /// home folder, the current folder or its parents, or a folder with a `.git`).
+        #[arg(long)]
+        force: bool,
     },
     /// Inspect worlds and export their ground truth.
     World {
@@ -403,6 +442,10 @@ enum WorldCommand {
         /// Skip the occupancy grid (write meshes only).
         #[arg(long)]
         no_grid: bool,
+        /// Replace the output even when it holds files futago did not write (never `/`, the
+        /// home folder, the current folder or its parents, or a folder with a `.git`).
+        #[arg(long)]
+        force: bool,
     },
     /// Make a world from a ROS map_server map (its YAML file; PGM or PNG image), such as the
     /// `map.yaml` that `futago replay` builds from a real log: occupied cells become walls.
@@ -427,6 +470,10 @@ enum WorldCommand {
         /// Leave the ceiling out.
         #[arg(long)]
         no_ceiling: bool,
+        /// Replace the output even when it holds files futago did not write (never `/`, the
+        /// home folder, the current folder or its parents, or a folder with a `.git`).
+        #[arg(long)]
+        force: bool,
     },
 }
 
@@ -542,6 +589,7 @@ fn real_main() -> Result<()> {
             duration,
             overlays,
             quiet,
+            force,
         } => {
             if let Some(d) = duration
                 && !(d.is_finite() && d > 0.0)
@@ -555,6 +603,7 @@ fn real_main() -> Result<()> {
                 duration,
                 progress: !quiet,
                 report: true,
+                force,
             };
             let (summary, o) = run::run(&s, &opts, &out)?;
             let rtf = summary["performance"]["real_time_factor"]
@@ -592,11 +641,12 @@ fn real_main() -> Result<()> {
             jobs,
             shard,
             out,
+            force,
             overlays,
         } => {
             let jobs = resolve_jobs(jobs)?;
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
-            let s = suite::suite(&paths, &overlays.load()?, jobs, shard, &out)?;
+            let s = suite::suite(&paths, &overlays.load()?, jobs, shard, &out, force)?;
             report_suite(&s, &out);
         }
         Command::Tune {
@@ -626,6 +676,7 @@ fn real_main() -> Result<()> {
             seeds,
             rounds,
             out,
+            force,
             overlays,
         } => {
             let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
@@ -637,7 +688,7 @@ fn real_main() -> Result<()> {
             if !(1..=100_000).contains(&rounds) {
                 anyhow::bail!("--rounds {rounds}: expected 1 to 100000");
             }
-            let summary = legs_train::train(&s, &seeds, rounds, &out)?;
+            let summary = legs_train::train(&s, &seeds, rounds, &out, force)?;
             println!("{}", serde_json::to_string_pretty(&summary)?);
             println!("model written to {}", out.display());
         }
@@ -652,8 +703,11 @@ fn real_main() -> Result<()> {
             jobs,
             seed,
             out,
+            force,
             root,
         } => {
+            let out = out.unwrap_or_else(|| PathBuf::from("out/fuzz"));
+            output::check_folder(&out, force)?;
             let targets = fuzz::targets(&root)?;
             let r = fuzz::run(&targets, inputs, jobs, seed, 100);
             for (name, n) in &r.counts {
@@ -667,8 +721,7 @@ fn real_main() -> Result<()> {
                 r.findings.len()
             );
             if !r.findings.is_empty() {
-                let out = out.unwrap_or_else(|| PathBuf::from("out/fuzz"));
-                fuzz::write_findings(&r.findings, &out)?;
+                fuzz::write_findings(&r.findings, &out, force)?;
                 for f in &r.findings {
                     eprintln!("{}: {}", f.target, f.message);
                 }
@@ -680,17 +733,21 @@ fn real_main() -> Result<()> {
             let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
             print!("{}", toml::to_string(&s.effective_config())?);
         }
-        Command::Merge { shards, out } => {
+        Command::Merge { shards, out, force } => {
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
-            let s = suite::merge(&shards, &out)?;
+            let s = suite::merge(&shards, &out, force)?;
             report_suite(&s, &out);
         }
         Command::Replay {
             log,
             relations,
             out,
+            force,
             config,
             method,
+            strict,
+            scan_topic,
+            odom_topic,
         } => {
             let mut slam_config: futago_robot::mapping::slam::SlamConfig = match &config {
                 Some(p) => futago_sim::config::load_toml(p)?,
@@ -717,7 +774,20 @@ fn real_main() -> Result<()> {
                         .unwrap_or_else(|| "log".into()),
                 )
             });
-            let s = replay::replay(&log, relations.as_deref(), slam_config, &out)?;
+            let s = replay::replay(
+                &log,
+                relations.as_deref(),
+                slam_config,
+                &out,
+                &replay::ReplayOptions {
+                    read: futago_msgs::carmen::ReadOptions {
+                        strict,
+                        scan_topic,
+                        odom_topic,
+                    },
+                    force,
+                },
+            )?;
             let line = |k: &str| -> String {
                 let m = &s["relations"][k];
                 let spans = s["relations"]["by_span"]
@@ -755,6 +825,20 @@ fn real_main() -> Result<()> {
                 s["performance"]["real_time_factor"].as_f64().unwrap_or(0.0),
                 out.display()
             );
+            let read = &s["read"];
+            let topics: Vec<String> = [("scans", "scan_topic"), ("odometry", "odom_topic")]
+                .iter()
+                .filter_map(|(what, k)| read[k].as_str().map(|t| format!("{what} from {t}")))
+                .collect();
+            if !topics.is_empty() {
+                println!("read {}", topics.join(", "));
+            }
+            if read["odometry"] != "read" {
+                println!("no odometry in the log: the robot's motion is the SLAM's scan matching");
+            }
+            if let Some(line) = replay::damage_line(read) {
+                eprintln!("futago: {line}");
+            }
             if s.get("relations").is_some() {
                 println!(
                     "{}
@@ -777,6 +861,7 @@ fn real_main() -> Result<()> {
                 margin,
                 mesh,
                 no_grid,
+                force,
             } => {
                 if !(resolution.is_finite() && (0.001..=10.0).contains(&resolution)) {
                     bail!(
@@ -799,6 +884,7 @@ fn real_main() -> Result<()> {
                         mesh,
                         grid: !no_grid,
                     },
+                    force,
                 )?;
                 for p in written {
                     println!("wrote {}", p.display());
@@ -812,6 +898,7 @@ fn real_main() -> Result<()> {
                 unknown,
                 spawn,
                 no_ceiling,
+                force,
             } => {
                 let spawn = spawn
                     .map(|s| -> Result<[f64; 3]> {
@@ -847,6 +934,7 @@ fn real_main() -> Result<()> {
                         spawn,
                         ceiling: !no_ceiling,
                     },
+                    force,
                 )?;
                 println!("wrote {}", out.display());
                 println!("{}", world_cmd::describe(&w));

@@ -11,8 +11,10 @@ use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Instant;
 
-/// Reads a log by its extension: CARMEN (`.clf`, `.log`, `.carmen`) or ROS 1 bag (`.bag`).
-pub fn read_log(path: &Path) -> Result<carmen::Log> {
+/// Reads a log by its extension: CARMEN (`.clf`, `.log`, `.carmen`) or ROS 1 bag (`.bag`),
+/// with the reader's options: salvage of a damaged log unless `o.strict`, and the bag's
+/// topics.
+pub fn read_log_with(path: &Path, o: &carmen::ReadOptions) -> Result<carmen::Log> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
@@ -21,19 +23,28 @@ pub fn read_log(path: &Path) -> Result<carmen::Log> {
         "clf" | "log" | "carmen" => {
             let bytes =
                 std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-            let text = String::from_utf8(bytes).map_err(|e| {
-                anyhow::anyhow!(
+            if o.scan_topic.is_some() || o.odom_topic.is_some() {
+                bail!(
+                    "{}: --scan-topic and --odom-topic choose a bag's topics; a CARMEN log has none",
+                    path.display()
+                );
+            }
+            let text = match String::from_utf8(bytes) {
+                Ok(t) => t,
+                // Salvaging, the lines with bad bytes fail to parse and are skipped.
+                Err(e) if !o.strict => String::from_utf8_lossy(e.as_bytes()).into_owned(),
+                Err(e) => bail!(
                     "{}: not a text CARMEN log (invalid UTF-8 at byte {})",
                     path.display(),
                     e.utf8_error().valid_up_to()
-                )
-            })?;
-            carmen::read(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+                ),
+            };
+            carmen::read_with(&text, o).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
         }
         "bag" => {
             let bytes =
                 std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-            futago_msgs::rosbag::read(&bytes)
+            futago_msgs::rosbag::read_with(&bytes, o)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
         }
         _ => bail!(
@@ -68,18 +79,100 @@ fn method_name(m: SlamMethod) -> &'static str {
     }
 }
 
+/// What `futago replay` is asked besides the log.
+#[derive(Debug, Clone, Default)]
+pub struct ReplayOptions {
+    /// How the log is read (salvage or strict, the bag's topics).
+    pub read: carmen::ReadOptions,
+    /// Replace the output folder even when it holds files futago did not write.
+    pub force: bool,
+}
+
+/// What a log held and lost, for the summary: messages by topic, the stamps read, the damage.
+fn read_summary(log: &carmen::Log) -> Value {
+    let stamps = log.scans.iter().map(|s| s.logged.secs());
+    json!({
+        "messages": log.messages,
+        "scan_topic": log.scan_topic,
+        "odom_topic": log.odom_topic,
+        "odometry": if log.odometry_absent { "absent: the robot's motion is the SLAM front end's scan matching" } else { "read" },
+        "first_stamp_s": stamps.clone().reduce(f64::min),
+        "last_stamp_s": stamps.reduce(f64::max),
+        "damaged": !log.damage.is_empty(),
+        "damage": log.damage,
+    })
+}
+
+/// One line on what a damaged log lost, or `None` for an intact one.
+pub fn damage_line(log: &Value) -> Option<String> {
+    let d = &log["damage"];
+    if log["damaged"] != true {
+        return None;
+    }
+    let gaps: Vec<String> = d["losses"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|l| {
+            let (a, b) = (
+                l["last_stamp_before_s"].as_f64(),
+                l["first_stamp_after_s"].as_f64(),
+            );
+            match (a, b) {
+                (Some(a), Some(b)) => Some(format!("{a:.3}–{b:.3} s")),
+                (Some(a), None) => Some(format!("after {a:.3} s")),
+                (None, Some(b)) => Some(format!("before {b:.3} s")),
+                (None, None) => None,
+            }
+        })
+        .collect();
+    Some(format!(
+        "damaged log: {} bytes lost in {} parts{}{}; read up to {:.3} s{}",
+        d["bytes_lost"],
+        d["parts_skipped"],
+        if d["truncated"] == true {
+            ", cut short"
+        } else {
+            ""
+        },
+        match d["messages_salvaged_from_cut_chunk"].as_u64() {
+            Some(n) if n > 0 => format!(" ({n} messages recovered from the cut chunk)"),
+            _ => String::new(),
+        },
+        log["last_stamp_s"].as_f64().unwrap_or(f64::NAN),
+        if gaps.is_empty() {
+            String::new()
+        } else {
+            format!("; gaps: {}", gaps.join(", "))
+        }
+    ))
+}
+
 /// Runs the laser SLAM over `log`, writes `trajectory.txt`, `odometry.txt` (TUM),
 /// `map.pgm`/`map.yaml` and `summary.json` into `out`, and scores SLAM and raw odometry
-/// against `relations` when given.
+/// against `relations` when given. A damaged log gives the results of what it held (unless
+/// `o.read.strict`); a log of scans alone is localised by the SLAM's scan matching.
 pub fn replay(
     log_path: &Path,
     relations: Option<&Path>,
     config: SlamConfig,
     out: &Path,
+    o: &ReplayOptions,
 ) -> Result<Value> {
-    let log = read_log(log_path)?;
+    let force = o.force;
+    crate::output::check_folder(out, force)?;
+    let log = read_log_with(log_path, &o.read)?;
     if log.scans.is_empty() {
-        bail!("{}: the log holds no laser scans", log_path.display());
+        match log.damage.losses.first() {
+            Some(first) => bail!(
+                "{}: {} ({} damaged parts, {} bytes lost): the log holds no laser scans that could be read",
+                log_path.display(),
+                first.what,
+                log.damage.parts_skipped,
+                log.damage.bytes_lost
+            ),
+            None => bail!("{}: the log holds no laser scans", log_path.display()),
+        }
     }
     let rels = match relations {
         Some(p) => Some(relations::parse(
@@ -108,14 +201,21 @@ pub fn replay(
     trajectory.sort_by_key(|p| p.0);
     let drawn_odometry = odometry.clone();
     odometry.sort_by_key(|p| p.0);
+    // Where the robot was at each scan: its odometry, or without any, the SLAM's estimate
+    // (scan matching), a fixed frame all the same for tracking people.
+    let robot: Vec<Pose2> = if log.odometry_absent {
+        path.iter().map(|(_, p)| *p).collect()
+    } else {
+        log.scans.iter().map(|s| s.odometry).collect()
+    };
     let people = if log.people.is_empty() {
         None
     } else {
-        Some(track_people(&log)?)
+        Some(track_people(&log, &robot)?)
     };
     let wall = started.elapsed().as_secs_f64();
     let span = (log.scans[log.scans.len() - 1].scan.stamp - log.scans[0].scan.stamp).secs();
-    write_atomically(out, |tmp| {
+    write_atomically(out, force, "replay", |tmp| {
         write_tum(
             &tmp.join("trajectory.txt"),
             &format!(
@@ -141,6 +241,7 @@ pub fn replay(
             "scans": log.scans.len(),
             "odometry_records": log.odometry.len(),
             "skipped": log.skipped,
+            "read": read_summary(&log),
             "log_duration_s": span,
             "keyframes": slam.keyframes(),
             "unmatched_scans": slam.unmatched(),
@@ -161,8 +262,13 @@ pub fn replay(
                 "detection_on_annotated_frames": detection,
             });
             let mut text = format!(
-                "# people tracked by futago on {}: timestamp id x y (odometry frame, m)\n",
-                log_path.display()
+                "# people tracked by futago on {}: timestamp id x y ({} frame, m)\n",
+                log_path.display(),
+                if log.odometry_absent {
+                    "the SLAM map's"
+                } else {
+                    "odometry"
+                }
             );
             for (t, id, p) in tracks {
                 text += &format!("{:.6} {id} {:.4} {:.4}\n", t.secs(), p[0], p[1]);
@@ -238,7 +344,7 @@ struct PeopleReplay {
 /// within [`MOT_GATE`]). The tracks are scored over every scan (the benchmark's protocol: a
 /// track where nobody is annotated is a false positive) and over the annotated scans alone;
 /// the detectors over the annotated scans (DROW's AP, as in simulation).
-fn track_people(log: &carmen::Log) -> Result<PeopleReplay> {
+fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
     use crate::ground_truth::detection::{Detection, DetectionFrame, score};
     use futago_robot::tracking::PeopleConfig;
     use futago_robot::tracking::laser_people::LaserPeople;
@@ -252,8 +358,8 @@ fn track_people(log: &carmen::Log) -> Result<PeopleReplay> {
     let mut found: Vec<(Pose2, Vec<Detection>, Option<Vec<Detection>>)> =
         Vec::with_capacity(log.scans.len());
     let stamps: Vec<Time> = log.scans.iter().map(|s| s.scan.stamp).collect();
-    for (s, frame) in log.scans.iter().zip(frames.iter_mut()) {
-        let laser = s.odometry.compose(&s.mount);
+    for ((s, frame), base) in log.scans.iter().zip(frames.iter_mut()).zip(robot) {
+        let laser = base.compose(&s.mount);
         let d = people.update(&s.scan, None, laser);
         found.push((
             laser,

@@ -34,6 +34,9 @@ pub struct RunOptions {
     pub progress: bool,
     /// Write `report.html` (parameter searches skip it).
     pub report: bool,
+    /// Replace the output folder even when it holds files futago did not write (`--force`;
+    /// see [`crate::output`]).
+    pub force: bool,
 }
 
 /// What a run measured, for the summary and for callers (tests, benchmarks).
@@ -585,7 +588,7 @@ pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
 
 /// Runs a scenario and writes its results into `out` (created or replaced whole).
 pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcome)> {
-    write_atomically(out, |tmp| {
+    write_atomically(out, opts.force, "run", |tmp| {
         let (outcome, nodes) = simulate(s, opts, Some(tmp))?;
         let truth_text = std::fs::read_to_string(tmp.join(stack::record::GROUNDTRUTH_FILE))
             .with_context(|| format!("reading back {}", stack::record::GROUNDTRUTH_FILE))?;
@@ -690,12 +693,17 @@ pub fn run_in_memory(s: &Scenario, opts: &RunOptions) -> Result<Outcome> {
 
 /// Creates `out` whole or not at all: `fill` writes into a temporary folder beside it, which
 /// replaces `out` when `fill` succeeds and is removed when it fails or panics (a panic comes
-/// back as an error).
-pub fn write_atomically<T>(out: &Path, fill: impl FnOnce(&Path) -> Result<T>) -> Result<T> {
-    let parent = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
+/// back as an error). An existing `out` is replaced only when it is futago's (checked before
+/// `fill` runs and again before it goes, see [`crate::output`]) or `force` is given; the new
+/// folder's marker names `command` as its writer.
+pub fn write_atomically<T>(
+    out: &Path,
+    force: bool,
+    command: &str,
+    fill: impl FnOnce(&Path) -> Result<T>,
+) -> Result<T> {
+    crate::output::check_folder(out, force)?;
+    let parent = crate::output::parent_of(out);
     std::fs::create_dir_all(&parent).with_context(|| format!("creating {}", parent.display()))?;
     let name = out
         .file_name()
@@ -717,22 +725,29 @@ pub fn write_atomically<T>(out: &Path, fill: impl FnOnce(&Path) -> Result<T>) ->
             Err(anyhow::anyhow!(
                 "internal error (a panic: {what}); nothing was written. Please report it with the input that caused it"
             ))
-        });
-    match filled {
-        Ok(r) => {
-            if out.exists() {
-                std::fs::remove_dir_all(out)
-                    .with_context(|| format!("replacing {}", out.display()))?;
-            }
-            std::fs::rename(&tmp, out)
-                .with_context(|| format!("moving results into {}", out.display()))?;
-            Ok(r)
-        }
+        })
+        .and_then(|r| crate::output::mark(&tmp, command).map(|()| r));
+    let r = match filled {
+        Ok(r) => r,
         Err(e) => {
             let _ = std::fs::remove_dir_all(&tmp);
-            Err(e)
+            return Err(e);
         }
+    };
+    if let Ok(meta) = std::fs::symlink_metadata(out) {
+        // Checked again: a file put there while the command ran is not deleted. The results
+        // stay where they were written.
+        crate::output::check_folder(out, force)
+            .with_context(|| format!("the results are left in {}", tmp.display()))?;
+        if meta.is_dir() {
+            std::fs::remove_dir_all(out)
+        } else {
+            std::fs::remove_file(out)
+        }
+        .with_context(|| format!("replacing {}", out.display()))?;
     }
+    std::fs::rename(&tmp, out).with_context(|| format!("moving results into {}", out.display()))?;
+    Ok(r)
 }
 
 fn sha256_file(p: &Path) -> Result<String> {
@@ -782,7 +797,7 @@ mod tests {
     fn a_panic_while_writing_is_an_error_and_leaves_nothing() {
         let tmp = tempfile::tempdir().unwrap();
         let out = tmp.path().join("run");
-        let r: Result<()> = write_atomically(&out, |dir| {
+        let r: Result<()> = write_atomically(&out, false, "test", |dir| {
             std::fs::write(dir.join("half.txt"), "half").unwrap();
             panic!("boom at step 7");
         });
@@ -791,7 +806,10 @@ mod tests {
         assert!(!out.exists());
         assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0);
         // And a run that succeeds replaces the folder whole.
-        write_atomically(&out, |dir| Ok(std::fs::write(dir.join("a"), "a")?)).unwrap();
+        write_atomically(&out, false, "test", |dir| {
+            Ok(std::fs::write(dir.join("a"), "a")?)
+        })
+        .unwrap();
         assert!(out.join("a").is_file());
     }
 }

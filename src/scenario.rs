@@ -797,10 +797,9 @@ impl Scenario {
             .iter()
             .map(|(c, s)| LidarConfig {
                 beams: Some(s.beams),
-                fov_deg: Some(
-                    c.fov_deg
-                        .unwrap_or((s.angle_increment * (s.beams - 1) as f64).to_degrees()),
-                ),
+                // The preset's field of view as declared (the resolved increment times the
+                // beams would print 239.99999999999997 for 240).
+                fov_deg: Some(c.fov_deg.unwrap_or(c.preset.fov_deg())),
                 range_min: Some(s.range_min),
                 range_max: Some(s.range_max),
                 rate: Some(s.rate),
@@ -817,11 +816,8 @@ impl Scenario {
             .map(|(c, s)| KinectConfig {
                 rgb_size: Some([s.rgb.width, s.rgb.height]),
                 depth_size: Some([s.depth.width, s.depth.height]),
-                // The preset's field of view, from its intrinsics (each preset has its own).
-                fov_deg: Some(c.fov_deg.unwrap_or([
-                    (2.0 * (s.rgb.width as f64 / 2.0 / s.rgb.fx).atan()).to_degrees(),
-                    (2.0 * (s.rgb.height as f64 / 2.0 / s.rgb.fy).atan()).to_degrees(),
-                ])),
+                // The preset's field of view as declared.
+                fov_deg: Some(c.fov_deg.unwrap_or(c.preset.fov_deg())),
                 range_min: Some(s.range_min),
                 range_max: Some(s.range_max),
                 rate: Some(s.rate),

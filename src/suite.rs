@@ -142,7 +142,9 @@ pub fn suite(
     jobs: usize,
     shard: Option<Shard>,
     out: &Path,
+    force: bool,
 ) -> Result<Value> {
+    crate::output::check_folder(out, force)?;
     let files = collect(paths)?;
     // Check everything before anything runs.
     let mut runs = Vec::new();
@@ -199,6 +201,7 @@ pub fn suite(
             duration: None,
             progress: false,
             report: true,
+            force,
         };
         let name = job.name();
         let result = run::run(&job.scenario, &opts, &out.join(&name))
@@ -226,6 +229,7 @@ pub fn suite(
     let summary = summarise(&entries, shard, jobs, wall);
     let dirs: Vec<PathBuf> = entries.iter().map(|e| out.join(&e.name)).collect();
     write_reports(out, &summary, &dirs)?;
+    crate::output::mark(out, "suite")?;
     Ok(summary)
 }
 
@@ -476,10 +480,11 @@ pub fn spread(v: &[f64]) -> Value {
 
 /// `futago merge`: joins the `suite.json` of several shards into one suite, with its JUnit
 /// file; the wall time is the longest shard's (they ran side by side).
-pub fn merge(shards: &[PathBuf], out: &Path) -> Result<Value> {
+pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Value> {
     if shards.is_empty() {
         bail!("nothing to merge: name the output folders of the shards");
     }
+    crate::output::check_folder(out, force)?;
     let mut results = Vec::new();
     let mut wall = 0.0f64;
     let mut seen = std::collections::BTreeSet::new();
@@ -517,6 +522,7 @@ pub fn merge(shards: &[PathBuf], out: &Path) -> Result<Value> {
     let summary = totals(results, None, None, wall);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     write_reports(out, &summary, &run_dirs)?;
+    crate::output::mark(out, "merge")?;
     Ok(summary)
 }
 

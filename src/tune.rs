@@ -115,6 +115,9 @@ pub enum Method {
 /// What `futago tune` was asked.
 #[derive(clap::Args)]
 pub struct TuneOptions {
+    /// Replace the output folder even when it holds files futago did not write.
+    #[arg(long)]
+    pub force: bool,
     /// A parameter and its range: PATH=LO..HI, or PATH=LO..HI:log for a log scale;
     /// integer ends search integers. Repeatable.
     #[arg(long = "param", value_name = "PATH=LO..HI", required = true)]
@@ -170,6 +173,7 @@ fn overlay(params: &[Param], values: &[f64]) -> Result<Overlay> {
 
 /// Runs the search; writes its files into `out` (created or replaced whole).
 pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> Result<Value> {
+    crate::output::check_folder(out, o.force)?;
     if o.params.is_empty() {
         bail!(
             "--param: name at least one parameter to search, e.g. --param localization.mcl.sigma_hit=0.05..0.5"
@@ -224,7 +228,7 @@ pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> R
         .collect();
     let sign = if o.maximize { -1.0 } else { 1.0 };
 
-    run::write_atomically(out, |tmp| {
+    run::write_atomically(out, o.force, "tune", |tmp| {
         let trials_dir = tmp.join("trials");
         let evaluate = |batch: &[(usize, usize, Option<Vec<f64>>)]| -> Vec<Trial> {
             // One run per candidate and seed, all in parallel.
@@ -427,6 +431,7 @@ fn evaluate_one(
         duration: None,
         progress: false,
         report: false,
+        force: false,
     };
     let (summary, _) = run::run(&s, &opts, dir).map_err(|e| format!("{e:#}"))?;
     if let Ok(entries) = std::fs::read_dir(dir) {

@@ -37,13 +37,16 @@ pub struct ExportOptions {
     pub grid: bool,
 }
 
-/// Writes `<name>.pgm`/`.yaml` (occupancy of the band) and the mesh files into `dir`; returns
-/// the paths written.
+/// Writes `<name>.pgm`/`.yaml` (occupancy of the band) and the mesh files into the folder
+/// `out`, created or replaced whole when futago wrote it (or with `force`); returns the paths
+/// written.
 pub fn export_world(
     world: &World,
-    dir: &Path,
+    out: &Path,
     o: &ExportOptions,
+    force: bool,
 ) -> Result<Vec<std::path::PathBuf>> {
+    crate::output::check_folder(out, force)?;
     // The grid is made (or refused) before anything is written.
     let grid = if o.grid {
         Some(
@@ -53,7 +56,19 @@ pub fn export_world(
     } else {
         None
     };
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    crate::run::write_atomically(out, force, "world export", |dir| {
+        write_export(world, dir, grid, o)
+    })
+    .map(|names| names.into_iter().map(|n| out.join(n)).collect())
+}
+
+/// The export's files, written into `dir`; their names.
+fn write_export(
+    world: &World,
+    dir: &Path,
+    grid: Option<futago_msgs::grid::OccupancyGrid>,
+    o: &ExportOptions,
+) -> Result<Vec<String>> {
     let mut written = Vec::new();
     let stem = &world.name;
     if let Some(grid) = grid {
@@ -66,18 +81,18 @@ pub fn export_world(
             o.band.0, o.band.1, world.name
         ));
         write_atomic(&yaml, y.as_bytes())?;
-        written.extend([pgm, yaml]);
+        written.extend([format!("{stem}.pgm"), format!("{stem}.yaml")]);
     }
     let poses: Vec<_> = world.objects.iter().map(|ob| ob.pose).collect();
     if matches!(o.mesh, MeshFormat::Ply | MeshFormat::Both) {
         let p = dir.join(format!("{stem}.ply"));
         write_atomic(&p, &export::to_ply(world))?;
-        written.push(p);
+        written.push(format!("{stem}.ply"));
     }
     if matches!(o.mesh, MeshFormat::Glb | MeshFormat::Both) {
         let p = dir.join(format!("{stem}.glb"));
         write_atomic(&p, &gltf_io::export_glb(world, &poses))?;
-        written.push(p);
+        written.push(format!("{stem}.glb"));
     }
     Ok(written)
 }
@@ -141,7 +156,7 @@ const SPAWN_CLEARANCE: f64 = 0.25;
 /// Makes a world from a map_server map: writes the world file `out` and, beside it, the map
 /// as `<name>.map.pgm`/`.yaml` (trinary), which the world's `[[map_walls]]` names, so that the
 /// world is self-contained. The world is compiled before it is put in place; returns it.
-pub fn from_map(map: &Path, out: &Path, o: &FromMapOptions) -> Result<World> {
+pub fn from_map(map: &Path, out: &Path, o: &FromMapOptions, force: bool) -> Result<World> {
     use futago_sim::world::floor_plan::{UnknownCells, WallCells};
     if !(o.height.is_finite() && (0.1..=100.0).contains(&o.height)) {
         anyhow::bail!("--height: expected 0.1 to 100 m, found {}", o.height);
@@ -229,12 +244,18 @@ pub fn from_map(map: &Path, out: &Path, o: &FromMapOptions) -> Result<World> {
     let stem = format!("{name}.map");
     let pgm = dir.join(format!("{stem}.pgm"));
     let yaml = dir.join(format!("{stem}.yaml"));
+    // The world file and its map copy replace only what an earlier from-map wrote: a world
+    // file with its header, and the map copy beside such a world file.
+    let ours = std::fs::read(out).is_ok_and(|b| b.starts_with(FROM_MAP_HEADER.as_bytes()));
+    crate::output::check_file(out, force, |_| ours)?;
+    crate::output::check_file(&pgm, force, |_| ours)?;
+    crate::output::check_file(&yaml, force, |_| ours)?;
     let unknown = match o.unknown {
         UnknownCells::Wall => "wall",
         UnknownCells::Free => "free",
     };
     let mut toml = format!(
-        "# Made by `futago world from-map {map}`: the occupied cells of that ROS map_server map\n\
+        "{FROM_MAP_HEADER}{map}`: the occupied cells of that ROS map_server map\n\
          # ({w} × {h} cells of {res} m, copied beside this file as {stem}.pgm/.yaml) extruded into\n\
          # walls {height} m high. Unknown cells: {unknown} (wall: sealed where they touch free space,\n\
          # free space narrower than {min_free} m taken for unknown first; free: open floor).\n\
@@ -286,6 +307,9 @@ pub fn from_map(map: &Path, out: &Path, o: &FromMapOptions) -> Result<World> {
         ..world
     })
 }
+
+/// How a world file that `futago world from-map` wrote begins.
+const FROM_MAP_HEADER: &str = "# Made by `futago world from-map ";
 
 /// `v` to three decimals, for a file a person reads.
 fn round_mm(v: f64) -> f64 {

@@ -104,6 +104,93 @@ pub struct Log {
     pub skipped: std::collections::BTreeMap<String, usize>,
     /// Annotated people (a bag's `leg_tracker/Person` messages), in file order.
     pub people: Vec<PersonMark>,
+    /// Messages read, by topic (a bag's) or record type (a CARMEN log's).
+    pub messages: std::collections::BTreeMap<String, usize>,
+    /// What a damaged log lost, read with [`ReadOptions::strict`] off (nothing for an intact
+    /// log).
+    pub damage: Damage,
+    /// The log has scans but no odometry (a bag of laser scans alone): each scan's
+    /// `odometry` is the identity and the robot's motion must come from the scans.
+    pub odometry_absent: bool,
+    /// The topics read, where the log is a bag: the laser scans' and the odometry's.
+    pub scan_topic: Option<String>,
+    pub odom_topic: Option<String>,
+}
+
+/// How a log is read.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReadOptions {
+    /// Refuse a damaged log (a cut end, a chunk or line that does not parse) instead of
+    /// reading what it holds and saying what was lost in [`Log::damage`].
+    pub strict: bool,
+    /// The `sensor_msgs/LaserScan` topic to read, where a bag has several.
+    pub scan_topic: Option<String>,
+    /// The `nav_msgs/Odometry` topic to read, where a bag has several.
+    pub odom_topic: Option<String>,
+}
+
+/// What a damaged log lost: the parts skipped and the bytes they held.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct Damage {
+    /// Bytes of the file that were not read: a cut end, skipped chunks and records.
+    pub bytes_lost: u64,
+    /// The file ends inside a record (cut short).
+    pub truncated: bool,
+    /// Parts skipped: a bag's chunks and records, a CARMEN log's lines.
+    pub parts_skipped: usize,
+    /// Messages read from the cut end of a truncated chunk.
+    pub messages_salvaged_from_cut_chunk: usize,
+    /// The first [`MAX_LOSSES`] losses, in file order.
+    pub losses: Vec<Loss>,
+}
+
+/// Losses kept in [`Damage::losses`]; further ones are counted only.
+pub const MAX_LOSSES: usize = 100;
+
+/// One part of a log that could not be read.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Loss {
+    /// Where: a bag's byte offset, a CARMEN log's 1-based line.
+    pub at: u64,
+    /// What was wrong.
+    pub what: String,
+    /// Bytes lost.
+    pub bytes: u64,
+    /// The last stamp read before the loss and the first after it, s: the gap in the data.
+    pub last_stamp_before_s: Option<f64>,
+    pub first_stamp_after_s: Option<f64>,
+}
+
+impl Damage {
+    /// Whether anything was lost.
+    pub fn is_empty(&self) -> bool {
+        self.parts_skipped == 0 && !self.truncated && self.bytes_lost == 0
+    }
+
+    /// Records a loss at `at` of `bytes`, after the stamp `before`.
+    pub fn lose(&mut self, at: u64, what: String, bytes: u64, before: Option<Time>) {
+        self.parts_skipped += 1;
+        self.bytes_lost += bytes;
+        if self.losses.len() < MAX_LOSSES {
+            self.losses.push(Loss {
+                at,
+                what,
+                bytes,
+                last_stamp_before_s: before.map(Time::secs),
+                first_stamp_after_s: None,
+            });
+        }
+    }
+
+    /// Closes the gaps still open with the first stamp read after them.
+    pub fn stamp_read(&mut self, t: Time) {
+        for l in self.losses.iter_mut().rev() {
+            if l.first_stamp_after_s.is_some() {
+                break;
+            }
+            l.first_stamp_after_s = Some(t.secs());
+        }
+    }
 }
 
 /// One annotated person: after which scan it came (an index into [`Log::scans`]), its id
@@ -220,7 +307,20 @@ enum Record {
 /// last line cut short (a truncated file). A malformed record anywhere else is an error that
 /// names its line.
 pub fn read(text: &str) -> Result<Log, ReadError> {
+    read_with(
+        text,
+        &ReadOptions {
+            strict: true,
+            ..Default::default()
+        },
+    )
+}
+
+/// [`read`], or with `strict` off, a malformed record skipped and recorded in
+/// [`Log::damage`] (its line, what was wrong, the stamps read around it) instead of an error.
+pub fn read_with(text: &str, o: &ReadOptions) -> Result<Log, ReadError> {
     let mut log = Log::default();
+    let mut last_stamp: Option<Time> = None;
     let lines: Vec<&str> = text.lines().collect();
     let truncated_last = !text.ends_with('\n');
     let mut last_scan: std::collections::HashMap<String, f64> = Default::default();
@@ -237,7 +337,7 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
             line: i + 1,
         };
         let kind = f.words[0];
-        let parsed = match kind {
+        let parsed: Result<Record, ReadError> = match kind {
             "FLASER" => (|| {
                 let n = f.count("number of readings")?;
                 let ranges = f.ranges(n, FLASER_NO_RETURN)?;
@@ -330,8 +430,13 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
                 continue;
             }
         };
+        if parsed.is_ok() {
+            *log.messages.entry(kind.to_string()).or_insert(0) += 1;
+        }
         match parsed {
             Ok(Record::Scan(t, scan)) => {
+                last_stamp = Some(Time::from_secs(t));
+                log.damage.stamp_read(Time::from_secs(t));
                 let prev = last_scan
                     .entry(scan.scan.frame.clone())
                     .or_insert(f64::NEG_INFINITY);
@@ -343,6 +448,8 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
                 }
             }
             Ok(Record::Odom(t, pose)) => {
+                last_stamp = Some(Time::from_secs(t));
+                log.damage.stamp_read(Time::from_secs(t));
                 if t < last_odom {
                     skip(&mut log, "ODOM: time went backwards".into());
                 } else {
@@ -350,10 +457,23 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
                     log.odometry.push((Time::from_secs(t), pose));
                 }
             }
-            Err(_) if truncated_last && i + 1 == lines.len() => {
+            Err(e) if truncated_last && i + 1 == lines.len() => {
                 skip(&mut log, "last line cut short (truncated file)".into());
+                if !o.strict {
+                    log.damage.truncated = true;
+                    log.damage
+                        .lose((i + 1) as u64, e.to_string(), line.len() as u64, last_stamp);
+                }
             }
-            Err(e) => return Err(e),
+            Err(e) if o.strict => return Err(e),
+            Err(e) => {
+                log.damage.lose(
+                    (i + 1) as u64,
+                    e.to_string(),
+                    line.len() as u64 + 1,
+                    last_stamp,
+                );
+            }
         }
     }
     Ok(log)
@@ -438,5 +558,29 @@ mod tests {
         assert_eq!(w[w.len() - 1], "1.500000");
         // The field of view spans first to last beam.
         assert_eq!(w[3], "2.000000");
+    }
+
+    #[test]
+    fn a_bad_line_is_skipped_and_recorded_when_salvaging() {
+        let text = "ODOM 0 0 0 0 0 0 1.0 h 1.0\n\
+                    FLASER 3 1.0 1.0 1.0 0 0 0 0 0 0 2.0 h 2.0\n\
+                    FLASER 3 1.0 oops 2.0 0 0 0 0 0 0 3.0 h 3.0\n\
+                    FLASER 3 1.0 1.0 1.0 0 0 0 0 0 0 4.0 h 4.0\n\
+                    ODOM 0 0 0 0 0 0 5.0 h 5.0\n";
+        let e = read(text).unwrap_err();
+        assert_eq!(e.line, 3);
+        let log = read_with(text, &ReadOptions::default()).unwrap();
+        assert_eq!(log.scans.len(), 2);
+        assert_eq!(log.messages["FLASER"], 2);
+        assert_eq!(log.damage.parts_skipped, 1);
+        let l = &log.damage.losses[0];
+        assert_eq!(l.at, 3);
+        assert!(l.what.contains("oops"), "{l:?}");
+        assert_eq!(l.last_stamp_before_s, Some(2.0));
+        assert_eq!(l.first_stamp_after_s, Some(4.0));
+        // A last line cut short is a cut file.
+        let cut = &text[..text.len() - 16];
+        let log = read_with(cut, &ReadOptions::default()).unwrap();
+        assert!(log.damage.truncated);
     }
 }

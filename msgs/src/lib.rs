@@ -9,6 +9,7 @@
 
 pub mod camera;
 pub mod carmen;
+pub mod datasets;
 pub mod grid;
 pub mod landmarks;
 pub mod map_server;

@@ -21,10 +21,12 @@
 //! otherwise is an error. Without a chain the laser is taken at the base, and the scans are
 //! counted under `skipped` as `no tf from BASE to FRAME`.
 
-use crate::carmen::{Log, LogScan, PersonMark};
+use crate::carmen::{Damage, Log, LogScan, PersonMark, ReadOptions};
 use crate::{LaserScan, Pose2, Time};
 use std::collections::HashMap;
 use std::io::Read;
+
+pub mod writer;
 
 /// An error reading a bag: the byte offset of the record and what was wrong.
 #[derive(Debug, Clone, PartialEq)]
@@ -114,19 +116,82 @@ fn field_u32(f: &HashMap<String, Vec<u8>>, name: &str) -> Result<u32, String> {
 /// What a bag holds of interest, before pairing scans with odometry.
 #[derive(Default)]
 struct Raw {
-    /// Connection id → message type.
-    types: HashMap<u32, String>,
-    /// Each scan with its header's `seq`.
-    scans: Vec<(u32, LaserScan)>,
-    /// Annotated people: how many scans came before each in the file, its id and position.
+    /// Connection id → (topic, message type).
+    conns: HashMap<u32, (String, String)>,
+    /// Each scan with its connection and its header's `seq`.
+    scans: Vec<(u32, u32, LaserScan)>,
+    /// Annotated people: how many scans (of any topic) came before each in the file, its id
+    /// and position.
     people: Vec<(usize, u32, [f64; 2])>,
-    /// Each odometry message's header `seq`, stamp and pose.
-    odometry: Vec<(u32, Time, Pose2)>,
-    /// The odometry's child frame: the robot's base.
-    base: Option<String>,
+    /// Each odometry message's connection, header `seq`, stamp, pose and child frame.
+    odometry: Vec<(u32, u32, Time, Pose2, String)>,
     /// tf: child frame → (parent frame, transform), the last one seen.
     tf: HashMap<String, (String, Transform)>,
     skipped: std::collections::BTreeMap<String, usize>,
+    /// Messages read, by topic.
+    messages: std::collections::BTreeMap<String, usize>,
+    /// Salvaging: what was lost, and the last stamp read (for the gaps).
+    salvage: bool,
+    damage: Damage,
+    last_stamp: Option<Time>,
+    /// Salvaging: messages on connections not (yet) defined, with their offset: the
+    /// definition may come later (a bag repeats them after its chunks), or have been lost.
+    pending: Vec<(usize, u32, Vec<u8>)>,
+}
+
+impl Raw {
+    fn stamp(&mut self, t: Time) {
+        self.last_stamp = Some(t);
+        self.damage.stamp_read(t);
+    }
+
+    fn lose(&mut self, at: usize, what: String, bytes: usize) {
+        self.damage.lose(
+            at as u64,
+            format!("byte {at}: {what}"),
+            bytes as u64,
+            self.last_stamp,
+        );
+    }
+
+    /// Takes in the message `body` on connection `conn` of type `ty`.
+    fn message(&mut self, conn: u32, ty: &str, body: &[u8]) -> Result<(), String> {
+        match ty {
+            "sensor_msgs/LaserScan" => {
+                let (seq, scan) = laser_scan(body).map_err(|m| format!("LaserScan: {m}"))?;
+                self.stamp(scan.stamp);
+                self.scans.push((conn, seq, scan));
+            }
+            "leg_tracker/Person" => {
+                let (id, p) = person(body).map_err(|m| format!("leg_tracker/Person: {m}"))?;
+                self.people.push((self.scans.len(), id, p));
+            }
+            "nav_msgs/Odometry" => {
+                let (seq, t, pose, child) = odometry(body).map_err(|m| format!("Odometry: {m}"))?;
+                self.stamp(t);
+                self.odometry.push((conn, seq, t, pose, child));
+            }
+            "tf2_msgs/TFMessage" | "tf/tfMessage" => {
+                for (parent, child, t) in tf_message(body).map_err(|m| format!("TFMessage: {m}"))? {
+                    self.tf.insert(child, (parent, t));
+                }
+            }
+            other => {
+                *self
+                    .skipped
+                    .entry(format!("message type {other}"))
+                    .or_insert(0) += 1;
+                return Ok(());
+            }
+        }
+        let topic = self
+            .conns
+            .get(&conn)
+            .map(|c| c.0.clone())
+            .unwrap_or_default();
+        *self.messages.entry(topic).or_insert(0) += 1;
+        Ok(())
+    }
 }
 
 /// A tf transform: translation and unit quaternion `[x, y, z, w]`.
@@ -348,107 +413,280 @@ fn inflate(reader: impl Read, size: usize, what: &str) -> Result<Vec<u8>, String
     Ok(out)
 }
 
-/// Walks the records of `data` (the file after its magic line, or a chunk's contents).
+/// One record of a bag: its header's fields and its data.
+struct Record<'a> {
+    fields: HashMap<String, Vec<u8>>,
+    op: u8,
+    body: &'a [u8],
+    /// Where the next record begins.
+    end: usize,
+    /// Bytes of the data that the file ends before (salvaging a cut file), else 0.
+    missing: usize,
+}
+
+/// The record at `at` of `data`. Salvaging (`cut_ok`), a record whose data runs past the end
+/// of `data` comes back with what there is of it and the count of what is missing.
+fn parse_record(data: &[u8], at: usize, cut_ok: bool) -> Result<Record<'_>, String> {
+    let mut c = Cursor { data, at };
+    let hlen = c.u32("record header length")? as usize;
+    let header = c.take(hlen, "record header")?;
+    let dlen = c.u32("record data length")? as usize;
+    let left = data.len() - c.at;
+    let (body, missing) = if cut_ok && dlen > left {
+        let b = &data[c.at..];
+        c.at = data.len();
+        (b, dlen - left)
+    } else {
+        (c.take(dlen, "record data")?, 0)
+    };
+    let fields = fields(header)?;
+    let op = fields
+        .get("op")
+        .and_then(|v| v.first().copied())
+        .ok_or("record without `op`")?;
+    Ok(Record {
+        fields,
+        op,
+        body,
+        end: c.at,
+        missing,
+    })
+}
+
+/// The first place after `from` where a whole record of a known type parses: where reading
+/// goes on after a damaged stretch, as `rosbag reindex` scans a bag record by record. Each
+/// record's header holds the field `op=` (length 4), and begins a little before it.
+fn resync(data: &[u8], from: usize) -> Option<usize> {
+    const OP: &[u8] = b"\x04\x00\x00\x00op=";
+    let mut p = from;
+    while p + OP.len() <= data.len() {
+        let k = data[p..].windows(OP.len()).position(|w| w == OP)?;
+        let at_op = p + k;
+        // The header starts at most this far before its op field.
+        let lowest = at_op.saturating_sub(4 + 1024).max(from);
+        for start in (lowest..=at_op.saturating_sub(4)).rev() {
+            if let Ok(r) = parse_record(data, start, false)
+                && (0x02..=0x07).contains(&r.op)
+                && start + 4 <= at_op
+            {
+                return Some(start);
+            }
+        }
+        p = at_op + 1;
+    }
+    None
+}
+
+/// A compressed chunk's contents as far as they decompress (a chunk cut by the end of the
+/// file), at most `size` bytes.
+fn inflate_partial(mut reader: impl Read, size: usize) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut buf = vec![0u8; 1 << 16];
+    while out.len() < size {
+        match reader.read(&mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => out.extend_from_slice(&buf[..n.min(size - out.len())]),
+        }
+    }
+    out
+}
+
+/// Walks the records of `data` (the file after its magic line, or a chunk's contents), `base`
+/// being the offset of `data` in the file. Strict, the first damaged record is the error;
+/// salvaging, a record that does not parse is recorded as lost and reading goes on at the next
+/// record that does.
 fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<(), BagError> {
-    let mut c = Cursor { data, at: 0 };
-    while c.at < data.len() {
-        let offset = base + c.at;
+    let mut at = 0;
+    while at < data.len() {
+        let offset = base + at;
         let err = |message: String| BagError { offset, message };
-        let hlen = c.u32("record header length").map_err(err)? as usize;
-        let header = c.take(hlen, "record header").map_err(err)?;
-        let dlen = c.u32("record data length").map_err(err)? as usize;
-        let body = c.take(dlen, "record data").map_err(err)?;
-        let f = fields(header).map_err(err)?;
-        let op = f
-            .get("op")
-            .and_then(|v| v.first().copied())
-            .ok_or_else(|| err("record without `op`".into()))?;
-        match op {
+        let rec = match parse_record(data, at, raw.salvage && !in_chunk) {
+            Ok(r) => r,
+            Err(m) if !raw.salvage => return Err(err(m)),
+            Err(m) => {
+                let next = resync(data, at + 1);
+                let lost = next.unwrap_or(data.len()) - at;
+                if next.is_none() && m.contains("truncated") && !in_chunk {
+                    raw.damage.truncated = true;
+                }
+                raw.lose(offset, m, lost);
+                match next {
+                    Some(n) => {
+                        at = n;
+                        continue;
+                    }
+                    None => break,
+                }
+            }
+        };
+        at = rec.end;
+        let step = match rec.op {
             0x05 if in_chunk => {
                 // The format puts messages and connections in chunks, never chunks: refusing
                 // them bounds the recursion at one level.
-                return Err(err("a chunk inside a chunk".into()));
+                Err(err("a chunk inside a chunk".into()))
             }
-            0x05 => {
-                let compression = f
-                    .get("compression")
-                    .map(|v| String::from_utf8_lossy(v).into_owned())
-                    .unwrap_or_default();
-                let size = field_u32(&f, "size").map_err(err)? as usize;
-                let inner = match compression.as_str() {
-                    "none" => body.to_vec(),
-                    "bz2" => {
-                        inflate(bzip2::read::BzDecoder::new(body), size, "bz2").map_err(err)?
+            0x05 => chunk(&rec, offset, raw),
+            0x07 => connection(&rec).map_err(err).map(|(conn, topic, ty)| {
+                raw.conns.insert(conn, (topic, ty));
+            }),
+            0x02 => match field_u32(&rec.fields, "conn") {
+                Err(m) => Err(err(m)),
+                Ok(conn) => match raw.conns.get(&conn).map(|c| c.1.clone()) {
+                    Some(ty) => raw.message(conn, &ty, rec.body).map_err(err),
+                    None if raw.salvage => {
+                        raw.pending.push((offset, conn, rec.body.to_vec()));
+                        Ok(())
                     }
-                    "lz4" => inflate(lz4_flex::frame::FrameDecoder::new(body), size, "lz4")
-                        .map_err(err)?,
-                    other => {
-                        return Err(err(format!(
-                            "chunk compression `{other}` is not supported (expected none, bz2 or lz4)"
-                        )));
-                    }
-                };
-                records(&inner, offset, raw, true)?;
-            }
-            0x07 => {
-                let conn = field_u32(&f, "conn").map_err(err)?;
-                let conn_header = fields(body).map_err(err)?;
-                let ty = conn_header
-                    .get("type")
-                    .map(|v| String::from_utf8_lossy(v).into_owned())
-                    .unwrap_or_default();
-                raw.types.insert(conn, ty);
-            }
-            0x02 => {
-                let conn = field_u32(&f, "conn").map_err(err)?;
-                match raw.types.get(&conn).map(String::as_str) {
-                    Some("sensor_msgs/LaserScan") => raw
-                        .scans
-                        .push(laser_scan(body).map_err(|m| err(format!("LaserScan: {m}")))?),
-                    Some("leg_tracker/Person") => {
-                        let (id, p) =
-                            person(body).map_err(|m| err(format!("leg_tracker/Person: {m}")))?;
-                        raw.people.push((raw.scans.len(), id, p));
-                    }
-                    Some("nav_msgs/Odometry") => {
-                        let (seq, t, pose, child) =
-                            odometry(body).map_err(|m| err(format!("Odometry: {m}")))?;
-                        raw.odometry.push((seq, t, pose));
-                        raw.base.get_or_insert(child);
-                    }
-                    Some("tf2_msgs/TFMessage" | "tf/tfMessage") => {
-                        for (parent, child, t) in
-                            tf_message(body).map_err(|m| err(format!("TFMessage: {m}")))?
-                        {
-                            raw.tf.insert(child, (parent, t));
-                        }
-                    }
-                    Some(other) => {
-                        *raw.skipped
-                            .entry(format!("message type {other}"))
-                            .or_insert(0) += 1
-                    }
-                    None => {
-                        return Err(err(format!(
-                            "message on connection {conn}, which no record defined"
-                        )));
-                    }
-                }
-            }
-            0x03 | 0x04 | 0x06 => {}
+                    None => Err(err(format!(
+                        "message on connection {conn}, which no record defined"
+                    ))),
+                },
+            },
+            0x03 | 0x04 | 0x06 => Ok(()),
             other => {
                 *raw.skipped
                     .entry(format!("record op 0x{other:02x}"))
-                    .or_insert(0) += 1
+                    .or_insert(0) += 1;
+                Ok(())
             }
+        };
+        match step {
+            Ok(()) => {}
+            Err(e) if !raw.salvage => return Err(e),
+            Err(e) => raw.lose(e.offset, e.message, rec.body.len()),
+        }
+        if rec.missing > 0 {
+            raw.damage.truncated = true;
+            raw.lose(
+                offset,
+                format!(
+                    "record cut short by the end of the file ({} of its {} bytes missing)",
+                    rec.missing,
+                    rec.missing + rec.body.len()
+                ),
+                rec.missing,
+            );
         }
     }
     Ok(())
 }
 
-/// Reads a ROS 1 bag's laser scans and odometry. Scans without any odometry in the bag are
-/// an error; other message types are counted as skipped.
+/// A connection record: its id, topic and message type.
+fn connection(rec: &Record) -> Result<(u32, String, String), String> {
+    let conn = field_u32(&rec.fields, "conn")?;
+    let conn_header = fields(rec.body)?;
+    let text = |f: &HashMap<String, Vec<u8>>, k: &str| {
+        f.get(k)
+            .map(|v| String::from_utf8_lossy(v).into_owned())
+            .unwrap_or_default()
+    };
+    let mut topic = text(&conn_header, "topic");
+    if topic.is_empty() {
+        topic = text(&rec.fields, "topic");
+    }
+    Ok((conn, topic, text(&conn_header, "type")))
+}
+
+/// A chunk record: its contents decompressed and walked. A chunk cut by the end of the file
+/// (salvaging) gives the messages of what decompresses.
+fn chunk(rec: &Record, offset: usize, raw: &mut Raw) -> Result<(), BagError> {
+    let err = |message: String| BagError { offset, message };
+    let compression = rec
+        .fields
+        .get("compression")
+        .map(|v| String::from_utf8_lossy(v).into_owned())
+        .unwrap_or_default();
+    let size = field_u32(&rec.fields, "size").map_err(err)? as usize;
+    let body = rec.body;
+    if rec.missing > 0 {
+        let inner = match compression.as_str() {
+            "none" => body[..body.len().min(size)].to_vec(),
+            "bz2" => inflate_partial(bzip2::read::BzDecoder::new(body), size),
+            "lz4" => inflate_partial(lz4_flex::frame::FrameDecoder::new(body), size),
+            _ => Vec::new(),
+        };
+        let before = raw.messages.values().sum::<usize>();
+        records(&inner, offset, raw, true)?;
+        raw.damage.messages_salvaged_from_cut_chunk +=
+            raw.messages.values().sum::<usize>() - before;
+        return Ok(());
+    }
+    let inner = match compression.as_str() {
+        "none" => body.to_vec(),
+        "bz2" => inflate(bzip2::read::BzDecoder::new(body), size, "bz2").map_err(err)?,
+        "lz4" => inflate(lz4_flex::frame::FrameDecoder::new(body), size, "lz4").map_err(err)?,
+        other => {
+            return Err(err(format!(
+                "chunk compression `{other}` is not supported (expected none, bz2 or lz4)"
+            )));
+        }
+    };
+    records(&inner, offset, raw, true)
+}
+
+/// The topic of each stream of type `ty`: the one `chosen`, or the only one with messages;
+/// several without a choice are an error naming them (`flag` makes the choice).
+fn choose_topic(
+    raw: &Raw,
+    ty: &str,
+    used: &std::collections::BTreeSet<String>,
+    chosen: &Option<String>,
+    flag: &str,
+) -> Result<Option<String>, BagError> {
+    let err = |message: String| BagError { offset: 0, message };
+    let defined: std::collections::BTreeSet<&String> = raw
+        .conns
+        .values()
+        .filter(|c| c.1 == ty)
+        .map(|c| &c.0)
+        .collect();
+    match chosen {
+        Some(c) if defined.contains(c) => Ok(Some(c.clone())),
+        Some(c) => Err(err(format!(
+            "{flag} {c}: the bag has no {ty} topic `{c}`; its {ty} topics: {}",
+            if defined.is_empty() {
+                "none".to_string()
+            } else {
+                defined
+                    .iter()
+                    .map(|s| s.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }
+        ))),
+        None if used.len() > 1 => Err(err(format!(
+            "the bag has {} {ty} topics ({}): choose one with {flag}",
+            used.len(),
+            used.iter()
+                .map(String::as_str)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))),
+        None => Ok(used.iter().next().cloned()),
+    }
+}
+
+/// Reads a ROS 1 bag's laser scans and odometry, refusing a damaged bag (see [`read_with`]).
 pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
+    read_with(
+        bytes,
+        &ReadOptions {
+            strict: true,
+            ..Default::default()
+        },
+    )
+}
+
+/// Reads a ROS 1 bag's laser scans and odometry; other message types are counted as skipped.
+///
+/// A bag with several `sensor_msgs/LaserScan` (or `nav_msgs/Odometry`) topics is an error
+/// naming them unless `o` chooses one. A bag of laser scans without odometry is read with
+/// [`Log::odometry_absent`] set. With `o.strict` off, a damaged bag (cut short, a chunk that
+/// does not decompress or parse, a garbled stretch) gives what can be read: every intact
+/// record and chunk, the messages of a cut chunk as far as it decompresses, and in
+/// [`Log::damage`] what was lost.
+pub fn read_with(bytes: &[u8], o: &ReadOptions) -> Result<Log, BagError> {
     const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
     if !bytes.starts_with(MAGIC) {
         return Err(BagError {
@@ -456,13 +694,82 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
             message: "not a ROS bag of format 2.0 (no `#ROSBAG V2.0` line)".into(),
         });
     }
-    let mut raw = Raw::default();
+    let mut raw = Raw {
+        salvage: !o.strict,
+        ..Default::default()
+    };
     records(&bytes[MAGIC.len()..], MAGIC.len(), &mut raw, false)?;
+    // Messages whose connection was defined after them (or never, its record lost).
+    for (offset, conn, body) in std::mem::take(&mut raw.pending) {
+        match raw.conns.get(&conn).map(|c| c.1.clone()) {
+            Some(ty) => {
+                if let Err(m) = raw.message(conn, &ty, &body) {
+                    raw.lose(offset, m, body.len());
+                }
+            }
+            None => raw.lose(
+                offset,
+                format!("message on connection {conn}, whose definition was lost"),
+                body.len(),
+            ),
+        }
+    }
+    let topic_of = |conn: u32| {
+        raw.conns
+            .get(&conn)
+            .map(|c| c.0.clone())
+            .unwrap_or_default()
+    };
+    let scan_topic = choose_topic(
+        &raw,
+        "sensor_msgs/LaserScan",
+        &raw.scans.iter().map(|s| topic_of(s.0)).collect(),
+        &o.scan_topic,
+        "--scan-topic",
+    )?;
+    let odom_topic = choose_topic(
+        &raw,
+        "nav_msgs/Odometry",
+        &raw.odometry.iter().map(|s| topic_of(s.0)).collect(),
+        &o.odom_topic,
+        "--odom-topic",
+    )?;
+    // The chosen streams; each annotation keeps its place after the chosen scans.
+    let mut kept_before = Vec::with_capacity(raw.scans.len() + 1);
+    kept_before.push(0usize);
+    let mut chosen_scans = Vec::new();
+    for (conn, seq, scan) in std::mem::take(&mut raw.scans) {
+        let keep = scan_topic.as_deref() == Some(topic_of(conn).as_str());
+        if keep {
+            chosen_scans.push((seq, scan));
+        } else {
+            *raw.skipped
+                .entry(format!("LaserScan on {} (not chosen)", topic_of(conn)))
+                .or_insert(0) += 1;
+        }
+        kept_before.push(chosen_scans.len());
+    }
+    let mut chosen_odometry = Vec::new();
+    let mut base = None;
+    for (conn, seq, t, pose, child) in std::mem::take(&mut raw.odometry) {
+        if odom_topic.as_deref() == Some(topic_of(conn).as_str()) {
+            base.get_or_insert(child);
+            chosen_odometry.push((seq, t, pose));
+        } else {
+            *raw.skipped
+                .entry(format!("Odometry on {} (not chosen)", topic_of(conn)))
+                .or_insert(0) += 1;
+        }
+    }
     // Each stream in the order it was published, restamped where its stamps contradict it.
     let odometry = {
-        let times = acquisition_times(&raw.odometry.iter().map(|o| (o.0, o.1)).collect::<Vec<_>>());
-        let mut o: Vec<(Time, u32, Pose2)> = raw
-            .odometry
+        let times = acquisition_times(
+            &chosen_odometry
+                .iter()
+                .map(|o| (o.0, o.1))
+                .collect::<Vec<_>>(),
+        );
+        let mut o: Vec<(Time, u32, Pose2)> = chosen_odometry
             .iter()
             .zip(times)
             .map(|(&(seq, _, pose), t)| (t, seq, pose))
@@ -472,13 +779,13 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
     };
     let scans = {
         let times = acquisition_times(
-            &raw.scans
+            &chosen_scans
                 .iter()
                 .map(|s| (s.0, s.1.stamp))
                 .collect::<Vec<_>>(),
         );
         // With each scan's place in the file, for the annotations that follow it.
-        let mut s: Vec<(Time, u32, usize, LaserScan)> = std::mem::take(&mut raw.scans)
+        let mut s: Vec<(Time, u32, usize, LaserScan)> = chosen_scans
             .into_iter()
             .zip(times)
             .enumerate()
@@ -491,17 +798,18 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
     for (i, s) in scans.iter().enumerate() {
         sorted_of_file[s.2] = i;
     }
-    if !scans.is_empty() && odometry.is_empty() {
-        return Err(BagError {
-            offset: 0,
-            message: "the bag has laser scans but no nav_msgs/Odometry".into(),
-        });
-    }
+    let odometry_absent = !scans.is_empty() && odometry.is_empty();
     let mut log = Log {
-        skipped: raw.skipped,
+        skipped: std::mem::take(&mut raw.skipped),
+        messages: std::mem::take(&mut raw.messages),
+        damage: std::mem::take(&mut raw.damage),
+        odometry_absent,
+        scan_topic,
+        odom_topic,
         ..Default::default()
     };
     for &(before, id, position) in &raw.people {
+        let before = kept_before[before.min(kept_before.len() - 1)];
         match before.checked_sub(1) {
             Some(k) => log.people.push(PersonMark {
                 scan: sorted_of_file[k],
@@ -515,7 +823,7 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
             }
         }
     }
-    let base = raw.base.clone().unwrap_or_else(|| "base_link".into());
+    let base = base.unwrap_or_else(|| "base_link".into());
     // Each frame's mount, found once.
     let mut mounts: HashMap<String, Option<(Pose2, bool)>> = HashMap::new();
     for (taken, _, _, mut scan) in scans {
@@ -523,6 +831,16 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
         scan.stamp = taken;
         let pose =
             crate::pose_at(&odometry, taken, crate::Outside::Clamp).unwrap_or(Pose2::IDENTITY);
+        if odometry_absent {
+            // No base to place the laser on: the laser's frame is the robot's.
+            log.scans.push(LogScan {
+                scan,
+                logged,
+                odometry: Pose2::IDENTITY,
+                mount: Pose2::IDENTITY,
+            });
+            continue;
+        }
         let mount = match mounts.get(&scan.frame) {
             Some(m) => *m,
             None => {
@@ -769,23 +1087,7 @@ pub fn example_mounted(compression: &str, laser_q: [f64; 4]) -> Vec<u8> {
         msg(3, b"xx"),
     ]
     .concat();
-    let data = match compression {
-        "bz2" => {
-            let mut z = Vec::new();
-            bzip2::read::BzEncoder::new(&inner[..], bzip2::Compression::default())
-                .read_to_end(&mut z)
-                .expect("bz2 compression in memory cannot fail");
-            z
-        }
-        "lz4" => {
-            use std::io::Write;
-            let mut e = lz4_flex::frame::FrameEncoder::new(Vec::new());
-            e.write_all(&inner)
-                .expect("lz4 compression in memory cannot fail");
-            e.finish().expect("lz4 compression in memory cannot fail")
-        }
-        _ => inner.clone(),
-    };
+    let data = writer::compress(compression, &inner);
     let mut out = b"#ROSBAG V2.0\n".to_vec();
     out.extend(record(&[field("op", &[0x03])], &[]));
     out.extend(record(
@@ -1065,5 +1367,189 @@ mod tests {
         ));
         let e = read(&nested).unwrap_err();
         assert!(e.message.contains("a chunk inside a chunk"), "{e}");
+    }
+
+    /// A bag of `n` scans (10 Hz, in frame `laser`), each after an odometry message of the
+    /// robot driving along x at 0.5 m/s, `per_chunk` messages a chunk; with `odometry` off,
+    /// scans alone. Scans are numbered from 1, stamped `seq` / 10 s.
+    fn fixture(n: u32, per_chunk: usize, compression: &str, odometry: bool) -> Vec<u8> {
+        use writer::{BagWriter, laser_scan_message, odometry_message};
+        let mut w = BagWriter::new(compression, per_chunk);
+        let scan_conn = w.connection("/scan", "sensor_msgs/LaserScan");
+        let odom_conn = w.connection("/odom", "nav_msgs/Odometry");
+        for k in 1..=n {
+            let t = Time::from_secs(k as f64 / 10.0);
+            if odometry {
+                let pose = Pose2::new(0.05 * k as f64, 0.0, 0.0);
+                w.write(
+                    odom_conn,
+                    t,
+                    &odometry_message(k, t, "odom", "base_link", pose),
+                );
+            }
+            let scan = LaserScan {
+                frame: "laser".into(),
+                stamp: t,
+                angle_min: -1.0,
+                angle_increment: 0.01,
+                time_increment: 0.0,
+                range_min: 0.02,
+                range_max: 10.0,
+                ranges: (0..201)
+                    .map(|b| 2.0 + (b as f32 + k as f32) * 0.001)
+                    .collect(),
+            };
+            w.write(scan_conn, t, &laser_scan_message(k, &scan));
+        }
+        w.finish()
+    }
+
+    fn salvaging() -> ReadOptions {
+        ReadOptions::default()
+    }
+
+    fn seqs(log: &Log) -> Vec<u32> {
+        log.scans
+            .iter()
+            .map(|s| (s.scan.stamp.secs() * 10.0).round() as u32)
+            .collect()
+    }
+
+    #[test]
+    fn the_writer_s_bags_read_back_whole() {
+        for c in ["none", "bz2", "lz4"] {
+            let log = read(&fixture(40, 10, c, true)).unwrap();
+            assert_eq!(seqs(&log), (1..=40).collect::<Vec<_>>(), "{c}");
+            assert!((log.scans[39].odometry.x - 2.0).abs() < 1e-9);
+            assert!(log.damage.is_empty());
+            assert_eq!(log.messages["/scan"], 40);
+            assert_eq!(log.scan_topic.as_deref(), Some("/scan"));
+            assert!(!log.odometry_absent);
+        }
+    }
+
+    #[test]
+    fn a_cut_bag_gives_every_scan_before_the_cut() {
+        for c in ["none", "bz2", "lz4"] {
+            let bag = fixture(100, 10, c, true);
+            // Cut inside the sixth chunk (each holds five scans and five odometry messages).
+            let chunk_starts: Vec<usize> = bag
+                .windows(8)
+                .enumerate()
+                .filter(|(_, w)| *w == b"\x04\x00\x00\x00op=\x05")
+                .map(|(k, _)| k)
+                .collect();
+            let cut = chunk_starts[5] + 300;
+            let e = read(&bag[..cut]).unwrap_err();
+            assert!(e.message.contains("truncated"), "{e}");
+            let log = read_with(&bag[..cut], &salvaging()).unwrap();
+            let got = seqs(&log);
+            // The five whole chunks' 25 scans; an uncompressed cut chunk gives more.
+            assert!(got.len() >= 25, "{c}: {got:?}");
+            assert_eq!(got, (1..=got.len() as u32).collect::<Vec<_>>(), "{c}");
+            assert!(got.len() < 50, "{c}");
+            assert!(log.damage.truncated, "{c}");
+            assert!(log.damage.bytes_lost > 0, "{c}");
+            let last = log.damage.losses.last().unwrap();
+            assert!(last.last_stamp_before_s.is_some() && last.first_stamp_after_s.is_none());
+        }
+    }
+
+    #[test]
+    fn a_corrupt_chunk_in_the_middle_costs_only_its_own_scans() {
+        let bag = fixture(100, 10, "bz2", true);
+        let chunk_starts: Vec<usize> = bag
+            .windows(8)
+            .enumerate()
+            .filter(|(_, w)| *w == b"\x04\x00\x00\x00op=\x05")
+            .map(|(k, _)| k)
+            .collect();
+        assert_eq!(chunk_starts.len(), 20);
+        // Garble the compressed data of the fourth chunk (scans 16-20).
+        let mut bad = bag.clone();
+        for b in &mut bad[chunk_starts[3] + 200..chunk_starts[3] + 260] {
+            *b ^= 0x5a;
+        }
+        assert!(read(&bad).is_err());
+        let log = read_with(&bad, &salvaging()).unwrap();
+        let want: Vec<u32> = (1..=15).chain(21..=100).collect();
+        assert_eq!(seqs(&log), want);
+        assert_eq!(log.damage.parts_skipped, 1);
+        let loss = &log.damage.losses[0];
+        assert!(
+            (loss.last_stamp_before_s.unwrap() - 1.5).abs() < 1e-9,
+            "{loss:?}"
+        );
+        assert!(
+            (loss.first_stamp_after_s.unwrap() - 2.1).abs() < 1e-9,
+            "{loss:?}"
+        );
+        assert!(!log.damage.truncated);
+        // A garbled record header: reading goes on at the next record that parses.
+        let mut bad = bag.clone();
+        for b in &mut bad[chunk_starts[7]..chunk_starts[7] + 40] {
+            *b = 0xff;
+        }
+        let log = read_with(&bad, &salvaging()).unwrap();
+        let want: Vec<u32> = (1..=35).chain(41..=100).collect();
+        assert_eq!(seqs(&log), want);
+    }
+
+    #[test]
+    fn a_bag_of_scans_alone_is_read_without_odometry() {
+        let log = read(&fixture(20, 10, "lz4", false)).unwrap();
+        assert_eq!(log.scans.len(), 20);
+        assert!(log.odometry_absent);
+        assert!(log.odometry.is_empty());
+        assert!(log.scans.iter().all(|s| s.odometry == Pose2::IDENTITY));
+        assert_eq!(log.odom_topic, None);
+    }
+
+    #[test]
+    fn several_scan_topics_must_be_chosen_between() {
+        use writer::{BagWriter, laser_scan_message};
+        let mut w = BagWriter::new("none", 4);
+        let front = w.connection("/front/scan", "sensor_msgs/LaserScan");
+        let rear = w.connection("/rear/scan", "sensor_msgs/LaserScan");
+        for k in 1..=6u32 {
+            let t = Time::from_secs(k as f64);
+            let scan = |frame: &str, n: usize| LaserScan {
+                frame: frame.into(),
+                stamp: t,
+                angle_min: 0.0,
+                angle_increment: 0.1,
+                time_increment: 0.0,
+                range_min: 0.0,
+                range_max: 5.0,
+                ranges: vec![1.0; n],
+            };
+            w.write(front, t, &laser_scan_message(k, &scan("front", 3)));
+            w.write(rear, t, &laser_scan_message(k, &scan("rear", 5)));
+        }
+        let bag = w.finish();
+        let e = read(&bag).unwrap_err();
+        assert!(
+            e.message.contains("/front/scan")
+                && e.message.contains("/rear/scan")
+                && e.message.contains("--scan-topic"),
+            "{e}"
+        );
+        let o = ReadOptions {
+            scan_topic: Some("/rear/scan".into()),
+            ..ReadOptions::default()
+        };
+        let log = read_with(&bag, &o).unwrap();
+        assert_eq!(log.scans.len(), 6);
+        assert!(log.scans.iter().all(|s| s.scan.ranges.len() == 5));
+        assert_eq!(log.skipped["LaserScan on /front/scan (not chosen)"], 6);
+        let o = ReadOptions {
+            scan_topic: Some("/scan".into()),
+            ..ReadOptions::default()
+        };
+        let e = read_with(&bag, &o).unwrap_err();
+        assert!(
+            e.message.contains("no sensor_msgs/LaserScan topic `/scan`"),
+            "{e}"
+        );
     }
 }

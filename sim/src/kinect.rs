@@ -44,6 +44,17 @@ pub enum KinectPreset {
     Digiclops,
 }
 
+impl KinectPreset {
+    /// The preset's horizontal and vertical fields of view as declared, degrees.
+    pub fn fov_deg(self) -> [f64; 2] {
+        match self {
+            KinectPreset::KinectV1 | KinectPreset::Seed000 => [57.0, 43.0],
+            KinectPreset::Sr4000 => [43.6, 34.6],
+            KinectPreset::Digiclops => [60.0, 46.8],
+        }
+    }
+}
+
 /// Depth noise model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -191,12 +202,13 @@ impl KinectConfig {
     pub fn resolve(&self, file: &Path, key: &str) -> Result<KinectSpec, SpecError> {
         let k = |s: &str| format!("{key}.{s}");
         crate::config::check_name(file, &k("name"), &self.name)?;
-        let (depth_size, rgb_size, range, fov) = match self.preset {
-            KinectPreset::KinectV1 => ([640, 480], [640, 480], (0.8, 4.0), [57.0, 43.0]),
-            KinectPreset::Seed000 => ([320, 240], [640, 480], (1.2, 3.5), [57.0, 43.0]),
-            KinectPreset::Sr4000 => ([176, 144], [176, 144], (0.1, 5.0), [43.6, 34.6]),
-            KinectPreset::Digiclops => ([320, 240], [320, 240], (0.1, 30.0), [60.0, 46.8]),
+        let (depth_size, rgb_size, range) = match self.preset {
+            KinectPreset::KinectV1 => ([640, 480], [640, 480], (0.8, 4.0)),
+            KinectPreset::Seed000 => ([320, 240], [640, 480], (1.2, 3.5)),
+            KinectPreset::Sr4000 => ([176, 144], [176, 144], (0.1, 5.0)),
+            KinectPreset::Digiclops => ([320, 240], [320, 240], (0.1, 30.0)),
         };
+        let fov = self.preset.fov_deg();
         let rgb_size = self.rgb_size.unwrap_or(rgb_size);
         let depth_size = self.depth_size.unwrap_or(depth_size);
         let [fh, fv] = self.fov_deg.unwrap_or(fov);

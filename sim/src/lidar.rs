@@ -86,13 +86,29 @@ impl LidarPreset {
         }
     }
 
+    /// The angle between the preset's beams as its data sheet gives it, degrees.
+    fn increment_deg(self) -> f64 {
+        match self {
+            LidarPreset::Urg04lx => 360.0 / 1024.0,
+            LidarPreset::Utm30lx | LidarPreset::Seed000 => 0.25,
+            LidarPreset::Lms200 => 0.5,
+        }
+    }
+
+    /// The preset's field of view (first beam to last), degrees, computed in degrees so that
+    /// it prints as declared (240, not 239.99999999999997).
+    pub fn fov_deg(self) -> f64 {
+        self.increment_deg() * (self.spec().beams - 1) as f64
+    }
+
     /// The preset's parameters.
     pub fn spec(self) -> LidarSpec {
         let deg = std::f64::consts::PI / 180.0;
+        let angle_increment = self.increment_deg() * deg;
         match self {
             LidarPreset::Urg04lx => LidarSpec {
                 beams: 682,
-                angle_increment: 360.0 / 1024.0 * deg,
+                angle_increment,
                 range_min: 0.02,
                 range_max: 5.6,
                 rate: 10.0,
@@ -102,7 +118,7 @@ impl LidarPreset {
             },
             LidarPreset::Utm30lx => LidarSpec {
                 beams: 1081,
-                angle_increment: 0.25 * deg,
+                angle_increment,
                 range_min: 0.1,
                 range_max: 30.0,
                 rate: 40.0,
@@ -112,7 +128,7 @@ impl LidarPreset {
             },
             LidarPreset::Lms200 => LidarSpec {
                 beams: 361,
-                angle_increment: 0.5 * deg,
+                angle_increment,
                 range_min: 0.01,
                 range_max: 8.0,
                 rate: 37.5,
@@ -122,7 +138,7 @@ impl LidarPreset {
             },
             LidarPreset::Seed000 => LidarSpec {
                 beams: 961,
-                angle_increment: 0.25 * deg,
+                angle_increment,
                 range_min: 0.02,
                 range_max: 30.0,
                 rate: 40.0,
