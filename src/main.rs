@@ -1,7 +1,6 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
-/// Exit status of a run whose results were written but a gate failed (errors exit with 1).
-const GATE_FAILED: i32 = 3;
+use run::GATE_FAILED;
 
 mod bench;
 mod cmaes;
@@ -146,6 +145,11 @@ enum Command {
         /// home folder, the current folder or its parents, or a folder with a `.git`).
         #[arg(long)]
         force: bool,
+        /// Run each scenario in a process of its own, so that a crash (a segfault in a GPU
+        /// driver) is that run's error and every other result is kept. A suite whose last
+        /// run in the same folder crashed does this by itself.
+        #[arg(long)]
+        isolate: bool,
         #[command(flatten)]
         overlays: OverlayArgs,
     },
@@ -245,6 +249,19 @@ struct OverlayArgs {
 }
 
 impl OverlayArgs {
+    /// The arguments again, for a child `futago run`.
+    fn args(&self) -> Vec<String> {
+        let files = self
+            .files
+            .iter()
+            .flat_map(|f| ["--overlay".to_string(), f.display().to_string()]);
+        let sets = self
+            .sets
+            .iter()
+            .flat_map(|s| ["--set".to_string(), s.clone()]);
+        files.chain(sets).collect()
+    }
+
     /// The overlays, read and checked: files first, then assignments, in the order given.
     fn load(&self) -> Result<Vec<overlay::Overlay>> {
         let mut out = Vec::new();
@@ -642,11 +659,23 @@ fn real_main() -> Result<()> {
             shard,
             out,
             force,
+            isolate,
             overlays,
         } => {
             let jobs = resolve_jobs(jobs)?;
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
-            let s = suite::suite(&paths, &overlays.load()?, jobs, shard, &out, force)?;
+            let isolation = isolate.then(|| suite::Isolation {
+                overlay_args: overlays.args(),
+            });
+            let s = suite::suite(
+                &paths,
+                &overlays.load()?,
+                jobs,
+                shard,
+                &out,
+                force,
+                isolation.as_ref(),
+            )?;
             report_suite(&s, &out);
         }
         Command::Tune {

@@ -137,6 +137,10 @@ fn walk(
         let e = e.with_context(|| format!("listing {}", dir.display()))?;
         let name = e.file_name().to_string_lossy().to_string();
         let (show, rel) = (format!("{shown}{name}"), format!("{inner}{name}"));
+        if is_partial(&name) {
+            // What a futago command was writing when it stopped (a crash, a kill).
+            continue;
+        }
         let ty = e
             .file_type()
             .with_context(|| format!("reading {}", e.path().display()))?;
@@ -161,6 +165,26 @@ fn walk(
         }
     }
     Ok(())
+}
+
+/// Whether `name` is a folder or file that a futago command writes before renaming it into
+/// place (`.NAME.partial-PID`, `.NAME.partial`): left behind only by a command that crashed.
+pub fn is_partial(name: &str) -> bool {
+    name.starts_with('.') && (name.contains(".partial-") || name.ends_with(".partial"))
+}
+
+/// Removes what crashed commands left half-written in `dir` (see [`is_partial`]).
+pub fn remove_partials(dir: &Path) {
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        if is_partial(&e.file_name().to_string_lossy()) {
+            let p = e.path();
+            let _ = if p.is_dir() {
+                std::fs::remove_dir_all(&p)
+            } else {
+                std::fs::remove_file(&p)
+            };
+        }
+    }
 }
 
 /// The files listed by `dir`'s marker, or `None` when it has none (or one that does not read).
@@ -201,6 +225,9 @@ fn files_under(dir: &Path, prefix: &str, out: &mut Vec<String>) -> Result<()> {
         let e = e.with_context(|| format!("listing {}", dir.display()))?;
         let name = e.file_name().to_string_lossy().to_string();
         let rel = format!("{prefix}{name}");
+        if is_partial(&name) {
+            continue;
+        }
         if e.file_type()?.is_dir() {
             if !e.path().join(MARKER).is_file() {
                 files_under(&e.path(), &format!("{rel}/"), out)?;

@@ -588,6 +588,7 @@ pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
 
 /// Runs a scenario and writes its results into `out` (created or replaced whole).
 pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcome)> {
+    crash_if_asked(&s.spec.name);
     write_atomically(out, opts.force, "run", |tmp| {
         let (outcome, nodes) = simulate(s, opts, Some(tmp))?;
         let truth_text = std::fs::read_to_string(tmp.join(stack::record::GROUNDTRUTH_FILE))
@@ -684,6 +685,20 @@ fn report_height(s: &Scenario) -> f64 {
         .map(|(c, _)| c.xyz[2])
         .min_by(f64::total_cmp)
         .unwrap_or(0.2)
+}
+
+/// Exit status of a run whose results were written but a gate failed (errors exit with 1).
+pub const GATE_FAILED: i32 = 3;
+
+/// The environment variable that makes the run of the scenario it names abort, as a crash in
+/// a driver would: fault injection for the tests of `futago suite --isolate`.
+pub const CRASH_ENV: &str = "FUTAGO_CRASH_RUN";
+
+fn crash_if_asked(name: &str) {
+    if std::env::var_os(CRASH_ENV).is_some_and(|v| v == name) {
+        eprintln!("futago: {CRASH_ENV}={name}: aborting, as asked");
+        std::process::abort();
+    }
 }
 
 /// Runs without writing anything (for benchmarks).

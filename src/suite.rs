@@ -143,6 +143,7 @@ pub fn suite(
     shard: Option<Shard>,
     out: &Path,
     force: bool,
+    isolate: Option<&Isolation>,
 ) -> Result<Value> {
     crate::output::check_folder(out, force)?;
     let files = collect(paths)?;
@@ -185,6 +186,27 @@ pub fn suite(
         None => runs,
     };
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    // A suite that left its flag behind ended without writing its results: a crash (or a
+    // kill). This one runs each scenario in a process of its own, so that it cannot again.
+    let flag = out.join(RUNNING_FLAG);
+    let crashed_before = flag.exists();
+    if crashed_before {
+        crate::output::remove_partials(out);
+    }
+    let isolation = match (isolate, crashed_before) {
+        (Some(i), _) => Some(i.clone()),
+        (None, true) => {
+            eprintln!(
+                "futago: the last suite in {} ended without writing its results (a crash?): running each scenario in a process of its own, as --isolate does",
+                out.display()
+            );
+            Some(Isolation::default())
+        }
+        (None, false) => None,
+    };
+    std::fs::write(&flag, format!("{}\n", std::process::id()))
+        .with_context(|| format!("writing {}", flag.display()))?;
+    crate::output::mark(out, "suite")?;
     let started = std::time::Instant::now();
     let bar = indicatif::ProgressBar::new(runs.len() as u64);
     bar.set_style(
@@ -204,9 +226,12 @@ pub fn suite(
             force,
         };
         let name = job.name();
-        let result = run::run(&job.scenario, &opts, &out.join(&name))
-            .map(|(summary, _)| summary)
-            .map_err(|e| format!("{e:#}"));
+        let result = match &isolation {
+            Some(i) => run_child(job, i, &out.join(&name), force),
+            None => run::run(&job.scenario, &opts, &out.join(&name))
+                .map(|(summary, _)| summary)
+                .map_err(|e| format!("{e:#}")),
+        };
         bar.inc(1);
         bar.set_message(name.clone());
         Entry {
@@ -229,8 +254,81 @@ pub fn suite(
     let summary = summarise(&entries, shard, jobs, wall);
     let dirs: Vec<PathBuf> = entries.iter().map(|e| out.join(&e.name)).collect();
     write_reports(out, &summary, &dirs)?;
+    let _ = std::fs::remove_file(&flag);
     crate::output::mark(out, "suite")?;
     Ok(summary)
+}
+
+/// The file a suite keeps in its folder while it runs: found at the start of the next suite,
+/// it says the last one crashed.
+const RUNNING_FLAG: &str = ".suite-running";
+
+/// Each run of a suite in a child `futago run`: a crash (a segfault in a driver, an abort)
+/// is then that run's error, and the suite's other results are kept. The child is given the
+/// suite's `--overlay` and `--set` arguments.
+#[derive(Debug, Clone, Default)]
+pub struct Isolation {
+    pub overlay_args: Vec<String>,
+}
+
+/// Runs `job` as a child `futago run` into `dir`; its summary, or what stopped it (its
+/// error, or the signal that killed it).
+fn run_child(job: &Job, iso: &Isolation, dir: &Path, force: bool) -> Result<Value, String> {
+    let exe = std::env::current_exe().map_err(|e| format!("finding the futago program: {e}"))?;
+    let mut cmd = std::process::Command::new(exe);
+    cmd.arg("run")
+        .arg(&job.file)
+        .arg("--out")
+        .arg(dir)
+        .arg("-q")
+        .args(&iso.overlay_args);
+    if let Some(k) = job.seed {
+        cmd.args(["--seed", &k.to_string()]);
+    }
+    if force {
+        cmd.arg("--force");
+    }
+    let o = cmd
+        .stdin(std::process::Stdio::null())
+        .output()
+        .map_err(|e| format!("starting a child futago: {e}"))?;
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    match o.status.code() {
+        // 3: the run wrote its results and a gate failed, which the suite scores itself.
+        Some(0) | Some(run::GATE_FAILED) => {
+            let p = dir.join("summary.json");
+            let text =
+                std::fs::read_to_string(&p).map_err(|e| format!("reading {}: {e}", p.display()))?;
+            serde_json::from_str(&text).map_err(|e| format!("reading {}: {e}", p.display()))
+        }
+        Some(c) => Err(stderr
+            .lines()
+            .filter_map(|l| l.strip_prefix("futago: error: "))
+            .last()
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("the run exited with status {c}: {}", stderr.trim()))),
+        None => {
+            use std::os::unix::process::ExitStatusExt;
+            let sig = o.status.signal().unwrap_or(0);
+            let name = match sig {
+                4 => "SIGILL",
+                6 => "SIGABRT",
+                7 => "SIGBUS",
+                8 => "SIGFPE",
+                9 => "SIGKILL",
+                11 => "SIGSEGV",
+                _ => "a signal",
+            };
+            Err(format!(
+                "the run crashed (signal {sig}, {name}{}); nothing of it was written, the suite's other runs are kept",
+                if o.status.core_dumped() {
+                    ", core dumped"
+                } else {
+                    ""
+                }
+            ))
+        }
+    }
 }
 
 /// A run's gates, with its gates against other scenarios' runs of the suite: the run of
