@@ -1,28 +1,9 @@
 //! End-to-end tests of the `futago` command.
 
+mod common;
+use common::*;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-
-fn futago(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_futago"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("futago runs")
-}
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn ok(o: &Output) {
-    assert!(
-        o.status.success(),
-        "futago failed:\nstdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
 
 /// Runs `scenario` quietly into `out` (for `duration` simulated seconds if given); must
 /// succeed.
@@ -78,14 +59,6 @@ fn edited_scenario_is_refused(dir: &Path, text: &str, from: &str, to: &str, expe
         expect,
         None,
     );
-}
-
-fn json_file(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-fn summary(dir: &Path) -> serde_json::Value {
-    json_file(&dir.join("summary.json"))
 }
 
 #[test]
@@ -295,12 +268,6 @@ fn umbmark_square_shows_the_configured_odometry_errors_and_none_without_them() {
             );
         }
     }
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p
 }
 
 #[test]

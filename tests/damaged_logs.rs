@@ -6,29 +6,9 @@ use futago_msgs::rosbag::writer::{
     BagWriter, laser_scan_message, odometry_message, person_message,
 };
 use futago_msgs::{LaserScan, Pose2, Time};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn futago(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_futago"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("futago runs")
-}
-
-fn ok(o: &Output) {
-    assert!(
-        o.status.success(),
-        "futago failed:\nstdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
-
-fn summary(out: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
-}
+mod common;
+use common::*;
+use std::path::Path;
 
 /// Scans of the robot in a 6 m × 4 m room with a box in one corner, 10 Hz, the robot driving
 /// 3 cm and turning 0.002 rad a scan.
@@ -99,18 +79,24 @@ fn bag(odometry: bool, per_chunk: usize) -> Vec<u8> {
     w.finish()
 }
 
+/// `futago replay LOG --out OUT`, which must succeed; its output and summary.
+fn replayed(log: &Path, out: &Path) -> (std::process::Output, serde_json::Value) {
+    let o = futago(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    ok(&o);
+    (o, summary(out))
+}
+
 fn chunk_starts(b: &[u8]) -> Vec<usize> {
     b.windows(8)
         .enumerate()
         .filter(|(_, w)| *w == b"\x04\x00\x00\x00op=\x05")
         .map(|(k, _)| k)
         .collect()
-}
-
-fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, bytes).unwrap();
-    p
 }
 
 #[test]
@@ -123,19 +109,12 @@ fn a_cut_or_corrupted_bag_is_replayed_for_what_it_holds() {
     // Cut inside the 13th chunk, as a recorder killed mid-write leaves a bag.
     let cut = write(d, "cut.bag", &whole[..chunks[12] + 500]);
     let out = d.join("cut");
-    let o = futago(&[
-        "replay",
-        cut.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    ok(&o);
+    let (o, s) = replayed(&cut, &out);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
         err.contains("damaged log") && err.contains("cut short"),
         "{err}"
     );
-    let s = summary(&out);
     // The twelve whole chunks' 60 scans (the cut one's bz2 block does not decompress).
     assert_eq!(s["scans"], 60);
     assert_eq!(s["read"]["damaged"], true);
@@ -161,13 +140,7 @@ fn a_cut_or_corrupted_bag_is_replayed_for_what_it_holds() {
     }
     let bad = write(d, "bad.bag", &bad);
     let out = d.join("bad");
-    ok(&futago(&[
-        "replay",
-        bad.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]));
-    let s = summary(&out);
+    let (_, s) = replayed(&bad, &out);
     assert_eq!(s["scans"], 95);
     let loss = &s["read"]["damage"]["losses"][0];
     assert!(
@@ -181,13 +154,7 @@ fn a_cut_or_corrupted_bag_is_replayed_for_what_it_holds() {
     // The whole bag is not damaged, and says so.
     let good = write(d, "good.bag", &whole);
     let out = d.join("good");
-    ok(&futago(&[
-        "replay",
-        good.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]));
-    let s = summary(&out);
+    let (_, s) = replayed(&good, &out);
     assert_eq!(s["scans"], 100);
     assert_eq!(s["read"]["damaged"], false);
 }
@@ -215,14 +182,7 @@ fn a_carmen_log_with_a_bad_line_is_replayed_around_it() {
     }
     let log = write(tmp.path(), "log.clf", text.as_bytes());
     let out = tmp.path().join("o");
-    let o = futago(&[
-        "replay",
-        log.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    ok(&o);
-    let s = summary(&out);
+    let (_, s) = replayed(&log, &out);
     assert_eq!(s["scans"], 99);
     assert_eq!(s["read"]["damage"]["losses"][0]["at"], 50);
     let o = futago(&["replay", log.to_str().unwrap(), "--strict"]);
@@ -234,15 +194,8 @@ fn a_bag_of_scans_alone_is_localised_by_scan_matching() {
     let tmp = tempfile::tempdir().unwrap();
     let b = write(tmp.path(), "scans.bag", &bag(false, 50));
     let out = tmp.path().join("o");
-    let o = futago(&[
-        "replay",
-        b.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    ok(&o);
+    let (o, s) = replayed(&b, &out);
     assert!(String::from_utf8_lossy(&o.stdout).contains("no odometry in the log"));
-    let s = summary(&out);
     assert!(
         s["read"]["odometry"]
             .as_str()
@@ -314,7 +267,7 @@ fn several_scan_topics_are_an_error_until_one_is_chosen() {
 /// that scan matching gives, about as well as with the robot's odometry.
 #[test]
 fn a_scan_only_copy_of_the_people_log_is_tracked() {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let root = root();
     let Some(files) = futago_msgs::datasets::require(
         &root,
         "a_scan_only_copy_of_the_people_log_is_tracked",

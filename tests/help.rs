@@ -29,9 +29,15 @@ fn every_command_has_its_own_description() {
         assert!(!text.trim().is_empty(), "`{name}` has no description");
         assert!(texts.insert(text.trim()), "`{name}` shares its description");
     }
-    let metrics = lines.iter().find(|l| l.trim().starts_with("metrics")).unwrap();
+    let metrics = lines
+        .iter()
+        .find(|l| l.trim().starts_with("metrics"))
+        .unwrap();
     assert!(!metrics.contains("shards"), "{metrics}");
-    let merge = lines.iter().find(|l| l.trim().starts_with("merge")).unwrap();
+    let merge = lines
+        .iter()
+        .find(|l| l.trim().starts_with("merge"))
+        .unwrap();
     assert!(merge.contains("shards"), "{merge}");
 }
 

@@ -2,7 +2,9 @@
 //! crashed in the same folder) each scenario runs in a process of its own, and a run that
 //! aborts is that run's error in suite.json and JUnit, every other result kept.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::root;
+use std::path::Path;
 use std::process::{Command, Output};
 
 fn futago(args: &[&str], crash: Option<&str>) -> Output {
@@ -12,10 +14,6 @@ fn futago(args: &[&str], crash: Option<&str>) -> Output {
         c.env("FUTAGO_CRASH_RUN", name);
     }
     c.output().expect("futago runs")
-}
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
 /// Three short scenarios in `dir`: a, b and c, two seconds each in the lab.

@@ -2,20 +2,10 @@
 //! a user's is refused before any work, `--force` replaces it, and the current folder, its
 //! parents and a repository are refused whatever is asked.
 
+mod common;
+use common::*;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn futago_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_futago"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("futago runs")
-}
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use std::process::Output;
 
 /// A folder of a user's: a thesis and a data file in a subfolder.
 fn users_folder(d: &Path) -> PathBuf {

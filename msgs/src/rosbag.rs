@@ -1030,75 +1030,42 @@ pub fn example(bz2: bool) -> Vec<u8> {
 /// [`example`] with its chunk compressed by `compression` (`none`, `bz2` or `lz4`) and the
 /// laser turned by the quaternion `laser_q` on the base.
 pub fn example_mounted(compression: &str, laser_q: [f64; 4]) -> Vec<u8> {
-    let conn = |id: u32, topic: &str, ty: &str| {
-        record(
-            &[
-                field("op", &[0x07]),
-                field("conn", &id.to_le_bytes()),
-                field("topic", topic.as_bytes()),
-            ],
-            &[
-                field("topic", topic.as_bytes()),
-                field("type", ty.as_bytes()),
-            ]
-            .concat(),
+    use writer::{BagWriter, laser_scan_message, odometry_message};
+    let mut w = BagWriter::new(compression, 100);
+    let scan = w.connection("/scan", "sensor_msgs/LaserScan");
+    let odom = w.connection("/odom", "nav_msgs/Odometry");
+    let tf = w.connection("/tf_static", "tf2_msgs/TFMessage");
+    let imu = w.connection("/imu", "sensor_msgs/Imu");
+    let t = Time::from_secs;
+    w.write(
+        tf,
+        t(0.0),
+        &tf_bytes("base_link", "laser", [0.22, 0.0, 0.3], laser_q),
+    );
+    let odo = |seq: u32, x: f64| {
+        odometry_message(
+            seq,
+            t(seq as f64),
+            "odom",
+            "base_link",
+            Pose2::new(x, 0.0, 0.0),
         )
     };
-    let mut scan = header_msg(2, "laser");
-    for v in [-1.0f32, 1.0, 0.5, 0.0, 0.1, 0.02, 10.0] {
-        scan.extend(v.to_bits().to_le_bytes());
-    }
-    scan.extend(5u32.to_le_bytes());
-    for r in [1.0f32, 2.0, f32::INFINITY, 12.0, 3.0] {
-        scan.extend(r.to_bits().to_le_bytes());
-    }
-    scan.extend(0u32.to_le_bytes());
-    let odo = |t: u32, x: f64| {
-        let mut m = header_msg(t, "odom");
-        m.extend(ros_string("base_link"));
-        for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
-            m.extend(v.to_le_bytes());
-        }
-        m.extend(vec![0u8; 36 * 8 + 6 * 8 + 36 * 8]);
-        m
+    w.write(odom, t(1.0), &odo(1, 0.0));
+    let s = LaserScan {
+        frame: "laser".into(),
+        stamp: t(2.0),
+        angle_min: -1.0,
+        angle_increment: 0.5,
+        time_increment: 0.0,
+        range_min: 0.02,
+        range_max: 10.0,
+        ranges: vec![1.0, 2.0, f32::INFINITY, 12.0, 3.0],
     };
-    let msg = |id: u32, body: &[u8]| {
-        record(
-            &[
-                field("op", &[0x02]),
-                field("conn", &id.to_le_bytes()),
-                field("time", &[0; 8]),
-            ],
-            body,
-        )
-    };
-    let inner = [
-        conn(0, "/scan", "sensor_msgs/LaserScan"),
-        conn(1, "/odom", "nav_msgs/Odometry"),
-        conn(2, "/tf_static", "tf2_msgs/TFMessage"),
-        conn(3, "/imu", "sensor_msgs/Imu"),
-        msg(
-            2,
-            &tf_bytes("base_link", "laser", [0.22, 0.0, 0.3], laser_q),
-        ),
-        msg(1, &odo(1, 0.0)),
-        msg(0, &scan),
-        msg(1, &odo(3, 1.0)),
-        msg(3, b"xx"),
-    ]
-    .concat();
-    let data = writer::compress(compression, &inner);
-    let mut out = b"#ROSBAG V2.0\n".to_vec();
-    out.extend(record(&[field("op", &[0x03])], &[]));
-    out.extend(record(
-        &[
-            field("op", &[0x05]),
-            field("compression", compression.as_bytes()),
-            field("size", &(inner.len() as u32).to_le_bytes()),
-        ],
-        &data,
-    ));
-    out
+    w.write(scan, t(2.0), &laser_scan_message(7, &s));
+    w.write(odom, t(3.0), &odo(3, 1.0));
+    w.write(imu, t(3.0), b"xx");
+    w.finish()
 }
 
 #[cfg(test)]
