@@ -304,7 +304,7 @@ fn run_child(job: &Job, iso: &Isolation, dir: &Path, force: bool) -> Result<Valu
         Some(c) => Err(stderr
             .lines()
             .filter_map(|l| l.strip_prefix("futago: error: "))
-            .last()
+            .next_back()
             .map(str::to_string)
             .unwrap_or_else(|| format!("the run exited with status {c}: {}", stderr.trim()))),
         None => {

@@ -671,7 +671,7 @@ fn exploration_maps_both_rooms_on_slam_without_a_bump() {
     let scenario = write(
         tmp.path(),
         "explore.toml",
-        &format!(
+        format!(
             "name = \"explore\"\nworld = {world:?}\nduration = 300.0\nseed = 3\n\
              start = {{ x = 1.0, y = 1.0, yaw_deg = 0.0 }}\n\
              [robot.odometry]\nwheel_base_ratio = 1.01\nnoise = 0.002\n\
@@ -728,7 +728,7 @@ fn mcl_recovers_from_a_kidnapping_between_rooms() {
     let scenario = write(
         tmp.path(),
         "kidnap.toml",
-        &format!(
+        format!(
             "name = \"kidnap\"\nworld = {world:?}\nduration = 60.0\nseed = 4\n\
              start = {{ x = 1.0, y = 1.0, yaw_deg = 0.0 }}\n\
              [[lidar]]\nname = \"front\"\npreset = \"urg-04lx\"\nxyz = [0.08, 0.0, 0.2]\n\
@@ -794,7 +794,7 @@ fn a_suite_runs_in_parallel_and_reports_gates_as_junit() {
         write(
             &dir,
             &format!("{name}.toml"),
-            &format!(
+            format!(
                 "name = \"{name}\"\nworld = {world:?}\nduration = 2.0\nstart = \"centre\"\n\
                  [controller]\ntype = \"segments\"\nsegments = [{{ duration = 2.0, velocity = 0.2 }}]\n\
                  [[gate]]\nmetric = \"odometry.ate.max_m\"\nop = \"<\"\nvalue = {limit}\n"
@@ -930,7 +930,7 @@ fn a_seed_sweep_reports_mean_and_spread_and_overlays_apply_to_every_run() {
     let scenario = write(
         tmp.path(),
         "sweep.toml",
-        &format!(
+        format!(
             "name = \"sweep\"\nworld = {world:?}\nduration = 3.0\nstart = \"centre\"\nseeds = [1, 2, 3]\n\
              [robot.odometry]\nnoise = 0.05\n\
              [controller]\ntype = \"segments\"\nsegments = [{{ duration = 3.0, velocity = 0.2, radius = 0.5 }}]\n\
@@ -1032,7 +1032,7 @@ fn tune_calibrates_a_wheel_base_error_found_by_hand_and_its_overlay_reproduces_t
     let scenario = write(
         tmp.path(),
         "cal.toml",
-        &format!(
+        format!(
             "name = \"calibrate\"\nworld = {world:?}\nduration = 6.0\nstart = \"centre\"\n\
              [robot.odometry]\nwheel_base_ratio = 1.025\nnoise = 0.0\nquantize = false\n\
              [controller]\ntype = \"segments\"\nsegments = [{{ duration = 6.0, velocity = 0.3, radius = 0.6 }}]\n"
@@ -1160,7 +1160,7 @@ fn an_rgbd_map_is_scored_against_the_surfaces_it_saw_and_a_worse_pose_scores_wor
     let scenario = write(
         tmp.path(),
         "map.toml",
-        &format!(
+        format!(
             "name = \"map\"\nworld = {world:?}\nduration = 14.0\nseed = 1\nstart = \"centre\"\n\
              [robot.odometry]\nwheel_base_ratio = 1.03\n\
              [[camera]]\nname = \"kinect\"\npreset = \"seed000\"\nxyz = [0.1, 0.0, 0.42]\nnoise = {{ model = \"nguyen\" }}\n\
@@ -1549,7 +1549,7 @@ fn rgbd_dataset_is_a_tum_sequence_that_lands_on_the_floor_and_repeats() {
     let quiet = write(
         tmp.path(),
         "q.toml",
-        &text.replace("rgbd_dataset = true", "rgbd_dataset = false"),
+        text.replace("rgbd_dataset = true", "rgbd_dataset = false"),
     );
     let c = tmp.path().join("c");
     run_for(&quiet, &c, Some("1"));
@@ -1655,7 +1655,7 @@ fn replay_of_a_simulated_log_beats_its_odometry_on_ground_truth_relations() {
     let scenario = write(
         tmp.path(),
         "lap.toml",
-        &format!(
+        format!(
             "name = \"lap\"\nworld = {world:?}\nduration = 40.0\nseed = 2\nstart = \"centre\"\n\
              [robot.odometry]\nwheel_base_ratio = 1.02\nnoise = 0.002\n\
              [[lidar]]\nname = \"front\"\npreset = \"urg-04lx\"\nxyz = [0.08, 0.0, 0.2]\n\
@@ -2201,7 +2201,7 @@ fn inputs_that_crashed_are_refused_by_name() {
         let log = write(
             d,
             "far.clf",
-            &format!("ODOM {x} 0 0 0 0 0 1.0 host 1.0\nODOM {x} 0 0 0 0 0 2.0 host 2.0\n"),
+            format!("ODOM {x} 0 0 0 0 0 1.0 host 1.0\nODOM {x} 0 0 0 0 0 2.0 host 2.0\n"),
         );
         refused_before_running(
             &["replay", log.to_str().unwrap()],
@@ -2214,7 +2214,7 @@ fn inputs_that_crashed_are_refused_by_name() {
     let two = write(
         d,
         "two.toml",
-        &format!(
+        format!(
             "name = \"two\"\nworld = {:?}\nduration = 1.0\nstart = \"corridor\"\n[[lidar]]\nname = \"front\"\npreset = \"utm-30lx\"\n[[lidar]]\nname = \"rear\"\npreset = \"lms200\"\n[slam]\n[controller]\ntype = \"segments\"\nsegments = [{{ duration = 1.0, velocity = 0.2 }}]\n",
             root().join("worlds/hall.toml")
         ),
@@ -2259,7 +2259,7 @@ fn agents_leave_their_ground_truth_and_sensors_ride_joints() {
     let scenario = write(
         d,
         "movers.toml",
-        &format!(
+        format!(
             "name = \"movers\"\nworld = {world:?}\nduration = 3.0\nstart = \"centre\"\n\
              [controller]\ntype = \"segments\"\nsegments = [{{ duration = 3.0, velocity = 0.0 }}]\n\
              [[lidar]]\nname = \"front\"\npreset = \"urg-04lx\"\n\

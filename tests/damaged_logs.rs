@@ -192,7 +192,7 @@ fn a_carmen_log_with_a_bad_line_is_replayed_around_it() {
 #[test]
 fn a_bag_of_scans_alone_is_localised_by_scan_matching() {
     let tmp = tempfile::tempdir().unwrap();
-    let b = write(tmp.path(), "scans.bag", &bag(false, 50));
+    let b = write(tmp.path(), "scans.bag", bag(false, 50));
     let out = tmp.path().join("o");
     let (o, s) = replayed(&b, &out);
     assert!(String::from_utf8_lossy(&o.stdout).contains("no odometry in the log"));
@@ -232,7 +232,7 @@ fn several_scan_topics_are_an_error_until_one_is_chosen() {
         w.write(front, t, &laser_scan_message(k, &scan(k, "front")));
         w.write(rear, t, &laser_scan_message(k, &scan(k, "rear")));
     }
-    let b = write(tmp.path(), "two.bag", &w.finish());
+    let b = write(tmp.path(), "two.bag", w.finish());
     let out = tmp.path().join("o");
     let o = futago(&[
         "replay",
@@ -292,7 +292,7 @@ fn a_scan_only_copy_of_the_people_log_is_tracked() {
             w.write(pe, s.logged, &person_message(m.id, m.position));
         }
     }
-    let scans_only = write(tmp.path(), "scans_only.bag", &w.finish());
+    let scans_only = write(tmp.path(), "scans_only.bag", w.finish());
     let run = |bag: &Path, name: &str| {
         let out = tmp.path().join(name);
         ok(&futago(&[
