@@ -127,9 +127,10 @@ pub fn damage_line(log: &Value) -> Option<String> {
         })
         .collect();
     Some(format!(
-        "damaged log: {} bytes lost in {} parts{}{}; read up to {:.3} s{}",
+        "damaged log: {} bytes lost in {} part{}{}{}; read up to {:.3} s{}",
         d["bytes_lost"],
         d["parts_skipped"],
+        if d["parts_skipped"] == 1 { "" } else { "s" },
         if d["truncated"] == true {
             ", cut short"
         } else {

@@ -494,8 +494,15 @@ fn inflate_partial(mut reader: impl Read, size: usize) -> Vec<u8> {
 /// Walks the records of `data` (the file after its magic line, or a chunk's contents), `base`
 /// being the offset of `data` in the file. Strict, the first damaged record is the error;
 /// salvaging, a record that does not parse is recorded as lost and reading goes on at the next
-/// record that does.
-fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<(), BagError> {
+/// record that does. `cut`: `data` is what decompressed of a chunk cut by the end of the file,
+/// whose last record running past its end is part of that cut, not a loss of its own.
+fn records(
+    data: &[u8],
+    base: usize,
+    raw: &mut Raw,
+    in_chunk: bool,
+    cut: bool,
+) -> Result<(), BagError> {
     let mut at = 0;
     while at < data.len() {
         let offset = base + at;
@@ -505,6 +512,9 @@ fn records(data: &[u8], base: usize, raw: &mut Raw, in_chunk: bool) -> Result<()
             Err(m) if !raw.salvage => return Err(err(m)),
             Err(m) => {
                 let next = resync(data, at + 1);
+                if cut && next.is_none() {
+                    break;
+                }
                 let lost = next.unwrap_or(data.len()) - at;
                 if next.is_none() && m.contains("truncated") && !in_chunk {
                     raw.damage.truncated = true;
@@ -607,7 +617,7 @@ fn chunk(rec: &Record, offset: usize, raw: &mut Raw) -> Result<(), BagError> {
             _ => Vec::new(),
         };
         let before = raw.messages.values().sum::<usize>();
-        records(&inner, offset, raw, true)?;
+        records(&inner, offset, raw, true, true)?;
         raw.damage.messages_salvaged_from_cut_chunk +=
             raw.messages.values().sum::<usize>() - before;
         return Ok(());
@@ -622,7 +632,7 @@ fn chunk(rec: &Record, offset: usize, raw: &mut Raw) -> Result<(), BagError> {
             )));
         }
     };
-    records(&inner, offset, raw, true)
+    records(&inner, offset, raw, true, false)
 }
 
 /// The topic of each stream of type `ty`: the one `chosen`, or the only one with messages;
@@ -698,7 +708,7 @@ pub fn read_with(bytes: &[u8], o: &ReadOptions) -> Result<Log, BagError> {
         salvage: !o.strict,
         ..Default::default()
     };
-    records(&bytes[MAGIC.len()..], MAGIC.len(), &mut raw, false)?;
+    records(&bytes[MAGIC.len()..], MAGIC.len(), &mut raw, false, false)?;
     // Messages whose connection was defined after them (or never, its record lost).
     for (offset, conn, body) in std::mem::take(&mut raw.pending) {
         match raw.conns.get(&conn).map(|c| c.1.clone()) {
