@@ -126,8 +126,15 @@ pub fn damage_line(log: &Value) -> Option<String> {
             }
         })
         .collect();
+    let read: Vec<String> = log["messages"]
+        .as_object()
+        .into_iter()
+        .flatten()
+        .map(|(topic, n)| format!("{n} {topic}"))
+        .collect();
     Some(format!(
-        "damaged log: {} bytes lost in {} part{}{}{}; read up to {:.3} s{}",
+        "damaged log: read {}; {} bytes lost in {} part{}{}{}; read up to {:.3} s{}",
+        read.join(", "),
         d["bytes_lost"],
         d["parts_skipped"],
         if d["parts_skipped"] == 1 { "" } else { "s" },
