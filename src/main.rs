@@ -817,65 +817,7 @@ fn real_main() -> Result<()> {
                     force,
                 },
             )?;
-            let line = |k: &str| -> String {
-                let m = &s["relations"][k];
-                let spans = s["relations"]["by_span"]
-                    .as_array()
-                    .map(|groups| {
-                        groups
-                            .iter()
-                            .filter(|g| g[k]["relations"].as_u64().unwrap_or(0) > 0)
-                            .map(|g| {
-                                format!(
-                                    "{} {:.4}",
-                                    g["span"].as_str().unwrap_or("?"),
-                                    g[k]["abs_trans_m"]["mean"].as_f64().unwrap_or(f64::NAN)
-                                )
-                            })
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    })
-                    .unwrap_or_default();
-                format!(
-                    "{k:>9}: abs trans {:.4} ± {:.4} m, abs rot {:.3} ± {:.3}° over {} relations (by span: {spans} m)",
-                    m["abs_trans_m"]["mean"].as_f64().unwrap_or(f64::NAN),
-                    m["abs_trans_m"]["std"].as_f64().unwrap_or(f64::NAN),
-                    m["abs_rot_deg"]["mean"].as_f64().unwrap_or(f64::NAN),
-                    m["abs_rot_deg"]["std"].as_f64().unwrap_or(f64::NAN),
-                    m["relations"]
-                )
-            };
-            println!(
-                "{}: {} scans over {:.0} s in {:.2} s ({:.0}× real time); results in {}",
-                log.display(),
-                s["scans"],
-                s["log_duration_s"].as_f64().unwrap_or(0.0),
-                s["performance"]["wall_time_s"].as_f64().unwrap_or(0.0),
-                s["performance"]["real_time_factor"].as_f64().unwrap_or(0.0),
-                out.display()
-            );
-            let read = &s["read"];
-            let topics: Vec<String> = [("scans", "scan_topic"), ("odometry", "odom_topic")]
-                .iter()
-                .filter_map(|(what, k)| read[k].as_str().map(|t| format!("{what} from {t}")))
-                .collect();
-            if !topics.is_empty() {
-                println!("read {}", topics.join(", "));
-            }
-            if read["odometry"] != "read" {
-                println!("no odometry in the log: the robot's motion is the SLAM's scan matching");
-            }
-            if let Some(line) = replay::damage_line(read) {
-                eprintln!("futago: {line}");
-            }
-            if s.get("relations").is_some() {
-                println!(
-                    "{}
-{}",
-                    line("slam"),
-                    line("odometry")
-                );
-            }
+            replay::print(&s, &log, &out);
         }
         Command::World { command } => match command {
             WorldCommand::Info { world } => {
