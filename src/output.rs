@@ -63,9 +63,9 @@ fn refuse_protected(out: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Checks, before any work, that the command `what` may create or replace the folder `out`:
-/// it is absent, empty or futago's own (see the module's doc), or `force` is given and it is
-/// not a protected folder.
+/// Checks, before any work, that a command may create or replace the folder `out`: it is
+/// absent, empty or futago's own (see the module's doc), or `force` is given and it is not a
+/// protected folder.
 pub fn check_folder(out: &Path, force: bool) -> Result<()> {
     refuse_protected(out)?;
     let meta = match std::fs::symlink_metadata(out) {
@@ -200,15 +200,18 @@ fn read_marker(dir: &Path) -> Option<BTreeSet<String>> {
     )
 }
 
-/// A folder that futago wrote before markers existed: a run's or a replay's `summary.json`
-/// (with the SHA-256 of its files), a suite's `suite.json` or a search's `tune.json`.
+/// A folder that futago wrote before markers existed: a run's `summary.json` (with the SHA-256
+/// of its files), a replay's (its log and SLAM method), a suite's `suite.json` or a search's
+/// `tune.json`.
 fn written_by_earlier_futago(dir: &Path) -> bool {
     let read = |name: &str| -> Option<Value> {
         serde_json::from_str(&std::fs::read_to_string(dir.join(name)).ok()?).ok()
     };
     let summary = read("summary.json").is_some_and(|v| {
-        v.get("files").is_some_and(Value::is_object)
-            && (v.get("scenario").is_some() || v.get("log").is_some())
+        let run = v.get("files").is_some_and(Value::is_object) && v.get("scenario").is_some();
+        let replay = v.get("log").is_some_and(Value::is_string)
+            && v.get("slam").is_some_and(Value::is_string);
+        run || replay
     });
     let suite = read("suite.json").is_some_and(|v| {
         v.get("results").is_some_and(Value::is_array) && v.get("scenarios").is_some()
@@ -381,6 +384,13 @@ mod tests {
         std::fs::write(
             d.join("summary.json"),
             r#"{"scenario": "x", "files": {"a": "b"}}"#,
+        )
+        .unwrap();
+        check_folder(&d, false).unwrap();
+        // A replay's.
+        std::fs::write(
+            d.join("summary.json"),
+            r#"{"log": "x.bag", "slam": "graph"}"#,
         )
         .unwrap();
         check_folder(&d, false).unwrap();
