@@ -494,7 +494,7 @@ pub fn bench_people(
             taken.push(scan);
         }
     }
-    let model = crate::legs_train::default_model()?;
+    let model = crate::stack::people::default_model()?;
     let mount = lidar.planar_mount();
     let laser = start.compose(&mount);
     let map = futago_sim::world::export::occupancy_grid(
@@ -696,4 +696,46 @@ pub fn bench_depth_mcl(
         "frames": frames,
         "rows": rows,
     }))
+}
+
+/// A bench's world and the pose of its spawn `spawn`.
+pub fn world_at_spawn(
+    world: &std::path::Path,
+    spawn: &str,
+) -> Result<(futago_sim::world::World, futago_msgs::Pose2)> {
+    let w = crate::world_cmd::load(world)?;
+    let start = w
+        .spawn(spawn)
+        .with_context(|| format!("world `{}` has no spawn `{spawn}`", w.name))?;
+    Ok((w, start))
+}
+
+/// `WIDTHxHEIGHT` of option `flag`.
+pub fn parse_size(flag: &str, s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("{flag}: expected WIDTHxHEIGHT, found `{s}`"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .with_context(|| format!("{flag}: `{w}` is not a pixel count"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .with_context(|| format!("{flag}: `{h}` is not a pixel count"))?;
+    Ok((w, h))
+}
+
+/// `--sizes` of `futago bench depth-mcl`: `WIDTHxHEIGHT` each, at most the Kinect's 176 × 144
+/// depth-model size.
+pub fn parse_depth_sizes(sizes: &[String]) -> Result<Vec<[u32; 2]>> {
+    sizes
+        .iter()
+        .map(|s| match parse_size("--sizes", s)? {
+            (w, h) if (1..=176).contains(&w) && (1..=144).contains(&h) => Ok([w, h]),
+            _ => Err(anyhow::anyhow!(
+                "--sizes: expected at most 176x144, found `{s}`"
+            )),
+        })
+        .collect()
 }

@@ -577,6 +577,42 @@ pub fn write_findings(findings: &[Finding], out: &Path, force: bool) -> Result<(
     })
 }
 
+/// `futago fuzz`: fuzzes every parser of the files under `root` with `inputs` mutated inputs
+/// on `jobs` threads, prints the counts, and writes the inputs that panicked into `out`
+/// (default `out/fuzz`, checked before any work). Gives the exit status: 1 when one did.
+pub fn command(
+    root: &Path,
+    inputs: u64,
+    jobs: usize,
+    seed: u64,
+    out: Option<PathBuf>,
+    force: bool,
+) -> Result<i32> {
+    let out = out.unwrap_or_else(|| PathBuf::from("out/fuzz"));
+    crate::output::check_folder(&out, force)?;
+    let targets = targets(root)?;
+    let r = run(&targets, inputs, jobs, seed, 100);
+    for (name, n) in &r.counts {
+        println!("{name:>10}: {n} inputs");
+    }
+    let total: u64 = r.counts.iter().map(|c| c.1).sum();
+    println!(
+        "fuzz: {total} inputs in {:.1} s ({:.0} per second, {jobs} jobs, seed {seed}), {} panics",
+        r.seconds,
+        total as f64 / r.seconds.max(1e-9),
+        r.findings.len()
+    );
+    if r.findings.is_empty() {
+        return Ok(0);
+    }
+    write_findings(&r.findings, &out, force)?;
+    for f in &r.findings {
+        eprintln!("{}: {}", f.target, f.message);
+    }
+    eprintln!("inputs written to {}", out.display());
+    Ok(1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -197,26 +197,26 @@ fn is_model(bytes: &[u8]) -> bool {
     })
 }
 
-/// Reads a model file written by [`train`], checking it.
-pub fn load_model(text: &str, name: &str) -> Result<AdaBoost> {
-    let v: Value = serde_json::from_str(text).with_context(|| format!("{name}: not JSON"))?;
-    let model: AdaBoost = serde_json::from_value(v["model"].clone())
-        .with_context(|| format!("{name}: key `model`: expected {{\"stumps\": [...]}}"))?;
-    model
-        .validate()
-        .map_err(|e| anyhow::anyhow!("{name}: key `model`: {e}"))?;
-    Ok(model)
-}
-
-/// The model shipped with futago (`models/legs.json`), trained by `futago train-legs
-/// scenarios/train-legs.toml`.
-pub fn default_model() -> Result<AdaBoost> {
-    load_model(include_str!("../models/legs.json"), "models/legs.json")
+/// `futago train-legs`: trains on `seeds` (default: the scenario's `seeds`; the last held
+/// out) with `rounds` stumps, writes the model to `out` and prints its summary.
+pub fn command(s: &Scenario, seeds: &[u64], rounds: usize, out: &Path, force: bool) -> Result<()> {
+    let seeds = if seeds.is_empty() {
+        s.spec.seeds.clone()
+    } else {
+        seeds.to_vec()
+    };
+    if !(1..=100_000).contains(&rounds) {
+        bail!("--rounds {rounds}: expected 1 to 100000");
+    }
+    let summary = train(s, &seeds, rounds, out, force)?;
+    println!("{}", serde_json::to_string_pretty(&summary)?);
+    println!("model written to {}", out.display());
+    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use crate::stack::people::{default_model, load_model};
     use futago_msgs::{LaserScan, Time};
     use futago_robot::perception::legs::{LegConfig, detect};
 

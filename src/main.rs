@@ -1,28 +1,10 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
-use run::GATE_FAILED;
+use futago::{
+    bench, fuzz, legs_train, overlay, replay, run, scenario, stack, suite, tune, world_cmd,
+};
 
-mod bench;
-mod cmaes;
-#[cfg(test)]
-mod config_walk;
-mod fuzz;
-mod ground_truth;
-mod legs_train;
-mod output;
-mod overlay;
-mod relations;
-mod replay;
-mod report;
-mod rgbd;
-mod run;
-mod scenario;
-mod stack;
-mod suite;
-mod tune;
-mod world_cmd;
-
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -405,34 +387,6 @@ enum BenchCommand {
     },
 }
 
-/// A bench's world and the pose of its spawn `spawn`.
-fn world_at_spawn(
-    world: &std::path::Path,
-    spawn: &str,
-) -> Result<(futago_sim::world::World, futago_msgs::Pose2)> {
-    let w = world_cmd::load(world)?;
-    let start = w
-        .spawn(spawn)
-        .with_context(|| format!("world `{}` has no spawn `{spawn}`", w.name))?;
-    Ok((w, start))
-}
-
-/// `WIDTHxHEIGHT` of option `flag`.
-fn parse_size(flag: &str, s: &str) -> Result<(u32, u32)> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .with_context(|| format!("{flag}: expected WIDTHxHEIGHT, found `{s}`"))?;
-    let w: u32 = w
-        .trim()
-        .parse()
-        .with_context(|| format!("{flag}: `{w}` is not a pixel count"))?;
-    let h: u32 = h
-        .trim()
-        .parse()
-        .with_context(|| format!("{flag}: `{h}` is not a pixel count"))?;
-    Ok((w, h))
-}
-
 #[derive(Subcommand)]
 enum WorldCommand {
     /// Load a world and describe it (objects, triangles, bounds, spawns).
@@ -501,89 +455,14 @@ enum UnknownArg {
     Free,
 }
 
-fn parse_band(s: &str) -> Result<(f64, f64)> {
-    let (a, b) = s
-        .split_once(':')
-        .with_context(|| format!("--band: expected ZMIN:ZMAX in metres, found `{s}`"))?;
-    let (a, b): (f64, f64) = (
-        a.trim()
-            .parse()
-            .with_context(|| format!("--band: `{a}` is not a number"))?,
-        b.trim()
-            .parse()
-            .with_context(|| format!("--band: `{b}` is not a number"))?,
-    );
-    if !(a.is_finite() && b.is_finite() && b > a) {
-        bail!("--band: expected ZMIN < ZMAX, found {a}:{b}");
-    }
-    Ok((a, b))
-}
-
 fn main() -> std::process::ExitCode {
     match real_main() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
+        Ok(0) => std::process::ExitCode::SUCCESS,
+        Ok(status) => std::process::ExitCode::from(status),
         Err(e) => {
             eprintln!("futago: error: {e:#}");
             std::process::ExitCode::FAILURE
         }
-    }
-}
-
-/// Prints a suite's results and exits with its status: 1 when a run failed, 3 when a gate did.
-fn report_suite(s: &serde_json::Value, out: &std::path::Path) {
-    for r in s["results"].as_array().into_iter().flatten() {
-        let status = r["status"].as_str().unwrap_or("");
-        println!("{status:>6}  {}", r["scenario"].as_str().unwrap_or(""));
-        for g in r["gates"].as_array().into_iter().flatten() {
-            if g["passed"] == false {
-                println!(
-                    "        gate failed: {}",
-                    g["message"].as_str().unwrap_or("")
-                );
-            }
-        }
-        if let Some(e) = r["error"].as_str() {
-            println!("        error: {e}");
-        }
-    }
-    for (stem, sw) in s["sweeps"].as_object().into_iter().flatten() {
-        let seeds = sw["seeds"].as_array().map_or(0, |a| a.len());
-        let mut line = format!("sweep  {stem}: {} of {seeds} seeds passed", sw["passed"]);
-        let gated: std::collections::BTreeSet<&str> = s["results"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .filter(|r| r["sweep"].as_str() == Some(stem))
-            .flat_map(|r| r["gates"].as_array().into_iter().flatten())
-            .filter_map(|g| g["metric"].as_str())
-            .collect();
-        for m in gated {
-            let v = &sw["metrics"][m];
-            if let (Some(mean), Some(std)) = (v["mean"].as_f64(), v["std"].as_f64()) {
-                line += &format!("; {m} {mean:.4} ± {std:.4}");
-            }
-        }
-        println!("{line}");
-    }
-    println!(
-        "suite: {} scenarios, {} passed, {} failed, {} errors in {:.1} s ({:.1} per minute{}); results in {}",
-        s["scenarios"],
-        s["passed"],
-        s["failed"],
-        s["errors"],
-        s["wall_time_s"].as_f64().unwrap_or(0.0),
-        s["scenarios_per_minute"].as_f64().unwrap_or(0.0),
-        s["jobs"]
-            .as_u64()
-            .map(|j| format!(", {j} jobs"))
-            .unwrap_or_default(),
-        out.display()
-    );
-    if s["errors"].as_u64().unwrap_or(0) > 0 {
-        std::process::exit(1);
-    }
-    if s["failed"].as_u64().unwrap_or(0) > 0 {
-        std::process::exit(GATE_FAILED);
     }
 }
 
@@ -596,9 +475,9 @@ fn resolve_jobs(jobs: Option<usize>) -> Result<usize> {
     Ok(jobs)
 }
 
-fn real_main() -> Result<()> {
-    let cli = Cli::parse();
-    match cli.command {
+/// Runs the command line's command; gives the exit status (1: a run failed; 3: a gate did).
+fn real_main() -> Result<u8> {
+    let status = match Cli::parse().command {
         Command::Run {
             scenario,
             out,
@@ -608,13 +487,6 @@ fn real_main() -> Result<()> {
             quiet,
             force,
         } => {
-            if let Some(d) = duration
-                && !(d.is_finite() && d > 0.0)
-            {
-                bail!("--duration: expected a positive number of seconds, found {d}");
-            }
-            let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
-            let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
             let opts = run::RunOptions {
                 seed,
                 duration,
@@ -622,36 +494,7 @@ fn real_main() -> Result<()> {
                 report: true,
                 force,
             };
-            let (summary, o) = run::run(&s, &opts, &out)?;
-            let rtf = summary["performance"]["real_time_factor"]
-                .as_f64()
-                .unwrap_or(0.0);
-            println!(
-                "{}: {:.1} s simulated in {:.2} s ({rtf:.0}× real time), {:.2} m driven, odometry off by {:.3} m; results in {}",
-                s.spec.name,
-                o.sim_time,
-                o.wall_time,
-                o.distance_travelled,
-                o.final_truth.distance(&o.final_odometry),
-                out.display()
-            );
-            let failed: Vec<&serde_json::Value> = summary["gates"]
-                .as_array()
-                .map(|g| g.iter().filter(|r| r["passed"] == false).collect())
-                .unwrap_or_default();
-            let total = summary["gates"].as_array().map_or(0, |g| g.len());
-            if total > 0 {
-                println!("gates: {} of {total} passed", total - failed.len());
-            }
-            if !failed.is_empty() {
-                for r in &failed {
-                    eprintln!(
-                        "futago: gate failed: {}",
-                        r["message"].as_str().unwrap_or("")
-                    );
-                }
-                std::process::exit(GATE_FAILED);
-            }
+            run::command(&scenario, &overlays.load()?, out, &opts)?
         }
         Command::Suite {
             paths,
@@ -667,16 +510,9 @@ fn real_main() -> Result<()> {
             let isolation = isolate.then(|| suite::Isolation {
                 overlay_args: overlays.args(),
             });
-            let s = suite::suite(
-                &paths,
-                &overlays.load()?,
-                jobs,
-                shard,
-                &out,
-                force,
-                isolation.as_ref(),
-            )?;
-            report_suite(&s, &out);
+            let o = overlays.load()?;
+            let s = suite::suite(&paths, &o, jobs, shard, &out, force, isolation.as_ref())?;
+            suite::print(&s, &out)
         }
         Command::Tune {
             scenario,
@@ -688,17 +524,8 @@ fn real_main() -> Result<()> {
             let base = overlays.load()?;
             let name = scenario::Scenario::load_with(&scenario, &base)?.spec.name;
             let out = out.unwrap_or_else(|| PathBuf::from("out/tune").join(name));
-            let s = tune::tune(&scenario, &base, &options, &out)?;
-            println!(
-                "tune: {} {}: baseline {} -> best {} (trial {} of {}); best parameters in {}",
-                s["direction"].as_str().unwrap_or(""),
-                s["objective"].as_str().unwrap_or(""),
-                s["baseline"]["objective"],
-                s["best"]["objective"],
-                s["best"]["trial"],
-                s["budget"],
-                out.join("best.toml").display()
-            );
+            tune::print(&tune::tune(&scenario, &base, &options, &out)?, &out);
+            0
         }
         Command::TrainLegs {
             scenario,
@@ -709,23 +536,15 @@ fn real_main() -> Result<()> {
             overlays,
         } => {
             let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
-            let seeds = if seeds.is_empty() {
-                s.spec.seeds.clone()
-            } else {
-                seeds
-            };
-            if !(1..=100_000).contains(&rounds) {
-                anyhow::bail!("--rounds {rounds}: expected 1 to 100000");
-            }
-            let summary = legs_train::train(&s, &seeds, rounds, &out, force)?;
-            println!("{}", serde_json::to_string_pretty(&summary)?);
-            println!("model written to {}", out.display());
+            legs_train::command(&s, &seeds, rounds, &out, force)?;
+            0
         }
         Command::Metrics { scenario, overlays } => {
             let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
             for name in s.spec.metric_names() {
                 println!("{name}");
             }
+            0
         }
         Command::Fuzz {
             inputs,
@@ -734,38 +553,15 @@ fn real_main() -> Result<()> {
             out,
             force,
             root,
-        } => {
-            let out = out.unwrap_or_else(|| PathBuf::from("out/fuzz"));
-            output::check_folder(&out, force)?;
-            let targets = fuzz::targets(&root)?;
-            let r = fuzz::run(&targets, inputs, jobs, seed, 100);
-            for (name, n) in &r.counts {
-                println!("{name:>10}: {n} inputs");
-            }
-            let total: u64 = r.counts.iter().map(|c| c.1).sum();
-            println!(
-                "fuzz: {total} inputs in {:.1} s ({:.0} per second, {jobs} jobs, seed {seed}), {} panics",
-                r.seconds,
-                total as f64 / r.seconds.max(1e-9),
-                r.findings.len()
-            );
-            if !r.findings.is_empty() {
-                fuzz::write_findings(&r.findings, &out, force)?;
-                for f in &r.findings {
-                    eprintln!("{}: {}", f.target, f.message);
-                }
-                eprintln!("inputs written to {}", out.display());
-                std::process::exit(1);
-            }
-        }
+        } => fuzz::command(&root, inputs, jobs, seed, out, force)?,
         Command::Config { scenario, overlays } => {
             let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
             print!("{}", toml::to_string(&s.effective_config())?);
+            0
         }
         Command::Merge { shards, out, force } => {
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
-            let s = suite::merge(&shards, &out, force)?;
-            report_suite(&s, &out);
+            suite::print(&suite::merge(&shards, &out, force)?, &out)
         }
         Command::Replay {
             log,
@@ -778,264 +574,174 @@ fn real_main() -> Result<()> {
             scan_topic,
             odom_topic,
         } => {
-            let mut slam_config: futago_robot::mapping::slam::SlamConfig = match &config {
-                Some(p) => futago_sim::config::load_toml(p)?,
-                None => Default::default(),
-            };
-            if let Some(m) = method {
-                slam_config.method = match m.as_str() {
-                    "graph" => futago_robot::mapping::slam::SlamMethod::Graph,
-                    "icp" => futago_robot::mapping::slam::SlamMethod::Icp,
-                    other => anyhow::bail!("--method {other}: expected `graph` or `icp`"),
-                };
-            }
-            if let Err((key, expected)) = slam_config.validate() {
-                let file = config
-                    .as_ref()
-                    .map(|p| p.display().to_string())
-                    .unwrap_or_else(|| "default SLAM configuration".into());
-                anyhow::bail!("{file}: `{key}`: {expected}");
-            }
-            let out = out.unwrap_or_else(|| {
-                std::path::Path::new("out/replay").join(
-                    log.file_stem()
-                        .map(|s| s.to_string_lossy().to_string())
-                        .unwrap_or_else(|| "log".into()),
-                )
-            });
-            let s = replay::replay(
-                &log,
-                relations.as_deref(),
-                slam_config,
-                &out,
-                &replay::ReplayOptions {
-                    read: futago_msgs::carmen::ReadOptions {
-                        strict,
-                        scan_topic,
-                        odom_topic,
-                    },
-                    force,
+            let slam = replay::slam_config(config.as_deref(), method.as_deref())?;
+            let out = out.unwrap_or_else(|| replay::default_out(&log));
+            let options = replay::ReplayOptions {
+                read: futago_msgs::carmen::ReadOptions {
+                    strict,
+                    scan_topic,
+                    odom_topic,
                 },
-            )?;
+                force,
+            };
+            let s = replay::replay(&log, relations.as_deref(), slam, &out, &options)?;
             replay::print(&s, &log, &out);
+            0
         }
-        Command::World { command } => match command {
-            WorldCommand::Info { world } => {
-                let w = world_cmd::load(&world)?;
-                println!("{}", world_cmd::describe(&w));
-            }
-            WorldCommand::Export {
-                world,
-                out,
+        Command::World { command } => world(command)?,
+        Command::Bench { command } => bench(command)?,
+    };
+    Ok(u8::try_from(status).unwrap_or(1))
+}
+
+/// `futago world …`.
+fn world(command: WorldCommand) -> Result<i32> {
+    match command {
+        WorldCommand::Info { world } => {
+            let w = world_cmd::load(&world)?;
+            println!("{}", world_cmd::describe(&w));
+        }
+        WorldCommand::Export {
+            world,
+            out,
+            resolution,
+            band,
+            margin,
+            mesh,
+            no_grid,
+            force,
+        } => {
+            world_cmd::check_export_options(resolution, margin)?;
+            let band = world_cmd::parse_band(&band)?;
+            let w = world_cmd::load(&world)?;
+            let dir = out.unwrap_or_else(|| PathBuf::from("out/worlds").join(&w.name));
+            let options = world_cmd::ExportOptions {
                 resolution,
                 band,
                 margin,
                 mesh,
-                no_grid,
-                force,
-            } => {
-                if !(resolution.is_finite() && (0.001..=10.0).contains(&resolution)) {
-                    bail!(
-                        "--resolution: expected a cell size in [0.001, 10] m, found {resolution}"
-                    );
-                }
-                if !(margin.is_finite() && margin >= 0.0) {
-                    bail!("--margin: expected a non-negative number of metres, found {margin}");
-                }
-                let band = parse_band(&band)?;
-                let w = world_cmd::load(&world)?;
-                let dir = out.unwrap_or_else(|| PathBuf::from("out/worlds").join(&w.name));
-                let written = world_cmd::export_world(
-                    &w,
-                    &dir,
-                    &world_cmd::ExportOptions {
-                        resolution,
-                        band,
-                        margin,
-                        mesh,
-                        grid: !no_grid,
-                    },
-                    force,
-                )?;
-                for p in written {
-                    println!("wrote {}", p.display());
-                }
+                grid: !no_grid,
+            };
+            for p in world_cmd::export_world(&w, &dir, &options, force)? {
+                println!("wrote {}", p.display());
             }
-            WorldCommand::FromMap {
-                map,
-                out,
+        }
+        WorldCommand::FromMap {
+            map,
+            out,
+            name,
+            height,
+            unknown,
+            spawn,
+            no_ceiling,
+            force,
+        } => {
+            let spawn = spawn.map(|s| world_cmd::parse_spawn(&s)).transpose()?;
+            let out = out.unwrap_or_else(|| {
+                let stem = map
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().to_string())
+                    .unwrap_or_else(|| "map".into());
+                PathBuf::from("out/worlds").join(format!("{stem}.toml"))
+            });
+            let options = world_cmd::FromMapOptions {
                 name,
                 height,
-                unknown,
+                unknown: match unknown {
+                    UnknownArg::Wall => futago_sim::world::floor_plan::UnknownCells::Wall,
+                    UnknownArg::Free => futago_sim::world::floor_plan::UnknownCells::Free,
+                },
                 spawn,
-                no_ceiling,
-                force,
-            } => {
-                let spawn = spawn
-                    .map(|s| -> Result<[f64; 3]> {
-                        let v: Vec<f64> = s
-                            .split(',')
-                            .map(|p| p.trim().parse::<f64>())
-                            .collect::<Result<_, _>>()
-                            .ok()
-                            .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite()))
-                            .with_context(|| {
-                                format!("--spawn: `{s}`: expected X,Y,YAW_DEG (m, m, degrees)")
-                            })?;
-                        Ok([v[0], v[1], v[2]])
-                    })
-                    .transpose()?;
-                let out = out.unwrap_or_else(|| {
-                    let stem = map
-                        .file_stem()
-                        .map(|s| s.to_string_lossy().to_string())
-                        .unwrap_or_else(|| "map".into());
-                    PathBuf::from("out/worlds").join(format!("{stem}.toml"))
-                });
-                let w = world_cmd::from_map(
-                    &map,
-                    &out,
-                    &world_cmd::FromMapOptions {
-                        name,
-                        height,
-                        unknown: match unknown {
-                            UnknownArg::Wall => futago_sim::world::floor_plan::UnknownCells::Wall,
-                            UnknownArg::Free => futago_sim::world::floor_plan::UnknownCells::Free,
-                        },
-                        spawn,
-                        ceiling: !no_ceiling,
-                    },
-                    force,
-                )?;
-                println!("wrote {}", out.display());
-                println!("{}", world_cmd::describe(&w));
-            }
-        },
-        Command::Bench {
-            command:
-                BenchCommand::Sim {
-                    scenario,
-                    duration,
-                    rays,
-                },
-        } => {
-            let s = scenario::Scenario::load(&scenario)?;
-            let r = bench::bench(&s, duration, rays.max(682))?;
-            println!("{}", serde_json::to_string_pretty(&r)?);
+                ceiling: !no_ceiling,
+            };
+            let w = world_cmd::from_map(&map, &out, &options, force)?;
+            println!("wrote {}", out.display());
+            println!("{}", world_cmd::describe(&w));
         }
-        Command::Bench {
-            command: BenchCommand::Scan3d { scenario, repeats },
-        } => {
-            let s = scenario::Scenario::load(&scenario)?;
-            let r = stack::scan3d::bench(&s, repeats)?;
-            println!("{}", serde_json::to_string_pretty(&r)?);
+    }
+    Ok(0)
+}
+
+/// `futago bench …`: prints the bench's figures as JSON.
+fn bench(command: BenchCommand) -> Result<i32> {
+    let load = scenario::Scenario::load;
+    let r = match command {
+        BenchCommand::Sim {
+            scenario,
+            duration,
+            rays,
+        } => bench::bench(&load(&scenario)?, duration, rays.max(682))?,
+        BenchCommand::Scan3d { scenario, repeats } => {
+            stack::scan3d::bench(&load(&scenario)?, repeats)?
         }
-        Command::Bench {
-            command: BenchCommand::Coverage { scenario, repeats },
-        } => {
-            let s = scenario::Scenario::load(&scenario)?;
-            let r = bench::bench_coverage(&s, repeats)?;
-            println!("{}", serde_json::to_string_pretty(&r)?);
+        BenchCommand::Coverage { scenario, repeats } => {
+            bench::bench_coverage(&load(&scenario)?, repeats)?
         }
-        Command::Bench {
-            command: BenchCommand::Visual { scenario, duration },
-        } => {
-            let s = scenario::Scenario::load(&scenario)?;
-            let r = bench::bench_visual(&s, duration)?;
-            println!("{}", serde_json::to_string_pretty(&r)?);
+        BenchCommand::Visual { scenario, duration } => {
+            bench::bench_visual(&load(&scenario)?, duration)?
         }
-        Command::Bench {
-            command: BenchCommand::Rgbd { scenario, duration },
-        } => {
-            let s = scenario::Scenario::load(&scenario)?;
-            let r = bench::bench_rgbd(&s, duration)?;
-            println!("{}", serde_json::to_string_pretty(&r)?);
+        BenchCommand::Rgbd { scenario, duration } => {
+            bench::bench_rgbd(&load(&scenario)?, duration)?
         }
-        Command::Bench {
-            command:
-                BenchCommand::People {
-                    world,
-                    spawn,
-                    people,
-                    scans,
-                    crowd,
-                },
+        BenchCommand::People {
+            world,
+            spawn,
+            people,
+            scans,
+            crowd,
         } => {
-            let (w, start) = world_at_spawn(&world, &spawn)?;
+            let (w, start) = bench::world_at_spawn(&world, &spawn)?;
             if people > 1000 || crowd > 1000 || !(1..=100_000).contains(&scans) {
-                anyhow::bail!("expected at most 1000 people and crowd, and 1 to 100000 scans");
+                bail!("expected at most 1000 people and crowd, and 1 to 100000 scans");
             }
-            let r = bench::bench_people(&w, start, people, scans, crowd)?;
-            println!("{}", serde_json::to_string_pretty(&r)?);
+            bench::bench_people(&w, start, people, scans, crowd)?
         }
-        Command::Bench {
-            command:
-                BenchCommand::Mcl {
-                    world,
-                    spawn,
-                    particles,
-                    updates,
-                },
+        BenchCommand::Mcl {
+            world,
+            spawn,
+            particles,
+            updates,
         } => {
-            let (w, start) = world_at_spawn(&world, &spawn)?;
-            let r = bench::bench_mcl(&w, start, particles.max(1), updates)?;
-            println!("{}", serde_json::to_string_pretty(&r)?);
+            let (w, start) = bench::world_at_spawn(&world, &spawn)?;
+            bench::bench_mcl(&w, start, particles.max(1), updates)?
         }
-        Command::Bench {
-            command:
-                BenchCommand::DepthMcl {
-                    world,
-                    spawn,
-                    particles,
-                    sizes,
-                    frames,
-                },
+        BenchCommand::DepthMcl {
+            world,
+            spawn,
+            particles,
+            sizes,
+            frames,
         } => {
-            let (w, start) = world_at_spawn(&world, &spawn)?;
-            let sizes = sizes
-                .iter()
-                .map(|s| match parse_size("--sizes", s)? {
-                    (w, h) if (1..=176).contains(&w) && (1..=144).contains(&h) => Ok([w, h]),
-                    _ => Err(anyhow::anyhow!(
-                        "--sizes: expected at most 176x144, found `{s}`"
-                    )),
-                })
-                .collect::<Result<Vec<_>>>()?;
+            let (w, start) = bench::world_at_spawn(&world, &spawn)?;
+            let sizes = bench::parse_depth_sizes(&sizes)?;
             if particles.iter().any(|n| !(1..=100_000).contains(n))
                 || !(1..=100_000).contains(&frames)
             {
-                anyhow::bail!("expected 1 to 100000 particles and frames");
+                bail!("expected 1 to 100000 particles and frames");
             }
-            let r = bench::bench_depth_mcl(&w, start, &particles, &sizes, frames)?;
-            println!("{}", serde_json::to_string_pretty(&r)?);
+            bench::bench_depth_mcl(&w, start, &particles, &sizes, frames)?
         }
-        Command::Bench {
-            command:
-                BenchCommand::Sensors {
-                    world,
-                    poses,
-                    frames,
-                    batch,
-                    batches,
-                    batch_size,
-                    rays,
-                },
+        BenchCommand::Sensors {
+            world,
+            poses,
+            frames,
+            batch,
+            batches,
+            batch_size,
+            rays,
         } => {
             let w = world_cmd::load(&world)?;
             let poses = poses.map(|p| bench::read_poses(&p)).transpose()?;
-            let r = bench::bench_sensors(
-                &w,
-                poses,
-                &bench::SensorBench {
-                    frames,
-                    batch,
-                    batches,
-                    batch_size: parse_size("--batch-size", &batch_size)?,
-                    rays: rays.max(682),
-                },
-            )?;
-            println!("{}", serde_json::to_string_pretty(&r)?);
+            let options = bench::SensorBench {
+                frames,
+                batch,
+                batches,
+                batch_size: bench::parse_size("--batch-size", &batch_size)?,
+                rays: rays.max(682),
+            };
+            bench::bench_sensors(&w, poses, &options)?
         }
-    }
-    Ok(())
+    };
+    println!("{}", serde_json::to_string_pretty(&r)?);
+    Ok(0)
 }

@@ -2,13 +2,14 @@
 //! relations when given; and, on a log with annotated people (`leg_tracker/Person`), its people
 //! tracking scored by CLEAR-MOT as the leg_tracker benchmark scores it.
 
+use crate::ground_truth::mot::MOT_GATE;
 use crate::relations::{self, Metrics};
 use crate::run::write_atomically;
 use anyhow::{Context, Result, bail};
 use futago_msgs::{Pose2, Pose3, Time, carmen, tum};
 use futago_robot::mapping::slam::{Slam, SlamConfig, SlamMethod};
 use serde_json::{Value, json};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Reads a log by its extension: CARMEN (`.clf`, `.log`, `.carmen`) or ROS 1 bag (`.bag`),
@@ -393,9 +394,6 @@ pub fn replay(
     })
 }
 
-/// The leg_tracker benchmark's match gate, m.
-pub const MOT_GATE: f64 = 0.75;
-
 /// CLEAR-MOT over every scan and over the annotated ones, the detectors' scores on the
 /// annotated scans (legs and temporal difference, at each match radius), and every track at
 /// every scan (logged stamp, id, position in the odometry frame).
@@ -415,7 +413,10 @@ fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
     use crate::ground_truth::detection::{Detection, DetectionFrame, score};
     use futago_robot::tracking::PeopleConfig;
     use futago_robot::tracking::laser_people::LaserPeople;
-    let mut people = LaserPeople::new(PeopleConfig::default(), crate::legs_train::default_model()?);
+    let mut people = LaserPeople::new(
+        PeopleConfig::default(),
+        crate::stack::people::default_model()?,
+    );
     let mut frames = vec![crate::ground_truth::mot::Frame::default(); log.scans.len()];
     for m in &log.people {
         frames[m.scan].truth.push((m.id, m.position));
@@ -489,4 +490,36 @@ fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
         detection: Value::Object(detection),
         tracks,
     })
+}
+
+/// The SLAM configuration of `futago replay`: the `[slam]` keys of `config` (a TOML file; the
+/// defaults without one), with `method` (`graph` or `icp`) over it, checked.
+pub fn slam_config(config: Option<&Path>, method: Option<&str>) -> Result<SlamConfig> {
+    let mut slam: SlamConfig = match config {
+        Some(p) => futago_sim::config::load_toml(p)?,
+        None => Default::default(),
+    };
+    if let Some(m) = method {
+        slam.method = match m {
+            "graph" => futago_robot::mapping::slam::SlamMethod::Graph,
+            "icp" => futago_robot::mapping::slam::SlamMethod::Icp,
+            other => anyhow::bail!("--method {other}: expected `graph` or `icp`"),
+        };
+    }
+    if let Err((key, expected)) = slam.validate() {
+        let file = config
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "default SLAM configuration".into());
+        anyhow::bail!("{file}: `{key}`: {expected}");
+    }
+    Ok(slam)
+}
+
+/// Where `futago replay` writes without `--out`: `out/replay/<the log's stem>`.
+pub fn default_out(log: &Path) -> PathBuf {
+    Path::new("out/replay").join(
+        log.file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_else(|| "log".into()),
+    )
 }

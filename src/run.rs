@@ -804,6 +804,52 @@ fn sha256_tree(dir: &Path) -> Result<String> {
 /// which the run's relations metrics are computed; other tools can score against it too.
 pub const RELATIONS_FILE: &str = "groundtruth.relations";
 
+/// `futago run`: loads `scenario` with its overlays, runs it into `out` (default
+/// `out/<name>`), prints the one-line result and the failed gates, and gives the command's
+/// exit status: 0, or [`GATE_FAILED`] when a gate failed.
+pub fn command(
+    scenario: &Path,
+    overlays: &[crate::overlay::Overlay],
+    out: Option<PathBuf>,
+    opts: &RunOptions,
+) -> Result<i32> {
+    if let Some(d) = opts.duration
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("--duration: expected a positive number of seconds, found {d}");
+    }
+    let s = Scenario::load_with(scenario, overlays)?;
+    let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
+    let (summary, o) = run(&s, opts, &out)?;
+    let rtf = summary["performance"]["real_time_factor"]
+        .as_f64()
+        .unwrap_or(0.0);
+    println!(
+        "{}: {:.1} s simulated in {:.2} s ({rtf:.0}× real time), {:.2} m driven, odometry off by {:.3} m; results in {}",
+        s.spec.name,
+        o.sim_time,
+        o.wall_time,
+        o.distance_travelled,
+        o.final_truth.distance(&o.final_odometry),
+        out.display()
+    );
+    let failed: Vec<&Value> = summary["gates"]
+        .as_array()
+        .map(|g| g.iter().filter(|r| r["passed"] == false).collect())
+        .unwrap_or_default();
+    let total = summary["gates"].as_array().map_or(0, |g| g.len());
+    if total > 0 {
+        println!("gates: {} of {total} passed", total - failed.len());
+    }
+    for r in &failed {
+        eprintln!(
+            "futago: gate failed: {}",
+            r["message"].as_str().unwrap_or("")
+        );
+    }
+    Ok(if failed.is_empty() { 0 } else { GATE_FAILED })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -102,7 +102,7 @@ pub struct ScenarioSpec {
     pub event: Vec<EventSpec>,
     /// Accuracy gates: `futago run` exits with status 3 when one fails.
     #[serde(default)]
-    pub gate: Vec<crate::ground_truth::Gate>,
+    pub gate: Vec<crate::gate::Gate>,
     /// Read as a table and typed by [`controller_config`], so that errors inside it carry
     /// their full key path.
     pub controller: toml::Table,
@@ -1312,7 +1312,7 @@ impl Scenario {
         let names = spec.metric_names();
         for (i, g) in spec.gate.iter().enumerate() {
             if !names.contains(&g.metric) {
-                let close = crate::ground_truth::similar(&names, &g.metric);
+                let close = crate::gate::similar(&names, &g.metric);
                 return Err(SpecError::new(
                     path,
                     format!("gate[{i}].metric"),
@@ -1375,7 +1375,7 @@ impl Scenario {
                     format!("gate[{i}].than"),
                     format!(
                         "this scenario produces no metric `{m}`; similar: {:?}",
-                        crate::ground_truth::similar(&names, m)
+                        crate::gate::similar(&names, m)
                     ),
                 ));
             }

@@ -624,6 +624,66 @@ pub fn merge(shards: &[PathBuf], out: &Path, force: bool) -> Result<Value> {
     Ok(summary)
 }
 
+/// Prints a suite's results (`suite.json`'s content) and gives the command's exit status: 1
+/// when a run failed, [`run::GATE_FAILED`] when a gate did, else 0.
+pub fn print(s: &Value, out: &Path) -> i32 {
+    for r in s["results"].as_array().into_iter().flatten() {
+        let status = r["status"].as_str().unwrap_or("");
+        println!("{status:>6}  {}", r["scenario"].as_str().unwrap_or(""));
+        for g in r["gates"].as_array().into_iter().flatten() {
+            if g["passed"] == false {
+                println!(
+                    "        gate failed: {}",
+                    g["message"].as_str().unwrap_or("")
+                );
+            }
+        }
+        if let Some(e) = r["error"].as_str() {
+            println!("        error: {e}");
+        }
+    }
+    for (stem, sw) in s["sweeps"].as_object().into_iter().flatten() {
+        let seeds = sw["seeds"].as_array().map_or(0, |a| a.len());
+        let mut line = format!("sweep  {stem}: {} of {seeds} seeds passed", sw["passed"]);
+        let gated: std::collections::BTreeSet<&str> = s["results"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter(|r| r["sweep"].as_str() == Some(stem))
+            .flat_map(|r| r["gates"].as_array().into_iter().flatten())
+            .filter_map(|g| g["metric"].as_str())
+            .collect();
+        for m in gated {
+            let v = &sw["metrics"][m];
+            if let (Some(mean), Some(std)) = (v["mean"].as_f64(), v["std"].as_f64()) {
+                line += &format!("; {m} {mean:.4} ± {std:.4}");
+            }
+        }
+        println!("{line}");
+    }
+    println!(
+        "suite: {} scenarios, {} passed, {} failed, {} errors in {:.1} s ({:.1} per minute{}); results in {}",
+        s["scenarios"],
+        s["passed"],
+        s["failed"],
+        s["errors"],
+        s["wall_time_s"].as_f64().unwrap_or(0.0),
+        s["scenarios_per_minute"].as_f64().unwrap_or(0.0),
+        s["jobs"]
+            .as_u64()
+            .map(|j| format!(", {j} jobs"))
+            .unwrap_or_default(),
+        out.display()
+    );
+    if s["errors"].as_u64().unwrap_or(0) > 0 {
+        1
+    } else if s["failed"].as_u64().unwrap_or(0) > 0 {
+        run::GATE_FAILED
+    } else {
+        0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -570,6 +570,20 @@ fn html(trials: &[Trial], o: &TuneOptions, summary: &Value) -> String {
     crate::report::page("futago tune", &body)
 }
 
+/// Prints the one-line result of `futago tune` (`tune.json`'s content).
+pub fn print(s: &Value, out: &Path) {
+    println!(
+        "tune: {} {}: baseline {} -> best {} (trial {} of {}); best parameters in {}",
+        s["direction"].as_str().unwrap_or(""),
+        s["objective"].as_str().unwrap_or(""),
+        s["baseline"]["objective"],
+        s["best"]["objective"],
+        s["best"]["trial"],
+        s["budget"],
+        out.join("best.toml").display()
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,6 +1,6 @@
 //! `futago world`: checking a world file and exporting its ground truth.
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use futago_sim::World;
 use futago_sim::world::{export, gltf_io};
 use std::path::Path;
@@ -346,4 +346,47 @@ fn known_part(g: &futago_msgs::grid::OccupancyGrid) -> Option<futago_msgs::grid:
         }
     }
     Some(out)
+}
+
+/// `--band ZMIN:ZMAX` of `futago world export`, m.
+pub fn parse_band(s: &str) -> Result<(f64, f64)> {
+    let (a, b) = s
+        .split_once(':')
+        .with_context(|| format!("--band: expected ZMIN:ZMAX in metres, found `{s}`"))?;
+    let (a, b): (f64, f64) = (
+        a.trim()
+            .parse()
+            .with_context(|| format!("--band: `{a}` is not a number"))?,
+        b.trim()
+            .parse()
+            .with_context(|| format!("--band: `{b}` is not a number"))?,
+    );
+    if !(a.is_finite() && b.is_finite() && b > a) {
+        bail!("--band: expected ZMIN < ZMAX, found {a}:{b}");
+    }
+    Ok((a, b))
+}
+
+/// `--spawn X,Y,YAW_DEG` of `futago world from-map` (m, m, degrees).
+pub fn parse_spawn(s: &str) -> Result<[f64; 3]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite()))
+        .with_context(|| format!("--spawn: `{s}`: expected X,Y,YAW_DEG (m, m, degrees)"))?;
+    Ok([v[0], v[1], v[2]])
+}
+
+/// Checks the numbers of `futago world export`: a cell size in [0.001, 10] m and a
+/// non-negative margin.
+pub fn check_export_options(resolution: f64, margin: f64) -> Result<()> {
+    if !(resolution.is_finite() && (0.001..=10.0).contains(&resolution)) {
+        bail!("--resolution: expected a cell size in [0.001, 10] m, found {resolution}");
+    }
+    if !(margin.is_finite() && margin >= 0.0) {
+        bail!("--margin: expected a non-negative number of metres, found {margin}");
+    }
+    Ok(())
 }

@@ -15,6 +15,7 @@ pub mod pollution;
 pub mod regions;
 pub mod trajectory;
 
+pub use crate::gate::{Comparison, Gate, similar};
 use std::collections::BTreeMap;
 use trajectory::Stats;
 
@@ -97,11 +98,7 @@ pub fn sample_relations(truth: &[futago_msgs::tum::Stamped]) -> Vec<crate::relat
 /// `NAME.ate.p95_m`, `NAME.rpe_1m.trans.*_m` / `NAME.rpe_1m.rot.*_deg`, and the relations
 /// metric as `NAME.relations.*` (see [`RELATION_KEYS`]). A file the run did not write scores
 /// nothing.
-pub fn score_trajectory(
-    truth: &crate::stack::Truth,
-    name: &str,
-    file: &str,
-) -> anyhow::Result<Metrics> {
+pub fn score_trajectory(truth: &Truth, name: &str, file: &str) -> anyhow::Result<Metrics> {
     use anyhow::Context;
     let mut m = Metrics::default();
     let p = truth.dir.join(file);
@@ -181,77 +178,6 @@ pub fn map_metric_names(prefix: &str) -> Vec<String> {
         names.push(format!("{prefix}.{k}"));
     }
     names
-}
-
-/// Up to six of `names` most like `metric` (in its family, the longest shared prefix first), for
-/// errors about a metric that does not exist.
-pub fn similar<'a>(names: &'a [String], metric: &str) -> Vec<&'a String> {
-    let family = metric.split('.').next().unwrap_or("");
-    let shared = |n: &str| {
-        n.chars()
-            .zip(metric.chars())
-            .take_while(|(a, b)| a == b)
-            .count()
-    };
-    let mut close: Vec<&String> = names
-        .iter()
-        .filter(|n| n.split('.').next() == Some(family))
-        .collect();
-    close.sort_by_key(|n| std::cmp::Reverse(shared(n)));
-    close.truncate(6);
-    close
-}
-
-/// A comparison of a gate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
-pub enum Comparison {
-    #[serde(rename = "<")]
-    Less,
-    #[serde(rename = "<=")]
-    LessOrEqual,
-    #[serde(rename = ">")]
-    Greater,
-    #[serde(rename = ">=")]
-    GreaterOrEqual,
-}
-
-impl Comparison {
-    fn symbol(self) -> &'static str {
-        match self {
-            Comparison::Less => "<",
-            Comparison::LessOrEqual => "<=",
-            Comparison::Greater => ">",
-            Comparison::GreaterOrEqual => ">=",
-        }
-    }
-
-    fn holds(self, v: f64, t: f64) -> bool {
-        match self {
-            Comparison::Less => v < t,
-            Comparison::LessOrEqual => v <= t,
-            Comparison::Greater => v > t,
-            Comparison::GreaterOrEqual => v >= t,
-        }
-    }
-}
-
-/// `[[gate]]`: the run passes only if `metric op value` holds, or with `than`, `metric op
-/// than + value` (value 0 unless given): a gate that ranks one metric against another of the
-/// same run, e.g. one method's map against another's. With `scenario`, `metric op (the same
-/// metric of that scenario's run) + value`: a gate of a suite, which ranks this scenario
-/// against a baseline's run with the same seed (a run alone does not check it).
-#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct Gate {
-    pub metric: String,
-    pub op: Comparison,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub value: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub than: Option<String>,
-    /// The scenario (its file's stem, in the same suite) whose run this one is ranked against.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub scenario: Option<String>,
 }
 
 /// A gate's outcome.
@@ -336,6 +262,43 @@ pub fn evaluate_versus(g: &Gate, own: &Metrics, other: Option<&Metrics>) -> Gate
     };
     let mut r = evaluate(&[gate], &m);
     r.remove(0)
+}
+
+/// What the scorers are given: the run's folder and the simulated truth.
+pub struct Truth<'a> {
+    pub dir: &'a std::path::Path,
+    pub scenario: &'a crate::scenario::Scenario,
+    /// The run's `groundtruth.txt`, read back.
+    pub poses: &'a [futago_msgs::tum::Stamped],
+    pub relations: &'a [crate::relations::Relation],
+}
+
+impl Truth<'_> {
+    /// The world's occupancy grid of the 10 cm band at `height`, at `resolution`.
+    pub fn world_map(
+        &self,
+        resolution: f64,
+        height: f64,
+    ) -> anyhow::Result<futago_msgs::grid::OccupancyGrid> {
+        world_map(self.scenario, resolution, height)
+    }
+}
+
+/// The world's ground-truth occupancy grid of the 10 cm band around `height` (the map a
+/// perfect mapping run at that laser height would give).
+pub fn world_map(
+    s: &crate::scenario::Scenario,
+    resolution: f64,
+    height: f64,
+) -> anyhow::Result<futago_msgs::grid::OccupancyGrid> {
+    futago_sim::world::export::occupancy_grid(
+        &s.world,
+        resolution,
+        height - 0.05,
+        height + 0.05,
+        0.5,
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))
 }
 
 #[cfg(test)]

@@ -9,6 +9,9 @@
 //! MOTA = 1 − (misses + false positives + switches) / true people over all frames;
 //! MOTP = mean distance of the matches, m.
 
+/// The leg_tracker benchmark's match gate, m.
+pub const MOT_GATE: f64 = 0.75;
+
 use futago_robot::tracking::assignment::assign;
 use std::collections::BTreeMap;
 

@@ -485,7 +485,7 @@ impl CoverageNode {
                 img.put_pixel(u as u32, v as u32, image::Rgb([0, 0, 0]));
             }
         }
-        crate::report::png(img)
+        crate::picture::png(img)
     }
 }
 

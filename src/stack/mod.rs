@@ -36,6 +36,7 @@ pub mod slam;
 pub mod visual_localization;
 pub mod visual_map;
 
+pub use crate::ground_truth::{Truth, world_map};
 pub use bus::Bus;
 
 use crate::ground_truth::Metrics;
@@ -163,35 +164,6 @@ pub struct Report {
     pub trajectories: Vec<(String, String)>,
     /// Its own measured costs beyond the wall time of its callbacks (`performance`).
     pub performance: serde_json::Map<String, Value>,
-}
-
-/// What the scorers are given: the run's folder and the simulated truth.
-pub struct Truth<'a> {
-    pub dir: &'a Path,
-    pub scenario: &'a Scenario,
-    /// The run's `groundtruth.txt`, read back.
-    pub poses: &'a [tum::Stamped],
-    pub relations: &'a [crate::relations::Relation],
-}
-
-impl Truth<'_> {
-    /// The world's occupancy grid of the 10 cm band at `height`, at `resolution`.
-    pub fn world_map(&self, resolution: f64, height: f64) -> Result<OccupancyGrid> {
-        world_map(self.scenario, resolution, height)
-    }
-}
-
-/// The world's ground-truth occupancy grid of the 10 cm band around `height` (the map a
-/// perfect mapping run at that laser height would give).
-pub fn world_map(s: &Scenario, resolution: f64, height: f64) -> Result<OccupancyGrid> {
-    futago_sim::world::export::occupancy_grid(
-        &s.world,
-        resolution,
-        height - 0.05,
-        height + 0.05,
-        0.5,
-    )
-    .map_err(|e| anyhow::anyhow!("{e}"))
 }
 
 /// A camera's place and heading on the robot's base, as a 2D pose: x, y and the yaw of its

@@ -49,9 +49,10 @@ use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Pose2, Time};
 use futago_robot::perception::depth_people::{DepthPeople, DepthPeopleConfig};
+use futago_robot::perception::legs::AdaBoost;
 use futago_robot::tracking::laser_people::{Detections, LaserPeople};
 use futago_robot::tracking::people::{Candidate, TrackedPerson};
-use serde_json::json;
+use serde_json::{Value, json};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
@@ -149,7 +150,7 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
             mount: l.planar_mount(),
             height: l.xyz[2],
             min_points: s.spec.people.legs.min_points,
-            people: LaserPeople::new(s.spec.people, crate::legs_train::default_model()?),
+            people: LaserPeople::new(s.spec.people, default_model()?),
             map_seen: None,
             frames: Vec::new(),
             scans: Vec::new(),
@@ -575,7 +576,7 @@ impl Node for PeopleNode {
             "time_within_1.2m_s": self.within[1],
         });
         if let Some(t) = &self.tracking {
-            let m = clear_mot(&t.frames, crate::replay::MOT_GATE);
+            let m = clear_mot(&t.frames, crate::ground_truth::mot::MOT_GATE);
             let mut tracking = m.summary();
             tracking["laser"] = json!(t.laser);
             entry["tracking"] = tracking;
@@ -617,7 +618,7 @@ impl Node for PeopleNode {
     fn score(&self, _truth: &Truth) -> Result<Metrics> {
         let mut m = Metrics::default();
         if let Some(t) = &self.tracking {
-            let mot = clear_mot(&t.frames, crate::replay::MOT_GATE);
+            let mot = clear_mot(&t.frames, crate::ground_truth::mot::MOT_GATE);
             // MOTA is undefined where nobody was seen; it is taken as 1 − false positives (as
             // if one person were there to find), so false tracks still count against such a
             // run.
@@ -698,4 +699,21 @@ impl PeopleNode {
             1000.0
         }
     }
+}
+
+/// Reads a model file written by `futago train-legs` (`crate::legs_train::train`), checking it.
+pub fn load_model(text: &str, name: &str) -> Result<AdaBoost> {
+    let v: Value = serde_json::from_str(text).with_context(|| format!("{name}: not JSON"))?;
+    let model: AdaBoost = serde_json::from_value(v["model"].clone())
+        .with_context(|| format!("{name}: key `model`: expected {{\"stumps\": [...]}}"))?;
+    model
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{name}: key `model`: {e}"))?;
+    Ok(model)
+}
+
+/// The model shipped with futago (`models/legs.json`), trained by `futago train-legs
+/// scenarios/train-legs.toml`.
+pub fn default_model() -> Result<AdaBoost> {
+    load_model(include_str!("../../models/legs.json"), "models/legs.json")
 }

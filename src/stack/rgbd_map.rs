@@ -413,7 +413,7 @@ impl Node for RgbdMapNode {
                 .collect();
             std::fs::write(
                 dir.join(RGBD_SLICE_FILE),
-                crate::report::points_over_map_png(&self.picture, &slice, 5),
+                crate::picture::points_over_map_png(&self.picture, &slice, 5),
             )
             .with_context(|| format!("writing {RGBD_SLICE_FILE}"))?;
             files.extend(
