@@ -3,6 +3,8 @@
 
 use crate::run::{RunOptions, run_in_memory};
 use crate::scenario::Scenario;
+use crate::stack::rgbd_map::RgbdMapSpec;
+use crate::stack::visual_localization::VisualLocalizationSpec;
 use anyhow::{Context, Result, bail};
 use futago_msgs::Pose2;
 use futago_sim::create::CreateConfig;
@@ -349,7 +351,7 @@ fn run_quietly(s: &Scenario, duration: Option<f64>) -> Result<crate::run::Outcom
 /// features) and each method's registration with the building of its points and planes, on
 /// the scenario's own run (one core).
 pub fn bench_rgbd(s: &Scenario, duration: Option<f64>) -> Result<Value> {
-    if s.rgbd_map.is_none() {
+    if s.module::<RgbdMapSpec>().is_none() {
         bail!("{}: the scenario has no [rgbd_map]", s.spec.name);
     }
     let out = run_quietly(s, duration)?;
@@ -360,8 +362,8 @@ pub fn bench_rgbd(s: &Scenario, duration: Option<f64>) -> Result<Value> {
         .context("the run made no RGB-D map")?;
     let keyframes = count.max(1) as f64;
     let methods: serde_json::Map<String, Value> = s
-        .rgbd_map
-        .iter()
+        .module::<RgbdMapSpec>()
+        .into_iter()
         .flat_map(|r| r.config.methods.iter())
         .map(|method| {
             let t = m[format!("build_{}_s", method.name())]
@@ -386,7 +388,7 @@ pub fn bench_rgbd(s: &Scenario, duration: Option<f64>) -> Result<Value> {
 /// and for each localiser the selection, the matching (the seed's timed step) and the pose
 /// search, their sum, and the delegates' matching speed-up over all landmarks.
 pub fn bench_visual(s: &Scenario, duration: Option<f64>) -> Result<Value> {
-    if s.spec.visual_localization.is_none() {
+    if s.module::<VisualLocalizationSpec>().is_none() {
         bail!("{}: the scenario has no [visual_localization]", s.spec.name);
     }
     let out = run_quietly(s, duration)?;

@@ -4,7 +4,6 @@
 //! list, the list). The keys are not listed by hand: they come from
 //! [`Scenario::effective_config`], so a field added to any config is walked too.
 
-use crate::scenario::Scenario;
 use std::path::Path;
 
 /// Scenarios that between them use every table: sensors on the base and on a joint, agents,
@@ -192,11 +191,11 @@ fn every_numeric_key_refuses_absurd_values_by_name() {
     for (n, text) in scenarios().iter().enumerate() {
         let file = tmp.path().join(format!("walk-{n}.toml"));
         std::fs::write(&file, text).unwrap();
-        let s = Scenario::load(&file).unwrap_or_else(|e| panic!("scenario {n}: {e}"));
+        let s = crate::stack::load(&file).unwrap_or_else(|e| panic!("scenario {n}: {e}"));
         let effective = toml::Value::Table(s.effective_config());
         // The effective config is itself a scenario that loads.
         std::fs::write(&file, toml::to_string(&effective).unwrap()).unwrap();
-        Scenario::load(&file).unwrap_or_else(|e| panic!("effective config {n}: {e}"));
+        crate::stack::load(&file).unwrap_or_else(|e| panic!("effective config {n}: {e}"));
         let mut numeric = Vec::new();
         leaves(&effective, "", &mut numeric);
         for (leaf, value) in numeric {
@@ -215,7 +214,7 @@ fn every_numeric_key_refuses_absurd_values_by_name() {
                     toml::Value::Float(f) if f.abs() == 1e300 => format!("{:e}", f),
                     _ => b.to_string(),
                 };
-                match Scenario::load(&file) {
+                match crate::stack::load(&file) {
                     Ok(_) => failures.push(format!("{leaf} = {shown}: accepted")),
                     Err(e) if !names(&e.key, &leaf) => failures.push(format!(
                         "{leaf} = {shown}: refused at `{}`: {}",

@@ -12,7 +12,7 @@
 //! written to the output folder with its message. Inputs are drawn from seeded ChaCha
 //! streams, one per worker, so a run is reproducible from its seed and worker count.
 
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::ScenarioSpec;
 use anyhow::{Context, Result};
 use futago_msgs::{Pose2, Time, carmen, rosbag, tum};
 use futago_sim::World;
@@ -68,7 +68,7 @@ fn text(b: &[u8]) -> String {
 fn parse_scenario(s: &Seed, worlds: &mut Worlds) {
     let t = text(&s.bytes);
     if let Ok(spec) = parse_toml::<ScenarioSpec>(&s.origin, &t) {
-        let s = Scenario::from_spec_with(&s.origin, spec, &mut |p| worlds.load(p));
+        let s = crate::stack::from_spec_with(&s.origin, spec, &mut |p| worlds.load(p));
         if let Ok(s) = s {
             // What `futago config` prints must load again.
             let _ = toml::to_string(&s.effective_config());
@@ -168,7 +168,7 @@ fn parse_overlay(s: &Seed, worlds: &mut Worlds) {
     if let Ok(spec) =
         serde_path_to_error::deserialize::<_, ScenarioSpec>(toml::Value::Table(config))
     {
-        let _ = Scenario::from_spec_with(&s.origin, spec, &mut |p| worlds.load(p));
+        let _ = crate::stack::from_spec_with(&s.origin, spec, &mut |p| worlds.load(p));
     }
 }
 

@@ -12,12 +12,11 @@
 //!    (`stack`);
 //! 5. **reports**: the HTML report (`report`);
 //! 6. **applications**: the loop and what runs it (`run`, `replay`, `legs_train`, `suite`,
-//!    `tune` with `cmaes`, `bench`, `fuzz`, `world_cmd`).
+//!    `tune` with `cmaes`, `bench`, `fuzz`, `world_cmd`; and `config_walk`, a test that walks every
+//!    scenario's parameters).
 //!
 //! The binary (`src/main.rs`) parses the command line and calls these.
 
-#[cfg(test)]
-mod config_walk;
 pub mod gate;
 pub mod overlay;
 pub mod scenario;
@@ -35,6 +34,8 @@ pub mod report;
 
 pub mod bench;
 pub mod cmaes;
+#[cfg(test)]
+mod config_walk;
 pub mod fuzz;
 pub mod legs_train;
 pub mod replay;

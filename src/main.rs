@@ -1,8 +1,6 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
-use futago::{
-    bench, fuzz, legs_train, overlay, replay, run, scenario, stack, suite, tune, world_cmd,
-};
+use futago::{bench, fuzz, legs_train, overlay, replay, run, stack, suite, tune, world_cmd};
 
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
@@ -522,7 +520,7 @@ fn real_main() -> Result<u8> {
         } => {
             options.jobs = Some(resolve_jobs(options.jobs)?);
             let base = overlays.load()?;
-            let name = scenario::Scenario::load_with(&scenario, &base)?.spec.name;
+            let name = stack::load_with(&scenario, &base)?.spec.name;
             let out = out.unwrap_or_else(|| PathBuf::from("out/tune").join(name));
             tune::print(&tune::tune(&scenario, &base, &options, &out)?, &out);
             0
@@ -535,13 +533,13 @@ fn real_main() -> Result<u8> {
             force,
             overlays,
         } => {
-            let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
+            let s = stack::load_with(&scenario, &overlays.load()?)?;
             legs_train::command(&s, &seeds, rounds, &out, force)?;
             0
         }
         Command::Metrics { scenario, overlays } => {
-            let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
-            for name in s.spec.metric_names() {
+            let s = stack::load_with(&scenario, &overlays.load()?)?;
+            for name in s.metric_names() {
                 println!("{name}");
             }
             0
@@ -555,7 +553,7 @@ fn real_main() -> Result<u8> {
             root,
         } => fuzz::command(&root, inputs, jobs, seed, out, force)?,
         Command::Config { scenario, overlays } => {
-            let s = scenario::Scenario::load_with(&scenario, &overlays.load()?)?;
+            let s = stack::load_with(&scenario, &overlays.load()?)?;
             print!("{}", toml::to_string(&s.effective_config())?);
             0
         }
@@ -664,7 +662,7 @@ fn world(command: WorldCommand) -> Result<i32> {
 
 /// `futago bench …`: prints the bench's figures as JSON.
 fn bench(command: BenchCommand) -> Result<i32> {
-    let load = scenario::Scenario::load;
+    let load = stack::load;
     let r = match command {
         BenchCommand::Sim {
             scenario,

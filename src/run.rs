@@ -818,7 +818,7 @@ pub fn command(
     {
         bail!("--duration: expected a positive number of seconds, found {d}");
     }
-    let s = Scenario::load_with(scenario, overlays)?;
+    let s = crate::stack::load_with(scenario, overlays)?;
     let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
     let (summary, o) = run(&s, opts, &out)?;
     let rtf = summary["performance"]["real_time_factor"]

@@ -151,7 +151,7 @@ pub fn suite(
     let mut runs = Vec::new();
     let mut stems = std::collections::BTreeSet::new();
     for f in &files {
-        let s = Scenario::load_with(f, overlays)?;
+        let s = crate::stack::load_with(f, overlays)?;
         let stem = f
             .file_stem()
             .map(|s| s.to_string_lossy().to_string())

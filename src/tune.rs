@@ -15,7 +15,6 @@ use crate::cmaes::{Cmaes, RandomSearch};
 use crate::overlay::{Overlay, lookup};
 use crate::report::{Series, escape, line_chart_scaled};
 use crate::run::{self, RunOptions};
-use crate::scenario::Scenario;
 use crate::suite::parallel_map;
 use anyhow::{Context, Result, bail};
 use serde_json::{Value, json};
@@ -190,8 +189,8 @@ pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> R
             bail!("--param {}: named twice", p.path);
         }
     }
-    let s = Scenario::load_with(scenario, base)?;
-    let names = s.spec.metric_names();
+    let s = crate::stack::load_with(scenario, base)?;
+    let names = s.metric_names();
     if !names.contains(&o.objective) {
         let close = crate::ground_truth::similar(&names, &o.objective);
         bail!(
@@ -211,7 +210,7 @@ pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> R
         let values: Vec<f64> = o.params.iter().map(|p| p.value(end)).collect();
         let mut all = base.to_vec();
         all.push(overlay(&o.params, &values)?);
-        Scenario::load_with(scenario, &all).map_err(|e| {
+        crate::stack::load_with(scenario, &all).map_err(|e| {
             anyhow::anyhow!(
                 "--param: the range's {} end does not give a valid scenario: {e}",
                 if end == 0.0 { "low" } else { "high" }
@@ -425,7 +424,7 @@ fn evaluate_one(
     }
     // The CARMEN log is not scored; a search does not need it.
     all.push(Overlay::parse_set("output.carmen=false").map_err(|e| e.to_string())?);
-    let s = Scenario::load_with(scenario, &all).map_err(|e| e.to_string())?;
+    let s = crate::stack::load_with(scenario, &all).map_err(|e| e.to_string())?;
     let opts = RunOptions {
         seed: Some(seed),
         duration: None,

@@ -26,20 +26,24 @@
 //! The estimated and true camera poses are written as 3D TUM files.
 
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth, tum_line};
+use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::trajectory::{
     RECOVERED_HOLD_S, RECOVERED_M, recovery_times, worst_recovery,
 };
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
 use anyhow::{Context, Result};
 use futago_msgs::camera::Intrinsics;
 use futago_msgs::tum::{Stamped, format_line};
 use futago_msgs::{Duration, Pose2, Pose3, Time};
 use futago_robot::localization::depth_mcl::{CameraState, DepthMcl, DepthMclConfig, reproject};
 use futago_robot::localization::model::{self, ModelConfig};
+use futago_sim::config::{SpecError, check_range};
 use futago_sim::noise::stream;
 use glam::{DQuat, DVec3};
+use serde::Deserialize;
 use serde_json::json;
+use std::any::Any;
 use std::path::Path;
 use std::time::Instant;
 
@@ -118,10 +122,7 @@ fn body_of_optical(optical: &Pose3) -> CameraState {
 }
 
 /// Whether the scenario's localised camera rides on an agent rather than the robot.
-fn carried(s: &ScenarioSpec) -> bool {
-    let Some(d) = &s.depth_localization else {
-        return false;
-    };
+fn carried(s: &ScenarioSpec, d: &DepthLocalizationSpec) -> bool {
     // Validation has named the camera by now.
     s.camera
         .iter()
@@ -132,7 +133,7 @@ fn carried(s: &ScenarioSpec) -> bool {
 /// The node when the scenario has `[depth_localization]`.
 pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
     use rand::Rng;
-    let Some(spec) = &s.spec.depth_localization else {
+    let Some(spec) = s.module::<DepthLocalizationSpec>() else {
         return Ok(None);
     };
     let name = spec.camera.clone().unwrap_or_default();
@@ -263,11 +264,8 @@ fn model_scene(
 
 /// The metrics this node scores: the camera's (always) and, for a camera on the robot, the
 /// trajectory metrics of the robot's pose under `depth_localization`.
-pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    if s.depth_localization.is_none() {
-        return Vec::new();
-    }
-    let mut names = if carried(s) {
+fn metric_names(s: &ScenarioSpec, d: &DepthLocalizationSpec) -> Vec<String> {
+    let mut names = if carried(s, d) {
         Vec::new()
     } else {
         crate::ground_truth::trajectory_metric_names("depth_localization")
@@ -285,13 +283,11 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
         names.push(format!("depth_localization.camera.rpe_1s.{k}"));
     }
     names.push("depth_localization.frame_ms".into());
-    if let Some(d) = &s.depth_localization {
-        if !s.event.is_empty() && !carried(s) {
-            names.push("depth_localization.recovery_s".into());
-        }
-        if d.global {
-            names.push("depth_localization.convergence_s".into());
-        }
+    if !s.event.is_empty() && !carried(s, d) {
+        names.push("depth_localization.recovery_s".into());
+    }
+    if d.global {
+        names.push("depth_localization.convergence_s".into());
     }
     names
 }
@@ -662,6 +658,172 @@ impl Node for DepthLocalizationNode {
             }
         }
         Ok(m)
+    }
+}
+
+/// The depth-camera localiser of a run (seed 002): MCL of one camera in the world's mesh,
+/// handed to the stack as its 3D model.
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepthLocalizationSpec {
+    /// The camera it localises (by name; may be left out when the scenario has one).
+    #[serde(default)]
+    pub camera: Option<String>,
+    /// Frames the filter takes per second (seed 002 took 125 ms a frame: 8 Hz).
+    #[serde(default = "default_depth_localization_rate")]
+    pub rate: f64,
+    /// Render size [width, height], px: the particles' views and the measured depth
+    /// re-projected to it; none: the camera's depth size.
+    #[serde(default)]
+    pub size: Option<[u32; 2]>,
+    /// Carry the particles by the robot's odometry; false: seed 002's carrier without it
+    /// (the random walk alone).
+    #[serde(default)]
+    pub odometry: bool,
+    /// Start from anywhere in the model's free space (`mcl.max_particles` particles, any
+    /// yaw) instead of the camera's true pose; scored by `depth_localization.convergence_s`.
+    #[serde(default)]
+    pub global: bool,
+    #[serde(default)]
+    pub mcl: futago_robot::localization::depth_mcl::DepthMclConfig,
+    /// The model the filter renders: the world's mesh (exact or perturbed), or a mesh or
+    /// point cloud file (`file`, relative to the scenario; resolved when the scenario loads).
+    #[serde(default)]
+    pub model: futago_robot::localization::model::ModelConfig,
+}
+
+fn default_depth_localization_rate() -> f64 {
+    8.0
+}
+
+/// `[depth_localization]`: Monte Carlo localisation of a depth camera in the world's 3D model
+/// (seed 002).
+pub struct Module;
+
+impl ModuleConfig for Module {
+    fn key(&self) -> Option<&'static str> {
+        Some("depth_localization")
+    }
+
+    fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
+        let key = "depth_localization";
+        let mut d: DepthLocalizationSpec = cx.typed(key, cx.table(key, table)?)?;
+        let path = cx.path;
+        if cx.cameras.is_empty() {
+            return Err(SpecError::new(
+                path,
+                "depth_localization",
+                "depth-camera localisation needs a [[camera]]; the scenario has none",
+            ));
+        }
+        let names: Vec<&str> = cx.cameras.iter().map(|c| c.name.as_str()).collect();
+        let name = match &d.camera {
+            Some(n) if names.contains(&n.as_str()) => n.clone(),
+            Some(n) => {
+                return Err(SpecError::new(
+                    path,
+                    "depth_localization.camera",
+                    format!("no camera is named `{n}`; the scenario's cameras are {names:?}"),
+                ));
+            }
+            None if names.len() == 1 => names[0].to_string(),
+            None => {
+                return Err(SpecError::new(
+                    path,
+                    "depth_localization.camera",
+                    format!(
+                        "the scenario has {} cameras {names:?}: name one",
+                        names.len()
+                    ),
+                ));
+            }
+        };
+        let cam =
+            cx.cameras.iter().find(|c| c.name == name).ok_or_else(|| {
+                SpecError::new(path, "depth_localization.camera", "no such camera")
+            })?;
+        if cam.joint.is_some() {
+            return Err(SpecError::new(
+                path,
+                "depth_localization.camera",
+                format!(
+                    "camera `{name}` rides on a joint; the localiser needs one fixed to the base"
+                ),
+            ));
+        }
+        if let (Some(a), true) = (&cam.carrier, d.odometry) {
+            return Err(SpecError::new(
+                path,
+                "depth_localization.odometry",
+                format!(
+                    "camera `{name}` is carried by agent `{a}`, which has no odometry: set odometry = false"
+                ),
+            ));
+        }
+        check_range(path, "depth_localization.rate", d.rate, 0.1, 100.0, "Hz")?;
+        if let Some([w, h]) = d.size {
+            for (k, v, most) in [(0, w, cam.depth.width), (1, h, cam.depth.height)] {
+                if v == 0 || v > most {
+                    return Err(SpecError::new(
+                        path,
+                        format!("depth_localization.size[{k}]"),
+                        format!("expected 1 to the camera's {most} px, found {v}"),
+                    ));
+                }
+            }
+        }
+        d.mcl
+            .validate("depth_localization.mcl")
+            .map_err(|(k, m)| SpecError::new(path, k, m))?;
+        d.model
+            .validate("depth_localization.model")
+            .map_err(|(k, m)| SpecError::new(path, k, m))?;
+        if let Some(file) = &d.model.file {
+            let resolved = path.parent().unwrap_or(Path::new(".")).join(file);
+            let ext = resolved
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(str::to_ascii_lowercase);
+            if !matches!(ext.as_deref(), Some("ply" | "glb" | "gltf")) {
+                return Err(SpecError::new(
+                    path,
+                    "depth_localization.model.file",
+                    format!("{file}: expected a .ply, .glb or .gltf file"),
+                ));
+            }
+            if !resolved.is_file() {
+                return Err(SpecError::new(
+                    path,
+                    "depth_localization.model.file",
+                    format!("model file {} does not exist", resolved.display()),
+                ));
+            }
+            // Absolute, so the spec reads the same wherever it is checked again.
+            let resolved = std::fs::canonicalize(&resolved).unwrap_or(resolved);
+            d.model.file = Some(resolved.to_string_lossy().into_owned());
+        }
+        d.camera = Some(name);
+        Ok(Box::new(d))
+    }
+
+    fn effective(&self, spec: &(dyn Any + Send + Sync)) -> Option<toml::Table> {
+        toml::Table::try_from(spec.downcast_ref::<DepthLocalizationSpec>()?).ok()
+    }
+
+    fn metric_names(
+        &self,
+        spec: &ScenarioSpec,
+        own: Option<&(dyn Any + Send + Sync)>,
+    ) -> Vec<String> {
+        own.and_then(|o| o.downcast_ref::<DepthLocalizationSpec>())
+            .map(|d| metric_names(spec, d))
+            .unwrap_or_default()
+    }
+}
+
+impl StackModule for Module {
+    fn build(&self, s: &Scenario, seed: u64, _out: Option<&Path>) -> Nodes {
+        boxed(node(s, seed))
     }
 }
 

@@ -4,7 +4,7 @@
 use super::{Bus, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
 use crate::scenario::ControllerConfig;
-use crate::scenario::Scenario;
+use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{DriveCommand, Duration, LaserScan, Odometry, Pose2, Time};
 use futago_robot::control::PoseSource;
@@ -120,7 +120,8 @@ impl DriverNode {
             map_seen: None,
             pending: Vec::new(),
             laps: Vec::new(),
-            localizes: spec.localization.is_some() || spec.visual_localization.is_some(),
+            localizes: spec.module("localization").is_some()
+                || spec.module("visual_localization").is_some(),
             scripted_on_slam: matches!(&s.controller, ControllerConfig::Waypoints(w) if w.pose_source == PoseSource::Slam),
             goals: match &s.controller {
                 ControllerConfig::Navigate(n) => match n.task() {
@@ -327,10 +328,29 @@ impl Node for DriverNode {
 }
 
 /// `navigation.goals_missed` (goals a navigator did not reach) where it is given goals.
-pub fn metric_names(s: &crate::scenario::ScenarioSpec) -> Vec<String> {
+pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     if s.controller.get("type").and_then(|t| t.as_str()) == Some("navigate") {
         vec!["navigation.goals_missed".into()]
     } else {
         Vec::new()
+    }
+}
+
+/// The driver: the controller that publishes the drive commands.
+pub struct Module;
+
+impl crate::scenario::ModuleConfig for Module {
+    fn metric_names(
+        &self,
+        spec: &ScenarioSpec,
+        _own: Option<&(dyn std::any::Any + Send + Sync)>,
+    ) -> Vec<String> {
+        metric_names(spec)
+    }
+}
+
+impl super::StackModule for Module {
+    fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> super::Nodes {
+        Ok(vec![Box::new(DriverNode::new(s)?) as Box<dyn Node>])
     }
 }

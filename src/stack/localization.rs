@@ -6,14 +6,19 @@
 //! recovery from a kidnapping and its convergence from a global start.
 
 use super::{Bus, Node, Report, Streams, Truth, tum_line};
+use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, LaserScan, Pose2, Time, wrap_angle};
+use futago_robot::localization::mcl::MclConfig;
 use futago_robot::localization::mcl::{Mcl, MclMap};
 use futago_robot::tracking::exclusion::{Exclusion, ExclusionConfig};
+use futago_sim::config::{SpecError, check_range};
 use futago_sim::noise::stream;
+use serde::Deserialize;
 use serde_json::{Value, json};
+use std::any::Any;
 use std::path::Path;
 
 /// The localiser's estimates (TUM), at each update.
@@ -49,7 +54,7 @@ pub struct LocalizationNode {
 /// The localiser when the scenario has `[localization]`.
 pub fn node(s: &Scenario, seed: u64) -> Result<Option<LocalizationNode>> {
     use rand::Rng;
-    let Some(spec) = &s.spec.localization else {
+    let Some(spec) = s.module::<LocalizationSpec>() else {
         return Ok(None);
     };
     let (cfg, _) = super::laser(s, spec.laser.as_deref()).context("localization.laser")?;
@@ -83,10 +88,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<LocalizationNode>> {
 
 /// `localization.*` trajectory metrics, and its recovery and convergence times where the
 /// scenario kidnaps the robot or starts globally.
-pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    let Some(l) = &s.localization else {
-        return Vec::new();
-    };
+fn metric_names(s: &ScenarioSpec, l: &LocalizationSpec) -> Vec<String> {
     let mut names = crate::ground_truth::trajectory_metric_names("localization");
     if !s.event.is_empty() {
         names.push("localization.recovery_s".into());
@@ -205,5 +207,104 @@ impl Node for LocalizationNode {
             }
         }
         Ok(m)
+    }
+}
+
+/// The localiser of a run: MCL on the world's ground-truth occupancy grid at the first laser's
+/// height (the map a perfect SLAM run would give).
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LocalizationSpec {
+    /// The laser it localises with (by name; may be left out when the scenario has one).
+    #[serde(default)]
+    pub laser: Option<String>,
+    /// Map cell size, m (seed 000: 50 mm).
+    #[serde(default = "default_map_resolution")]
+    pub map_resolution: f64,
+    /// Filter updates per second (seed 000: 4).
+    #[serde(default = "default_localization_rate")]
+    pub rate: f64,
+    /// Start knowing nothing (particles over the whole map) instead of near the start pose.
+    #[serde(default)]
+    pub global: bool,
+    /// Spread of the initial particles around the start pose (m, m, rad).
+    #[serde(default = "default_initial_sigma")]
+    pub initial_sigma: [f64; 3],
+    #[serde(default)]
+    pub mcl: MclConfig,
+}
+
+fn default_map_resolution() -> f64 {
+    0.05
+}
+fn default_localization_rate() -> f64 {
+    4.0
+}
+fn default_initial_sigma() -> [f64; 3] {
+    [0.2, 0.2, 0.1]
+}
+
+/// `[localization]`: Monte Carlo localisation on the world's map, from its laser's scans.
+pub struct Module;
+
+impl ModuleConfig for Module {
+    fn key(&self) -> Option<&'static str> {
+        Some("localization")
+    }
+
+    fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
+        let mut l: LocalizationSpec = cx.typed("localization", cx.table("localization", table)?)?;
+        if cx.lidars.is_empty() {
+            return Err(cx.error(
+                "localization",
+                "Monte Carlo localisation needs a [[lidar]]; the scenario has none",
+            ));
+        }
+        // The localiser reads its laser by the resolved name.
+        l.laser = Some(cx.laser("localization", &l.laser)?);
+        let path = cx.path;
+        check_range(
+            path,
+            "localization.map_resolution",
+            l.map_resolution,
+            0.01,
+            0.5,
+            "m",
+        )?;
+        check_range(path, "localization.rate", l.rate, 0.1, 100.0, "Hz")?;
+        for (k, v) in l.initial_sigma.iter().enumerate() {
+            check_range(
+                path,
+                &format!("localization.initial_sigma[{k}]"),
+                *v,
+                0.0,
+                100.0,
+                "m or rad",
+            )?;
+        }
+        l.mcl
+            .validate("localization.mcl")
+            .map_err(|(k, m)| cx.error(k, m))?;
+        Ok(Box::new(l))
+    }
+
+    fn effective(&self, spec: &(dyn Any + Send + Sync)) -> Option<toml::Table> {
+        toml::Table::try_from(spec.downcast_ref::<LocalizationSpec>()?).ok()
+    }
+
+    fn metric_names(
+        &self,
+        spec: &ScenarioSpec,
+        own: Option<&(dyn Any + Send + Sync)>,
+    ) -> Vec<String> {
+        own.and_then(|o| o.downcast_ref::<LocalizationSpec>())
+            .map(|l| metric_names(spec, l))
+            .unwrap_or_default()
+    }
+}
+
+impl StackModule for Module {
+    fn build(&self, s: &Scenario, seed: u64, _out: Option<&Path>) -> Nodes {
+        boxed(node(s, seed))
     }
 }

@@ -40,11 +40,13 @@ pub use crate::ground_truth::{Truth, world_map};
 pub use bus::Bus;
 
 use crate::ground_truth::Metrics;
-use crate::scenario::Scenario;
+use crate::overlay::Overlay;
+use crate::scenario::{ModuleConfig, Scenario, ScenarioSpec};
 use anyhow::Result;
 use futago_msgs::camera::{DepthImage, RgbdFrame};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Odometry, Pose2, Pose3, Time, tum};
+use futago_sim::config::SpecError;
 use serde_json::Value;
 use std::path::Path;
 
@@ -192,87 +194,87 @@ pub fn laser<'a>(
 /// A scenario's nodes of one module, in their order.
 pub type Nodes = Result<Vec<Box<dyn Node>>>;
 
-/// A kind of stack module: how it makes its nodes for a scenario (none where the scenario
-/// does not run it) and the metric names its scorer declares for a scenario.
-pub struct Module {
-    pub build: fn(&Scenario, u64, Option<&Path>) -> Nodes,
-    pub metric_names: fn(&crate::scenario::ScenarioSpec) -> Vec<String>,
+/// A stack module: its configuration ([`ModuleConfig`]: its table, typed and resolved, and
+/// its metric names) and the nodes it adds to a run of a scenario (none where the scenario
+/// does not run it). Each module implements it beside its node, as a unit struct `Module`.
+pub trait StackModule: ModuleConfig {
+    /// Its nodes for scenario `s` run with `seed`, writing into `out` when the run writes
+    /// files.
+    fn build(&self, s: &Scenario, seed: u64, out: Option<&Path>) -> Nodes;
 }
 
-fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
+/// One node, or none.
+pub(crate) fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
     Ok(n?
         .map(|n| Box::new(n) as Box<dyn Node>)
         .into_iter()
         .collect())
 }
 
-/// The stack's modules, in the order their nodes run in every phase: the recorders of the
-/// run's files (when it writes them), the people's truth and safety scores, the coverage
-/// planner and scorer, the driver, the localiser, SLAM, the RGB-D mapper, the stop-and-scan
-/// 3D mapper, seed 001's visual landmark mapper and monocular localiser. A new module is one
-/// line here; the loop and the metric checks read this table.
-pub const MODULES: &[Module] = &[
-    Module {
-        build: |s, _, out| out.map_or(Ok(Vec::new()), |dir| record::recorders(s, dir)),
-        metric_names: record::metric_names,
-    },
-    Module {
-        build: |s, _, out| boxed(people::node(s, out)),
-        metric_names: people::metric_names,
-    },
-    Module {
-        build: |s, _, _| boxed(coverage::node(s)),
-        metric_names: coverage::metric_names,
-    },
-    Module {
-        build: |s, _, _| Ok(vec![Box::new(driver::DriverNode::new(s)?) as Box<dyn Node>]),
-        metric_names: driver::metric_names,
-    },
-    Module {
-        build: |s, seed, _| boxed(localization::node(s, seed)),
-        metric_names: localization::metric_names,
-    },
-    Module {
-        build: |s, seed, _| boxed(depth_localization::node(s, seed)),
-        metric_names: depth_localization::metric_names,
-    },
-    Module {
-        build: |s, _, _| boxed(slam::node(s)),
-        metric_names: slam::metric_names,
-    },
-    Module {
-        build: |s, seed, _| boxed(rgbd_map::node(s, seed)),
-        metric_names: rgbd_map::metric_names,
-    },
-    Module {
-        build: |s, seed, _| boxed(scan3d::node(s, seed)),
-        metric_names: scan3d::metric_names,
-    },
-    Module {
-        build: |s, _, _| boxed(visual_map::node(s)),
-        metric_names: visual_map::metric_names,
-    },
-    Module {
-        build: |s, _, _| boxed(visual_localization::node(s)),
-        metric_names: visual_localization::metric_names,
-    },
+/// The stack's modules, in the order their tables resolve and their nodes run in every
+/// phase: the recorders of the run's files (when it writes them), the people's truth and
+/// safety scores, the coverage planner and scorer, the driver, the localiser, the depth-camera
+/// localiser, SLAM, the RGB-D mapper, the stop-and-scan 3D mapper, seed 001's visual landmark
+/// mapper and monocular localiser. A new module is its own file and one line here; the
+/// loader, the loop and the metric checks read this table.
+pub static MODULES: &[&dyn StackModule] = &[
+    &record::Module,
+    &people::Module,
+    &coverage::Module,
+    &driver::Module,
+    &localization::Module,
+    &depth_localization::Module,
+    &slam::Module,
+    &rgbd_map::Module,
+    &scan3d::Module,
+    &visual_map::Module,
+    &visual_localization::Module,
 ];
+
+/// The configurations of `modules`, for the loader.
+pub fn configs(modules: &[&'static dyn StackModule]) -> Vec<&'static dyn ModuleConfig> {
+    modules
+        .iter()
+        .map(|&m| m as &'static dyn ModuleConfig)
+        .collect()
+}
+
+/// Loads and checks a scenario with the stack's modules ([`MODULES`]).
+pub fn load(path: &Path) -> Result<Scenario, SpecError> {
+    Scenario::load(path, &configs(MODULES))
+}
+
+/// Loads a scenario with overlays laid over it, with the stack's modules.
+pub fn load_with(path: &Path, overlays: &[Overlay]) -> Result<Scenario, SpecError> {
+    Scenario::load_with(path, overlays, &configs(MODULES))
+}
+
+/// Checks a parsed scenario with the stack's modules, its world compiled by `load_world`.
+pub fn from_spec_with(
+    path: &Path,
+    spec: ScenarioSpec,
+    load_world: &mut dyn FnMut(&Path) -> Result<futago_sim::World, SpecError>,
+) -> Result<Scenario, SpecError> {
+    Scenario::from_spec_with(path, spec, &configs(MODULES), load_world)
+}
 
 /// The stack of a scenario: every module's nodes, in [`MODULES`] order.
 pub fn build(s: &Scenario, seed: u64, out: Option<&Path>) -> Result<Vec<Box<dyn Node>>> {
-    let mut nodes = Vec::new();
-    for m in MODULES {
-        nodes.extend((m.build)(s, seed, out)?);
-    }
-    Ok(nodes)
+    build_with(MODULES, s, seed, out)
 }
 
-/// Every metric name a run of `s` produces: each module's scorer declares its own.
-pub fn metric_names(s: &crate::scenario::ScenarioSpec) -> Vec<String> {
-    let mut names: Vec<String> = MODULES.iter().flat_map(|m| (m.metric_names)(s)).collect();
-    names.sort();
-    names.dedup();
-    names
+/// The nodes of `modules` for a scenario, in their order.
+pub fn build_with(
+    modules: &[&'static dyn StackModule],
+    s: &Scenario,
+    seed: u64,
+    out: Option<&Path>,
+) -> Result<Vec<Box<dyn Node>>> {
+    let mut nodes = Vec::new();
+    for m in modules {
+        nodes.extend(m.build(s, seed, out)?);
+    }
+    Ok(nodes)
 }
 
 /// Writes a pose as a TUM line.

@@ -90,7 +90,7 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     .chain(
         (!s.lidar.is_empty())
             .then(|| {
-                let mapped = s.localization.is_some() || s.slam.is_some();
+                let mapped = s.module("localization").is_some() || s.module("slam").is_some();
                 DETECTORS
                     .iter()
                     .enumerate()
@@ -139,9 +139,9 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
     };
     let tracking = match s.lidars.first() {
         Some((l, _)) => Some(Tracking {
-            source: if s.spec.localization.is_some() {
+            source: if s.spec.module("localization").is_some() {
                 Some("localization")
-            } else if s.slam.is_some() {
+            } else if s.spec.module("slam").is_some() {
                 Some("slam")
             } else {
                 None
@@ -716,4 +716,23 @@ pub fn load_model(text: &str, name: &str) -> Result<AdaBoost> {
 /// scenarios/train-legs.toml`.
 pub fn default_model() -> Result<AdaBoost> {
     load_model(include_str!("../../models/legs.json"), "models/legs.json")
+}
+
+/// People detection and tracking, and the people's truth and safety scores.
+pub struct Module;
+
+impl crate::scenario::ModuleConfig for Module {
+    fn metric_names(
+        &self,
+        spec: &ScenarioSpec,
+        _own: Option<&(dyn std::any::Any + Send + Sync)>,
+    ) -> Vec<String> {
+        metric_names(spec)
+    }
+}
+
+impl super::StackModule for Module {
+    fn build(&self, s: &Scenario, _seed: u64, out: Option<&Path>) -> super::Nodes {
+        super::boxed(node(s, out))
+    }
 }

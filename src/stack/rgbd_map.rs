@@ -11,18 +11,27 @@
 //! that lies where they walked is scored (`rgbd_map.people_pollution`, see
 //! `ground_truth::pollution`).
 
+use super::localization::LocalizationSpec;
+use super::slam::SlamSpec;
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
+use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::pollution::{FLOOR, HEAD_ROOM, PATH_RADIUS, PeoplePaths};
-use crate::scenario::{MapPose, Scenario, ScenarioSpec};
+use crate::scenario::{
+    ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec, take_name, typed_table,
+};
 use anyhow::{Context, Result};
 use futago_msgs::camera::{DepthImage, Intrinsics};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{Pose2, Pose3};
 use futago_robot::mapping::registration::{EnvironmentMap, Method};
+use futago_robot::mapping::rgbd_map::RgbdMapConfig;
 use futago_robot::mapping::rgbd_map::{CameraMount, RgbdMap, RgbdMapper};
 use futago_robot::tracking::exclusion::{Exclusion, ExclusionConfig};
+use futago_sim::config::SpecError;
+use serde::Deserialize;
 use serde_json::json;
+use std::any::Any;
 use std::path::Path;
 use std::time::Instant;
 
@@ -77,7 +86,7 @@ pub struct RgbdMapNode {
 
 /// The mapper when the scenario has `[rgbd_map]`.
 pub fn node(s: &Scenario, seed: u64) -> Result<Option<RgbdMapNode>> {
-    let Some(m) = &s.rgbd_map else {
+    let Some(m) = s.module::<RgbdMapSpec>() else {
         return Ok(None);
     };
     let cam = s
@@ -98,8 +107,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<RgbdMapNode>> {
     };
     // The true walls the slice is scored against, at the 2D map's cell size.
     let resolution = s
-        .slam
-        .as_ref()
+        .module::<SlamSpec>()
         .map_or(SLICE_MAP_RESOLUTION, |l| l.config.grid.resolution);
     let picture = super::world_map(s, SLICE_MAP_RESOLUTION, slice_z)?;
     let walls = if resolution == SLICE_MAP_RESOLUTION {
@@ -163,17 +171,8 @@ pub const RGBD_MAP_KEYS: [&str; 12] = [
 ];
 
 /// `rgbd_map.*` for the first method and `rgbd_map.METHOD.*` for each.
-pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    let Some(table) = &s.rgbd_map else {
-        return Vec::new();
-    };
-    // The methods as typed; a table that does not type yet has the default.
-    let methods: Vec<&'static str> = crate::scenario::rgbd_map_config(Path::new(""), table)
-        .map(|m| m.config.methods)
-        .unwrap_or_else(|_| futago_robot::mapping::rgbd_map::RgbdMapConfig::default().methods)
-        .iter()
-        .map(|m| m.name())
-        .collect();
+fn metric_names(s: &ScenarioSpec, spec: &RgbdMapSpec) -> Vec<String> {
+    let methods: Vec<&'static str> = spec.config.methods.iter().map(|m| m.name()).collect();
     let mut names = Vec::new();
     if s.has_people() {
         names.push("rgbd_map.people_pollution".into());
@@ -536,4 +535,163 @@ fn score_map(
     out.push(("planes.faces".into(), faces as f64));
     out.push(("planes.vertices".into(), vertices as f64));
     out
+}
+
+/// Which 2D pose places the RGB-D keyframes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapPose {
+    GroundTruth,
+    Odometry,
+    Localization,
+    Slam,
+}
+
+/// `[rgbd_map]`: `pose_source`, `camera` (its frames), `laser` (the height of its 2D-map
+/// term and slice) and the mapper's own keys ([`RgbdMapConfig`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RgbdMapSpec {
+    pub pose_source: MapPose,
+    /// The camera's name (resolved: the only camera when the table names none).
+    pub camera: String,
+    /// The laser's name, if any.
+    pub laser: Option<String>,
+    pub config: RgbdMapConfig,
+}
+
+/// Types the `[rgbd_map]` table: `pose_source` (default `slam`) and the mapper's keys, naming
+/// `rgbd_map.KEY` in errors.
+pub fn rgbd_map_config(path: &Path, table: &toml::Table) -> Result<RgbdMapSpec, SpecError> {
+    let mut rest = table.clone();
+    let camera = take_name(path, "rgbd_map", "camera", &mut rest)?.unwrap_or_default();
+    let laser = take_name(path, "rgbd_map", "laser", &mut rest)?;
+    let pose_source = match rest.remove("pose_source") {
+        None => MapPose::Slam,
+        Some(v) => MapPose::deserialize(v.clone()).map_err(|_| {
+            SpecError::new(
+                path,
+                "rgbd_map.pose_source",
+                format!(
+                    "expected one of \"ground_truth\", \"odometry\", \"localization\", \"slam\"; found {v}"
+                ),
+            )
+        })?,
+    };
+    let config: RgbdMapConfig = typed_table(path, "rgbd_map", rest)?;
+    config
+        .validate()
+        .map_err(|(k, m)| SpecError::new(path, format!("rgbd_map.{k}"), m))?;
+    Ok(RgbdMapSpec {
+        pose_source,
+        camera,
+        laser,
+        config,
+    })
+}
+
+/// `[rgbd_map]`: a 3D map from a camera's RGB-D keyframes, placed by a 2D pose and the floor.
+pub struct Module;
+
+impl ModuleConfig for Module {
+    fn key(&self) -> Option<&'static str> {
+        Some("rgbd_map")
+    }
+
+    fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
+        let path = cx.path;
+        let mut m = rgbd_map_config(path, &cx.table("rgbd_map", table)?)?;
+        if cx.cameras.is_empty() {
+            return Err(SpecError::new(
+                path,
+                "rgbd_map",
+                "an RGB-D map needs a [[camera]]; the scenario has none",
+            ));
+        }
+        let names: Vec<&str> = cx.cameras.iter().map(|c| c.name.as_str()).collect();
+        if m.camera.is_empty() {
+            if cx.cameras.len() > 1 {
+                return Err(SpecError::new(
+                    path,
+                    "rgbd_map.camera",
+                    format!(
+                        "the scenario has {} cameras {names:?}: name one, e.g. rgbd_map.camera = \"{}\"",
+                        names.len(),
+                        names[0]
+                    ),
+                ));
+            }
+            m.camera = cx.cameras[0].name.clone();
+        } else if !names.contains(&m.camera.as_str()) {
+            return Err(SpecError::new(
+                path,
+                "rgbd_map.camera",
+                format!(
+                    "no camera is named `{}`; the scenario's cameras are {names:?}",
+                    m.camera
+                ),
+            ));
+        }
+        // The laser of its slice and 2D-map term: the one named, else SLAM's, else the
+        // localiser's, else the only one.
+        m.laser = match &m.laser {
+            Some(_) => Some(cx.laser("rgbd_map", &m.laser)?),
+            None => cx
+                .earlier
+                .get::<SlamSpec>()
+                .and_then(|s| s.laser.clone())
+                .or_else(|| {
+                    cx.earlier
+                        .get::<LocalizationSpec>()
+                        .and_then(|l| l.laser.clone())
+                })
+                .or_else(|| (cx.lidars.len() == 1).then(|| cx.lidars[0].0.name.clone())),
+        };
+        let needs = match m.pose_source {
+            MapPose::Localization if cx.spec.module("localization").is_none() => {
+                Some("[localization]")
+            }
+            MapPose::Slam if cx.spec.module("slam").is_none() => Some("[slam]"),
+            _ => None,
+        };
+        if let Some(table) = needs {
+            return Err(SpecError::new(
+                path,
+                "rgbd_map.pose_source",
+                format!("this pose source needs a {table} table"),
+            ));
+        }
+
+        Ok(Box::new(m))
+    }
+
+    fn effective(&self, spec: &(dyn Any + Send + Sync)) -> Option<toml::Table> {
+        let r = spec.downcast_ref::<RgbdMapSpec>()?;
+        let mut m = toml::Table::try_from(&r.config).unwrap_or_default();
+        m.extend(
+            r.laser
+                .clone()
+                .map(|v| ("laser".to_string(), toml::Value::String(v))),
+        );
+        m.insert("camera".into(), toml::Value::String(r.camera.clone()));
+        if let Ok(v) = toml::Value::try_from(r.pose_source) {
+            m.insert("pose_source".into(), v);
+        }
+        Some(m)
+    }
+
+    fn metric_names(
+        &self,
+        spec: &ScenarioSpec,
+        own: Option<&(dyn Any + Send + Sync)>,
+    ) -> Vec<String> {
+        own.and_then(|o| o.downcast_ref::<RgbdMapSpec>())
+            .map(|m| metric_names(spec, m))
+            .unwrap_or_default()
+    }
+}
+
+impl StackModule for Module {
+    fn build(&self, s: &Scenario, seed: u64, _out: Option<&Path>) -> Nodes {
+        boxed(node(s, seed))
+    }
 }

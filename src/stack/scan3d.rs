@@ -30,21 +30,28 @@
 //! lengths cast in the world's colliders (`[[scan3d.length]]`, the seed's L1 and L2).
 
 use super::{Bus, Node, Report, Streams, Truth};
+use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::completeness::{Completeness, length_along};
 use crate::ground_truth::coverage::Surfaces;
-use crate::scenario::{Scan3dPose, Scenario, ScenarioSpec};
+use crate::scenario::{
+    ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec, take_name, typed_table,
+};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Odometry, Pose2, Time};
 use futago_robot::mapping::line_icp::LineIcp;
+use futago_robot::mapping::turntable::TurntableConfig;
 use futago_robot::mapping::turntable::{Phase, StopAndScan, TableMount};
 use futago_robot::mapping::voxels::VoxelMap;
 use futago_robot::navigation::views::{View, ViewPlanningConfig, next_view};
+use futago_sim::config::SpecError;
 use futago_sim::lidar::BeamHit;
 use glam::{DAffine3, DQuat, DVec3};
 use rand_chacha::ChaCha8Rng;
 use rustc_hash::{FxHashMap, FxHashSet};
+use serde::Deserialize;
 use serde_json::json;
+use std::any::Any;
 use std::collections::VecDeque;
 use std::path::Path;
 
@@ -90,7 +97,7 @@ const JOINT_HISTORY: usize = 64;
 
 /// The mapper when the scenario has `[scan3d]`.
 pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
-    let Some(m) = &s.scan3d else {
+    let Some(m) = s.module::<Scan3dSpec>() else {
         return Ok(None);
     };
     let laser = |n: &str| {
@@ -145,7 +152,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
 }
 
 /// The turntable's geometry: the joint's axis and origin, the vertical laser's mount.
-fn node_mount(s: &Scenario, m: &crate::scenario::Scan3dSpec) -> Result<TableMount> {
+fn node_mount(s: &Scenario, m: &Scan3dSpec) -> Result<TableMount> {
     let vertical = s
         .lidars
         .iter()
@@ -215,7 +222,7 @@ pub struct Scan3dNode {
     /// The map's completeness against the true surfaces of the area to map.
     completeness: Completeness,
     /// The lengths to measure, with their truth (`None`: the world has no surface there).
-    lengths: Vec<(crate::scenario::MapLength, Option<f64>)>,
+    lengths: Vec<(MapLength, Option<f64>)>,
     /// After each view: views, distance driven (m, true), coverage.
     curve: Vec<(usize, f64, f64)>,
     /// Distance driven so far (m, true) and the last true pose.
@@ -657,8 +664,7 @@ pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
     use futago_robot::mapping::turntable::Phase;
     use std::time::Instant;
     let m = s
-        .scan3d
-        .as_ref()
+        .module::<Scan3dSpec>()
         .context("the scenario has no [scan3d] to time")?;
     let vertical = s
         .lidars
@@ -857,10 +863,7 @@ fn removal_scores(
 }
 
 /// The metrics this node scores.
-pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    if s.scan3d.is_none() {
-        return Vec::new();
-    }
+fn metric_names(s: &ScenarioSpec, spec: &Scan3dSpec) -> Vec<String> {
     let movers = !(s.agent.is_empty() && s.person.is_empty() && s.flow.is_empty());
     let mut names: Vec<String> = [
         "scan3d.views",
@@ -872,17 +875,9 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     ]
     .map(String::from)
     .to_vec();
-    // The lengths' names, as the table gives them (checked when the scenario loads).
-    let lengths = s
-        .scan3d
-        .as_ref()
-        .and_then(|t| t.get("length"))
-        .and_then(|v| v.as_array());
-    for l in lengths.into_iter().flatten() {
-        if let Some(name) = l.get("name").and_then(|n| n.as_str()) {
-            names.push(format!("scan3d.length.{name}.error_m"));
-            names.push(format!("scan3d.length.{name}.abs_error_m"));
-        }
+    for l in &spec.lengths {
+        names.push(format!("scan3d.length.{}.error_m", l.name));
+        names.push(format!("scan3d.length.{}.abs_error_m", l.name));
     }
     for method in ["pause", "carving", "pause_carving"] {
         let mut keys = vec!["sa", "sa_floor", "sa_structure", "pr"];
@@ -892,6 +887,274 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
         names.extend(keys.iter().map(|k| format!("scan3d.{method}.{k}")));
     }
     names
+}
+
+/// `[scan3d]`: `laser` (the vertical laser on the turntable), `horizontal` (the laser that
+/// watches for movers and, by default, localises), `pose_source` (default `line_icp`, the
+/// seed's) and the mapper's own keys ([`TurntableConfig`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scan3dSpec {
+    pub laser: String,
+    pub horizontal: String,
+    /// The joint the vertical laser rides on (resolved from the laser).
+    pub joint: String,
+    pub pose_source: Scan3dPose,
+    pub config: TurntableConfig,
+    /// Lengths to measure in the map against the world (`[[scan3d.length]]`; scoring).
+    pub lengths: Vec<MapLength>,
+    /// View planning, when no `stops` are given (`scan3d.planning.*`).
+    pub planning: futago_robot::navigation::views::ViewPlanningConfig,
+}
+
+/// A length of the building to measure in the 3D map, like seed 004's L1 and L2: from a
+/// point in free space (map frame, m) along a direction, the distance between the first
+/// surfaces on either side. The truth is cast in the world's static colliders.
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapLength {
+    /// Names the metrics `scan3d.length.NAME.*`: letters, digits, `_` and `-`.
+    pub name: String,
+    pub from: [f64; 3],
+    pub direction: [f64; 3],
+}
+
+/// Which pose places seed 004's scans: another node's or the truth, or the seed's own
+/// localisation on the horizontal laser (`line_icp`: odometry, then point-to-line ICP by
+/// Nelder–Mead, `scan3d.line_icp.*`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scan3dPose {
+    GroundTruth,
+    Odometry,
+    Localization,
+    Slam,
+    LineIcp,
+}
+
+/// Types the `[scan3d]` table, naming `scan3d.KEY` in errors (the lasers and the joint are
+/// checked against the scenario's in [`Scenario::load`]).
+pub fn scan3d_config(path: &Path, table: &toml::Table) -> Result<Scan3dSpec, SpecError> {
+    let mut rest = table.clone();
+    let laser = take_name(path, "scan3d", "laser", &mut rest)?.ok_or_else(|| {
+        SpecError::new(
+            path,
+            "scan3d.laser",
+            "expected the name of the laser on the turntable, e.g. laser = \"vertical\"",
+        )
+    })?;
+    let horizontal = take_name(path, "scan3d", "horizontal", &mut rest)?.ok_or_else(|| {
+        SpecError::new(
+            path,
+            "scan3d.horizontal",
+            "expected the name of the horizontal laser that watches for movers",
+        )
+    })?;
+    let pose_source = match rest.remove("pose_source") {
+        None => Scan3dPose::LineIcp,
+        Some(v) => Scan3dPose::deserialize(v.clone()).map_err(|_| {
+            SpecError::new(
+                path,
+                "scan3d.pose_source",
+                format!(
+                    "expected one of \"line_icp\", \"ground_truth\", \"odometry\", \"localization\", \"slam\"; found {v}"
+                ),
+            )
+        })?,
+    };
+    let lengths: Vec<MapLength> = match rest.remove("length") {
+        None => Vec::new(),
+        Some(v) => {
+            let mut t = toml::Table::new();
+            t.insert("length".into(), v);
+            #[derive(Deserialize)]
+            struct Lengths {
+                length: Vec<MapLength>,
+            }
+            typed_table::<Lengths>(path, "scan3d", t)?.length
+        }
+    };
+    for (i, l) in lengths.iter().enumerate() {
+        let key = |k: &str| format!("scan3d.length[{i}].{k}");
+        let ok_name = !l.name.is_empty()
+            && l.name.len() <= 64
+            && l.name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+        if !ok_name {
+            return Err(SpecError::new(
+                path,
+                key("name"),
+                format!(
+                    "expected 1-64 letters, digits, `_` or `-`; found {:?}",
+                    l.name
+                ),
+            ));
+        }
+        if lengths[..i].iter().any(|o| o.name == l.name) {
+            return Err(SpecError::new(
+                path,
+                key("name"),
+                format!("`{}` names two lengths", l.name),
+            ));
+        }
+        if !l.from.iter().all(|c| c.is_finite() && c.abs() <= 1e6) {
+            return Err(SpecError::new(
+                path,
+                key("from"),
+                format!("expected a point in the map frame, m; found {:?}", l.from),
+            ));
+        }
+        let n = l.direction.iter().map(|c| c * c).sum::<f64>().sqrt();
+        if !(n.is_finite() && n > 1e-9) {
+            return Err(SpecError::new(
+                path,
+                key("direction"),
+                format!("expected a non-zero vector; found {:?}", l.direction),
+            ));
+        }
+    }
+    let planning = match rest.remove("planning") {
+        None => Default::default(),
+        Some(v) => {
+            let mut t = toml::Table::new();
+            t.insert("planning".into(), v);
+            #[derive(Deserialize)]
+            struct Planning {
+                planning: futago_robot::navigation::views::ViewPlanningConfig,
+            }
+            typed_table::<Planning>(path, "scan3d", t)?.planning
+        }
+    };
+    planning
+        .validate("scan3d.planning")
+        .map_err(|(k, m)| SpecError::new(path, k, m))?;
+    let config: TurntableConfig = typed_table(path, "scan3d", rest)?;
+    config
+        .validate("scan3d")
+        .map_err(|(k, m)| SpecError::new(path, k, m))?;
+    Ok(Scan3dSpec {
+        laser,
+        horizontal,
+        joint: String::new(),
+        pose_source,
+        config,
+        lengths,
+        planning,
+    })
+}
+
+/// `[scan3d]`: seed 004's stop-and-scan 3D map from a laser on a turntable.
+pub struct Module;
+
+impl ModuleConfig for Module {
+    fn key(&self) -> Option<&'static str> {
+        Some("scan3d")
+    }
+
+    fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
+        let path = cx.path;
+        let mut m = scan3d_config(path, &cx.table("scan3d", table)?)?;
+        let names: Vec<&str> = cx.lidars.iter().map(|(c, _)| c.name.as_str()).collect();
+        let find = |key: &str, n: &str| {
+            cx.lidars.iter().find(|(c, _)| c.name == n).ok_or_else(|| {
+                SpecError::new(
+                    path,
+                    format!("scan3d.{key}"),
+                    format!("no laser is named `{n}`; the scenario's lasers are {names:?}"),
+                )
+            })
+        };
+        let (vertical, _) = find("laser", &m.laser)?;
+        let (horizontal, _) = find("horizontal", &m.horizontal)?;
+        let joint = vertical
+                    .joint
+                    .as_ref()
+                    .and_then(|j| cx.spec.joint.iter().find(|k| &k.name == j))
+                    .ok_or_else(|| {
+                        SpecError::new(
+                            path,
+                            "scan3d.laser",
+                            format!(
+                                "laser `{}` rides on no joint: the 3D scan turns it on a turntable ([[joint]] with mode = \"command\", and the laser's joint = NAME)",
+                                m.laser
+                            ),
+                        )
+                    })?;
+        if joint.mode != futago_sim::joint::JointMode::Command {
+            return Err(SpecError::new(
+                path,
+                "scan3d.laser",
+                format!(
+                    "joint `{}` must be mode = \"command\": the mapper turns the table itself, one sweep per view",
+                    joint.name
+                ),
+            ));
+        }
+        if horizontal.joint.is_some() {
+            return Err(SpecError::new(
+                path,
+                "scan3d.horizontal",
+                format!(
+                    "laser `{}` rides on a joint; the mover detector needs one fixed to the base",
+                    m.horizontal
+                ),
+            ));
+        }
+        if m.pose_source == Scan3dPose::Slam && cx.spec.module("slam").is_none() {
+            return Err(SpecError::new(
+                path,
+                "scan3d.pose_source",
+                "placing the scans by SLAM's pose needs a [slam] table",
+            ));
+        }
+        if m.pose_source == Scan3dPose::Localization && cx.spec.module("localization").is_none() {
+            return Err(SpecError::new(
+                path,
+                "scan3d.pose_source",
+                "placing the scans by the localiser's pose needs a [localization] table",
+            ));
+        }
+        m.joint = joint.name.clone();
+        Ok(Box::new(m))
+    }
+
+    fn effective(&self, spec: &(dyn Any + Send + Sync)) -> Option<toml::Table> {
+        let r = spec.downcast_ref::<Scan3dSpec>()?;
+        let mut m = toml::Table::try_from(&r.config).unwrap_or_default();
+        m.insert("laser".into(), toml::Value::String(r.laser.clone()));
+        m.insert(
+            "horizontal".into(),
+            toml::Value::String(r.horizontal.clone()),
+        );
+        if let Ok(v) = toml::Value::try_from(r.pose_source) {
+            m.insert("pose_source".into(), v);
+        }
+        if let Ok(v) = toml::Value::try_from(&r.planning) {
+            m.insert("planning".into(), v);
+        }
+        if !r.lengths.is_empty()
+            && let Ok(v) = toml::Value::try_from(&r.lengths)
+        {
+            m.insert("length".into(), v);
+        }
+        Some(m)
+    }
+
+    fn metric_names(
+        &self,
+        spec: &ScenarioSpec,
+        own: Option<&(dyn Any + Send + Sync)>,
+    ) -> Vec<String> {
+        own.and_then(|o| o.downcast_ref::<Scan3dSpec>())
+            .map(|m| metric_names(spec, m))
+            .unwrap_or_default()
+    }
+}
+
+impl StackModule for Module {
+    fn build(&self, s: &Scenario, seed: u64, _out: Option<&Path>) -> Nodes {
+        boxed(node(s, seed))
+    }
 }
 
 #[cfg(test)]

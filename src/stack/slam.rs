@@ -6,15 +6,19 @@
 //! (`slam.map.people_pollution`, see `ground_truth::pollution`).
 
 use super::{Bus, Node, Report, Streams, Truth, tum_line};
+use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::pollution::PeoplePaths;
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
 use anyhow::{Context, Result};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2, Time, wrap_angle};
 use futago_robot::mapping::slam::Slam;
+use futago_robot::mapping::slam::SlamConfig;
 use futago_robot::tracking::exclusion::{Exclusion, ExclusionConfig};
+use futago_sim::config::SpecError;
 use serde_json::json;
+use std::any::Any;
 use std::path::Path;
 
 /// SLAM's trajectory (TUM, every scan of its laser, as optimised at the end).
@@ -45,7 +49,7 @@ pub struct SlamNode {
 
 /// SLAM when the scenario has `[slam]`.
 pub fn node(s: &Scenario) -> Result<Option<SlamNode>> {
-    let Some(spec) = &s.slam else {
+    let Some(spec) = s.module::<SlamSpec>() else {
         return Ok(None);
     };
     let (cfg, _) = super::laser(s, spec.laser.as_deref()).context("slam.laser")?;
@@ -66,10 +70,7 @@ pub fn node(s: &Scenario) -> Result<Option<SlamNode>> {
 }
 
 /// `slam.*` trajectory metrics and `slam.map.*` (the map against the world's grid).
-pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    if s.slam.is_none() {
-        return Vec::new();
-    }
+fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     let mut names = crate::ground_truth::trajectory_metric_names("slam");
     names.extend(crate::ground_truth::map_metric_names("slam.map"));
     if s.has_people() {
@@ -216,5 +217,65 @@ impl Node for SlamNode {
             }
         }
         Ok(m)
+    }
+}
+
+/// `[slam]`: `laser` (the name of the laser it maps with) and SLAM's own keys.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlamSpec {
+    pub laser: Option<String>,
+    pub config: SlamConfig,
+}
+
+/// `[slam]`: laser SLAM in the loop, from its laser's scans.
+pub struct Module;
+
+impl ModuleConfig for Module {
+    fn key(&self) -> Option<&'static str> {
+        Some("slam")
+    }
+
+    /// `laser` and SLAM's keys ([`SlamConfig`]), naming `slam.KEY` in errors.
+    fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
+        let mut rest = cx.table("slam", table)?;
+        let laser = cx.take_name("slam", "laser", &mut rest)?;
+        let config: SlamConfig = cx.typed("slam", rest)?;
+        config.validate().map_err(|(k, m)| cx.error(k, m))?;
+        if cx.lidars.is_empty() {
+            return Err(cx.error(
+                "slam",
+                "laser SLAM needs a [[lidar]]; the scenario has none",
+            ));
+        }
+        let laser = Some(cx.laser("slam", &laser)?);
+        Ok(Box::new(SlamSpec { laser, config }))
+    }
+
+    fn effective(&self, spec: &(dyn Any + Send + Sync)) -> Option<toml::Table> {
+        let s = spec.downcast_ref::<SlamSpec>()?;
+        let mut m = toml::Table::try_from(s.config).unwrap_or_default();
+        m.extend(
+            s.laser
+                .clone()
+                .map(|v| ("laser".to_string(), toml::Value::String(v))),
+        );
+        Some(m)
+    }
+
+    fn metric_names(
+        &self,
+        spec: &ScenarioSpec,
+        own: Option<&(dyn Any + Send + Sync)>,
+    ) -> Vec<String> {
+        if own.is_none() {
+            return Vec::new();
+        }
+        metric_names(spec)
+    }
+}
+
+impl StackModule for Module {
+    fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> Nodes {
+        boxed(node(s))
     }
 }

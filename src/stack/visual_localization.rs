@@ -21,8 +21,9 @@
 //! gated by the comparisons that matching makes, which are what its time is spent on.
 
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
+use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
 use anyhow::{Context, Result};
 use futago_msgs::landmarks::LandmarkFile;
 use futago_msgs::{Duration, Pose2, Time};
@@ -31,8 +32,10 @@ use futago_robot::localization::landmarks::{
 };
 use futago_robot::perception::features::grey;
 use futago_robot::perception::sift::{self, SiftConfig};
+use futago_sim::config::SpecError;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
+use std::any::Any;
 use std::path::{Path, PathBuf};
 
 /// The driven estimate of the robot's pose, one TUM line a frame.
@@ -165,7 +168,7 @@ pub fn map_path(scenario: &Path, spec: &VisualLocalizationSpec) -> PathBuf {
 
 /// The node when the scenario has `[visual_localization]`.
 pub fn node(s: &Scenario) -> Result<Option<VisualLocalizationNode>> {
-    let Some(spec) = &s.spec.visual_localization else {
+    let Some(spec) = s.module::<VisualLocalizationSpec>() else {
         return Ok(None);
     };
     let name = spec.camera.clone().unwrap_or_default();
@@ -469,10 +472,7 @@ impl Node for VisualLocalizationNode {
 }
 
 /// The metrics a run with `[visual_localization]` produces.
-pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    if s.visual_localization.is_none() {
-        return Vec::new();
-    }
+fn metric_names(v: &VisualLocalizationSpec) -> Vec<String> {
     let mut out = Vec::new();
     for l in LOCALISERS {
         for k in [
@@ -489,12 +489,101 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     out.push("visual_localization.delegates.matching_work_ratio".into());
     out.push("visual_localization.delegates.error_ratio".into());
     out.push("visual_localization.bumps".into());
-    if s.visual_localization
-        .as_ref()
-        .is_some_and(|v| !v.route.is_empty())
-    {
+    if !v.route.is_empty() {
         out.push("visual_localization.path_error.mean_m".into());
         out.push("visual_localization.path_error.max_m".into());
     }
     out
+}
+
+/// `[visual_localization]`: seed 001's monocular localisation in a landmark map.
+pub struct Module;
+
+impl ModuleConfig for Module {
+    fn key(&self) -> Option<&'static str> {
+        Some("visual_localization")
+    }
+
+    fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
+        let key = "visual_localization";
+        let mut v: VisualLocalizationSpec = cx.typed(key, cx.table(key, table)?)?;
+        if cx.spec.module("localization").is_some() {
+            return Err(cx.error(
+                key,
+                "a scenario runs one localiser on `pose/localization`: [localization] or [visual_localization]",
+            ));
+        }
+        let path = cx.path;
+        let names: Vec<&str> = cx.cameras.iter().map(|c| c.name.as_str()).collect();
+        let name = match &v.camera {
+            Some(n) if names.contains(&n.as_str()) => n.clone(),
+            None if names.len() == 1 => names[0].to_string(),
+            _ => {
+                return Err(SpecError::new(
+                    path,
+                    "visual_localization.camera",
+                    format!("name one of the scenario's cameras {names:?}"),
+                ));
+            }
+        };
+        let cam = cx.cameras.iter().find(|c| c.name == name);
+        if cam.is_some_and(|c| c.joint.is_some() || c.carrier.is_some()) {
+            return Err(SpecError::new(
+                path,
+                "visual_localization.camera",
+                format!("camera `{name}` must be fixed to the robot's base"),
+            ));
+        }
+        let levelled = cx
+            .spec
+            .camera
+            .iter()
+            .find(|c| c.name == name)
+            .is_some_and(|c| c.rpy_deg[0] == 0.0 && c.rpy_deg[1] == 0.0);
+        if !levelled {
+            return Err(SpecError::new(
+                path,
+                "visual_localization.camera",
+                format!("camera `{name}` must be levelled (roll and pitch 0): the state is planar"),
+            ));
+        }
+        v.camera = Some(name);
+        v.validate().map_err(|(k, m)| SpecError::new(path, k, m))?;
+        let file = map_path(path, &v);
+        if !file.is_file() {
+            return Err(SpecError::new(
+                path,
+                "visual_localization.map",
+                format!(
+                    "{}: no such file (a `landmarks.json` a [visual_map] run wrote)",
+                    file.display()
+                ),
+            ));
+        }
+        // Read now, so that a bad map is refused before anything runs.
+        futago_msgs::landmarks::LandmarkFile::read(&file)
+            .map_err(|e| SpecError::new(path, "visual_localization.map", e.to_string()))?;
+        v.map = file;
+        Ok(Box::new(v))
+    }
+
+    fn effective(&self, spec: &(dyn Any + Send + Sync)) -> Option<toml::Table> {
+        toml::Table::try_from(spec.downcast_ref::<VisualLocalizationSpec>()?).ok()
+    }
+
+    fn metric_names(
+        &self,
+        _spec: &ScenarioSpec,
+        own: Option<&(dyn Any + Send + Sync)>,
+    ) -> Vec<String> {
+        own.and_then(|o| o.downcast_ref::<VisualLocalizationSpec>())
+            .map(metric_names)
+            .unwrap_or_default()
+    }
+}
+
+impl StackModule for Module {
+    fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> Nodes {
+        boxed(node(s))
+    }
 }

@@ -19,8 +19,9 @@
 //! - the mapping pass's pose error per frame (the seed's own ground truth for localisation).
 
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
+use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, Pose2, Pose3, Time};
 use futago_robot::localization::landmarks::Camera;
@@ -28,9 +29,11 @@ use futago_robot::mapping::landmark_map::{LandmarkMapper, MappingConfig, Mapping
 use futago_robot::perception::features::grey;
 use futago_robot::perception::sift::{self, Keypoint, SiftConfig};
 use futago_robot::perception::trinocular::{self, Rig, StereoConfig};
+use futago_sim::config::SpecError;
 use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
+use std::any::Any;
 use std::path::Path;
 
 /// The map file a run writes.
@@ -159,7 +162,7 @@ pub fn check_rig(
 
 /// The node when the scenario has `[visual_map]`.
 pub fn node(s: &Scenario) -> Result<Option<VisualMapNode>> {
-    let Some(spec) = &s.spec.visual_map else {
+    let Some(spec) = s.module::<VisualMapSpec>() else {
         return Ok(None);
     };
     let baseline = check_rig(&spec.cameras, &s.spec, &s.cameras)
@@ -497,10 +500,7 @@ impl Node for VisualMapNode {
 }
 
 /// The metrics a run with `[visual_map]` produces.
-pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    if s.visual_map.is_none() {
-        return Vec::new();
-    }
+fn metric_names() -> Vec<String> {
     [
         "landmarks",
         "stereo.false_rate",
@@ -526,5 +526,44 @@ impl VisualMapSpec {
         self.sift.validate("visual_map.sift")?;
         self.stereo.validate("visual_map.stereo")?;
         self.mapping.validate("visual_map.mapping")
+    }
+}
+
+/// `[visual_map]`: seed 001's visual landmark map from a trinocular camera.
+pub struct Module;
+
+impl ModuleConfig for Module {
+    fn key(&self) -> Option<&'static str> {
+        Some("visual_map")
+    }
+
+    fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
+        let key = "visual_map";
+        let v: VisualMapSpec = cx.typed(key, cx.table(key, table)?)?;
+        check_rig(&v.cameras, cx.spec, cx.cameras)
+            .map_err(|m| cx.error("visual_map.cameras", m))?;
+        v.validate().map_err(|(k, m)| cx.error(k, m))?;
+        Ok(Box::new(v))
+    }
+
+    fn effective(&self, spec: &(dyn Any + Send + Sync)) -> Option<toml::Table> {
+        toml::Table::try_from(spec.downcast_ref::<VisualMapSpec>()?).ok()
+    }
+
+    fn metric_names(
+        &self,
+        _spec: &ScenarioSpec,
+        own: Option<&(dyn Any + Send + Sync)>,
+    ) -> Vec<String> {
+        if own.is_none() {
+            return Vec::new();
+        }
+        metric_names()
+    }
+}
+
+impl StackModule for Module {
+    fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> Nodes {
+        boxed(node(s))
     }
 }
