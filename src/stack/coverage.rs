@@ -746,20 +746,7 @@ impl Node for CoverageNode {
 }
 
 /// The coverage planner and its scorer.
-pub struct Module;
-
-impl crate::scenario::ModuleConfig for Module {
-    fn metric_names(
-        &self,
-        spec: &ScenarioSpec,
-        _own: Option<&(dyn std::any::Any + Send + Sync)>,
-    ) -> Vec<String> {
-        metric_names(spec)
-    }
-}
-
-impl super::StackModule for Module {
-    fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> super::Nodes {
-        super::boxed(node(s))
-    }
-}
+pub const MODULE: super::Plain = super::Plain {
+    metric_names,
+    build: |s, _, _| super::boxed(node(s)),
+};

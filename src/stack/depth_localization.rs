@@ -815,7 +815,7 @@ impl ModuleConfig for Module {
         spec: &ScenarioSpec,
         own: Option<&(dyn Any + Send + Sync)>,
     ) -> Vec<String> {
-        own.and_then(|o| o.downcast_ref::<DepthLocalizationSpec>())
+        super::own::<DepthLocalizationSpec>(own)
             .map(|d| metric_names(spec, d))
             .unwrap_or_default()
     }

@@ -337,20 +337,7 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
 }
 
 /// The driver: the controller that publishes the drive commands.
-pub struct Module;
-
-impl crate::scenario::ModuleConfig for Module {
-    fn metric_names(
-        &self,
-        spec: &ScenarioSpec,
-        _own: Option<&(dyn std::any::Any + Send + Sync)>,
-    ) -> Vec<String> {
-        metric_names(spec)
-    }
-}
-
-impl super::StackModule for Module {
-    fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> super::Nodes {
-        Ok(vec![Box::new(DriverNode::new(s)?) as Box<dyn Node>])
-    }
-}
+pub const MODULE: super::Plain = super::Plain {
+    metric_names,
+    build: |s, _, _| Ok(vec![Box::new(DriverNode::new(s)?) as Box<dyn Node>]),
+};

@@ -297,7 +297,7 @@ impl ModuleConfig for Module {
         spec: &ScenarioSpec,
         own: Option<&(dyn Any + Send + Sync)>,
     ) -> Vec<String> {
-        own.and_then(|o| o.downcast_ref::<LocalizationSpec>())
+        super::own::<LocalizationSpec>(own)
             .map(|l| metric_names(spec, l))
             .unwrap_or_default()
     }

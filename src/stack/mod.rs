@@ -20,8 +20,8 @@
 //!
 //! Within a phase, nodes run in the order of [`build`]. Nothing depends on threads or the wall
 //! clock, so a scenario and a seed give the same bytes. A new module is a new file here with
-//! its node, a line in [`build`], its typed config in the scenario, and its scorer; the loop
-//! does not change.
+//! its node and its `Module` ([`StackModule`], [`ModuleConfig`]: its table, nodes and metric
+//! names), and one line in [`MODULES`]; the loader and the loop do not change.
 
 pub mod bus;
 pub mod coverage;
@@ -203,6 +203,34 @@ pub trait StackModule: ModuleConfig {
     fn build(&self, s: &Scenario, seed: u64, out: Option<&Path>) -> Nodes;
 }
 
+/// A module without a table of its own (it reads the scenario's sensors and shared tables):
+/// its metric names and its nodes.
+pub struct Plain {
+    pub metric_names: fn(&ScenarioSpec) -> Vec<String>,
+    pub build: fn(&Scenario, u64, Option<&Path>) -> Nodes,
+}
+
+impl ModuleConfig for Plain {
+    fn metric_names(
+        &self,
+        spec: &ScenarioSpec,
+        _own: Option<&(dyn std::any::Any + Send + Sync)>,
+    ) -> Vec<String> {
+        (self.metric_names)(spec)
+    }
+}
+
+impl StackModule for Plain {
+    fn build(&self, s: &Scenario, seed: u64, out: Option<&Path>) -> Nodes {
+        (self.build)(s, seed, out)
+    }
+}
+
+/// The resolved spec `own` of a module, as its type.
+pub fn own<T: std::any::Any>(own: Option<&(dyn std::any::Any + Send + Sync)>) -> Option<&T> {
+    own?.downcast_ref::<T>()
+}
+
 /// One node, or none.
 pub(crate) fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
     Ok(n?
@@ -218,10 +246,10 @@ pub(crate) fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
 /// mapper and monocular localiser. A new module is its own file and one line here; the
 /// loader, the loop and the metric checks read this table.
 pub static MODULES: &[&dyn StackModule] = &[
-    &record::Module,
-    &people::Module,
-    &coverage::Module,
-    &driver::Module,
+    &record::MODULE,
+    &people::MODULE,
+    &coverage::MODULE,
+    &driver::MODULE,
     &localization::Module,
     &depth_localization::Module,
     &slam::Module,

@@ -719,20 +719,7 @@ pub fn default_model() -> Result<AdaBoost> {
 }
 
 /// People detection and tracking, and the people's truth and safety scores.
-pub struct Module;
-
-impl crate::scenario::ModuleConfig for Module {
-    fn metric_names(
-        &self,
-        spec: &ScenarioSpec,
-        _own: Option<&(dyn std::any::Any + Send + Sync)>,
-    ) -> Vec<String> {
-        metric_names(spec)
-    }
-}
-
-impl super::StackModule for Module {
-    fn build(&self, s: &Scenario, _seed: u64, out: Option<&Path>) -> super::Nodes {
-        super::boxed(node(s, out))
-    }
-}
+pub const MODULE: super::Plain = super::Plain {
+    metric_names,
+    build: |s, _, out| super::boxed(node(s, out)),
+};

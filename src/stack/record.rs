@@ -439,20 +439,7 @@ impl Node for RgbdDatasetRecorder {
 }
 
 /// The recorders of a run's files (ground truth, odometry, the sensors' logs) and the odometry's scores.
-pub struct Module;
-
-impl crate::scenario::ModuleConfig for Module {
-    fn metric_names(
-        &self,
-        spec: &ScenarioSpec,
-        _own: Option<&(dyn std::any::Any + Send + Sync)>,
-    ) -> Vec<String> {
-        metric_names(spec)
-    }
-}
-
-impl super::StackModule for Module {
-    fn build(&self, s: &Scenario, _seed: u64, out: Option<&Path>) -> super::Nodes {
-        out.map_or(Ok(Vec::new()), |dir| recorders(s, dir))
-    }
-}
+pub const MODULE: super::Plain = super::Plain {
+    metric_names,
+    build: |s, _, out| out.map_or(Ok(Vec::new()), |dir| recorders(s, dir)),
+};

@@ -684,7 +684,7 @@ impl ModuleConfig for Module {
         spec: &ScenarioSpec,
         own: Option<&(dyn Any + Send + Sync)>,
     ) -> Vec<String> {
-        own.and_then(|o| o.downcast_ref::<RgbdMapSpec>())
+        super::own::<RgbdMapSpec>(own)
             .map(|m| metric_names(spec, m))
             .unwrap_or_default()
     }

@@ -1145,7 +1145,7 @@ impl ModuleConfig for Module {
         spec: &ScenarioSpec,
         own: Option<&(dyn Any + Send + Sync)>,
     ) -> Vec<String> {
-        own.and_then(|o| o.downcast_ref::<Scan3dSpec>())
+        super::own::<Scan3dSpec>(own)
             .map(|m| metric_names(spec, m))
             .unwrap_or_default()
     }

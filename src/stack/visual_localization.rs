@@ -576,7 +576,7 @@ impl ModuleConfig for Module {
         _spec: &ScenarioSpec,
         own: Option<&(dyn Any + Send + Sync)>,
     ) -> Vec<String> {
-        own.and_then(|o| o.downcast_ref::<VisualLocalizationSpec>())
+        super::own::<VisualLocalizationSpec>(own)
             .map(metric_names)
             .unwrap_or_default()
     }
