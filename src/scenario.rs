@@ -745,8 +745,19 @@ impl Scenario {
                 blame(err, overlays)
             })?
         };
-        let mut s = Scenario::from_spec_with(path, spec, modules, &mut World::load)
-            .map_err(|e| blame(e, overlays))?;
+        // The modules type their tables after parsing: their errors are placed on the
+        // file's lines here.
+        let tables: Vec<String> = spec.modules.keys().cloned().collect();
+        let mut s =
+            Scenario::from_spec_with(path, spec, modules, &mut World::load).map_err(|mut e| {
+                let table = e.key.split(['.', '[']).next().unwrap_or("");
+                if e.line.is_none() && overlays.is_empty() && tables.iter().any(|t| t == table) {
+                    e.line = std::fs::read_to_string(path)
+                        .ok()
+                        .and_then(|text| futago_sim::config::line_of_key(&text, &e.key));
+                }
+                blame(e, overlays)
+            })?;
         s.config = config;
         s.overlays = overlays.to_vec();
         Ok(s)

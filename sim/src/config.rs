@@ -78,6 +78,37 @@ pub fn parse_toml<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T, Spe
     })
 }
 
+/// The line (1-based) of the dotted key `key` (`localization.mcl.particles`,
+/// `lidar[0].name`) in the TOML text `text`: where its deepest part that the text holds is
+/// written. For errors found after parsing, when checks of typed values name a key.
+pub fn line_of_key(text: &str, key: &str) -> Option<usize> {
+    use toml::de::{DeTable, DeValue};
+    let root = DeTable::parse(text).ok()?;
+    let line = |offset: usize| text[..offset.min(text.len())].matches('\n').count() + 1;
+    let mut table = root.get_ref();
+    let mut found = None;
+    for part in key.split('.') {
+        let (name, indices) = part.split_once('[').unwrap_or((part, ""));
+        let (k, mut v) = table.iter().find(|(k, _)| k.get_ref().as_ref() == name)?;
+        found = Some(line(k.span().start));
+        for index in indices.split('[').filter(|i| !i.is_empty()) {
+            let i: usize = index.trim_end_matches(']').parse().ok()?;
+            match v.get_ref() {
+                DeValue::Array(a) => {
+                    v = a.get(i)?;
+                    found = Some(line(v.span().start));
+                }
+                _ => return found,
+            }
+        }
+        match v.get_ref() {
+            DeValue::Table(t) => table = t,
+            _ => return found,
+        }
+    }
+    found
+}
+
 /// Reads and parses a TOML file into `T`.
 pub fn load_toml<T: DeserializeOwned>(path: &Path) -> Result<T, SpecError> {
     let text = read_text(path)?;
@@ -177,6 +208,19 @@ pub fn check_name(file: &Path, key: &str, name: &str) -> Result<(), SpecError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn keys_are_found_on_their_lines() {
+        let text = "name = \"a\"\n\n[localization]\nrate = 4.0\n\n[localization.mcl]\nparticles = 5\n\n[[lidar]]\nname = \"front\"\n\n[[lidar]]\nname = \"back\"\nxyz = [0.0, 0.0, 0.2]\n";
+        assert_eq!(line_of_key(text, "name"), Some(1));
+        assert_eq!(line_of_key(text, "localization.rate"), Some(4));
+        assert_eq!(line_of_key(text, "localization.mcl.particles"), Some(7));
+        assert_eq!(line_of_key(text, "lidar[1].name"), Some(13));
+        // A key the text does not hold is placed at its deepest part that it does.
+        assert_eq!(line_of_key(text, "localization.mcl.model"), Some(6));
+        assert_eq!(line_of_key(text, "slam.method"), None);
+        assert_eq!(line_of_key("x = [", "x"), None);
+    }
     use serde::Deserialize;
 
     #[derive(Deserialize, serde::Serialize, Debug)]
