@@ -89,17 +89,24 @@ pub fn line_of_key(text: &str, key: &str) -> Option<usize> {
     let mut found = None;
     for part in key.split('.') {
         let (name, indices) = part.split_once('[').unwrap_or((part, ""));
-        let (k, mut v) = table.iter().find(|(k, _)| k.get_ref().as_ref() == name)?;
+        let Some((k, mut v)) = table.iter().find(|(k, _)| k.get_ref().as_ref() == name) else {
+            return found;
+        };
         found = Some(line(k.span().start));
         for index in indices.split('[').filter(|i| !i.is_empty()) {
-            let i: usize = index.trim_end_matches(']').parse().ok()?;
-            match v.get_ref() {
-                DeValue::Array(a) => {
-                    v = a.get(i)?;
-                    found = Some(line(v.span().start));
-                }
-                _ => return found,
-            }
+            let item = index
+                .trim_end_matches(']')
+                .parse::<usize>()
+                .ok()
+                .and_then(|i| match v.get_ref() {
+                    DeValue::Array(a) => a.get(i),
+                    _ => None,
+                });
+            let Some(item) = item else {
+                return found;
+            };
+            v = item;
+            found = Some(line(v.span().start));
         }
         match v.get_ref() {
             DeValue::Table(t) => table = t,
