@@ -216,6 +216,43 @@ pub fn print(s: &Value, log: &Path, out: &Path) {
     }
 }
 
+/// The people tracked in a replay: their scores in the summary's `people`, and their tracks
+/// written as `people_tracks.txt` into `tmp`.
+fn write_people(
+    people: &PeopleReplay,
+    log: &carmen::Log,
+    log_path: &Path,
+    summary: &mut Value,
+    tmp: &Path,
+) -> Result<()> {
+    let PeopleReplay {
+        mot,
+        detection,
+        tracks,
+    } = people;
+    summary["people"] = json!({
+        "annotations": log.people.len(),
+        "gate_m": MOT_GATE,
+        "all_frames": mot[0].summary(),
+        "annotated_frames": mot[1].summary(),
+        "detection_on_annotated_frames": detection,
+    });
+    let mut text = format!(
+        "# people tracked by futago on {}: timestamp id x y ({} frame, m)\n",
+        log_path.display(),
+        if log.odometry_absent {
+            "the SLAM map's"
+        } else {
+            "odometry"
+        }
+    );
+    for (t, id, p) in tracks {
+        text += &format!("{:.6} {id} {:.4} {:.4}\n", t.secs(), p[0], p[1]);
+    }
+    std::fs::write(tmp.join("people_tracks.txt"), text).context("writing people_tracks.txt")?;
+    Ok(())
+}
+
 /// Runs the laser SLAM over `log`, writes `trajectory.txt`, `odometry.txt` (TUM),
 /// `map.pgm`/`map.yaml` and `summary.json` into `out`, and scores SLAM and raw odometry
 /// against `relations` when given. A damaged log gives the results of what it held (unless
@@ -316,33 +353,8 @@ pub fn replay(
             "skipped_scans": slam.skipped(),
             "config": format!("{config:?}"),
         });
-        if let Some(PeopleReplay {
-            mot,
-            detection,
-            tracks,
-        }) = &people
-        {
-            summary["people"] = json!({
-                "annotations": log.people.len(),
-                "gate_m": MOT_GATE,
-                "all_frames": mot[0].summary(),
-                "annotated_frames": mot[1].summary(),
-                "detection_on_annotated_frames": detection,
-            });
-            let mut text = format!(
-                "# people tracked by futago on {}: timestamp id x y ({} frame, m)\n",
-                log_path.display(),
-                if log.odometry_absent {
-                    "the SLAM map's"
-                } else {
-                    "odometry"
-                }
-            );
-            for (t, id, p) in tracks {
-                text += &format!("{:.6} {id} {:.4} {:.4}\n", t.secs(), p[0], p[1]);
-            }
-            std::fs::write(tmp.join("people_tracks.txt"), text)
-                .context("writing people_tracks.txt")?;
+        if let Some(p) = &people {
+            write_people(p, &log, log_path, &mut summary, tmp)?;
         }
         if let Some(rels) = &rels {
             let by_span: Vec<Value> = relations::by_span(rels)

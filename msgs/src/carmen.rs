@@ -316,6 +316,91 @@ pub fn read(text: &str) -> Result<Log, ReadError> {
     )
 }
 
+/// The fields of a FLASER record after its name: a 180° scan and the odometry pose.
+fn flaser(f: &mut Fields) -> Result<Record, ReadError> {
+    let n = f.count("number of readings")?;
+    let ranges = f.ranges(n, FLASER_NO_RETURN)?;
+    let _corrected = f.pose("pose")?;
+    let odometry = f.pose("odometry pose")?;
+    let t = f.stamp()?;
+    let inc = if n > 1 {
+        std::f64::consts::PI / (n - 1) as f64
+    } else {
+        0.0
+    };
+    Ok(Record::Scan(
+        t,
+        LogScan {
+            scan: LaserScan {
+                frame: "front".into(),
+                stamp: Time::from_secs(t),
+                angle_min: -std::f64::consts::FRAC_PI_2,
+                angle_increment: inc,
+                time_increment: 0.0,
+                range_min: 0.0,
+                range_max: FLASER_NO_RETURN as f64,
+                ranges,
+            },
+            logged: Time::from_secs(t),
+            odometry,
+            mount: Pose2::IDENTITY,
+        },
+    ))
+}
+
+/// The fields of a ROBOTLASER1 or ROBOTLASER2 record (`kind`) after its name: a scan with its
+/// geometry, the laser's and the robot's poses.
+fn robot_laser(f: &mut Fields, kind: &str) -> Result<Record, ReadError> {
+    let _laser_type = f.num("laser type")?;
+    let start = f.num("start angle")?;
+    let _fov = f.num("field of view")?;
+    let inc = f.num("angular resolution")?;
+    let max = f.num("maximum range")?;
+    let _accuracy = f.num("accuracy")?;
+    let _remission_mode = f.num("remission mode")?;
+    let n = f.count("number of readings")?;
+    let ranges = f.ranges(n, max as f32)?;
+    let m = f.count("number of remissions")?;
+    for _ in 0..m {
+        f.num("remission")?;
+    }
+    let laser = f.pose("laser pose")?;
+    let robot = f.pose("robot pose")?;
+    for what in [
+        "tv",
+        "rv",
+        "forward safety distance",
+        "side safety distance",
+        "turn axis",
+    ] {
+        f.num(what)?;
+    }
+    let t = f.stamp()?;
+    Ok(Record::Scan(
+        t,
+        LogScan {
+            scan: LaserScan {
+                frame: if kind == "ROBOTLASER1" {
+                    "front"
+                } else {
+                    "rear"
+                }
+                .into(),
+                stamp: Time::from_secs(t),
+                angle_min: start,
+                angle_increment: inc,
+                time_increment: 0.0,
+                range_min: 0.0,
+                range_max: max,
+                ranges,
+            },
+            logged: Time::from_secs(t),
+            odometry: robot,
+            mount: robot.between(&laser),
+        },
+    ))
+}
+
 /// [`read`], or with `strict` off, a malformed record skipped and recorded in
 /// [`Log::damage`] (its line, what was wrong, the stamps read around it) instead of an error.
 pub fn read_with(text: &str, o: &ReadOptions) -> Result<Log, ReadError> {
@@ -338,86 +423,8 @@ pub fn read_with(text: &str, o: &ReadOptions) -> Result<Log, ReadError> {
         };
         let kind = f.words[0];
         let parsed: Result<Record, ReadError> = match kind {
-            "FLASER" => (|| {
-                let n = f.count("number of readings")?;
-                let ranges = f.ranges(n, FLASER_NO_RETURN)?;
-                let _corrected = f.pose("pose")?;
-                let odometry = f.pose("odometry pose")?;
-                let t = f.stamp()?;
-                let inc = if n > 1 {
-                    std::f64::consts::PI / (n - 1) as f64
-                } else {
-                    0.0
-                };
-                Ok(Record::Scan(
-                    t,
-                    LogScan {
-                        scan: LaserScan {
-                            frame: "front".into(),
-                            stamp: Time::from_secs(t),
-                            angle_min: -std::f64::consts::FRAC_PI_2,
-                            angle_increment: inc,
-                            time_increment: 0.0,
-                            range_min: 0.0,
-                            range_max: FLASER_NO_RETURN as f64,
-                            ranges,
-                        },
-                        logged: Time::from_secs(t),
-                        odometry,
-                        mount: Pose2::IDENTITY,
-                    },
-                ))
-            })(),
-            "ROBOTLASER1" | "ROBOTLASER2" => (|| {
-                let _laser_type = f.num("laser type")?;
-                let start = f.num("start angle")?;
-                let _fov = f.num("field of view")?;
-                let inc = f.num("angular resolution")?;
-                let max = f.num("maximum range")?;
-                let _accuracy = f.num("accuracy")?;
-                let _remission_mode = f.num("remission mode")?;
-                let n = f.count("number of readings")?;
-                let ranges = f.ranges(n, max as f32)?;
-                let m = f.count("number of remissions")?;
-                for _ in 0..m {
-                    f.num("remission")?;
-                }
-                let laser = f.pose("laser pose")?;
-                let robot = f.pose("robot pose")?;
-                for what in [
-                    "tv",
-                    "rv",
-                    "forward safety distance",
-                    "side safety distance",
-                    "turn axis",
-                ] {
-                    f.num(what)?;
-                }
-                let t = f.stamp()?;
-                Ok(Record::Scan(
-                    t,
-                    LogScan {
-                        scan: LaserScan {
-                            frame: if kind == "ROBOTLASER1" {
-                                "front"
-                            } else {
-                                "rear"
-                            }
-                            .into(),
-                            stamp: Time::from_secs(t),
-                            angle_min: start,
-                            angle_increment: inc,
-                            time_increment: 0.0,
-                            range_min: 0.0,
-                            range_max: max,
-                            ranges,
-                        },
-                        logged: Time::from_secs(t),
-                        odometry: robot,
-                        mount: robot.between(&laser),
-                    },
-                ))
-            })(),
+            "FLASER" => flaser(&mut f),
+            "ROBOTLASER1" | "ROBOTLASER2" => robot_laser(&mut f, kind),
             "ODOM" => (|| {
                 let pose = f.pose("odometry pose")?;
                 for what in ["tv", "rv", "accel"] {

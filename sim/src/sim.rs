@@ -150,6 +150,58 @@ const PEOPLE_OBSTACLE_HEIGHT: f32 = 0.5;
 /// Robot body shape: a prism of this many sides (the render mesh uses the same vertices).
 const ROBOT_SEGMENTS: u32 = 32;
 
+/// Inserts the robot at `start`: a prism of its radius and height on its clearance, planar
+/// (z, roll and pitch locked) and moved by its wheels, not by gravity. Gives its body, its
+/// collider and its yaw inertia, kg m².
+fn insert_robot(
+    p: &mut PhysicsWorld,
+    robot: &CreateConfig,
+    start: Pose2,
+) -> (RigidBodyHandle, ColliderHandle, f64) {
+    let m = robot.mass as f32;
+    let r = robot.radius as f32;
+    let yaw_inertia = 0.5 * robot.mass * robot.radius * robot.radius;
+    let body = RigidBodyBuilder::dynamic()
+        .pose(Pose::from_parts(
+            Vec3::new(start.x as f32, start.y as f32, 0.0),
+            Quat::from_rotation_z(start.theta as f32),
+        ))
+        .gravity_scale(0.0)
+        .locked_axes(
+            LockedAxes::TRANSLATION_LOCKED_Z
+                | LockedAxes::ROTATION_LOCKED_X
+                | LockedAxes::ROTATION_LOCKED_Y,
+        )
+        .additional_mass_properties(MassProperties::new(
+            Vec3::ZERO,
+            m,
+            Vec3::new(
+                yaw_inertia as f32 / 2.0,
+                yaw_inertia as f32 / 2.0,
+                yaw_inertia as f32,
+            ),
+        ))
+        .build();
+    let robot_body = p.bodies.insert(body);
+    let hh = (robot.height / 2.0) as f32;
+    let hull = SharedShape::convex_hull(&TriMesh::prism_vertices(r, hh, ROBOT_SEGMENTS))
+        .expect("a prism has a hull");
+    let col = ColliderBuilder::new(hull)
+        .density(0.0)
+        .friction(0.3)
+        .collision_groups(InteractionGroups::new(
+            ROBOT_GROUP,
+            Group::ALL.difference(SLAB_GROUP),
+            InteractionTestMode::And,
+        ))
+        .translation(Vec3::new(0.0, 0.0, robot.clearance as f32 + hh))
+        .build();
+    let robot_collider = p
+        .colliders
+        .insert_with_parent(col, robot_body, &mut p.bodies);
+    (robot_body, robot_collider, yaw_inertia)
+}
+
 impl Simulation {
     /// Builds the rapier state from `world` and `movers`, places the robot at `start` and seeds
     /// every noise stream from `seed`. A laser whose `joint` names no joint of `movers` is
@@ -244,47 +296,7 @@ impl Simulation {
             people_bodies.push(handles);
         }
         // The robot: planar (z, roll and pitch locked), moved by its wheels, not by gravity.
-        let m = robot.mass as f32;
-        let r = robot.radius as f32;
-        let yaw_inertia = 0.5 * robot.mass * robot.radius * robot.radius;
-        let body = RigidBodyBuilder::dynamic()
-            .pose(Pose::from_parts(
-                Vec3::new(start.x as f32, start.y as f32, 0.0),
-                Quat::from_rotation_z(start.theta as f32),
-            ))
-            .gravity_scale(0.0)
-            .locked_axes(
-                LockedAxes::TRANSLATION_LOCKED_Z
-                    | LockedAxes::ROTATION_LOCKED_X
-                    | LockedAxes::ROTATION_LOCKED_Y,
-            )
-            .additional_mass_properties(MassProperties::new(
-                Vec3::ZERO,
-                m,
-                Vec3::new(
-                    yaw_inertia as f32 / 2.0,
-                    yaw_inertia as f32 / 2.0,
-                    yaw_inertia as f32,
-                ),
-            ))
-            .build();
-        let robot_body = p.bodies.insert(body);
-        let hh = (robot.height / 2.0) as f32;
-        let hull = SharedShape::convex_hull(&TriMesh::prism_vertices(r, hh, ROBOT_SEGMENTS))
-            .expect("a prism has a hull");
-        let col = ColliderBuilder::new(hull)
-            .density(0.0)
-            .friction(0.3)
-            .collision_groups(InteractionGroups::new(
-                ROBOT_GROUP,
-                Group::ALL.difference(SLAB_GROUP),
-                InteractionTestMode::And,
-            ))
-            .translation(Vec3::new(0.0, 0.0, robot.clearance as f32 + hh))
-            .build();
-        let robot_collider = p
-            .colliders
-            .insert_with_parent(col, robot_body, &mut p.bodies);
+        let (robot_body, robot_collider, yaw_inertia) = insert_robot(&mut p, robot, start);
         let drive = CreateDrive::new(
             robot.clone(),
             [

@@ -360,6 +360,42 @@ impl Navigator {
         self.roadmap.as_ref().map(|r| r.nodes().len()).unwrap_or(0)
     }
 
+    /// A bump: counts it, marks its contact point, gives up a route point bumped on again and
+    /// again, and backs off turning away from the pressed side.
+    fn on_bump(&mut self, input: &NavInput, now: Time) {
+        self.stats.bumps += 1;
+        // The contact point: the bumper's edge, on the pressed side.
+        let side = match (input.bumps.bump_left, input.bumps.bump_right) {
+            (true, false) => 0.6,
+            (false, true) => -0.6,
+            _ => 0.0,
+        };
+        let r = self.config.robot_radius + 0.02;
+        self.bump_marks.push(
+            input
+                .pose
+                .transform_point([r * f64::cos(side), r * f64::sin(side)]),
+        );
+        // A route point the robot bumps on its way to, again and again, lies past
+        // something the map does not hold or the robot cannot pass (a gap as wide as its
+        // clearance between jagged walls): it is given up for the next.
+        if let Task::Route(route) = &self.task {
+            self.route_bumps += 1;
+            if self.route_bumps >= ROUTE_BUMP_LIMIT && self.route_next < route.len() {
+                self.route_next += 1;
+                self.stats.route_points_skipped += 1;
+                self.route_bumps = 0;
+            }
+        }
+        // Turn away from the pressed side (seed 000: right bumper, turn left).
+        let away = if input.bumps.bump_right && !input.bumps.bump_left {
+            1.0
+        } else {
+            -1.0
+        };
+        self.start_backing(now, away);
+    }
+
     /// One control tick.
     pub fn update(&mut self, input: &NavInput) -> DriveCommand {
         if let Some(m) = input.map {
@@ -371,37 +407,7 @@ impl Navigator {
         }
         // A bump interrupts everything but a back-off already under way.
         if input.bumps.bumped() && !matches!(self.mode, Mode::Backing(..)) {
-            self.stats.bumps += 1;
-            // The contact point: the bumper's edge, on the pressed side.
-            let side = match (input.bumps.bump_left, input.bumps.bump_right) {
-                (true, false) => 0.6,
-                (false, true) => -0.6,
-                _ => 0.0,
-            };
-            let r = self.config.robot_radius + 0.02;
-            self.bump_marks.push(
-                input
-                    .pose
-                    .transform_point([r * f64::cos(side), r * f64::sin(side)]),
-            );
-            // A route point the robot bumps on its way to, again and again, lies past
-            // something the map does not hold or the robot cannot pass (a gap as wide as its
-            // clearance between jagged walls): it is given up for the next.
-            if let Task::Route(route) = &self.task {
-                self.route_bumps += 1;
-                if self.route_bumps >= ROUTE_BUMP_LIMIT && self.route_next < route.len() {
-                    self.route_next += 1;
-                    self.stats.route_points_skipped += 1;
-                    self.route_bumps = 0;
-                }
-            }
-            // Turn away from the pressed side (seed 000: right bumper, turn left).
-            let away = if input.bumps.bump_right && !input.bumps.bump_left {
-                1.0
-            } else {
-                -1.0
-            };
-            self.start_backing(now, away);
+            self.on_bump(input, now);
         }
         if let Mode::Backing(until, away, turn_until) = self.mode {
             let c = &self.config;

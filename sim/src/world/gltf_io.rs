@@ -230,15 +230,15 @@ pub fn load_slice(name: &Path, bytes: &[u8]) -> Result<Loaded, String> {
     convert(name, doc, buffers, images)
 }
 
-fn convert(
+/// The document's materials and their textures, the colour factor baked into each texture
+/// (see the module docs).
+fn materials(
     path: &Path,
-    doc: gltf::Document,
-    buffers: Vec<gltf::buffer::Data>,
-    images: Vec<gltf::image::Data>,
-) -> Result<Loaded, String> {
+    doc: &gltf::Document,
+    images: &[gltf::image::Data],
+) -> Result<(Vec<Texture>, Vec<LoadedMaterial>), String> {
     let mut textures = Vec::new();
     let mut materials = Vec::new();
-    // Materials, with factor baked into the texture (see module docs).
     for (i, m) in doc.materials().enumerate() {
         let pbr = m.pbr_metallic_roughness();
         let f = pbr.base_color_factor();
@@ -290,6 +290,16 @@ fn convert(
             texture,
         });
     }
+    Ok((textures, materials))
+}
+
+fn convert(
+    path: &Path,
+    doc: gltf::Document,
+    buffers: Vec<gltf::buffer::Data>,
+    images: Vec<gltf::image::Data>,
+) -> Result<Loaded, String> {
+    let (textures, mut materials) = materials(path, &doc, &images)?;
     let default_material = materials.len();
     materials.push(LoadedMaterial {
         name: "default".into(),

@@ -164,12 +164,12 @@ impl World {
     }
 }
 
-/// Builds the world from its parsed spec; `path` resolves relative asset paths and names the
-/// file in errors.
 /// How far from the origin any part of a world may lie, m (in x, y and z). A building of
 /// 4 km across fits; f32 coordinates keep millimetres out there.
 pub const MAX_EXTENT: f32 = 2000.0;
 
+/// Builds the world from its parsed spec; `path` resolves relative asset paths and names the
+/// file in errors.
 pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
     let mut c = Compiler {
         path,
@@ -263,82 +263,7 @@ pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
         }
     }
     // Floor and ceiling last: their default extent is that of everything else.
-    let (lo, hi) = c.world.bounds();
-    let have_extent = lo.x.is_finite();
-    for (slab, is_ceiling, key) in [
-        (&spec.floor, false, "floor"),
-        (&spec.ceiling, true, "ceiling"),
-    ] {
-        let Some(s) = slab else { continue };
-        let ext = match s.extent {
-            Some(e) => e,
-            None if have_extent => [
-                (lo.x - s.margin as f32) as f64,
-                (lo.y - s.margin as f32) as f64,
-                (hi.x + s.margin as f32) as f64,
-                (hi.y + s.margin as f32) as f64,
-            ],
-            None => {
-                return Err(SpecError::new(
-                    path,
-                    format!("{key}.extent"),
-                    "expected an extent [xmin, ymin, xmax, ymax]: the world has no other geometry to take it from",
-                ));
-            }
-        };
-        if !(ext.iter().all(|v| v.is_finite()) && ext[2] > ext[0] && ext[3] > ext[1]) {
-            return Err(SpecError::new(
-                path,
-                format!("{key}.extent"),
-                "expected [xmin, ymin, xmax, ymax] with max > min",
-            ));
-        }
-        check_positive(path, &format!("{key}.thickness"), s.thickness, "m")?;
-        let z0 = if is_ceiling {
-            let h = s.height.ok_or_else(|| {
-                SpecError::new(
-                    path,
-                    format!("{key}.height"),
-                    "expected the height of the ceiling's underside, m",
-                )
-            })?;
-            check_range(path, &format!("{key}.height"), h, 0.1, 100.0, "m")?;
-            h
-        } else {
-            if s.height.is_some() {
-                return Err(SpecError::new(
-                    path,
-                    format!("{key}.height"),
-                    "the floor's top is z = 0 by definition; remove `height`",
-                ));
-            }
-            -s.thickness
-        };
-        let mat = c.material(&s.material, &format!("{key}.material"))?;
-        let half = Vec3::new(
-            ((ext[2] - ext[0]) / 2.0) as f32,
-            ((ext[3] - ext[1]) / 2.0) as f32,
-            (s.thickness / 2.0) as f32,
-        );
-        let centre = Vec3::new(
-            ((ext[0] + ext[2]) / 2.0) as f32,
-            ((ext[1] + ext[3]) / 2.0) as f32,
-            (z0 + s.thickness / 2.0) as f32,
-        );
-        let uv = c.uv(mat);
-        c.world.objects.push(Object {
-            name: key.to_string(),
-            pose: Pose::from_translation(centre),
-            shape: Some(SharedShape::cuboid(half.x, half.y, half.z)),
-            parts: vec![MeshPart {
-                material: mat,
-                mesh: TriMesh::cuboid(half, uv),
-            }],
-            motion: Motion::Static,
-            friction: 0.8,
-            slab: true,
-        });
-    }
+    c.slabs(spec)?;
     if c.world.objects.is_empty() {
         return Err(SpecError::new(
             path,
@@ -366,6 +291,91 @@ pub fn compile(spec: &WorldSpec, path: &Path) -> Result<World, SpecError> {
         }
     }
     Ok(c.world)
+}
+
+impl Compiler<'_> {
+    /// The floor and the ceiling (slabs), by default as wide as everything else plus their
+    /// margin.
+    fn slabs(&mut self, spec: &WorldSpec) -> Result<(), SpecError> {
+        let path = self.path;
+        let (lo, hi) = self.world.bounds();
+        let have_extent = lo.x.is_finite();
+        for (slab, is_ceiling, key) in [
+            (&spec.floor, false, "floor"),
+            (&spec.ceiling, true, "ceiling"),
+        ] {
+            let Some(s) = slab else { continue };
+            let ext = match s.extent {
+                Some(e) => e,
+                None if have_extent => [
+                    (lo.x - s.margin as f32) as f64,
+                    (lo.y - s.margin as f32) as f64,
+                    (hi.x + s.margin as f32) as f64,
+                    (hi.y + s.margin as f32) as f64,
+                ],
+                None => {
+                    return Err(SpecError::new(
+                        path,
+                        format!("{key}.extent"),
+                        "expected an extent [xmin, ymin, xmax, ymax]: the world has no other geometry to take it from",
+                    ));
+                }
+            };
+            if !(ext.iter().all(|v| v.is_finite()) && ext[2] > ext[0] && ext[3] > ext[1]) {
+                return Err(SpecError::new(
+                    path,
+                    format!("{key}.extent"),
+                    "expected [xmin, ymin, xmax, ymax] with max > min",
+                ));
+            }
+            check_positive(path, &format!("{key}.thickness"), s.thickness, "m")?;
+            let z0 = if is_ceiling {
+                let h = s.height.ok_or_else(|| {
+                    SpecError::new(
+                        path,
+                        format!("{key}.height"),
+                        "expected the height of the ceiling's underside, m",
+                    )
+                })?;
+                check_range(path, &format!("{key}.height"), h, 0.1, 100.0, "m")?;
+                h
+            } else {
+                if s.height.is_some() {
+                    return Err(SpecError::new(
+                        path,
+                        format!("{key}.height"),
+                        "the floor's top is z = 0 by definition; remove `height`",
+                    ));
+                }
+                -s.thickness
+            };
+            let mat = self.material(&s.material, &format!("{key}.material"))?;
+            let half = Vec3::new(
+                ((ext[2] - ext[0]) / 2.0) as f32,
+                ((ext[3] - ext[1]) / 2.0) as f32,
+                (s.thickness / 2.0) as f32,
+            );
+            let centre = Vec3::new(
+                ((ext[0] + ext[2]) / 2.0) as f32,
+                ((ext[1] + ext[3]) / 2.0) as f32,
+                (z0 + s.thickness / 2.0) as f32,
+            );
+            let uv = self.uv(mat);
+            self.world.objects.push(Object {
+                name: key.to_string(),
+                pose: Pose::from_translation(centre),
+                shape: Some(SharedShape::cuboid(half.x, half.y, half.z)),
+                parts: vec![MeshPart {
+                    material: mat,
+                    mesh: TriMesh::cuboid(half, uv),
+                }],
+                motion: Motion::Static,
+                friction: 0.8,
+                slab: true,
+            });
+        }
+        Ok(())
+    }
 }
 
 struct Compiler<'a> {

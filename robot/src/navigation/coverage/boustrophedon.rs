@@ -84,6 +84,53 @@ pub fn plan(
     Ok(route)
 }
 
+/// The boustrophedon decomposition of the columns' free runs: cells of runs that continue
+/// one another from column to column (one run before and after, no step in the boundary
+/// wider than `jump` columns), and the pairs of cells that touch across a column boundary.
+fn decompose(runs: &[Vec<(usize, usize)>], jump: usize) -> (Vec<Cell>, Vec<(usize, usize)>) {
+    let overlap = |a: (usize, usize), b: (usize, usize)| a.0 <= b.1 && b.0 <= a.1;
+    let mut cells: Vec<Cell> = Vec::new();
+    // Cells that touch across a column boundary.
+    let mut touching: Vec<(usize, usize)> = Vec::new();
+    // The cell each run of the previous column belongs to.
+    let mut active: Vec<((usize, usize), usize)> = Vec::new();
+    for (u, column) in runs.iter().enumerate() {
+        let mut next = Vec::new();
+        for &run in column {
+            let before: Vec<usize> = (0..active.len())
+                .filter(|&k| overlap(active[k].0, run))
+                .collect();
+            // One run before and after, and no step in the boundary wider than a lane (a
+            // wall across the sweep: lanes would not reach along it).
+            let continues = before.len() == 1 && {
+                let prev = active[before[0]].0;
+                column.iter().filter(|&&r| overlap(prev, r)).count() == 1
+                    && prev.0.abs_diff(run.0) <= jump
+                    && prev.1.abs_diff(run.1) <= jump
+            };
+            let id = if continues {
+                let id = active[before[0]].1;
+                cells[id].runs.push(run);
+                id
+            } else {
+                cells.push(Cell {
+                    first: u,
+                    runs: vec![run],
+                });
+                cells.len() - 1
+            };
+            for &k in &before {
+                if active[k].1 != id {
+                    touching.push((active[k].1, id));
+                }
+            }
+            next.push((run, id));
+        }
+        active = next;
+    }
+    (cells, touching)
+}
+
 /// The route with lanes along y (columns are the grid's columns) or, `transposed`, along x.
 fn sweep(
     field: &Field,
@@ -133,46 +180,7 @@ fn sweep(
         .collect();
     // The decomposition.
     let jump = ((c.spacing / g.resolution).round() as usize).max(1);
-    let overlap = |a: (usize, usize), b: (usize, usize)| a.0 <= b.1 && b.0 <= a.1;
-    let mut cells: Vec<Cell> = Vec::new();
-    // Cells that touch across a column boundary.
-    let mut touching: Vec<(usize, usize)> = Vec::new();
-    // The cell each run of the previous column belongs to.
-    let mut active: Vec<((usize, usize), usize)> = Vec::new();
-    for (u, column) in runs.iter().enumerate() {
-        let mut next = Vec::new();
-        for &run in column {
-            let before: Vec<usize> = (0..active.len())
-                .filter(|&k| overlap(active[k].0, run))
-                .collect();
-            // One run before and after, and no step in the boundary wider than a lane (a
-            // wall across the sweep: lanes would not reach along it).
-            let continues = before.len() == 1 && {
-                let prev = active[before[0]].0;
-                column.iter().filter(|&&r| overlap(prev, r)).count() == 1
-                    && prev.0.abs_diff(run.0) <= jump
-                    && prev.1.abs_diff(run.1) <= jump
-            };
-            let id = if continues {
-                let id = active[before[0]].1;
-                cells[id].runs.push(run);
-                id
-            } else {
-                cells.push(Cell {
-                    first: u,
-                    runs: vec![run],
-                });
-                cells.len() - 1
-            };
-            for &k in &before {
-                if active[k].1 != id {
-                    touching.push((active[k].1, id));
-                }
-            }
-            next.push((run, id));
-        }
-        active = next;
-    }
+    let (cells, touching) = decompose(&runs, jump);
     // Lanes per cell, then the cells nearest first.
     let res = g.resolution;
     let step = ((c.spacing / res).round() as usize).max(1);
