@@ -399,6 +399,81 @@ pub fn downsample(grid: &OccupancyGrid, max_side: usize) -> std::borrow::Cow<'_,
 /// How many of a replay's worst relations are marked on its map.
 pub const WORST_RELATIONS: usize = 10;
 
+/// A replay's relation scores (`summary.json`'s `relations`): SLAM's and odometry's, over all
+/// relations and by span; nothing without relations.
+fn relations_section(rel: &Value) -> String {
+    let mut body = String::new();
+    if !rel.is_object() {
+        return body;
+    }
+    let row = |name: &str| {
+        let m = &rel[name];
+        let f = |k: &str, d: usize| {
+            format!(
+                "{:.d$} ± {:.d$}",
+                m[k]["mean"].as_f64().unwrap_or(f64::NAN),
+                m[k]["std"].as_f64().unwrap_or(f64::NAN)
+            )
+        };
+        vec![
+            name.to_string(),
+            f("abs_trans_m", 4),
+            f("abs_rot_deg", 3),
+            number(&m["relations"]),
+            number(&m["unmatched"]),
+        ]
+    };
+    body += "<h2>Relations (Kümmerle et al. 2009)</h2>\n";
+    body += &table(
+        "relations",
+        &[
+            "trajectory",
+            "abs trans (m)",
+            "abs rot (°)",
+            "scored",
+            "unmatched",
+        ],
+        &[row("slam"), row("odometry")],
+    );
+    if let Some(groups) = rel["by_span"].as_array() {
+        let mut rows = Vec::new();
+        for g in groups {
+            for name in ["slam", "odometry"] {
+                let m = &g[name];
+                rows.push(vec![
+                    g["span"].as_str().unwrap_or("?").replace('_', " "),
+                    name.to_string(),
+                    format!(
+                        "{:.4} ± {:.4}",
+                        m["abs_trans_m"]["mean"].as_f64().unwrap_or(f64::NAN),
+                        m["abs_trans_m"]["std"].as_f64().unwrap_or(f64::NAN)
+                    ),
+                    format!(
+                        "{:.3} ± {:.3}",
+                        m["abs_rot_deg"]["mean"].as_f64().unwrap_or(f64::NAN),
+                        m["abs_rot_deg"]["std"].as_f64().unwrap_or(f64::NAN)
+                    ),
+                    number(&m["relations"]),
+                ]);
+            }
+        }
+        body += "<p>By the time between a relation's two poses: short spans measure local \
+                 accuracy, long ones the map's consistency after loops.</p>\n";
+        body += &table(
+            "relations by span",
+            &[
+                "span",
+                "trajectory",
+                "abs trans (m)",
+                "abs rot (°)",
+                "scored",
+            ],
+            &rows,
+        );
+    }
+    body
+}
+
 /// The report of a replay of a real log (deterministic: no wall times): its facts and relation
 /// scores, the SLAM map with
 /// the SLAM trajectory and odometry over it and the worst relations marked (a circle at each
@@ -433,74 +508,7 @@ pub fn replay_report(
             number(&summary["unmatched_scans"]),
         ]],
     );
-    let rel = &summary["relations"];
-    if rel.is_object() {
-        let row = |name: &str| {
-            let m = &rel[name];
-            let f = |k: &str, d: usize| {
-                format!(
-                    "{:.d$} ± {:.d$}",
-                    m[k]["mean"].as_f64().unwrap_or(f64::NAN),
-                    m[k]["std"].as_f64().unwrap_or(f64::NAN)
-                )
-            };
-            vec![
-                name.to_string(),
-                f("abs_trans_m", 4),
-                f("abs_rot_deg", 3),
-                number(&m["relations"]),
-                number(&m["unmatched"]),
-            ]
-        };
-        body += "<h2>Relations (Kümmerle et al. 2009)</h2>\n";
-        body += &table(
-            "relations",
-            &[
-                "trajectory",
-                "abs trans (m)",
-                "abs rot (°)",
-                "scored",
-                "unmatched",
-            ],
-            &[row("slam"), row("odometry")],
-        );
-        if let Some(groups) = rel["by_span"].as_array() {
-            let mut rows = Vec::new();
-            for g in groups {
-                for name in ["slam", "odometry"] {
-                    let m = &g[name];
-                    rows.push(vec![
-                        g["span"].as_str().unwrap_or("?").replace('_', " "),
-                        name.to_string(),
-                        format!(
-                            "{:.4} ± {:.4}",
-                            m["abs_trans_m"]["mean"].as_f64().unwrap_or(f64::NAN),
-                            m["abs_trans_m"]["std"].as_f64().unwrap_or(f64::NAN)
-                        ),
-                        format!(
-                            "{:.3} ± {:.3}",
-                            m["abs_rot_deg"]["mean"].as_f64().unwrap_or(f64::NAN),
-                            m["abs_rot_deg"]["std"].as_f64().unwrap_or(f64::NAN)
-                        ),
-                        number(&m["relations"]),
-                    ]);
-                }
-            }
-            body += "<p>By the time between a relation's two poses: short spans measure local \
-                     accuracy, long ones the map's consistency after loops.</p>\n";
-            body += &table(
-                "relations by span",
-                &[
-                    "span",
-                    "trajectory",
-                    "abs trans (m)",
-                    "abs rot (°)",
-                    "scored",
-                ],
-                &rows,
-            );
-        }
-    }
+    body += &relations_section(&summary["relations"]);
     let path =
         |name: &str, colour: &'static str, t: &[(futago_msgs::Time, futago_msgs::Pose2)]| Series {
             name: name.into(),
@@ -584,25 +592,10 @@ pub fn replay_report(
     page(&format!("futago replay: {log}"), &body)
 }
 
-/// The report of a run whose results are in `dir`: `summary` is its summary.json, `config`
-/// the scenario text as run, `truth` the ground-truth grid and `estimate` SLAM's map.
-pub fn run_report(
-    dir: &Path,
-    summary: &Value,
-    config: &str,
-    truth: &OccupancyGrid,
-    estimate: Option<&OccupancyGrid>,
-    trajectories: &[(String, String)],
-) -> String {
-    let name = summary["scenario"].as_str().unwrap_or("run");
-    let gates = summary["gates"].as_array().cloned().unwrap_or_default();
+/// The facts of a run: world, seed, time simulated, distance driven, bumps, overlays, gates.
+fn run_facts(summary: &Value, gates: &[Value]) -> String {
     let failed = gates.iter().filter(|g| g["passed"] == false).count();
-    let mut body = format!(
-        "<h1>futago run: {}</h1>\n<p>{}</p>\n",
-        escape(name),
-        escape(summary["description"].as_str().unwrap_or(""))
-    );
-    body += &table(
+    table(
         "facts",
         &[
             "world",
@@ -647,7 +640,27 @@ pub fn run_report(
                 )
             },
         ]],
+    )
+}
+
+/// The report of a run whose results are in `dir`: `summary` is its summary.json, `config`
+/// the scenario text as run, `truth` the ground-truth grid and `estimate` SLAM's map.
+pub fn run_report(
+    dir: &Path,
+    summary: &Value,
+    config: &str,
+    truth: &OccupancyGrid,
+    estimate: Option<&OccupancyGrid>,
+    trajectories: &[(String, String)],
+) -> String {
+    let name = summary["scenario"].as_str().unwrap_or("run");
+    let gates = summary["gates"].as_array().cloned().unwrap_or_default();
+    let mut body = format!(
+        "<h1>futago run: {}</h1>\n<p>{}</p>\n",
+        escape(name),
+        escape(summary["description"].as_str().unwrap_or(""))
     );
+    body += &run_facts(summary, &gates);
     if !gates.is_empty() {
         body += "<h2>Gates</h2>\n";
         body += &table(

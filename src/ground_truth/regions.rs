@@ -60,6 +60,53 @@ pub struct Regions {
 
 const NONE: u32 = u32::MAX;
 
+/// Local thickness, in cells, of a `w` × `h` grid's free cells, given each cell's distance
+/// `r` to the nearest blocked cell's centre (cells): every free cell's disc (clear of blocked
+/// centres) paints its width, 2r − 1 (the disc reaches half a cell short of the blocked
+/// cells' faces), onto the cells it holds. A disc held in a neighbour's disc adds nothing.
+fn local_thickness(free: &[bool], r: &[f64], w: usize, h: usize) -> Vec<f64> {
+    let mut thick = vec![0.0f64; w * h];
+    for j in 0..h {
+        for i in 0..w {
+            let k = j * w + i;
+            if !free[k] {
+                continue;
+            }
+            let rq = r[k];
+            let inside_neighbour = (-1i64..=1).any(|dj| {
+                (-1i64..=1).any(|di| {
+                    let (a, b) = (i as i64 + di, j as i64 + dj);
+                    (di, dj) != (0, 0)
+                        && a >= 0
+                        && b >= 0
+                        && (a as usize) < w
+                        && (b as usize) < h
+                        && r[b as usize * w + a as usize]
+                            >= rq + ((di * di + dj * dj) as f64).sqrt() - 1e-9
+                })
+            });
+            if inside_neighbour {
+                continue;
+            }
+            let width = 2.0 * rq - 1.0;
+            let reach = rq.ceil() as i64;
+            for dj in -reach..=reach {
+                for di in -reach..=reach {
+                    let (a, b) = (i as i64 + di, j as i64 + dj);
+                    if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
+                        continue;
+                    }
+                    if ((di * di + dj * dj) as f64) < rq * rq {
+                        let m = b as usize * w + a as usize;
+                        thick[m] = thick[m].max(width);
+                    }
+                }
+            }
+        }
+    }
+    thick
+}
+
 impl Regions {
     /// The regions of `grid`'s free space, corridors being at most `corridor_width` wide (m).
     pub fn new(grid: &OccupancyGrid, corridor_width: f64) -> Regions {
@@ -76,48 +123,7 @@ impl Regions {
             .into_iter()
             .map(f64::sqrt)
             .collect();
-        // Local thickness, in cells: every free cell's disc (clear of blocked centres) paints
-        // its width, 2r − 1 (the disc reaches half a cell short of the blocked cells' faces),
-        // onto the cells it holds. A disc held in a neighbour's disc adds nothing.
-        let mut thick = vec![0.0f64; w * h];
-        for j in 0..h {
-            for i in 0..w {
-                let k = j * w + i;
-                if !free[k] {
-                    continue;
-                }
-                let rq = r[k];
-                let inside_neighbour = (-1i64..=1).any(|dj| {
-                    (-1i64..=1).any(|di| {
-                        let (a, b) = (i as i64 + di, j as i64 + dj);
-                        (di, dj) != (0, 0)
-                            && a >= 0
-                            && b >= 0
-                            && (a as usize) < w
-                            && (b as usize) < h
-                            && r[b as usize * w + a as usize]
-                                >= rq + ((di * di + dj * dj) as f64).sqrt() - 1e-9
-                    })
-                });
-                if inside_neighbour {
-                    continue;
-                }
-                let width = 2.0 * rq - 1.0;
-                let reach = rq.ceil() as i64;
-                for dj in -reach..=reach {
-                    for di in -reach..=reach {
-                        let (a, b) = (i as i64 + di, j as i64 + dj);
-                        if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
-                            continue;
-                        }
-                        if ((di * di + dj * dj) as f64) < rq * rq {
-                            let m = b as usize * w + a as usize;
-                            thick[m] = thick[m].max(width);
-                        }
-                    }
-                }
-            }
-        }
+        let thick = local_thickness(&free, &r, w, h);
         let narrow = |k: usize| thick[k] * res <= corridor_width + 1e-9;
         let mut label = vec![NONE; w * h];
         let mut kinds = Vec::new();
