@@ -688,6 +688,88 @@ pub fn read(bytes: &[u8]) -> Result<Log, BagError> {
     )
 }
 
+impl Raw {
+    /// Reads the messages kept until their connection's definition came, and loses those
+    /// whose definition never came.
+    fn settle_pending(&mut self) {
+        for (offset, conn, body) in std::mem::take(&mut self.pending) {
+            match self.conns.get(&conn).map(|c| c.1.clone()) {
+                Some(ty) => {
+                    if let Err(m) = self.message(conn, &ty, &body) {
+                        self.lose(offset, m, body.len());
+                    }
+                }
+                None => self.lose(
+                    offset,
+                    format!("message on connection {conn}, whose definition was lost"),
+                    body.len(),
+                ),
+            }
+        }
+    }
+}
+
+/// Where laser frame `frame` sits on `base`, by the bag's tf, as a planar pose and whether it
+/// is mounted upside down; none without a tf chain. A laser tilted more than 0.1 rad is an
+/// error: futago reads lasers that scan parallel to the floor.
+fn laser_mount(
+    tf: &HashMap<String, (String, Transform)>,
+    base: &str,
+    frame: &str,
+) -> Result<Option<(Pose2, bool)>, BagError> {
+    match chain(tf, base, frame) {
+        None => Ok(None),
+        Some(t) => {
+            let [roll, pitch, yaw] = t.rpy();
+            let flipped = roll.abs() > std::f64::consts::FRAC_PI_2;
+            let tilt = if flipped {
+                std::f64::consts::PI - roll.abs()
+            } else {
+                roll.abs()
+            };
+            if tilt > 0.1 || pitch.abs() > 0.1 {
+                return Err(BagError {
+                    offset: 0,
+                    message: format!(
+                        "laser frame `{}` is tilted on `{base}` (roll {roll:.3}, pitch {pitch:.3} rad): futago reads lasers that scan parallel to the floor",
+                        frame
+                    ),
+                });
+            }
+            // Upside down, its yaw is measured about the flipped z axis.
+            Ok(Some((Pose2::new(t.t[0], t.t[1], yaw), flipped)))
+        }
+    }
+}
+
+/// The chosen odometry (header `seq`, stamp, pose) in the order it was published, restamped
+/// where its stamps contradict that order.
+fn odometry_in_order(chosen: &[(u32, Time, Pose2)]) -> Vec<(Time, Pose2)> {
+    let times = acquisition_times(&chosen.iter().map(|o| (o.0, o.1)).collect::<Vec<_>>());
+    let mut o: Vec<(Time, u32, Pose2)> = chosen
+        .iter()
+        .zip(times)
+        .map(|(&(seq, _, pose), t)| (t, seq, pose))
+        .collect();
+    o.sort_by_key(|o| (o.0, o.1));
+    o.into_iter().map(|(t, _, p)| (t, p)).collect::<Vec<_>>()
+}
+
+/// The chosen scans (header `seq`, scan) in the order they were taken, restamped where their
+/// stamps contradict it, each with its place in the file (for the annotations after it).
+fn scans_in_order(chosen: Vec<(u32, LaserScan)>) -> Vec<(Time, u32, usize, LaserScan)> {
+    let times = acquisition_times(&chosen.iter().map(|s| (s.0, s.1.stamp)).collect::<Vec<_>>());
+    // With each scan's place in the file, for the annotations that follow it.
+    let mut s: Vec<(Time, u32, usize, LaserScan)> = chosen
+        .into_iter()
+        .zip(times)
+        .enumerate()
+        .map(|(k, ((seq, scan), t))| (t, seq, k, scan))
+        .collect();
+    s.sort_by_key(|s| (s.0, s.1, s.2));
+    s
+}
+
 /// Reads a ROS 1 bag's laser scans and odometry; other message types are counted as skipped.
 ///
 /// A bag with several `sensor_msgs/LaserScan` (or `nav_msgs/Odometry`) topics is an error
@@ -710,20 +792,7 @@ pub fn read_with(bytes: &[u8], o: &ReadOptions) -> Result<Log, BagError> {
     };
     records(&bytes[MAGIC.len()..], MAGIC.len(), &mut raw, false, false)?;
     // Messages whose connection was defined after them (or never, its record lost).
-    for (offset, conn, body) in std::mem::take(&mut raw.pending) {
-        match raw.conns.get(&conn).map(|c| c.1.clone()) {
-            Some(ty) => {
-                if let Err(m) = raw.message(conn, &ty, &body) {
-                    raw.lose(offset, m, body.len());
-                }
-            }
-            None => raw.lose(
-                offset,
-                format!("message on connection {conn}, whose definition was lost"),
-                body.len(),
-            ),
-        }
-    }
+    raw.settle_pending();
     let topic_of = |conn: u32| {
         raw.conns
             .get(&conn)
@@ -772,38 +841,8 @@ pub fn read_with(bytes: &[u8], o: &ReadOptions) -> Result<Log, BagError> {
         }
     }
     // Each stream in the order it was published, restamped where its stamps contradict it.
-    let odometry = {
-        let times = acquisition_times(
-            &chosen_odometry
-                .iter()
-                .map(|o| (o.0, o.1))
-                .collect::<Vec<_>>(),
-        );
-        let mut o: Vec<(Time, u32, Pose2)> = chosen_odometry
-            .iter()
-            .zip(times)
-            .map(|(&(seq, _, pose), t)| (t, seq, pose))
-            .collect();
-        o.sort_by_key(|o| (o.0, o.1));
-        o.into_iter().map(|(t, _, p)| (t, p)).collect::<Vec<_>>()
-    };
-    let scans = {
-        let times = acquisition_times(
-            &chosen_scans
-                .iter()
-                .map(|s| (s.0, s.1.stamp))
-                .collect::<Vec<_>>(),
-        );
-        // With each scan's place in the file, for the annotations that follow it.
-        let mut s: Vec<(Time, u32, usize, LaserScan)> = chosen_scans
-            .into_iter()
-            .zip(times)
-            .enumerate()
-            .map(|(k, ((seq, scan), t))| (t, seq, k, scan))
-            .collect();
-        s.sort_by_key(|s| (s.0, s.1, s.2));
-        s
-    };
+    let odometry = odometry_in_order(&chosen_odometry);
+    let scans = scans_in_order(chosen_scans);
     let mut sorted_of_file = vec![0usize; scans.len()];
     for (i, s) in scans.iter().enumerate() {
         sorted_of_file[s.2] = i;
@@ -854,29 +893,7 @@ pub fn read_with(bytes: &[u8], o: &ReadOptions) -> Result<Log, BagError> {
         let mount = match mounts.get(&scan.frame) {
             Some(m) => *m,
             None => {
-                let m = match chain(&raw.tf, &base, &scan.frame) {
-                    None => None,
-                    Some(t) => {
-                        let [roll, pitch, yaw] = t.rpy();
-                        let flipped = roll.abs() > std::f64::consts::FRAC_PI_2;
-                        let tilt = if flipped {
-                            std::f64::consts::PI - roll.abs()
-                        } else {
-                            roll.abs()
-                        };
-                        if tilt > 0.1 || pitch.abs() > 0.1 {
-                            return Err(BagError {
-                                offset: 0,
-                                message: format!(
-                                    "laser frame `{}` is tilted on `{base}` (roll {roll:.3}, pitch {pitch:.3} rad): futago reads lasers that scan parallel to the floor",
-                                    scan.frame
-                                ),
-                            });
-                        }
-                        // Upside down, its yaw is measured about the flipped z axis.
-                        Some((Pose2::new(t.t[0], t.t[1], yaw), flipped))
-                    }
-                };
+                let m = laser_mount(&raw.tf, &base, &scan.frame)?;
                 mounts.insert(scan.frame.clone(), m);
                 m
             }
