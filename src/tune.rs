@@ -170,9 +170,14 @@ fn overlay(params: &[Param], values: &[f64]) -> Result<Overlay> {
     })
 }
 
-/// Runs the search; writes its files into `out` (created or replaced whole).
-pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> Result<Value> {
-    crate::output::check_folder(out, o.force)?;
+/// Checks the search's options against the scenario before any run: parameters named once,
+/// a budget and seeds, an objective the scenario produces, and ranges whose ends both give a
+/// valid scenario. Gives the scenario with the base overlays.
+fn check_options(
+    scenario: &Path,
+    base: &[Overlay],
+    o: &TuneOptions,
+) -> Result<crate::scenario::Scenario> {
     if o.params.is_empty() {
         bail!(
             "--param: name at least one parameter to search, e.g. --param localization.mcl.sigma_hit=0.05..0.5"
@@ -217,6 +222,55 @@ pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> R
             )
         })?;
     }
+    Ok(s)
+}
+
+/// The trials of a batch of candidates (index, generation, values; none for the scenario's
+/// own), from the `results` of their `runs` (candidate, seed): the objective is the mean over
+/// the seeds, when every seed produced it.
+fn trials_of(
+    batch: &[(usize, usize, Option<Vec<f64>>)],
+    runs: &[(usize, u64)],
+    results: &[Result<f64, String>],
+    start_values: &[Option<f64>],
+) -> Vec<Trial> {
+    batch
+        .iter()
+        .enumerate()
+        .map(|(k, (index, generation, values))| {
+            let mine: Vec<&Result<f64, String>> = runs
+                .iter()
+                .zip(results)
+                .filter(|((kk, _), _)| *kk == k)
+                .map(|(_, r)| r)
+                .collect();
+            let per_seed: Vec<Option<f64>> =
+                mine.iter().map(|r| r.as_ref().ok().copied()).collect();
+            let error = mine.iter().find_map(|r| r.as_ref().err().cloned());
+            let objective = if per_seed.iter().all(|v| v.is_some()) {
+                Some(per_seed.iter().flatten().sum::<f64>() / per_seed.len() as f64)
+            } else {
+                None
+            };
+            Trial {
+                index: *index,
+                generation: *generation,
+                values: match values {
+                    Some(v) => v.iter().map(|x| Some(*x)).collect(),
+                    None => start_values.to_vec(),
+                },
+                per_seed,
+                objective,
+                error,
+            }
+        })
+        .collect()
+}
+
+/// Runs the search; writes its files into `out` (created or replaced whole).
+pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> Result<Value> {
+    crate::output::check_folder(out, o.force)?;
+    let s = check_options(scenario, base, o)?;
     let start_values: Vec<Option<f64>> = o
         .params
         .iter()
@@ -249,37 +303,7 @@ pub fn tune(scenario: &Path, base: &[Overlay], o: &TuneOptions, out: &Path) -> R
                     &dir,
                 )
             });
-            batch
-                .iter()
-                .enumerate()
-                .map(|(k, (index, generation, values))| {
-                    let mine: Vec<&Result<f64, String>> = runs
-                        .iter()
-                        .zip(&results)
-                        .filter(|((kk, _), _)| *kk == k)
-                        .map(|(_, r)| r)
-                        .collect();
-                    let per_seed: Vec<Option<f64>> =
-                        mine.iter().map(|r| r.as_ref().ok().copied()).collect();
-                    let error = mine.iter().find_map(|r| r.as_ref().err().cloned());
-                    let objective = if per_seed.iter().all(|v| v.is_some()) {
-                        Some(per_seed.iter().flatten().sum::<f64>() / per_seed.len() as f64)
-                    } else {
-                        None
-                    };
-                    Trial {
-                        index: *index,
-                        generation: *generation,
-                        values: match values {
-                            Some(v) => v.iter().map(|x| Some(*x)).collect(),
-                            None => start_values.clone(),
-                        },
-                        per_seed,
-                        objective,
-                        error,
-                    }
-                })
-                .collect()
+            trials_of(batch, &runs, &results, &start_values)
         };
         let mut trials = evaluate(&[(0, 0, None)]);
         report_progress(&trials, o, 0);
