@@ -408,6 +408,332 @@ pub struct Renderer {
     targets: HashMap<(bool, u32, u32), Targets>,
 }
 
+/// The bind group layouts: per frame (the camera's and the body's uniforms, `cam_size` bytes
+/// and a 4 × 4 matrix, at dynamic offsets) and per material (its colour, texture, sampler).
+fn layouts(device: &wgpu::Device, cam_size: u64) -> (wgpu::BindGroupLayout, wgpu::BindGroupLayout) {
+    let uniform_entry =
+        |binding: u32, size: u64, vis: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: vis,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: true,
+                min_binding_size: wgpu::BufferSize::new(size),
+            },
+            count: None,
+        };
+    let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("frame"),
+        entries: &[
+            uniform_entry(0, cam_size, wgpu::ShaderStages::VERTEX),
+            uniform_entry(1, 64, wgpu::ShaderStages::VERTEX),
+        ],
+    });
+    let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("material"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 2,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
+        ],
+    });
+    (frame_layout, material_layout)
+}
+
+/// A scene's geometry in one vertex and index buffer: static bodies baked into world
+/// coordinates and grouped by material (with their chunks for culling), then each movable
+/// body in its own frame, in its own model slot.
+struct Geometry {
+    vertices: Vec<Vertex>,
+    indices: Vec<u32>,
+    draws: Vec<Draw>,
+    chunks: Vec<Chunk>,
+    depth_draws: Vec<Draw>,
+    body_slots: Vec<u32>,
+    /// Model slots used by movable bodies (slot 0 is the identity of static geometry).
+    slots: u32,
+}
+
+/// The render pipelines: colour and depth after a z pre-pass, the z pre-pass itself, and
+/// depth alone.
+fn pipelines(
+    device: &wgpu::Device,
+    frame_layout: &wgpu::BindGroupLayout,
+    material_layout: &wgpu::BindGroupLayout,
+) -> [wgpu::RenderPipeline; 3] {
+    let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("futago camera"),
+        source: wgpu::ShaderSource::Wgsl(include_str!("shader.wgsl").into()),
+    });
+    let vertex_layout = wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<Vertex>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2],
+    };
+    let depth_stencil = wgpu::DepthStencilState {
+        format: ZBUFFER_FORMAT,
+        depth_write_enabled: Some(true),
+        depth_compare: Some(wgpu::CompareFunction::Less),
+        stencil: Default::default(),
+        bias: Default::default(),
+    };
+    let primitive = wgpu::PrimitiveState {
+        topology: wgpu::PrimitiveTopology::TriangleList,
+        cull_mode: None,
+        ..Default::default()
+    };
+    let pipeline = |label: &str,
+                    layouts: &[Option<&wgpu::BindGroupLayout>],
+                    fs: &str,
+                    targets: &[Option<wgpu::ColorTargetState>],
+                    depth_stencil: wgpu::DepthStencilState| {
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: layouts,
+            immediate_size: 0,
+        });
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(label),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(vertex_layout.clone())],
+            },
+            primitive,
+            depth_stencil: Some(depth_stencil),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some(fs),
+                compilation_options: Default::default(),
+                targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
+    };
+    let color_pipeline = pipeline(
+        "colour+depth",
+        &[Some(frame_layout), Some(material_layout)],
+        "fs_color",
+        &[Some(COLOR_FORMAT.into()), Some(DEPTH_BITS_FORMAT.into())],
+        // After the z pre-pass: shade only the visible surface of each pixel.
+        wgpu::DepthStencilState {
+            depth_write_enabled: Some(false),
+            depth_compare: Some(wgpu::CompareFunction::LessEqual),
+            ..depth_stencil.clone()
+        },
+    );
+    let masked = |format: wgpu::TextureFormat| {
+        Some(wgpu::ColorTargetState {
+            format,
+            blend: None,
+            write_mask: wgpu::ColorWrites::empty(),
+        })
+    };
+    let z_pipeline = pipeline(
+        "z pre-pass",
+        &[Some(frame_layout)],
+        "fs_none",
+        &[masked(COLOR_FORMAT), masked(DEPTH_BITS_FORMAT)],
+        depth_stencil.clone(),
+    );
+    let depth_pipeline = pipeline(
+        "depth",
+        &[Some(frame_layout)],
+        "fs_depth",
+        &[Some(DEPTH_BITS_FORMAT.into())],
+        depth_stencil.clone(),
+    );
+    [color_pipeline, z_pipeline, depth_pipeline]
+}
+
+/// The [`Geometry`] of `scene`.
+fn geometry(scene: &Scene) -> Geometry {
+    let mut vertices: Vec<Vertex> = Vec::new();
+    let mut indices: Vec<u32> = Vec::new();
+    let mut draws = Vec::new();
+    let mut static_parts: Vec<(usize, &MeshPart, &Pose)> = Vec::new();
+    for b in scene.bodies.iter().filter(|b| !b.movable) {
+        for p in &b.parts {
+            static_parts.push((p.material, p, &b.pose));
+        }
+    }
+    static_parts.sort_by_key(|s| s.0);
+    for (material, part, pose) in static_parts {
+        let range = push_mesh(&mut vertices, &mut indices, &part.mesh, Some(pose));
+        match draws.last_mut() {
+            Some(Draw {
+                material: m,
+                indices,
+                ..
+            }) if *m == material && indices.end == range.start => indices.end = range.end,
+            _ => draws.push(Draw {
+                material,
+                slot: 0,
+                indices: range,
+            }),
+        }
+    }
+    let static_end = draws.last().map(|d| d.indices.end).unwrap_or(0) as usize;
+    let static_tris = indices[..static_end].to_vec();
+    let chunks = chunk_triangles(&vertices, &mut indices, &static_tris);
+    let mut depth_draws = vec![];
+    let mut body_slots = vec![0u32; scene.bodies.len()];
+    let mut slot = 0;
+    for (bi, b) in scene.bodies.iter().enumerate() {
+        if !b.movable {
+            continue;
+        }
+        slot += 1;
+        body_slots[bi] = slot;
+        let start = indices.len() as u32;
+        for p in &b.parts {
+            let range = push_mesh(&mut vertices, &mut indices, &p.mesh, None);
+            draws.push(Draw {
+                material: p.material,
+                slot,
+                indices: range,
+            });
+        }
+        if indices.len() as u32 > start {
+            depth_draws.push(Draw {
+                material: 0,
+                slot,
+                indices: start..indices.len() as u32,
+            });
+        }
+    }
+    Geometry {
+        vertices,
+        indices,
+        draws,
+        chunks,
+        depth_draws,
+        body_slots,
+        slots: slot,
+    }
+}
+
+/// A bind group per material of `scene`: its colour, its texture (sRGB, so sampling returns
+/// linear values; a white texel for plain materials) and the sampler.
+fn material_groups(
+    gpu: &Gpu,
+    scene: &Scene,
+    material_layout: &wgpu::BindGroupLayout,
+) -> Result<Vec<wgpu::BindGroup>, RenderError> {
+    use wgpu::util::DeviceExt;
+    let device = &gpu.device;
+    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("base colour"),
+        address_mode_u: wgpu::AddressMode::Repeat,
+        address_mode_v: wgpu::AddressMode::Repeat,
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        ..Default::default()
+    });
+    let max_tex = gpu.limits.max_texture_dimension_2d;
+    let upload = |t: &Texture| -> Result<wgpu::TextureView, RenderError> {
+        if t.width > max_tex || t.height > max_tex {
+            return Err(RenderError::Config(format!(
+                "texture {} is {}×{}, larger than this GPU's {max_tex}-texel limit",
+                t.name, t.width, t.height
+            )));
+        }
+        let tex = device.create_texture_with_data(
+            &gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some(&t.name),
+                size: wgpu::Extent3d {
+                    width: t.width,
+                    height: t.height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8Unorm,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            &t.rgba,
+        );
+        Ok(tex.create_view(&Default::default()))
+    };
+    let white = upload(&Texture::from_rgba(
+        "white".into(),
+        1,
+        1,
+        vec![255, 255, 255, 255],
+    ))?;
+    let views = scene
+        .textures
+        .iter()
+        .map(upload)
+        .collect::<Result<Vec<_>, _>>()?;
+    let groups = scene
+        .materials
+        .iter()
+        .map(|m| {
+            let c = m.color.map(|c| c as f32);
+            let u = MaterialUniform {
+                color: [c[0], c[1], c[2], 1.0],
+            };
+            let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(&m.name),
+                contents: bytemuck::bytes_of(&u),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+            let view = m.texture.map(|t| &views[t]).unwrap_or(&white);
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(&m.name),
+                layout: material_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::Sampler(&sampler),
+                    },
+                ],
+            })
+        })
+        .collect();
+    Ok(groups)
+}
+
 impl Renderer {
     /// Opens a device (backend from [`gpu::BACKEND_ENV`]) and uploads `scene`.
     pub fn new(scene: &Scene) -> Result<Renderer, RenderError> {
@@ -441,200 +767,21 @@ impl Renderer {
     fn build(gpu: Gpu, scene: &Scene) -> Result<Renderer, RenderError> {
         let device = &gpu.device;
         let lighting = Lighting::default();
-        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("futago camera"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shader.wgsl").into()),
-        });
         let uniform_stride = gpu.limits.min_uniform_buffer_offset_alignment.max(256);
-        let uniform_entry =
-            |binding: u32, size: u64, vis: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: vis,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: true,
-                    min_binding_size: wgpu::BufferSize::new(size),
-                },
-                count: None,
-            };
         let cam_size = std::mem::size_of::<CameraUniform>() as u64;
-        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("frame"),
-            entries: &[
-                uniform_entry(0, cam_size, wgpu::ShaderStages::VERTEX),
-                uniform_entry(1, 64, wgpu::ShaderStages::VERTEX),
-            ],
-        });
-        let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("material"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-            ],
-        });
-        let vertex_layout = wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<Vertex>() as u64,
-            step_mode: wgpu::VertexStepMode::Vertex,
-            attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2],
-        };
-        let depth_stencil = wgpu::DepthStencilState {
-            format: ZBUFFER_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        };
-        let primitive = wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleList,
-            cull_mode: None,
-            ..Default::default()
-        };
-        let pipeline = |label: &str,
-                        layouts: &[Option<&wgpu::BindGroupLayout>],
-                        fs: &str,
-                        targets: &[Option<wgpu::ColorTargetState>],
-                        depth_stencil: wgpu::DepthStencilState| {
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(label),
-                bind_group_layouts: layouts,
-                immediate_size: 0,
-            });
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &shader,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout.clone())],
-                },
-                primitive,
-                depth_stencil: Some(depth_stencil),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &shader,
-                    entry_point: Some(fs),
-                    compilation_options: Default::default(),
-                    targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
-        let color_pipeline = pipeline(
-            "colour+depth",
-            &[Some(&frame_layout), Some(&material_layout)],
-            "fs_color",
-            &[Some(COLOR_FORMAT.into()), Some(DEPTH_BITS_FORMAT.into())],
-            // After the z pre-pass: shade only the visible surface of each pixel.
-            wgpu::DepthStencilState {
-                depth_write_enabled: Some(false),
-                depth_compare: Some(wgpu::CompareFunction::LessEqual),
-                ..depth_stencil.clone()
-            },
-        );
-        let masked = |format: wgpu::TextureFormat| {
-            Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::empty(),
-            })
-        };
-        let z_pipeline = pipeline(
-            "z pre-pass",
-            &[Some(&frame_layout)],
-            "fs_none",
-            &[masked(COLOR_FORMAT), masked(DEPTH_BITS_FORMAT)],
-            depth_stencil.clone(),
-        );
-        let depth_pipeline = pipeline(
-            "depth",
-            &[Some(&frame_layout)],
-            "fs_depth",
-            &[Some(DEPTH_BITS_FORMAT.into())],
-            depth_stencil.clone(),
-        );
+        let (frame_layout, material_layout) = layouts(device, cam_size);
+        let [color_pipeline, z_pipeline, depth_pipeline] =
+            pipelines(device, &frame_layout, &material_layout);
 
-        // Geometry: static bodies baked into world coordinates and grouped by material, then
-        // each movable body in its own frame.
-        let mut vertices: Vec<Vertex> = Vec::new();
-        let mut indices: Vec<u32> = Vec::new();
-        let mut draws = Vec::new();
-        let mut static_parts: Vec<(usize, &MeshPart, &Pose)> = Vec::new();
-        for b in scene.bodies.iter().filter(|b| !b.movable) {
-            for p in &b.parts {
-                static_parts.push((p.material, p, &b.pose));
-            }
-        }
-        static_parts.sort_by_key(|s| s.0);
-        for (material, part, pose) in static_parts {
-            let range = push_mesh(&mut vertices, &mut indices, &part.mesh, Some(pose));
-            match draws.last_mut() {
-                Some(Draw {
-                    material: m,
-                    indices,
-                    ..
-                }) if *m == material && indices.end == range.start => indices.end = range.end,
-                _ => draws.push(Draw {
-                    material,
-                    slot: 0,
-                    indices: range,
-                }),
-            }
-        }
-        let static_end = draws.last().map(|d| d.indices.end).unwrap_or(0) as usize;
-        let static_tris = indices[..static_end].to_vec();
-        let chunks = chunk_triangles(&vertices, &mut indices, &static_tris);
-        let mut depth_draws = vec![];
-        let mut body_slots = vec![0u32; scene.bodies.len()];
-        let mut slot = 0;
-        for (bi, b) in scene.bodies.iter().enumerate() {
-            if !b.movable {
-                continue;
-            }
-            slot += 1;
-            body_slots[bi] = slot;
-            let start = indices.len() as u32;
-            for p in &b.parts {
-                let range = push_mesh(&mut vertices, &mut indices, &p.mesh, None);
-                draws.push(Draw {
-                    material: p.material,
-                    slot,
-                    indices: range,
-                });
-            }
-            if indices.len() as u32 > start {
-                depth_draws.push(Draw {
-                    material: 0,
-                    slot,
-                    indices: start..indices.len() as u32,
-                });
-            }
-        }
+        let Geometry {
+            mut vertices,
+            mut indices,
+            draws,
+            chunks,
+            depth_draws,
+            body_slots,
+            slots: slot,
+        } = geometry(scene);
         let max_buffer = gpu.limits.max_buffer_size;
         let vbytes = (vertices.len() * std::mem::size_of::<Vertex>()) as u64;
         if vbytes > max_buffer {
@@ -666,89 +813,7 @@ impl Renderer {
             usage: wgpu::BufferUsages::INDEX,
         });
 
-        // Textures: sRGB, so sampling returns linear values; a white texel for plain materials.
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("base colour"),
-            address_mode_u: wgpu::AddressMode::Repeat,
-            address_mode_v: wgpu::AddressMode::Repeat,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
-        let max_tex = gpu.limits.max_texture_dimension_2d;
-        let upload = |t: &Texture| -> Result<wgpu::TextureView, RenderError> {
-            if t.width > max_tex || t.height > max_tex {
-                return Err(RenderError::Config(format!(
-                    "texture {} is {}×{}, larger than this GPU's {max_tex}-texel limit",
-                    t.name, t.width, t.height
-                )));
-            }
-            let tex = device.create_texture_with_data(
-                &gpu.queue,
-                &wgpu::TextureDescriptor {
-                    label: Some(&t.name),
-                    size: wgpu::Extent3d {
-                        width: t.width,
-                        height: t.height,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba8Unorm,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                },
-                wgpu::util::TextureDataOrder::LayerMajor,
-                &t.rgba,
-            );
-            Ok(tex.create_view(&Default::default()))
-        };
-        let white = upload(&Texture::from_rgba(
-            "white".into(),
-            1,
-            1,
-            vec![255, 255, 255, 255],
-        ))?;
-        let views = scene
-            .textures
-            .iter()
-            .map(upload)
-            .collect::<Result<Vec<_>, _>>()?;
-        let material_groups = scene
-            .materials
-            .iter()
-            .map(|m| {
-                let c = m.color.map(|c| c as f32);
-                let u = MaterialUniform {
-                    color: [c[0], c[1], c[2], 1.0],
-                };
-                let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(&m.name),
-                    contents: bytemuck::bytes_of(&u),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
-                let view = m.texture.map(|t| &views[t]).unwrap_or(&white);
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some(&m.name),
-                    layout: &material_layout,
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: buffer.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: wgpu::BindingResource::TextureView(view),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::Sampler(&sampler),
-                        },
-                    ],
-                })
-            })
-            .collect();
+        let material_groups = material_groups(&gpu, scene, &material_layout)?;
 
         let model_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("models"),
