@@ -123,6 +123,337 @@ fn simulate(
     simulate_with(s, opts, out, Vec::new())
 }
 
+/// Checks that every consumed estimate or map has a publisher.
+fn check_publishers(nodes: &[Scheduled], streams: &[stack::Streams]) -> Result<()> {
+    for (n, st) in nodes.iter().zip(streams) {
+        for t in &st.consumes {
+            let derived = t.starts_with("pose/") || t.starts_with("map/");
+            if derived && !streams.iter().any(|o| o.publishes.contains(t)) {
+                bail!(
+                    "node `{}` consumes `{t}`, which no node of this scenario publishes",
+                    n.node.name()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The names of the topics under `prefix` (`pose/`, `map/`) that nodes publish.
+fn published(streams: &[stack::Streams], prefix: &str) -> Vec<String> {
+    streams
+        .iter()
+        .flat_map(|st| st.publishes.iter())
+        .filter_map(|t| t.strip_prefix(prefix).map(String::from))
+        .collect()
+}
+
+/// The published maps some node consumes, each with the shortest period a consumer asks for
+/// (none: every change).
+fn map_subscriptions(streams: &[stack::Streams]) -> Vec<(String, Option<Duration>)> {
+    published(streams, "map/")
+        .into_iter()
+        .filter_map(|m| {
+            let topic = format!("map/{m}");
+            let wanted: Vec<&stack::Streams> = streams
+                .iter()
+                .filter(|st| st.consumes.contains(&topic))
+                .collect();
+            (!wanted.is_empty()).then(|| {
+                let period = wanted
+                    .iter()
+                    .map(|st| st.periods.iter().find(|(t, _)| *t == topic).map(|p| p.1))
+                    .try_fold(None::<Duration>, |acc, p| {
+                        p.map(|p| Some(acc.map_or(p, |a: Duration| Duration(a.0.min(p.0)))))
+                    })
+                    .flatten();
+                (topic, period)
+            })
+        })
+        .collect()
+}
+
+/// The run's cameras: each Kinect with the nodes that consume its frames, the joint or agent
+/// that carries it and its frame count, and the renderer they share, started only when some
+/// node consumes frames (cameras render on demand).
+struct CameraRig {
+    kinects: Vec<Kinect>,
+    consumers: Vec<Vec<usize>>,
+    /// The joint each camera rides on (index into the movers' joints).
+    joints: Vec<Option<usize>>,
+    /// The agent carrying each camera, if not the robot (index into the agents).
+    carriers: Vec<Option<usize>>,
+    frames: Vec<u64>,
+    renderer: Option<Renderer>,
+    /// Wall time spent rendering, s.
+    seconds: f64,
+}
+
+impl CameraRig {
+    fn new(
+        s: &Scenario,
+        seed: u64,
+        streams: &[stack::Streams],
+        nodes: &[Scheduled],
+    ) -> Result<CameraRig> {
+        let consumers: Vec<Vec<usize>> = s
+            .cameras
+            .iter()
+            .map(|c| consumers(streams, &format!("camera/{}", c.name)))
+            .collect();
+        // A camera an agent carries is not on the robot: only nodes that take its frames for
+        // what they are may consume it.
+        for (c, takers) in s.cameras.iter().zip(&consumers) {
+            if let Some(agent) = &c.carrier {
+                for &i in takers {
+                    let n = nodes[i].node.name();
+                    if !nodes[i].node.takes_carried_cameras() {
+                        anyhow::bail!(
+                            "camera `{}` is carried by agent `{agent}`, not the robot; the `{n}` node \
+                             takes camera frames as the robot's",
+                            c.name
+                        );
+                    }
+                }
+            }
+        }
+        let carriers = s
+            .cameras
+            .iter()
+            .map(|c| {
+                c.carrier
+                    .as_ref()
+                    .and_then(|a| s.movers.agents.iter().position(|k| &k.name == a))
+            })
+            .collect();
+        let joints = s
+            .cameras
+            .iter()
+            .map(|c| {
+                c.joint
+                    .as_ref()
+                    .and_then(|j| s.movers.joints.iter().position(|k| &k.name == j))
+            })
+            .collect();
+        let kinects: Vec<Kinect> = s
+            .cameras
+            .iter()
+            .map(|c| Kinect::new(c.clone(), stream(seed, &format!("camera.{}", c.name))))
+            .collect();
+        let renderer = if consumers.iter().any(|c| !c.is_empty()) {
+            Some(
+                Renderer::new(&scene(&s.world, &s.spec.robot, &s.movers, s.start))
+                    .context("starting the camera renderer")?,
+            )
+        } else {
+            None
+        };
+        Ok(CameraRig {
+            frames: vec![0; kinects.len()],
+            kinects,
+            consumers,
+            joints,
+            carriers,
+            renderer,
+            seconds: 0.0,
+        })
+    }
+
+    /// Renders each camera that is due and wanted now, in the scenario's order, and hands the
+    /// frame to the nodes that want it.
+    fn capture(
+        &mut self,
+        now: Time,
+        sim: &Simulation,
+        nodes: &mut [Scheduled],
+        bus: &mut Bus,
+    ) -> Result<()> {
+        let CameraRig {
+            kinects,
+            consumers,
+            joints,
+            carriers,
+            frames,
+            renderer,
+            seconds,
+        } = self;
+        let Some(r) = renderer.as_mut() else {
+            return Ok(());
+        };
+        let mut posed = None;
+        for (c, cam) in kinects.iter_mut().enumerate() {
+            if !cam.due(now.nanos()) {
+                continue;
+            }
+            let wanting: Vec<usize> = consumers[c]
+                .iter()
+                .copied()
+                .filter(|&i| nodes[i].node.wants_frame(&cam.spec.name, bus))
+                .collect();
+            if wanting.is_empty() {
+                continue;
+            }
+            let t0 = Instant::now();
+            // Pose the scene once for every camera rendered at this step.
+            let base = match posed {
+                Some(b) => b,
+                None => {
+                    let poses = sim.scene_poses();
+                    r.set_poses(&poses)?;
+                    *posed.insert(poses[poses.len() - 1])
+                }
+            };
+            // A camera on a joint: its mount is on the joint's frame; on an agent: on the
+            // agent's frame on the floor; then its carrier's sway.
+            let base = match (joints[c], carriers[c]) {
+                (Some(j), _) => base * sim.joints()[j].transform(),
+                (None, Some(a)) => {
+                    let p = sim.agent_poses()[a].1;
+                    futago_sim::render::Pose::from_parts(
+                        glam::Vec3::new(p.x as f32, p.y as f32, 0.0),
+                        glam::Quat::from_rotation_z(p.theta as f32),
+                    )
+                }
+                (None, None) => base,
+            };
+            let base = match &cam.spec.sway {
+                Some(sway) => base * sway.pose(now),
+                None => base,
+            };
+            cam.take();
+            let frame = CameraFrame {
+                frame: cam.capture(r, &base, now, true)?,
+                optical: cam.optical_pose(&base),
+            };
+            *seconds += t0.elapsed().as_secs_f64();
+            frames[c] += 1;
+            for i in wanting {
+                let mut truth = TrueDepth {
+                    renderer: r,
+                    camera: cam,
+                    base,
+                    seconds,
+                };
+                let name = &cam.spec.name;
+                nodes[i].call(|node| node.on_frame(name, &frame, &mut truth, bus))?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The live progress bar of a run of `duration` s, when shown.
+fn progress_bar(show: bool, duration: f64, name: &str) -> Option<indicatif::ProgressBar> {
+    show.then(|| {
+        let b = indicatif::ProgressBar::new((duration * 1000.0) as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} {msg} [{bar:40}] {percent}% sim {pos}/{len} ms, eta {eta}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        b.set_message(name.to_string());
+        b
+    })
+}
+
+/// What the nodes leave at the end of a run, gathered in node order.
+struct Finished {
+    entries: Vec<(String, Value)>,
+    files: Vec<String>,
+    map: Option<OccupancyGrid>,
+    trajectories: Vec<(String, String)>,
+    per_node: serde_json::Map<String, Value>,
+}
+
+/// Finishes every node in order (each writing into `out` when the run writes files) and
+/// gathers their reports, with each node's wall time.
+fn finish_nodes(nodes: &mut [Scheduled], bus: &mut Bus, out: Option<&Path>) -> Result<Finished> {
+    let mut f = Finished {
+        entries: Vec::new(),
+        files: Vec::new(),
+        map: None,
+        trajectories: Vec::new(),
+        per_node: serde_json::Map::new(),
+    };
+    for n in nodes.iter_mut() {
+        let Report {
+            summary,
+            files: written,
+            map: m,
+            trajectories: t,
+            performance,
+        } = n.call(|node| node.finish(bus, out))?;
+        f.entries.extend(summary);
+        f.files.extend(written);
+        f.map = f.map.or(m);
+        f.trajectories.extend(t);
+        let mut p = performance;
+        p.insert("wall_s".into(), json!(n.seconds));
+        f.per_node
+            .insert(n.node.name().to_string(), Value::Object(p));
+    }
+    Ok(f)
+}
+
+/// The truth phase: the robot's, the agents' and the people's true poses on the bus, then
+/// each node that consumes `truth`.
+fn publish_truth(
+    sim: &Simulation,
+    bus: &mut Bus,
+    nodes: &mut [Scheduled],
+    truth_nodes: &[usize],
+    (has_agents, has_people): (bool, bool),
+) -> Result<()> {
+    bus.truth = sim.robot_pose();
+    if has_agents {
+        bus.agents = sim
+            .agent_poses()
+            .into_iter()
+            .map(|(n, p)| (n.to_string(), p))
+            .collect();
+    }
+    if has_people {
+        bus.people = sim.people();
+        bus.person_collisions = sim.counters().person_contact_events;
+    }
+    for &i in truth_nodes {
+        nodes[i].call(|node| node.on_truth(bus))?;
+    }
+    Ok(())
+}
+
+/// Hands a message to the nodes `to`, in node order.
+fn deliver(
+    nodes: &mut [Scheduled],
+    to: &[usize],
+    mut f: impl FnMut(&mut dyn Node) -> Result<()>,
+) -> Result<()> {
+    for &i in to {
+        nodes[i].call(&mut f)?;
+    }
+    Ok(())
+}
+
+/// The control phase: every node's control tick in order; gives the drive command published,
+/// and hands the joints' commands to the simulation.
+fn control(
+    nodes: &mut [Scheduled],
+    bus: &mut Bus,
+    sim: &mut Simulation,
+) -> Result<Option<futago_msgs::DriveCommand>> {
+    for n in nodes.iter_mut() {
+        n.call(|node| node.on_control(bus))?;
+    }
+    let cmd = bus.command.take();
+    for (name, angle) in bus.joint_commands.drain(..) {
+        sim.command_joint(&name, angle)
+            .map_err(|e| anyhow::anyhow!("a node's joint/{name} command: {e}"))?;
+    }
+    Ok(cmd)
+}
+
 /// [`simulate`] with `extra` nodes after the stack's (a collector of training data, say).
 pub fn simulate_with(
     s: &Scenario,
@@ -139,49 +470,15 @@ pub fn simulate_with(
         .map(|node| Scheduled { node, seconds: 0.0 })
         .collect();
     let streams: Vec<stack::Streams> = nodes.iter().map(|n| n.node.streams()).collect();
-    // Every consumed estimate or map has a publisher.
-    for (n, st) in nodes.iter().zip(&streams) {
-        for t in &st.consumes {
-            let derived = t.starts_with("pose/") || t.starts_with("map/");
-            if derived && !streams.iter().any(|o| o.publishes.contains(t)) {
-                bail!(
-                    "node `{}` consumes `{t}`, which no node of this scenario publishes",
-                    n.node.name()
-                );
-            }
-        }
-    }
-    let published = |prefix: &str| -> Vec<String> {
-        streams
-            .iter()
-            .flat_map(|st| st.publishes.iter())
-            .filter_map(|t| t.strip_prefix(prefix).map(String::from))
-            .collect()
-    };
-    let subscriptions: Vec<(String, Option<Duration>)> = published("map/")
-        .into_iter()
-        .filter_map(|m| {
-            let topic = format!("map/{m}");
-            let wanted: Vec<&stack::Streams> = streams
-                .iter()
-                .filter(|st| st.consumes.contains(&topic))
-                .collect();
-            (!wanted.is_empty()).then(|| {
-                // The shortest period any consumer asks for; none asks: every change.
-                let period = wanted
-                    .iter()
-                    .map(|st| st.periods.iter().find(|(t, _)| *t == topic).map(|p| p.1))
-                    .try_fold(None::<Duration>, |acc, p| {
-                        p.map(|p| Some(acc.map_or(p, |a: Duration| Duration(a.0.min(p.0)))))
-                    })
-                    .flatten();
-                (topic, period)
-            })
-        })
-        .collect();
-    let mut bus = Bus::new(s.start, published("pose/"), subscriptions);
+    check_publishers(&nodes, &streams)?;
+    let mut bus = Bus::new(
+        s.start,
+        published(&streams, "pose/"),
+        map_subscriptions(&streams),
+    );
     let (has_agents, has_joints) = (!s.movers.agents.is_empty(), !s.movers.joints.is_empty());
     let has_people = !s.movers.people.is_empty() || !s.movers.flows.is_empty();
+    let movers = (has_agents, has_people);
     bus.joints = s
         .movers
         .joints
@@ -195,37 +492,7 @@ pub fn simulate_with(
         .iter()
         .map(|(c, _)| consumers(&streams, &format!("scan/{}", c.name)))
         .collect();
-    let camera_nodes: Vec<Vec<usize>> = s
-        .cameras
-        .iter()
-        .map(|c| consumers(&streams, &format!("camera/{}", c.name)))
-        .collect();
-    // A camera an agent carries is not on the robot: only nodes that take its frames for what
-    // they are may consume it.
-    for (c, takers) in s.cameras.iter().zip(&camera_nodes) {
-        if let Some(agent) = &c.carrier {
-            for &i in takers {
-                let n = nodes[i].node.name();
-                if !nodes[i].node.takes_carried_cameras() {
-                    anyhow::bail!(
-                        "camera `{}` is carried by agent `{agent}`, not the robot; the `{n}` node \
-                         takes camera frames as the robot's",
-                        c.name
-                    );
-                }
-            }
-        }
-    }
-    // The agent carrying each camera, if not the robot (index into the agents).
-    let camera_carriers: Vec<Option<usize>> = s
-        .cameras
-        .iter()
-        .map(|c| {
-            c.carrier
-                .as_ref()
-                .and_then(|a| s.movers.agents.iter().position(|k| &k.name == a))
-        })
-        .collect();
+    let mut cameras = CameraRig::new(s, seed, &streams, &nodes)?;
 
     let mut sim = Simulation::new(
         &s.world,
@@ -236,30 +503,6 @@ pub fn simulate_with(
         s.start,
         seed,
     );
-    // Cameras render on demand: only when some node consumes their frames.
-    let mut kinects: Vec<Kinect> = s
-        .cameras
-        .iter()
-        .map(|c| Kinect::new(c.clone(), stream(seed, &format!("camera.{}", c.name))))
-        .collect();
-    let mut renderer = if camera_nodes.iter().any(|c| !c.is_empty()) {
-        Some(
-            Renderer::new(&scene(&s.world, &spec.robot, &s.movers, s.start))
-                .context("starting the camera renderer")?,
-        )
-    } else {
-        None
-    };
-    let mut camera_frames = vec![0u64; kinects.len()];
-    let camera_joints: Vec<Option<usize>> = s
-        .cameras
-        .iter()
-        .map(|c| {
-            c.joint
-                .as_ref()
-                .and_then(|j| s.movers.joints.iter().position(|k| &k.name == j))
-        })
-        .collect();
     let mut odo = OdometryIntegrator::new(s.start);
     let gt_period = Duration::from_secs(1.0 / spec.output.groundtruth_rate);
     let end = Time::from_secs(duration);
@@ -268,20 +511,9 @@ pub fn simulate_with(
     let mut scans = vec![0u64; s.lidars.len()];
     let mut distance = 0.0;
     let mut prev_truth = s.start;
-    let (mut sim_seconds, mut render_seconds) = (0.0, 0.0);
+    let mut sim_seconds = 0.0;
     let started = Instant::now();
-    let bar = opts.progress.then(|| {
-        let b = indicatif::ProgressBar::new((duration * 1000.0) as u64);
-        b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} {msg} [{bar:40}] {percent}% sim {pos}/{len} ms, eta {eta}",
-            )
-            .expect("valid template")
-            .progress_chars("=> "),
-        );
-        b.set_message(spec.name.clone());
-        b
-    });
+    let bar = progress_bar(opts.progress, duration, &spec.name);
 
     // The first command, from the start pose alone, before any node has started.
     bus.bumps = sim.bumps();
@@ -297,32 +529,16 @@ pub fn simulate_with(
         bus.now = now;
         if now.nanos() >= next_gt * gt_period.0 {
             next_gt += 1;
-            bus.truth = sim.robot_pose();
-            if has_agents {
-                bus.agents = sim
-                    .agent_poses()
-                    .into_iter()
-                    .map(|(n, p)| (n.to_string(), p))
-                    .collect();
-            }
-            if has_people {
-                bus.people = sim.people();
-                bus.person_collisions = sim.counters().person_contact_events;
-            }
-            for &i in &truth_nodes {
-                nodes[i].call(|node| node.on_truth(&bus))?;
-            }
+            publish_truth(&sim, &mut bus, &mut nodes, &truth_nodes, movers)?;
         }
         let done = nodes.iter().all(|n| n.node.finished());
         if now >= end || (done && sim.wheel_speeds() == (0.0, 0.0) && cmd.is_none()) {
             break;
         }
-        while let Some(e) = spec.event.get(next_event)
-            && now.secs() >= e.time
-        {
-            sim.teleport(e.teleport.pose());
-            prev_truth = e.teleport.pose();
-            next_event += 1;
+        // Events that fell due: the robot is picked up and put down.
+        while let Some(e) = spec.event.get(next_event).filter(|e| now.secs() >= e.time) {
+            (prev_truth, next_event) = (e.teleport.pose(), next_event + 1);
+            sim.teleport(prev_truth);
         }
         let t0 = Instant::now();
         let out = sim.step(cmd.take().as_ref());
@@ -343,70 +559,11 @@ pub fn simulate_with(
             }
             odo.integrate(&o);
             bus.push_odometry(now, odo.pose);
-            for &i in &odometry_nodes {
-                nodes[i].call(|node| node.on_odometry(&o, &mut bus))?;
-            }
+            deliver(&mut nodes, &odometry_nodes, |node| {
+                node.on_odometry(&o, &mut bus)
+            })?;
         }
-        if let Some(r) = renderer.as_mut() {
-            let mut posed = None;
-            for (c, cam) in kinects.iter_mut().enumerate() {
-                if !cam.due(now.nanos()) {
-                    continue;
-                }
-                let wanting: Vec<usize> = camera_nodes[c]
-                    .iter()
-                    .copied()
-                    .filter(|&i| nodes[i].node.wants_frame(&cam.spec.name, &bus))
-                    .collect();
-                if wanting.is_empty() {
-                    continue;
-                }
-                let t0 = Instant::now();
-                // Pose the scene once for every camera rendered at this step.
-                let base = match posed {
-                    Some(b) => b,
-                    None => {
-                        let poses = sim.scene_poses();
-                        r.set_poses(&poses)?;
-                        *posed.insert(poses[poses.len() - 1])
-                    }
-                };
-                // A camera on a joint: its mount is on the joint's frame; on an agent: on the
-                // agent's frame on the floor; then its carrier's sway.
-                let base = match (camera_joints[c], camera_carriers[c]) {
-                    (Some(j), _) => base * sim.joints()[j].transform(),
-                    (None, Some(a)) => {
-                        let p = sim.agent_poses()[a].1;
-                        futago_sim::render::Pose::from_parts(
-                            glam::Vec3::new(p.x as f32, p.y as f32, 0.0),
-                            glam::Quat::from_rotation_z(p.theta as f32),
-                        )
-                    }
-                    (None, None) => base,
-                };
-                let base = match &cam.spec.sway {
-                    Some(sway) => base * sway.pose(now),
-                    None => base,
-                };
-                cam.take();
-                let frame = CameraFrame {
-                    frame: cam.capture(r, &base, now, true)?,
-                    optical: cam.optical_pose(&base),
-                };
-                render_seconds += t0.elapsed().as_secs_f64();
-                camera_frames[c] += 1;
-                for i in wanting {
-                    let mut truth = TrueDepth {
-                        renderer: r,
-                        camera: cam,
-                        base,
-                        seconds: &mut render_seconds,
-                    };
-                    let name = &cam.spec.name;
-                    nodes[i].call(|node| node.on_frame(name, &frame, &mut truth, &mut bus))?;
-                }
-            }
-        }
+        cameras.capture(now, &sim, &mut nodes, &mut bus)?;
         for ((l, scan), hits) in out.scans.into_iter().zip(&out.hits) {
             scans[l] += 1;
             let name = &s.lidars[l].0.name;
@@ -418,14 +575,7 @@ pub fn simulate_with(
         }
         // Control at the rate of the Create's sensor stream.
         if out.odometry.is_some() {
-            for n in nodes.iter_mut() {
-                n.call(|node| node.on_control(&mut bus))?;
-            }
-            cmd = bus.command.take();
-            for (name, angle) in bus.joint_commands.drain(..) {
-                sim.command_joint(&name, angle)
-                    .map_err(|e| anyhow::anyhow!("a node's joint/{name} command: {e}"))?;
-            }
+            cmd = control(&mut nodes, &mut bus, &mut sim)?;
         }
         if let Some(b) = &bar
             && sim.counters().steps.is_multiple_of(200)
@@ -433,32 +583,11 @@ pub fn simulate_with(
             b.set_position((now.secs() * 1000.0) as u64);
         }
     }
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
+    bar.iter()
+        .for_each(indicatif::ProgressBar::finish_and_clear);
     bus.now = sim.time();
     bus.person_collisions = sim.counters().person_contact_events;
-    let mut entries = Vec::new();
-    let mut files = Vec::new();
-    let mut map = None;
-    let mut trajectories = Vec::new();
-    let mut per_node = serde_json::Map::new();
-    for n in nodes.iter_mut() {
-        let Report {
-            summary,
-            files: written,
-            map: m,
-            trajectories: t,
-            performance,
-        } = n.call(|node| node.finish(&mut bus, out))?;
-        entries.extend(summary);
-        files.extend(written);
-        map = map.or(m);
-        trajectories.extend(t);
-        let mut p = performance;
-        p.insert("wall_s".into(), json!(n.seconds));
-        per_node.insert(n.node.name().to_string(), Value::Object(p));
-    }
+    let finished = finish_nodes(&mut nodes, &mut bus, out)?;
     let wall_time = started.elapsed().as_secs_f64();
     let c = sim.counters();
     let outcome = Outcome {
@@ -467,8 +596,8 @@ pub fn simulate_with(
         wall_time,
         steps: c.steps,
         scans,
-        camera_frames,
-        renderer: renderer.map(|r| r.adapter()),
+        camera_frames: cameras.frames,
+        renderer: cameras.renderer.map(|r| r.adapter()),
         laser_rays: c.laser_rays,
         bump_events: c.bump_events,
         wheel_drop_steps: c.wheel_drop_steps,
@@ -477,14 +606,14 @@ pub fn simulate_with(
         final_odometry: odo.pose,
         final_joints: sim.joints().iter().map(|j| j.angle()).collect(),
         final_agents: sim.agent_poses().into_iter().map(|(_, p)| p).collect(),
-        entries,
-        files,
-        map,
-        trajectories,
+        entries: finished.entries,
+        files: finished.files,
+        map: finished.map,
+        trajectories: finished.trajectories,
         performance: json!({
             "simulation_s": sim_seconds,
-            "rendering_s": render_seconds,
-            "nodes": per_node,
+            "rendering_s": cameras.seconds,
+            "nodes": finished.per_node,
         }),
     };
     Ok((outcome, nodes.into_iter().map(|n| n.node).collect()))
