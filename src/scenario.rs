@@ -291,15 +291,37 @@ impl Resolving<'_> {
         }
     }
 
-    /// Refuses `source` (a pose source at `key`) unless the scenario has the module table
-    /// that publishes it (`needs`, e.g. `slam`).
-    pub fn require(&self, key: &str, needs: &str, what: &str) -> Result<(), SpecError> {
-        if self.spec.module(needs).is_some() {
-            Ok(())
-        } else {
-            Err(self.error(key, format!("{what} needs a [{needs}] table")))
-        }
+    /// Refuses pose source `source` at `key` unless the scenario runs the module that
+    /// publishes it (see [`require_pose`]).
+    pub fn require_pose(&self, key: &str, source: PoseSource, what: &str) -> Result<(), SpecError> {
+        require_pose(self.path, self.spec, key, source, what)
     }
+}
+
+/// Refuses pose source `source` at `key` unless the scenario runs the module that publishes
+/// it: `slam` needs a `[slam]` table, `localization` a `[localization]` or
+/// `[visual_localization]` one (both publish `pose/localization`). `what` opens the error.
+pub fn require_pose(
+    path: &Path,
+    spec: &ScenarioSpec,
+    key: &str,
+    source: PoseSource,
+    what: &str,
+) -> Result<(), SpecError> {
+    let tables: &[&str] = match source {
+        PoseSource::Slam => &["slam"],
+        PoseSource::Localization => &["localization", "visual_localization"],
+        PoseSource::GroundTruth | PoseSource::Odometry => return Ok(()),
+    };
+    if tables.iter().any(|t| spec.module(t).is_some()) {
+        return Ok(());
+    }
+    let named: Vec<String> = tables.iter().map(|t| format!("[{t}]")).collect();
+    Err(SpecError::new(
+        path,
+        key,
+        format!("{what} needs a {} table", named.join(" or ")),
+    ))
 }
 
 /// The largest magnitude a gate's value may have.
@@ -1160,22 +1182,14 @@ fn resolve_controller(
         ControllerConfig::Route(r) => Some(r.pose_source),
         _ => None,
     };
-    if pose_source == Some(PoseSource::Slam) && spec.module("slam").is_none() {
-        return Err(SpecError::new(
+    if let Some(source) = pose_source {
+        require_pose(
             path,
+            spec,
             "controller.pose_source",
-            "driving on SLAM's pose needs a [slam] table",
-        ));
-    }
-    if pose_source == Some(PoseSource::Localization)
-        && spec.module("localization").is_none()
-        && spec.module("visual_localization").is_none()
-    {
-        return Err(SpecError::new(
-            path,
-            "controller.pose_source",
-            "driving on the localiser's pose needs a [localization] or [visual_localization] table",
-        ));
+            source,
+            "driving on this pose",
+        )?;
     }
     if matches!(controller, ControllerConfig::Explore(_)) && spec.module("slam").is_none() {
         return Err(SpecError::new(

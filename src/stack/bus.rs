@@ -7,6 +7,7 @@
 
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{BumpsAndDrops, DriveCommand, Duration, Pose2, Time};
+use futago_robot::control::PoseSource;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 
@@ -166,6 +167,19 @@ impl Bus {
         })
     }
 
+    /// The pose `source` gives now: the robot's true pose (the oracle source, for tests and
+    /// exact routes: the one place where a stack module's pose comes from the truth), its
+    /// odometry, or a node's estimate carried to now by odometry (odometry until the node
+    /// publishes one).
+    pub fn pose_from(&self, source: PoseSource) -> Pose2 {
+        match source {
+            PoseSource::GroundTruth => self.truth,
+            PoseSource::Odometry => self.odometry,
+            PoseSource::Localization => self.pose("localization").unwrap_or(self.odometry),
+            PoseSource::Slam => self.pose("slam").unwrap_or(self.odometry),
+        }
+    }
+
     /// Publishes a map on `map/TOPIC`, stamped now.
     pub fn publish_map(&mut self, topic: &str, map: OccupancyGrid) {
         self.maps
@@ -192,5 +206,14 @@ impl Bus {
     /// it changes).
     pub fn subscription(&self, topic: &str) -> Option<Option<Duration>> {
         self.subscriptions.get(topic).copied()
+    }
+}
+
+/// The topic a node that takes its pose from `source` consumes (`pose/slam`), if any.
+pub fn pose_topic(source: PoseSource) -> Option<String> {
+    match source {
+        PoseSource::Localization => Some("pose/localization".into()),
+        PoseSource::Slam => Some("pose/slam".into()),
+        PoseSource::GroundTruth | PoseSource::Odometry => None,
     }
 }

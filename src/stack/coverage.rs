@@ -284,12 +284,7 @@ const WALL_POINT_MIN_Z: f64 = 0.1;
 impl SecondPass {
     /// The pose the driver steers by.
     fn pose(&self, bus: &Bus) -> Pose2 {
-        match self.pose_source {
-            PoseSource::GroundTruth => bus.truth,
-            PoseSource::Localization => bus.pose("localization").unwrap_or(bus.odometry),
-            PoseSource::Odometry => bus.odometry,
-            PoseSource::Slam => bus.pose("slam").unwrap_or(bus.odometry),
-        }
+        bus.pose_from(self.pose_source)
     }
 
     /// Marks the walls a camera frame (its measured depth) shows, placed by the robot's own

@@ -24,6 +24,7 @@ use anyhow::{Context, Result};
 use futago_msgs::camera::{DepthImage, Intrinsics};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{Pose2, Pose3};
+use futago_robot::control::PoseSource;
 use futago_robot::mapping::registration::{EnvironmentMap, Method};
 use futago_robot::mapping::rgbd_map::RgbdMapConfig;
 use futago_robot::mapping::rgbd_map::{CameraMount, RgbdMap, RgbdMapper};
@@ -54,7 +55,7 @@ const DEFAULT_SLICE_Z: f64 = 0.2;
 pub struct RgbdMapNode {
     mapper: RgbdMapper,
     camera: String,
-    source: MapPose,
+    source: PoseSource,
     /// The methods that place the keyframes after the run, the first the run's map.
     methods: Vec<Method>,
     stride: u32,
@@ -195,12 +196,7 @@ fn metric_names(s: &ScenarioSpec, spec: &RgbdMapSpec) -> Vec<String> {
 impl RgbdMapNode {
     /// The 2D pose that places a keyframe now.
     fn map_pose(&self, bus: &Bus) -> Pose2 {
-        match self.source {
-            MapPose::GroundTruth => bus.truth,
-            MapPose::Odometry => bus.odometry,
-            MapPose::Localization => bus.pose("localization").unwrap_or(bus.odometry),
-            MapPose::Slam => bus.pose("slam").unwrap_or(bus.odometry),
-        }
+        bus.pose_from(self.source)
     }
 
     /// The tracked people now, as the exclusion cuts them out.
@@ -264,11 +260,7 @@ impl Node for RgbdMapNode {
 
     fn streams(&self) -> Streams {
         let mut consumes = vec![format!("camera/{}", self.camera)];
-        match self.source {
-            MapPose::Localization => consumes.push("pose/localization".into()),
-            MapPose::Slam => consumes.push("pose/slam".into()),
-            _ => {}
-        }
+        consumes.extend(super::bus::pose_topic(self.source));
         if self.exclusion.enabled || self.pause_for_people {
             consumes.push("people/tracked".into());
         }
@@ -537,21 +529,11 @@ fn score_map(
     out
 }
 
-/// Which 2D pose places the RGB-D keyframes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum MapPose {
-    GroundTruth,
-    Odometry,
-    Localization,
-    Slam,
-}
-
 /// `[rgbd_map]`: `pose_source`, `camera` (its frames), `laser` (the height of its 2D-map
 /// term and slice) and the mapper's own keys ([`RgbdMapConfig`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RgbdMapSpec {
-    pub pose_source: MapPose,
+    pub pose_source: PoseSource,
     /// The camera's name (resolved: the only camera when the table names none).
     pub camera: String,
     /// The laser's name, if any.
@@ -566,8 +548,8 @@ pub fn rgbd_map_config(path: &Path, table: &toml::Table) -> Result<RgbdMapSpec, 
     let camera = take_name(path, "rgbd_map", "camera", &mut rest)?.unwrap_or_default();
     let laser = take_name(path, "rgbd_map", "laser", &mut rest)?;
     let pose_source = match rest.remove("pose_source") {
-        None => MapPose::Slam,
-        Some(v) => MapPose::deserialize(v.clone()).map_err(|_| {
+        None => PoseSource::Slam,
+        Some(v) => PoseSource::deserialize(v.clone()).map_err(|_| {
             SpecError::new(
                 path,
                 "rgbd_map.pose_source",
@@ -646,20 +628,7 @@ impl ModuleConfig for Module {
                 })
                 .or_else(|| (cx.lidars.len() == 1).then(|| cx.lidars[0].0.name.clone())),
         };
-        let needs = match m.pose_source {
-            MapPose::Localization if cx.spec.module("localization").is_none() => {
-                Some("[localization]")
-            }
-            MapPose::Slam if cx.spec.module("slam").is_none() => Some("[slam]"),
-            _ => None,
-        };
-        if let Some(table) = needs {
-            return Err(SpecError::new(
-                path,
-                "rgbd_map.pose_source",
-                format!("this pose source needs a {table} table"),
-            ));
-        }
+        cx.require_pose("rgbd_map.pose_source", m.pose_source, "this pose source")?;
 
         Ok(Box::new(m))
     }

@@ -39,6 +39,7 @@ use crate::scenario::{
 };
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Odometry, Pose2, Time};
+use futago_robot::control::PoseSource;
 use futago_robot::mapping::line_icp::LineIcp;
 use futago_robot::mapping::turntable::TurntableConfig;
 use futago_robot::mapping::turntable::{Phase, StopAndScan, TableMount};
@@ -278,19 +279,14 @@ fn surfaces_to_map(s: &Scenario, region: &[[f64; 2]]) -> Result<Completeness> {
 
 impl Scan3dNode {
     fn pose(&self, bus: &Bus) -> Pose2 {
-        match self.source {
-            Scan3dPose::GroundTruth => bus.truth,
-            Scan3dPose::Odometry => bus.odometry,
-            Scan3dPose::Localization => bus.pose("localization").unwrap_or(bus.odometry),
-            Scan3dPose::Slam => bus.pose("slam").unwrap_or(bus.odometry),
-            // The last estimate, carried to now by odometry.
-            Scan3dPose::LineIcp => match &self.icp {
-                Some(icp) => {
-                    let (pose, at) = icp.pose();
-                    pose.compose(&at.between(&bus.odometry))
-                }
-                None => bus.odometry,
-            },
+        match (self.source.node(), &self.icp) {
+            (Some(source), _) => bus.pose_from(source),
+            // The seed's own estimate, carried to now by odometry.
+            (None, Some(icp)) => {
+                let (pose, at) = icp.pose();
+                pose.compose(&at.between(&bus.odometry))
+            }
+            (None, None) => bus.odometry,
         }
     }
 
@@ -418,11 +414,7 @@ impl Node for Scan3dNode {
             format!("scan/{}", self.vertical),
             format!("scan/{}", self.horizontal),
         ];
-        match self.source {
-            Scan3dPose::Localization => consumes.push("pose/localization".into()),
-            Scan3dPose::Slam => consumes.push("pose/slam".into()),
-            _ => {}
-        }
+        consumes.extend(self.source.node().and_then(super::bus::pose_topic));
         Streams {
             consumes,
             publishes: vec!["path/scan3d".into(), format!("joint/{}", self.joint)],
@@ -931,6 +923,19 @@ pub enum Scan3dPose {
     LineIcp,
 }
 
+impl Scan3dPose {
+    /// The node pose source it is, unless the seed's own `line_icp`.
+    pub fn node(self) -> Option<PoseSource> {
+        match self {
+            Scan3dPose::GroundTruth => Some(PoseSource::GroundTruth),
+            Scan3dPose::Odometry => Some(PoseSource::Odometry),
+            Scan3dPose::Localization => Some(PoseSource::Localization),
+            Scan3dPose::Slam => Some(PoseSource::Slam),
+            Scan3dPose::LineIcp => None,
+        }
+    }
+}
+
 /// Types the `[scan3d]` table, naming `scan3d.KEY` in errors (the lasers and the joint are
 /// checked against the scenario's in [`Scenario::load`]).
 pub fn scan3d_config(path: &Path, table: &toml::Table) -> Result<Scan3dSpec, SpecError> {
@@ -1100,19 +1105,12 @@ impl ModuleConfig for Module {
                 ),
             ));
         }
-        if m.pose_source == Scan3dPose::Slam && cx.spec.module("slam").is_none() {
-            return Err(SpecError::new(
-                path,
+        if let Some(source) = m.pose_source.node() {
+            cx.require_pose(
                 "scan3d.pose_source",
-                "placing the scans by SLAM's pose needs a [slam] table",
-            ));
-        }
-        if m.pose_source == Scan3dPose::Localization && cx.spec.module("localization").is_none() {
-            return Err(SpecError::new(
-                path,
-                "scan3d.pose_source",
-                "placing the scans by the localiser's pose needs a [localization] table",
-            ));
+                source,
+                "placing the scans by this pose",
+            )?;
         }
         m.joint = joint.name.clone();
         Ok(Box::new(m))
