@@ -716,32 +716,8 @@ impl ModuleConfig for Module {
                 "depth-camera localisation needs a [[camera]]; the scenario has none",
             ));
         }
-        let names: Vec<&str> = cx.cameras.iter().map(|c| c.name.as_str()).collect();
-        let name = match &d.camera {
-            Some(n) if names.contains(&n.as_str()) => n.clone(),
-            Some(n) => {
-                return Err(SpecError::new(
-                    path,
-                    "depth_localization.camera",
-                    format!("no camera is named `{n}`; the scenario's cameras are {names:?}"),
-                ));
-            }
-            None if names.len() == 1 => names[0].to_string(),
-            None => {
-                return Err(SpecError::new(
-                    path,
-                    "depth_localization.camera",
-                    format!(
-                        "the scenario has {} cameras {names:?}: name one",
-                        names.len()
-                    ),
-                ));
-            }
-        };
-        let cam =
-            cx.cameras.iter().find(|c| c.name == name).ok_or_else(|| {
-                SpecError::new(path, "depth_localization.camera", "no such camera")
-            })?;
+        let cam = cx.camera(key, d.camera.as_deref())?;
+        let name = cam.name.clone();
         if cam.joint.is_some() {
             return Err(SpecError::new(
                 path,

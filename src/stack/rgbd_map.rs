@@ -589,30 +589,8 @@ impl ModuleConfig for Module {
                 "an RGB-D map needs a [[camera]]; the scenario has none",
             ));
         }
-        let names: Vec<&str> = cx.cameras.iter().map(|c| c.name.as_str()).collect();
-        if m.camera.is_empty() {
-            if cx.cameras.len() > 1 {
-                return Err(SpecError::new(
-                    path,
-                    "rgbd_map.camera",
-                    format!(
-                        "the scenario has {} cameras {names:?}: name one, e.g. rgbd_map.camera = \"{}\"",
-                        names.len(),
-                        names[0]
-                    ),
-                ));
-            }
-            m.camera = cx.cameras[0].name.clone();
-        } else if !names.contains(&m.camera.as_str()) {
-            return Err(SpecError::new(
-                path,
-                "rgbd_map.camera",
-                format!(
-                    "no camera is named `{}`; the scenario's cameras are {names:?}",
-                    m.camera
-                ),
-            ));
-        }
+        let named = (!m.camera.is_empty()).then_some(m.camera.as_str());
+        m.camera = cx.camera("rgbd_map", named)?.name.clone();
         // The laser of its slice and 2D-map term: the one named, else SLAM's, else the
         // localiser's, else the only one.
         m.laser = match &m.laser {

@@ -514,20 +514,9 @@ impl ModuleConfig for Module {
             ));
         }
         let path = cx.path;
-        let names: Vec<&str> = cx.cameras.iter().map(|c| c.name.as_str()).collect();
-        let name = match &v.camera {
-            Some(n) if names.contains(&n.as_str()) => n.clone(),
-            None if names.len() == 1 => names[0].to_string(),
-            _ => {
-                return Err(SpecError::new(
-                    path,
-                    "visual_localization.camera",
-                    format!("name one of the scenario's cameras {names:?}"),
-                ));
-            }
-        };
-        let cam = cx.cameras.iter().find(|c| c.name == name);
-        if cam.is_some_and(|c| c.joint.is_some() || c.carrier.is_some()) {
+        let cam = cx.camera(key, v.camera.as_deref())?;
+        let name = cam.name.clone();
+        if cam.joint.is_some() || cam.carrier.is_some() {
             return Err(SpecError::new(
                 path,
                 "visual_localization.camera",
