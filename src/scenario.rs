@@ -2,16 +2,15 @@
 //! controller, and what to write.
 //!
 //! Every table is a typed config of the module it configures (`[robot]` is the Create's
-//! [`CreateConfig`], `[[lidar]]` a [`LidarConfig`], `[controller]` a scripted
-//! [`ControllerConfig`]), so any parameter is reachable by its dotted path.
+//! [`CreateConfig`], `[[lidar]]` a [`LidarConfig`]; a stack module's table, such as
+//! `[controller]` or `[slam]`, is typed by the module, see [`ModuleConfig`]), so any
+//! parameter is reachable by its dotted path.
 
 use crate::overlay::{Overlay, blame};
 use futago_msgs::Pose2;
 use futago_robot::control::PoseSource;
-use futago_robot::control::script::{Script, SegmentsConfig, WaypointConfig};
 use futago_robot::navigation::NavigationConfig;
 use futago_robot::navigation::coverage::CoverageConfig;
-use futago_robot::navigation::{CoverConfig, ExploreConfig, NavigateConfig, RouteConfig};
 use futago_robot::tracking::PeopleConfig;
 use futago_sim::agent::AgentConfig;
 use futago_sim::config::{SpecError, check_name, check_range, load_toml};
@@ -85,9 +84,6 @@ pub struct ScenarioSpec {
     /// Accuracy gates: `futago run` exits with status 3 when one fails.
     #[serde(default)]
     pub gate: Vec<crate::gate::Gate>,
-    /// Read as a table and typed by [`controller_config`], so that errors inside it carry
-    /// their full key path.
-    pub controller: toml::Table,
     #[serde(default)]
     pub output: OutputConfig,
     /// The stack modules' tables as written (`[localization]`, `[slam]`, `[rgbd_map]`, …), by
@@ -143,6 +139,11 @@ pub trait ModuleConfig: Sync {
     /// The key of its table in scenario files (`slam`); none for a module without one.
     fn key(&self) -> Option<&'static str> {
         None
+    }
+
+    /// Whether every scenario must have its table (`[controller]`).
+    fn required(&self) -> bool {
+        false
     }
 
     /// Types and checks its table (present in the scenario), naming `KEY.…` in errors, and
@@ -396,7 +397,6 @@ impl Default for OutputConfig {
 /// A loaded, checked scenario with its world compiled.
 #[derive(Debug, Clone)]
 pub struct Scenario {
-    pub controller: ControllerConfig,
     pub spec: ScenarioSpec,
     pub world: World,
     pub start: Pose2,
@@ -412,8 +412,6 @@ pub struct Scenario {
     pub overlays: Vec<Overlay>,
     /// The stack modules' specs, typed and resolved, in the modules' order.
     pub modules: ModuleSpecs,
-    /// The laser the navigator avoids obstacles with (`controller.laser`, or the only one).
-    pub driver_laser: Option<String>,
 }
 
 /// Types a module's table whose wiring keys (`wiring`: which sensor it reads, where its pose
@@ -451,137 +449,6 @@ pub fn take_name(
             path,
             format!("{module}.{key}"),
             format!("expected a sensor's name (a string), found {other}"),
-        )),
-    }
-}
-
-/// What drives the robot, as a scenario's `[controller]` table declares it, selected by its
-/// `type` key: a scripted plan ([`Script`]) or the navigator.
-#[derive(Debug, Clone, PartialEq)]
-pub enum ControllerConfig {
-    /// Stand still.
-    Idle,
-    Segments(SegmentsConfig),
-    /// Follow waypoints.
-    Waypoints(WaypointConfig),
-    /// Navigate to goals on the known map ([`futago_robot::navigation`]).
-    Navigate(NavigateConfig),
-    /// Explore an unknown world with SLAM ([`futago_robot::navigation`]).
-    Explore(ExploreConfig),
-    /// Drive a coverage route planned on the known map
-    /// ([`futago_robot::navigation::coverage`], parameters in `[coverage]`).
-    Coverage(CoverConfig),
-    /// Drive the routes a stack node publishes ([`futago_robot::navigation::RouteConfig`]).
-    Route(RouteConfig),
-}
-
-impl ControllerConfig {
-    /// The `type` names, in declaration order.
-    pub const TYPES: [&'static str; 7] = [
-        "idle",
-        "segments",
-        "waypoints",
-        "navigate",
-        "explore",
-        "coverage",
-        "route",
-    ];
-
-    /// Checks values a controller cannot run with; returns `(key, expectation)` on error.
-    pub fn validate(&self) -> Result<(), (String, String)> {
-        match self {
-            ControllerConfig::Idle
-            | ControllerConfig::Explore(_)
-            | ControllerConfig::Coverage(_) => Ok(()),
-            ControllerConfig::Route(r) => {
-                if r.topic.is_empty() || r.topic.contains(char::is_whitespace) {
-                    Err((
-                        "topic".into(),
-                        "a topic name without spaces, e.g. \"scan3d\"".into(),
-                    ))
-                } else {
-                    Ok(())
-                }
-            }
-            ControllerConfig::Segments(s) => s.validate(),
-            ControllerConfig::Waypoints(w) => w.validate(),
-            ControllerConfig::Navigate(n) => n.validate(),
-        }
-    }
-
-    /// The scripted plan, for the controllers that are one.
-    pub fn script(&self) -> Option<Script> {
-        match self {
-            ControllerConfig::Idle => Some(Script::Idle),
-            ControllerConfig::Segments(s) => Some(Script::Segments(s.clone())),
-            ControllerConfig::Waypoints(w) => Some(Script::Waypoints(w.clone())),
-            ControllerConfig::Navigate(_)
-            | ControllerConfig::Explore(_)
-            | ControllerConfig::Coverage(_)
-            | ControllerConfig::Route(_) => None,
-        }
-    }
-}
-
-/// Types the `[controller]` table by its `type` key, naming `controller.KEY` in errors.
-pub fn controller_config(path: &Path, table: &toml::Table) -> Result<ControllerConfig, SpecError> {
-    let mut rest = table.clone();
-    let ty = match rest.remove("type") {
-        Some(toml::Value::String(t)) => t,
-        Some(other) => {
-            return Err(SpecError::new(
-                path,
-                "controller.type",
-                format!(
-                    "expected a string, one of {:?}; found {other}",
-                    ControllerConfig::TYPES
-                ),
-            ));
-        }
-        None => {
-            return Err(SpecError::new(
-                path,
-                "controller.type",
-                format!("missing; expected one of {:?}", ControllerConfig::TYPES),
-            ));
-        }
-    };
-    fn typed<T: serde::de::DeserializeOwned>(
-        path: &Path,
-        rest: toml::Table,
-    ) -> Result<T, SpecError> {
-        serde_path_to_error::deserialize(toml::Value::Table(rest)).map_err(|e| {
-            let key = e.path().to_string();
-            let key = if key == "." {
-                "controller".to_string()
-            } else {
-                format!("controller.{key}")
-            };
-            SpecError::new(path, key, e.into_inner().message().to_string())
-        })
-    }
-    match ty.as_str() {
-        "idle" => match rest.keys().next() {
-            None => Ok(ControllerConfig::Idle),
-            Some(k) => Err(SpecError::new(
-                path,
-                format!("controller.{k}"),
-                "unknown field: an idle controller takes no parameters",
-            )),
-        },
-        "segments" => Ok(ControllerConfig::Segments(typed(path, rest)?)),
-        "waypoints" => Ok(ControllerConfig::Waypoints(typed(path, rest)?)),
-        "navigate" => Ok(ControllerConfig::Navigate(typed(path, rest)?)),
-        "explore" => Ok(ControllerConfig::Explore(typed(path, rest)?)),
-        "coverage" => Ok(ControllerConfig::Coverage(typed(path, rest)?)),
-        "route" => Ok(ControllerConfig::Route(typed(path, rest)?)),
-        other => Err(SpecError::new(
-            path,
-            "controller.type",
-            format!(
-                "unknown controller `{other}`; expected one of {:?}",
-                ControllerConfig::TYPES
-            ),
         )),
     }
 }
@@ -634,34 +501,6 @@ pub fn resolve_laser(
 
 /// The most lasers a CARMEN log has channels for (ROBOTLASER1, ROBOTLASER2).
 pub const MAX_LIDARS: usize = 2;
-
-impl ControllerConfig {
-    /// The `[controller]` table with every key, defaults included.
-    pub fn table(&self) -> toml::Table {
-        let typed = match self {
-            ControllerConfig::Idle => Ok(toml::Table::new()),
-            ControllerConfig::Segments(c) => toml::Table::try_from(c),
-            ControllerConfig::Waypoints(c) => toml::Table::try_from(c),
-            ControllerConfig::Navigate(c) => toml::Table::try_from(c),
-            ControllerConfig::Explore(c) => toml::Table::try_from(c),
-            ControllerConfig::Coverage(c) => toml::Table::try_from(c),
-            ControllerConfig::Route(c) => toml::Table::try_from(c),
-        };
-        let mut t = typed.unwrap_or_default();
-        let names = ControllerConfig::TYPES;
-        let ty = match self {
-            ControllerConfig::Idle => names[0],
-            ControllerConfig::Segments(_) => names[1],
-            ControllerConfig::Waypoints(_) => names[2],
-            ControllerConfig::Navigate(_) => names[3],
-            ControllerConfig::Explore(_) => names[4],
-            ControllerConfig::Coverage(_) => names[5],
-            ControllerConfig::Route(_) => names[6],
-        };
-        t.insert("type".into(), toml::Value::String(ty.into()));
-        t
-    }
-}
 
 impl Scenario {
     /// The scenario as it runs, with every key of every module, defaults included: what
@@ -716,11 +555,6 @@ impl Scenario {
                 t.insert(key.into(), toml::Value::Table(table));
             }
         }
-        let mut controller = self.controller.table();
-        if let Some(l) = &self.driver_laser {
-            controller.insert("laser".into(), toml::Value::String(l.clone()));
-        }
-        t.insert("controller".into(), toml::Value::Table(controller));
         t
     }
 
@@ -799,7 +633,6 @@ impl Scenario {
         let resolved = resolve_modules(path, &spec, &lidars, &cameras, modules)?;
         check_tables(path, &spec)?;
         check_gates(path, &spec, &resolved.metric_names(&spec))?;
-        let (controller, driver_laser) = resolve_controller(path, &spec, &lidars)?;
         let (world, start) = place(path, &spec, load_world)?;
         let movers = Movers {
             joints: spec.joint.clone(),
@@ -809,7 +642,6 @@ impl Scenario {
             crowd: spec.crowd,
         };
         Ok(Scenario {
-            controller,
             spec,
             world,
             start,
@@ -819,7 +651,6 @@ impl Scenario {
             config: toml::Table::new(),
             overlays: Vec::new(),
             modules: resolved,
-            driver_laser,
         })
     }
 }
@@ -1020,6 +851,10 @@ fn resolve_modules(
     let mut resolved = ModuleSpecs::default();
     for &m in modules {
         let own = match m.key().and_then(|k| spec.modules.get(k)) {
+            None if m.required() => {
+                let key = m.key().unwrap_or_default();
+                return Err(SpecError::new(path, "", format!("missing field `{key}`")));
+            }
             None => None,
             Some(table) => {
                 let cx = Resolving {
@@ -1134,71 +969,6 @@ fn check_gates(path: &Path, spec: &ScenarioSpec, names: &[String]) -> Result<(),
         }
     }
     Ok(())
-}
-
-/// The `[controller]` table, typed, and the laser the navigator avoids obstacles with
-/// (`controller.laser`, or the only one).
-fn resolve_controller(
-    path: &Path,
-    spec: &ScenarioSpec,
-    lidars: &[(LidarConfig, LidarSpec)],
-) -> Result<(ControllerConfig, Option<String>), SpecError> {
-    let mut controller_table = spec.controller.clone();
-    let controller_laser = take_name(path, "controller", "laser", &mut controller_table)?;
-    let controller = controller_config(path, &controller_table)?;
-    let navigates = matches!(
-        controller,
-        ControllerConfig::Navigate(_)
-            | ControllerConfig::Explore(_)
-            | ControllerConfig::Coverage(_)
-            | ControllerConfig::Route(_)
-    );
-    let driver_laser = match (&controller_laser, navigates) {
-        (Some(_), false) => {
-            return Err(SpecError::new(
-                path,
-                "controller.laser",
-                "only the navigate and explore controllers read a laser",
-            ));
-        }
-        (Some(_), true) => Some(resolve_laser(
-            path,
-            "controller",
-            &controller_laser,
-            lidars,
-        )?),
-        (None, true) if !lidars.is_empty() => {
-            Some(resolve_laser(path, "controller", &None, lidars)?)
-        }
-        _ => None,
-    };
-    controller
-        .validate()
-        .map_err(|(k, m)| SpecError::new(path, format!("controller.{k}"), m))?;
-    let pose_source = match &controller {
-        ControllerConfig::Waypoints(w) => Some(w.pose_source),
-        ControllerConfig::Navigate(n) => Some(n.pose_source),
-        ControllerConfig::Coverage(c) => Some(c.pose_source),
-        ControllerConfig::Route(r) => Some(r.pose_source),
-        _ => None,
-    };
-    if let Some(source) = pose_source {
-        require_pose(
-            path,
-            spec,
-            "controller.pose_source",
-            source,
-            "driving on this pose",
-        )?;
-    }
-    if matches!(controller, ControllerConfig::Explore(_)) && spec.module("slam").is_none() {
-        return Err(SpecError::new(
-            path,
-            "controller.type",
-            "exploration drives on SLAM's map and pose: it needs a [slam] table",
-        ));
-    }
-    Ok((controller, driver_laser))
 }
 
 /// Compiles the world and checks the poses in it: the start (a spawn or a pose), the events'

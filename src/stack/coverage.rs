@@ -14,11 +14,12 @@
 //! orange, walls and furniture the camera saw blue and those it did not red; the planned
 //! route dark blue, the second route magenta, the driven path black).
 
+use super::driver::{ControllerConfig, controller, controller_type};
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::coverage::{CLASSES, CameraCoverage, Footprint, Surfaces};
 use crate::ground_truth::regions::{CORRIDOR_WIDTH, Kind, MIN_AREA_FACTOR, Regions};
-use crate::scenario::{ControllerConfig, Scenario, ScenarioSpec};
+use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, Pose2, Time};
 use futago_robot::control::PoseSource;
@@ -103,7 +104,7 @@ struct SecondPass {
 
 /// The node when the scenario's controller is `coverage`.
 pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
-    let ControllerConfig::Coverage(control) = &s.controller else {
+    let ControllerConfig::Coverage(control) = controller(s) else {
         return Ok(None);
     };
     let height = super::driver::navigation_height(s);
@@ -229,7 +230,7 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
 
 /// The names this node scores where the controller is `coverage`.
 pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    if s.controller.get("type").and_then(|t| t.as_str()) != Some("coverage") {
+    if controller_type(s) != Some("coverage") {
         return Vec::new();
     }
     let mut names: Vec<String> = [

@@ -3,16 +3,19 @@
 
 use super::{Bus, Node, Report, Streams, Truth};
 use crate::ground_truth::Metrics;
-use crate::scenario::ControllerConfig;
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
 use anyhow::{Context, Result};
 use futago_msgs::{DriveCommand, Duration, LaserScan, Odometry, Pose2, Time};
 use futago_robot::control::PoseSource;
 use futago_robot::control::script::{ControlInput, ScriptedController};
+use futago_robot::control::script::{Script, SegmentsConfig, WaypointConfig};
 use futago_robot::localization::odometry::OdometryIntegrator;
 use futago_robot::navigation::{CoverConfig, NavInput, Navigator, RouteConfig, Task};
+use futago_robot::navigation::{ExploreConfig, NavigateConfig};
 use futago_robot::tracking::people::TrackedPerson;
+use futago_sim::config::SpecError;
 use serde_json::{Value, json};
+use std::any::Any;
 use std::path::Path;
 
 enum Driver {
@@ -52,8 +55,7 @@ pub struct DriverNode {
 /// The height of the band of the world's map that goal and route navigation plan on: the
 /// navigator's laser's (0.2 m without one).
 pub fn navigation_height(s: &Scenario) -> f64 {
-    s.driver_laser
-        .as_ref()
+    driver_laser(s)
         .and_then(|n| s.lidars.iter().find(|(c, _)| &c.name == n))
         .map_or(0.2, |(c, _)| c.xyz[2])
 }
@@ -65,7 +67,7 @@ impl DriverNode {
             super::world_map(s, spec.navigation.map_resolution, navigation_height(s))
                 .context("navigation.map_resolution")
         };
-        let driver = match &s.controller {
+        let driver = match controller(s) {
             ControllerConfig::Navigate(n) => Driver::Navigator {
                 nav: Box::new(Navigator::new(
                     spec.navigation,
@@ -102,7 +104,7 @@ impl DriverNode {
         };
         let navigates = matches!(driver, Driver::Navigator { .. });
         let laser = if navigates {
-            s.driver_laser.as_ref().and_then(|n| {
+            driver_laser(s).and_then(|n| {
                 s.lidars
                     .iter()
                     .find(|(c, _)| &c.name == n)
@@ -112,7 +114,7 @@ impl DriverNode {
             None
         };
         Ok(DriverNode {
-            map_period: matches!(s.controller, ControllerConfig::Explore(_))
+            map_period: matches!(controller(s), ControllerConfig::Explore(_))
                 .then(|| Duration::from_secs(spec.navigation.replan_period / 2.0)),
             driver,
             laser,
@@ -122,15 +124,15 @@ impl DriverNode {
             laps: Vec::new(),
             localizes: spec.module("localization").is_some()
                 || spec.module("visual_localization").is_some(),
-            scripted_on_slam: matches!(&s.controller, ControllerConfig::Waypoints(w) if w.pose_source == PoseSource::Slam),
-            goals: match &s.controller {
+            scripted_on_slam: matches!(controller(s), ControllerConfig::Waypoints(w) if w.pose_source == PoseSource::Slam),
+            goals: match controller(s) {
                 ControllerConfig::Navigate(n) => match n.task() {
                     Task::Goals(g) => Some(g.len()),
                     Task::Explore | Task::Route(_) => None,
                 },
                 _ => None,
             },
-            route: match &s.controller {
+            route: match controller(s) {
                 ControllerConfig::Coverage(_) => Some(("coverage".into(), None, false)),
                 ControllerConfig::Route(r) => Some((r.topic.clone(), None, false)),
                 _ => None,
@@ -329,15 +331,283 @@ impl Node for DriverNode {
 
 /// `navigation.goals_missed` (goals a navigator did not reach) where it is given goals.
 pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    if s.controller.get("type").and_then(|t| t.as_str()) == Some("navigate") {
+    if controller_type(s) == Some("navigate") {
         vec!["navigation.goals_missed".into()]
     } else {
         Vec::new()
     }
 }
 
-/// The driver: the controller that publishes the drive commands.
-pub const MODULE: super::Plain = super::Plain {
-    metric_names,
-    build: |s, _, _| Ok(vec![Box::new(DriverNode::new(s)?) as Box<dyn Node>]),
-};
+/// What drives the robot, as a scenario's `[controller]` table declares it, selected by its
+/// `type` key: a scripted plan ([`Script`]) or the navigator.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ControllerConfig {
+    /// Stand still.
+    Idle,
+    Segments(SegmentsConfig),
+    /// Follow waypoints.
+    Waypoints(WaypointConfig),
+    /// Navigate to goals on the known map ([`futago_robot::navigation`]).
+    Navigate(NavigateConfig),
+    /// Explore an unknown world with SLAM ([`futago_robot::navigation`]).
+    Explore(ExploreConfig),
+    /// Drive a coverage route planned on the known map
+    /// ([`futago_robot::navigation::coverage`], parameters in `[coverage]`).
+    Coverage(CoverConfig),
+    /// Drive the routes a stack node publishes ([`futago_robot::navigation::RouteConfig`]).
+    Route(RouteConfig),
+}
+
+impl ControllerConfig {
+    /// The `type` names, in declaration order.
+    pub const TYPES: [&'static str; 7] = [
+        "idle",
+        "segments",
+        "waypoints",
+        "navigate",
+        "explore",
+        "coverage",
+        "route",
+    ];
+
+    /// Checks values a controller cannot run with; returns `(key, expectation)` on error.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        match self {
+            ControllerConfig::Idle
+            | ControllerConfig::Explore(_)
+            | ControllerConfig::Coverage(_) => Ok(()),
+            ControllerConfig::Route(r) => {
+                if r.topic.is_empty() || r.topic.contains(char::is_whitespace) {
+                    Err((
+                        "topic".into(),
+                        "a topic name without spaces, e.g. \"scan3d\"".into(),
+                    ))
+                } else {
+                    Ok(())
+                }
+            }
+            ControllerConfig::Segments(s) => s.validate(),
+            ControllerConfig::Waypoints(w) => w.validate(),
+            ControllerConfig::Navigate(n) => n.validate(),
+        }
+    }
+
+    /// The scripted plan, for the controllers that are one.
+    pub fn script(&self) -> Option<Script> {
+        match self {
+            ControllerConfig::Idle => Some(Script::Idle),
+            ControllerConfig::Segments(s) => Some(Script::Segments(s.clone())),
+            ControllerConfig::Waypoints(w) => Some(Script::Waypoints(w.clone())),
+            ControllerConfig::Navigate(_)
+            | ControllerConfig::Explore(_)
+            | ControllerConfig::Coverage(_)
+            | ControllerConfig::Route(_) => None,
+        }
+    }
+}
+
+/// Types the `[controller]` table by its `type` key, naming `controller.KEY` in errors.
+pub fn controller_config(path: &Path, table: &toml::Table) -> Result<ControllerConfig, SpecError> {
+    let mut rest = table.clone();
+    let ty = match rest.remove("type") {
+        Some(toml::Value::String(t)) => t,
+        Some(other) => {
+            return Err(SpecError::new(
+                path,
+                "controller.type",
+                format!(
+                    "expected a string, one of {:?}; found {other}",
+                    ControllerConfig::TYPES
+                ),
+            ));
+        }
+        None => {
+            return Err(SpecError::new(
+                path,
+                "controller.type",
+                format!("missing; expected one of {:?}", ControllerConfig::TYPES),
+            ));
+        }
+    };
+    fn typed<T: serde::de::DeserializeOwned>(
+        path: &Path,
+        rest: toml::Table,
+    ) -> Result<T, SpecError> {
+        serde_path_to_error::deserialize(toml::Value::Table(rest)).map_err(|e| {
+            let key = e.path().to_string();
+            let key = if key == "." {
+                "controller".to_string()
+            } else {
+                format!("controller.{key}")
+            };
+            SpecError::new(path, key, e.into_inner().message().to_string())
+        })
+    }
+    match ty.as_str() {
+        "idle" => match rest.keys().next() {
+            None => Ok(ControllerConfig::Idle),
+            Some(k) => Err(SpecError::new(
+                path,
+                format!("controller.{k}"),
+                "unknown field: an idle controller takes no parameters",
+            )),
+        },
+        "segments" => Ok(ControllerConfig::Segments(typed(path, rest)?)),
+        "waypoints" => Ok(ControllerConfig::Waypoints(typed(path, rest)?)),
+        "navigate" => Ok(ControllerConfig::Navigate(typed(path, rest)?)),
+        "explore" => Ok(ControllerConfig::Explore(typed(path, rest)?)),
+        "coverage" => Ok(ControllerConfig::Coverage(typed(path, rest)?)),
+        "route" => Ok(ControllerConfig::Route(typed(path, rest)?)),
+        other => Err(SpecError::new(
+            path,
+            "controller.type",
+            format!(
+                "unknown controller `{other}`; expected one of {:?}",
+                ControllerConfig::TYPES
+            ),
+        )),
+    }
+}
+
+impl ControllerConfig {
+    /// The `[controller]` table with every key, defaults included.
+    pub fn table(&self) -> toml::Table {
+        let typed = match self {
+            ControllerConfig::Idle => Ok(toml::Table::new()),
+            ControllerConfig::Segments(c) => toml::Table::try_from(c),
+            ControllerConfig::Waypoints(c) => toml::Table::try_from(c),
+            ControllerConfig::Navigate(c) => toml::Table::try_from(c),
+            ControllerConfig::Explore(c) => toml::Table::try_from(c),
+            ControllerConfig::Coverage(c) => toml::Table::try_from(c),
+            ControllerConfig::Route(c) => toml::Table::try_from(c),
+        };
+        let mut t = typed.unwrap_or_default();
+        let names = ControllerConfig::TYPES;
+        let ty = match self {
+            ControllerConfig::Idle => names[0],
+            ControllerConfig::Segments(_) => names[1],
+            ControllerConfig::Waypoints(_) => names[2],
+            ControllerConfig::Navigate(_) => names[3],
+            ControllerConfig::Explore(_) => names[4],
+            ControllerConfig::Coverage(_) => names[5],
+            ControllerConfig::Route(_) => names[6],
+        };
+        t.insert("type".into(), toml::Value::String(ty.into()));
+        t
+    }
+}
+
+/// `[controller]`'s spec: what drives the robot, and the laser the navigator avoids
+/// obstacles with (`controller.laser`, or the only one).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControllerSpec {
+    pub controller: ControllerConfig,
+    pub laser: Option<String>,
+}
+
+/// What drives the robot in `s` (idle in a scenario not yet resolved, which cannot happen
+/// after loading: `[controller]` is required).
+pub fn controller(s: &Scenario) -> &ControllerConfig {
+    static IDLE: ControllerConfig = ControllerConfig::Idle;
+    s.module::<ControllerSpec>()
+        .map_or(&IDLE, |c| &c.controller)
+}
+
+/// The laser the navigator avoids obstacles with, if any.
+pub fn driver_laser(s: &Scenario) -> Option<&String> {
+    s.module::<ControllerSpec>()?.laser.as_ref()
+}
+
+/// The type of a scenario's `[controller]` as written (`navigate`), for scorers that declare
+/// their metrics before the table is typed.
+pub fn controller_type(spec: &ScenarioSpec) -> Option<&str> {
+    spec.module("controller")?.get("type")?.as_str()
+}
+
+/// `[controller]`: the driver, a scripted controller or the navigator. Every scenario has one.
+pub struct Module;
+
+impl ModuleConfig for Module {
+    fn key(&self) -> Option<&'static str> {
+        Some("controller")
+    }
+
+    fn required(&self) -> bool {
+        true
+    }
+
+    /// The table typed by its `type`, its laser resolved, and the pose its driver steers by
+    /// published by a module of the scenario.
+    fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
+        let path = cx.path;
+        let mut controller_table = cx.table("controller", table)?;
+        let controller_laser = cx.take_name("controller", "laser", &mut controller_table)?;
+        let controller = controller_config(path, &controller_table)?;
+        let navigates = matches!(
+            controller,
+            ControllerConfig::Navigate(_)
+                | ControllerConfig::Explore(_)
+                | ControllerConfig::Coverage(_)
+                | ControllerConfig::Route(_)
+        );
+        let driver_laser = match (&controller_laser, navigates) {
+            (Some(_), false) => {
+                return Err(SpecError::new(
+                    path,
+                    "controller.laser",
+                    "only the navigate and explore controllers read a laser",
+                ));
+            }
+            (Some(_), true) => Some(cx.laser("controller", &controller_laser)?),
+            (None, true) if !cx.lidars.is_empty() => Some(cx.laser("controller", &None)?),
+            _ => None,
+        };
+        controller
+            .validate()
+            .map_err(|(k, m)| SpecError::new(path, format!("controller.{k}"), m))?;
+        let pose_source = match &controller {
+            ControllerConfig::Waypoints(w) => Some(w.pose_source),
+            ControllerConfig::Navigate(n) => Some(n.pose_source),
+            ControllerConfig::Coverage(c) => Some(c.pose_source),
+            ControllerConfig::Route(r) => Some(r.pose_source),
+            _ => None,
+        };
+        if let Some(source) = pose_source {
+            cx.require_pose("controller.pose_source", source, "driving on this pose")?;
+        }
+        if matches!(controller, ControllerConfig::Explore(_)) && cx.spec.module("slam").is_none() {
+            return Err(SpecError::new(
+                path,
+                "controller.type",
+                "exploration drives on SLAM's map and pose: it needs a [slam] table",
+            ));
+        }
+        Ok(Box::new(ControllerSpec {
+            controller,
+            laser: driver_laser,
+        }))
+    }
+
+    fn effective(&self, spec: &(dyn Any + Send + Sync)) -> Option<toml::Table> {
+        let c = spec.downcast_ref::<ControllerSpec>()?;
+        let mut t = c.controller.table();
+        if let Some(l) = &c.laser {
+            t.insert("laser".into(), toml::Value::String(l.clone()));
+        }
+        Some(t)
+    }
+
+    fn metric_names(
+        &self,
+        spec: &ScenarioSpec,
+        _own: Option<&(dyn Any + Send + Sync)>,
+    ) -> Vec<String> {
+        metric_names(spec)
+    }
+}
+
+impl super::StackModule for Module {
+    fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> super::Nodes {
+        Ok(vec![Box::new(DriverNode::new(s)?) as Box<dyn Node>])
+    }
+}

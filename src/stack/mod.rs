@@ -249,7 +249,7 @@ pub static MODULES: &[&dyn StackModule] = &[
     &record::MODULE,
     &people::MODULE,
     &coverage::MODULE,
-    &driver::MODULE,
+    &driver::Module,
     &localization::Module,
     &depth_localization::Module,
     &slam::Module,

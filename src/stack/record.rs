@@ -101,7 +101,7 @@ pub fn recorders(s: &Scenario, dir: &Path) -> Result<Vec<Box<dyn Node>>> {
 /// travels the metre the relative pose error is taken over, so it has none.
 pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     let names = crate::ground_truth::trajectory_metric_names("odometry");
-    if s.controller.get("type").and_then(|t| t.as_str()) == Some("idle") {
+    if super::driver::controller_type(s) == Some("idle") {
         names
             .into_iter()
             .filter(|n| !n.starts_with("odometry.rpe_1m."))
