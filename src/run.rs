@@ -454,6 +454,58 @@ fn control(
     Ok(cmd)
 }
 
+/// The first control tick, from the start pose alone, then every node's start; gives the
+/// first drive command.
+fn begin(nodes: &mut [Scheduled], bus: &mut Bus) -> Result<Option<futago_msgs::DriveCommand>> {
+    for n in nodes.iter_mut() {
+        n.call(|node| node.on_control(bus))?;
+    }
+    let cmd = bus.command.take();
+    for n in nodes.iter_mut() {
+        n.call(|node| node.start(bus))?;
+    }
+    Ok(cmd)
+}
+
+/// Hands a scan of laser `name` to the nodes `to` that consume it, then what its beams hit
+/// (truth for scorers, not timed as the nodes' work).
+fn deliver_scan(
+    nodes: &mut [Scheduled],
+    to: &[usize],
+    name: &str,
+    scan: &futago_msgs::LaserScan,
+    hits: &[futago_sim::lidar::BeamHit],
+    bus: &mut Bus,
+) -> Result<()> {
+    for &i in to {
+        nodes[i].call(|node| node.on_scan(name, scan, bus))?;
+        nodes[i].node.on_scan_truth(name, hits);
+    }
+    Ok(())
+}
+
+/// The nodes in their order, each with its wall time.
+fn schedule(nodes: impl Iterator<Item = Box<dyn Node>>) -> Vec<Scheduled> {
+    nodes.map(|node| Scheduled { node, seconds: 0.0 }).collect()
+}
+
+/// The run's bus at time zero: the robot at its start, the estimates and maps the nodes
+/// publish (maps with the period their consumers want), the joints at their start angles.
+fn new_bus(s: &Scenario, streams: &[stack::Streams]) -> Bus {
+    let mut bus = Bus::new(
+        s.start,
+        published(streams, "pose/"),
+        map_subscriptions(streams),
+    );
+    bus.joints = s
+        .movers
+        .joints
+        .iter()
+        .map(|j| (j.name.clone(), j.start_deg.to_radians()))
+        .collect();
+    bus
+}
+
 /// [`simulate`] with `extra` nodes after the stack's (a collector of training data, say).
 pub fn simulate_with(
     s: &Scenario,
@@ -464,27 +516,13 @@ pub fn simulate_with(
     let seed = opts.seed.unwrap_or(s.spec.seed);
     let duration = opts.duration.unwrap_or(s.spec.duration);
     let spec = &s.spec;
-    let mut nodes: Vec<Scheduled> = stack::build(s, seed, out)?
-        .into_iter()
-        .chain(extra)
-        .map(|node| Scheduled { node, seconds: 0.0 })
-        .collect();
+    let mut nodes = schedule(stack::build(s, seed, out)?.into_iter().chain(extra));
     let streams: Vec<stack::Streams> = nodes.iter().map(|n| n.node.streams()).collect();
     check_publishers(&nodes, &streams)?;
-    let mut bus = Bus::new(
-        s.start,
-        published(&streams, "pose/"),
-        map_subscriptions(&streams),
-    );
+    let mut bus = new_bus(s, &streams);
     let (has_agents, has_joints) = (!s.movers.agents.is_empty(), !s.movers.joints.is_empty());
     let has_people = !s.movers.people.is_empty() || !s.movers.flows.is_empty();
     let movers = (has_agents, has_people);
-    bus.joints = s
-        .movers
-        .joints
-        .iter()
-        .map(|j| (j.name.clone(), j.start_deg.to_radians()))
-        .collect();
     let truth_nodes = consumers(&streams, "truth");
     let odometry_nodes = consumers(&streams, "odometry");
     let laser_nodes: Vec<Vec<usize>> = s
@@ -517,13 +555,7 @@ pub fn simulate_with(
 
     // The first command, from the start pose alone, before any node has started.
     bus.bumps = sim.bumps();
-    for n in nodes.iter_mut() {
-        n.call(|node| node.on_control(&mut bus))?;
-    }
-    let mut cmd = bus.command.take();
-    for n in nodes.iter_mut() {
-        n.call(|node| node.start(&mut bus))?;
-    }
+    let mut cmd = begin(&mut nodes, &mut bus)?;
     loop {
         let now = sim.time();
         bus.now = now;
@@ -566,12 +598,14 @@ pub fn simulate_with(
         cameras.capture(now, &sim, &mut nodes, &mut bus)?;
         for ((l, scan), hits) in out.scans.into_iter().zip(&out.hits) {
             scans[l] += 1;
-            let name = &s.lidars[l].0.name;
-            for &i in &laser_nodes[l] {
-                nodes[i].call(|node| node.on_scan(name, &scan, &mut bus))?;
-                // Truth for scorers: not timed as the node's work.
-                nodes[i].node.on_scan_truth(name, hits);
-            }
+            deliver_scan(
+                &mut nodes,
+                &laser_nodes[l],
+                &s.lidars[l].0.name,
+                &scan,
+                hits,
+                &mut bus,
+            )?;
         }
         // Control at the rate of the Create's sensor stream.
         if out.odometry.is_some() {

@@ -153,16 +153,9 @@ pub struct FromMapOptions {
 /// and a margin.
 const SPAWN_CLEARANCE: f64 = 0.25;
 
-/// Makes a world from a map_server map: writes the world file `out` and, beside it, the map
-/// as `<name>.map.pgm`/`.yaml` (trinary), which the world's `[[map_walls]]` names, so that the
-/// world is self-contained. The world is compiled before it is put in place; returns it.
-pub fn from_map(map: &Path, out: &Path, o: &FromMapOptions, force: bool) -> Result<World> {
-    use futago_sim::world::floor_plan::{UnknownCells, WallCells};
-    if !(o.height.is_finite() && (0.1..=100.0).contains(&o.height)) {
-        anyhow::bail!("--height: expected 0.1 to 100 m, found {}", o.height);
-    }
-    let grid = known_part(&futago_msgs::map_server::read(map)?)
-        .with_context(|| format!("{}: every cell of the map is unknown", map.display()))?;
+/// The name of the world `from_map` writes: `--name`, or the world file's stem; letters,
+/// digits, '-' and '_', for it names the world's files.
+fn world_name(o: &FromMapOptions, out: &Path) -> Result<String> {
     let name = match &o.name {
         Some(n) => n.clone(),
         None => out
@@ -179,6 +172,20 @@ pub fn from_map(map: &Path, out: &Path, o: &FromMapOptions, force: bool) -> Resu
             "--name: `{name}`: expected letters, digits, '-' and '_' (the world's name names its files)"
         );
     }
+    Ok(name)
+}
+
+/// Makes a world from a map_server map: writes the world file `out` and, beside it, the map
+/// as `<name>.map.pgm`/`.yaml` (trinary), which the world's `[[map_walls]]` names, so that the
+/// world is self-contained. The world is compiled before it is put in place; returns it.
+pub fn from_map(map: &Path, out: &Path, o: &FromMapOptions, force: bool) -> Result<World> {
+    use futago_sim::world::floor_plan::{UnknownCells, WallCells};
+    if !(o.height.is_finite() && (0.1..=100.0).contains(&o.height)) {
+        anyhow::bail!("--height: expected 0.1 to 100 m, found {}", o.height);
+    }
+    let grid = known_part(&futago_msgs::map_server::read(map)?)
+        .with_context(|| format!("{}: every cell of the map is unknown", map.display()))?;
+    let name = world_name(o, out)?;
     // Free cells, and how far each lies from the nearest wall or unknown cell.
     let walls = WallCells::new(&grid, o.unknown);
     let (w, h) = (walls.width, walls.height);

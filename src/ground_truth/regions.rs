@@ -107,6 +107,45 @@ fn local_thickness(free: &[bool], r: &[f64], w: usize, h: usize) -> Vec<f64> {
     thick
 }
 
+/// Small sets (under `min_cells`) join the neighbour they border most, smallest first, until
+/// none is left that has a neighbour; `label` follows the cells.
+fn merge_small(label: &mut [u32], cells_of: &mut [Vec<usize>], min_cells: f64, w: usize, h: usize) {
+    loop {
+        let small = (0..cells_of.len())
+            .filter(|&id| !cells_of[id].is_empty() && (cells_of[id].len() as f64) < min_cells)
+            .filter_map(|id| {
+                let mut border = std::collections::BTreeMap::<u32, usize>::new();
+                for &k in &cells_of[id] {
+                    let (i, j) = ((k % w) as i64, (k / w) as i64);
+                    for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                        let (a, b) = (i + di, j + dj);
+                        if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
+                            continue;
+                        }
+                        let l = label[b as usize * w + a as usize];
+                        if l != NONE && l != id as u32 {
+                            *border.entry(l).or_default() += 1;
+                        }
+                    }
+                }
+                // The longest border; ties to the lowest label.
+                let best = border
+                    .into_iter()
+                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))?;
+                Some((cells_of[id].len(), id, best.0))
+            })
+            .min();
+        let Some((_, id, into)) = small else {
+            break;
+        };
+        let moved = std::mem::take(&mut cells_of[id]);
+        for &k in &moved {
+            label[k] = into;
+        }
+        cells_of[into as usize].extend(moved);
+    }
+}
+
 impl Regions {
     /// The regions of `grid`'s free space, corridors being at most `corridor_width` wide (m).
     pub fn new(grid: &OccupancyGrid, corridor_width: f64) -> Regions {
@@ -197,43 +236,8 @@ impl Regions {
                 kinds[id] = Kind::Corridor;
             }
         }
-        // Small sets join the neighbour they border most, smallest first, until none is left
-        // that has a neighbour.
         let min_cells = MIN_AREA_FACTOR * corridor_width * corridor_width / (res * res);
-        loop {
-            let small = (0..cells_of.len())
-                .filter(|&id| !cells_of[id].is_empty() && (cells_of[id].len() as f64) < min_cells)
-                .filter_map(|id| {
-                    let mut border = std::collections::BTreeMap::<u32, usize>::new();
-                    for &k in &cells_of[id] {
-                        let (i, j) = ((k % w) as i64, (k / w) as i64);
-                        for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
-                            let (a, b) = (i + di, j + dj);
-                            if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
-                                continue;
-                            }
-                            let l = label[b as usize * w + a as usize];
-                            if l != NONE && l != id as u32 {
-                                *border.entry(l).or_default() += 1;
-                            }
-                        }
-                    }
-                    // The longest border; ties to the lowest label.
-                    let best = border
-                        .into_iter()
-                        .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))?;
-                    Some((cells_of[id].len(), id, best.0))
-                })
-                .min();
-            let Some((_, id, into)) = small else {
-                break;
-            };
-            let moved = std::mem::take(&mut cells_of[id]);
-            for &k in &moved {
-                label[k] = into;
-            }
-            cells_of[into as usize].extend(moved);
-        }
+        merge_small(&mut label, &mut cells_of, min_cells, w, h);
         // Number the regions left, in the order of their first cell.
         let mut renumber = vec![NONE; cells_of.len()];
         let mut regions = Vec::new();

@@ -168,6 +168,39 @@ struct Voxel {
     columns: [u32; 2],
 }
 
+/// The connected components (26-neighbourhood) of the occupied voxels, each grown from the
+/// first of its voxels in `order`.
+fn clusters(order: &[[i64; 3]], voxels: &FxHashMap<[i64; 3], Voxel>) -> Vec<Vec<[i64; 3]>> {
+    let mut label: FxHashMap<[i64; 3], usize> = FxHashMap::default();
+    let mut clusters: Vec<Vec<[i64; 3]>> = Vec::new();
+    for &seed in order {
+        if label.contains_key(&seed) {
+            continue;
+        }
+        let id = clusters.len();
+        let mut members = vec![seed];
+        label.insert(seed, id);
+        let mut next = 0;
+        while next < members.len() {
+            let m = members[next];
+            next += 1;
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        let n = [m[0] + dx, m[1] + dy, m[2] + dz];
+                        if voxels.contains_key(&n) && !label.contains_key(&n) {
+                            label.insert(n, id);
+                            members.push(n);
+                        }
+                    }
+                }
+            }
+        }
+        clusters.push(members);
+    }
+    clusters
+}
+
 impl DepthPeople {
     pub fn new(config: DepthPeopleConfig, mount: Pose2, seed: u64) -> DepthPeople {
         DepthPeople {
@@ -225,33 +258,7 @@ impl DepthPeople {
         }
         counts.voxels = order.len();
         // Clusters: connected components of the occupied voxels.
-        let mut label: FxHashMap<[i64; 3], usize> = FxHashMap::default();
-        let mut clusters: Vec<Vec<[i64; 3]>> = Vec::new();
-        for &seed in &order {
-            if label.contains_key(&seed) {
-                continue;
-            }
-            let id = clusters.len();
-            let mut members = vec![seed];
-            label.insert(seed, id);
-            let mut next = 0;
-            while next < members.len() {
-                let m = members[next];
-                next += 1;
-                for dx in -1..=1 {
-                    for dy in -1..=1 {
-                        for dz in -1..=1 {
-                            let n = [m[0] + dx, m[1] + dy, m[2] + dz];
-                            if voxels.contains_key(&n) && !label.contains_key(&n) {
-                                label.insert(n, id);
-                                members.push(n);
-                            }
-                        }
-                    }
-                }
-            }
-            clusters.push(members);
-        }
+        let clusters = clusters(&order, &voxels);
         counts.clusters = clusters.len();
         let last_column = d.width.saturating_sub(1);
         let edge = c.stride.saturating_sub(1);
