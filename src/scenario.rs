@@ -302,7 +302,7 @@ impl Resolving<'_> {
 /// Refuses pose source `source` at `key` unless the scenario runs the module that publishes
 /// it: `slam` needs a `[slam]` table, `localization` a `[localization]` or
 /// `[visual_localization]` one (both publish `pose/localization`). `what` opens the error.
-pub fn require_pose(
+fn require_pose(
     path: &Path,
     spec: &ScenarioSpec,
     key: &str,
