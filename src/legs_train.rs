@@ -6,7 +6,7 @@
 
 use crate::run::{RunOptions, simulate_with};
 use crate::scenario::Scenario;
-use crate::stack::{Bus, Node, Streams};
+use crate::stack::{Bus, Node, Streams, TrueState};
 use anyhow::{Context, Result, bail};
 use futago_msgs::{LaserScan, Pose2};
 use futago_robot::perception::legs::{
@@ -36,6 +36,8 @@ struct Collector {
     height: f64,
     config: LegConfig,
     people: Vec<futago_sim::people::PersonTruth>,
+    /// The scan just taken, until it is labelled.
+    scan: Option<LaserScan>,
     out: Rc<RefCell<Samples>>,
 }
 
@@ -51,13 +53,23 @@ impl Node for Collector {
         }
     }
 
-    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
-        self.people.clone_from(&bus.people);
+    fn on_truth(&mut self, truth: &TrueState, _bus: &mut Bus) -> Result<()> {
+        self.people.clone_from(&truth.people);
         Ok(())
     }
 
-    fn on_scan(&mut self, _laser: &str, scan: &LaserScan, bus: &mut Bus) -> Result<()> {
-        let laser = bus.truth.compose(&self.mount);
+    fn on_scan(&mut self, _laser: &str, scan: &LaserScan, _bus: &mut Bus) -> Result<()> {
+        self.scan = Some(scan.clone());
+        Ok(())
+    }
+
+    /// Labels the scan just taken by the true legs around the true laser pose.
+    fn observe(&mut self, truth: &TrueState, _bus: &Bus) {
+        let Some(scan) = self.scan.take() else {
+            return;
+        };
+        let scan = &scan;
+        let laser = truth.robot.compose(&self.mount);
         let legs: Vec<[f64; 2]> = self
             .people
             .iter()
@@ -72,7 +84,6 @@ impl Node for Collector {
             out.features.push(features(&s));
             out.labels.push(leg);
         }
-        Ok(())
     }
 }
 
@@ -108,6 +119,7 @@ pub fn train(
             height: lidar.xyz[2],
             config: LegConfig::default(),
             people: Vec::new(),
+            scan: None,
             out: samples.clone(),
         };
         let opts = RunOptions {

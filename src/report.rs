@@ -7,11 +7,10 @@ use crate::ground_truth::trajectory;
 use crate::picture::{grid_image, png};
 use base64::Engine;
 use futago_msgs::grid::OccupancyGrid;
-use futago_msgs::tum::{self, Stamped};
+use futago_msgs::tum::Stamped;
 use futago_robot::geometry::grid::OCCUPIED;
 use serde_json::Value;
 use std::fmt::Write;
-use std::path::Path;
 
 /// HTML/XML text with `& < > " '` escaped.
 pub fn escape(s: &str) -> String {
@@ -366,11 +365,6 @@ pub fn page(title: &str, body: &str) -> String {
     )
 }
 
-fn read_tum(dir: &Path, file: &str) -> Option<Vec<Stamped>> {
-    let text = std::fs::read_to_string(dir.join(file)).ok()?;
-    tum::parse(&text).ok()
-}
-
 /// A grid reduced so that neither side exceeds `max_side` cells: each new cell is occupied if
 /// any cell it covers is, else free if any is, else unknown. A drifted SLAM map can span
 /// hundreds of metres; drawn at one pixel a cell its picture would take gigabytes.
@@ -643,15 +637,17 @@ fn run_facts(summary: &Value, gates: &[Value]) -> String {
     )
 }
 
-/// The report of a run whose results are in `dir`: `summary` is its summary.json, `config`
-/// the scenario text as run, `truth` the ground-truth grid and `estimate` SLAM's map.
+/// The report of a run, from memory: `truth_traj` is its true trajectory, `summary` its
+/// summary.json, `config` the scenario text as run, `truth` the ground-truth grid,
+/// `estimate` SLAM's map and `trajectories` the estimated ones.
 pub fn run_report(
-    dir: &Path,
+    truth_traj: &[Stamped],
     summary: &Value,
     config: &str,
     truth: &OccupancyGrid,
     estimate: Option<&OccupancyGrid>,
-    trajectories: &[(String, String)],
+    trajectories: &[crate::stack::Trajectory],
+    pictures: &[(String, Vec<u8>)],
 ) -> String {
     let name = summary["scenario"].as_str().unwrap_or("run");
     let gates = summary["gates"].as_array().cloned().unwrap_or_default();
@@ -670,7 +666,6 @@ pub fn run_report(
         );
     }
     // Trajectories and their errors.
-    let truth_traj = read_tum(dir, "groundtruth.txt").unwrap_or_default();
     let mut paths = vec![Series {
         markers: false,
         name: "ground truth".into(),
@@ -684,11 +679,8 @@ pub fn run_report(
         ),
     }];
     let (mut pos_err, mut head_err) = (Vec::new(), Vec::new());
-    for (key, file) in trajectories {
-        let key = key.as_str();
-        let Some(est) = read_tum(dir, file) else {
-            continue;
-        };
+    for t in trajectories {
+        let (key, est) = (t.name.as_str(), &t.poses);
         paths.push(Series {
             markers: false,
             name: key.into(),
@@ -701,7 +693,7 @@ pub fn run_report(
             ),
         });
         let pairs =
-            trajectory::associate_indices(&truth_traj, &est, crate::ground_truth::MAX_TIME_DIFF);
+            trajectory::associate_indices(truth_traj, est, crate::ground_truth::MAX_TIME_DIFF);
         let (mut pe, mut he) = (Vec::new(), Vec::new());
         for (r, e) in pairs {
             let (a, b) = (truth_traj[r].pose.to_pose2(), est[e].pose.to_pose2());
@@ -760,8 +752,14 @@ pub fn run_report(
         );
         body += "</figure>\n";
     }
-    body += &rgbd_section(dir, summary);
-    body += &coverage_section(dir, summary);
+    let picture = |name: &str| {
+        pictures
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, png)| png.as_slice())
+    };
+    body += &rgbd_section(picture(crate::stack::rgbd_map::RGBD_SLICE_FILE), summary);
+    body += &coverage_section(picture(crate::stack::coverage::PICTURE_FILE), summary);
     body += "<h2>Metrics</h2>\n";
     let rows: Vec<Vec<String>> = summary["metrics"]
         .as_object()
@@ -777,8 +775,8 @@ pub fn run_report(
 }
 
 /// The RGB-D map's section: each method's main scores, and the laser-height slice picture
-/// (`rgbd_slice.png` in `dir`) embedded; empty for a run without one.
-fn rgbd_section(dir: &Path, summary: &Value) -> String {
+/// (`rgbd_slice.png`, from the mapper's report) embedded; empty for a run without one.
+fn rgbd_section(slice: Option<&[u8]>, summary: &Value) -> String {
     let metrics = &summary["metrics"];
     let methods: Vec<&str> = futago_robot::mapping::registration::Method::ALL
         .iter()
@@ -815,7 +813,7 @@ fn rgbd_section(dir: &Path, summary: &Value) -> String {
         .collect();
     let mut out = String::from("<h2>3D map</h2>\n");
     out += &table("rgbd-methods", &head, &rows);
-    if let Ok(png) = std::fs::read(dir.join("rgbd_slice.png")) {
+    if let Some(png) = slice {
         out += &format!(
             "<figure>\n<img class=\"slice\" src=\"data:image/png;base64,{}\" alt=\"the first method's laser-height slice (red) over the true 2D map\" style=\"max-width: 100%\">\n<figcaption>The first method's points at the laser's height (red) over the world's 2D map.</figcaption>\n</figure>\n",
             base64::engine::general_purpose::STANDARD.encode(png)
@@ -825,8 +823,8 @@ fn rgbd_section(dir: &Path, summary: &Value) -> String {
 }
 
 /// The coverage section: the route's and the second pass's figures, the painted map
-/// (`coverage.png` in `dir`) and coverage over time; empty for a run without a coverage route.
-fn coverage_section(dir: &Path, summary: &Value) -> String {
+/// (`coverage.png`, from the coverage node's report) and coverage over time; empty for a run without a coverage route.
+fn coverage_section(picture: Option<&[u8]>, summary: &Value) -> String {
     let c = &summary["coverage"];
     if c.is_null() {
         return String::new();
@@ -938,7 +936,7 @@ fn coverage_section(dir: &Path, summary: &Value) -> String {
             &regions,
         );
     }
-    if let Ok(png) = std::fs::read(dir.join("coverage.png")) {
+    if let Some(png) = picture {
         out += &format!(
             "<figure>\n<img class=\"coverage\" src=\"data:image/png;base64,{}\" alt=\"the map painted by coverage\" style=\"max-width: 100%\">\n<figcaption>Floor swept green, reachable floor not swept orange; walls and furniture the camera saw blue, not seen red; the planned route dark blue, the second route magenta, the driven path black.</figcaption>\n</figure>\n",
             base64::engine::general_purpose::STANDARD.encode(png)

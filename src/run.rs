@@ -6,12 +6,16 @@
 //! a temporary folder beside the destination and are renamed into place at the end: a
 //! failed, interrupted or panicking run leaves no half-written results.
 
+pub mod summary;
+
+pub use summary::Summary;
+
 use crate::scenario::Scenario;
-use crate::stack::{self, Bus, CameraFrame, FrameTruth, Node, Report};
+use crate::stack::{self, Bus, CameraFrame, FrameTruth, Node, Report, TrueState};
 use anyhow::{Context, Result, bail};
 use futago_msgs::camera::DepthImage;
 use futago_msgs::grid::OccupancyGrid;
-use futago_msgs::{Duration, Pose2, Time};
+use futago_msgs::{Duration, Pose2, Time, tum};
 use futago_robot::localization::odometry::OdometryIntegrator;
 use futago_sim::Simulation;
 use futago_sim::kinect::Kinect;
@@ -67,8 +71,12 @@ pub struct Outcome {
     pub files: Vec<String>,
     /// The stack's estimated 2D map, for the report.
     pub map: Option<OccupancyGrid>,
-    /// The trajectories the nodes wrote (name, file), for the report.
-    pub trajectories: Vec<(String, String)>,
+    /// The trajectories the nodes estimated, for the report.
+    pub trajectories: Vec<stack::Trajectory>,
+    /// The robot's true trajectory at the ground-truth rate, for the scorers.
+    pub truth: Vec<tum::Stamped>,
+    /// The pictures the nodes drew (file, PNG bytes), for the report.
+    pub pictures: Vec<(String, Vec<u8>)>,
     /// Where the wall time went: `simulation_s`, `rendering_s`, and per node (see
     /// [`performance`](Outcome::performance)).
     pub performance: Value,
@@ -76,6 +84,8 @@ pub struct Outcome {
 
 /// The camera's true depth at the frame just taken, rendered on demand (and timed).
 struct TrueDepth<'a> {
+    state: &'a TrueState,
+    optical: futago_msgs::Pose3,
     renderer: &'a mut Renderer,
     camera: &'a Kinect,
     base: rapier3d::math::Pose,
@@ -88,6 +98,14 @@ impl FrameTruth for TrueDepth<'_> {
         let d = self.camera.true_depth(self.renderer, &self.base)?;
         *self.seconds += t0.elapsed().as_secs_f64();
         Ok(d)
+    }
+
+    fn optical(&self) -> futago_msgs::Pose3 {
+        self.optical
+    }
+
+    fn state(&self) -> &TrueState {
+        self.state
     }
 }
 
@@ -103,6 +121,19 @@ impl Scheduled {
         let r = f(self.node.as_mut()).with_context(|| format!("node `{}`", self.node.name()));
         self.seconds += t0.elapsed().as_secs_f64();
         r
+    }
+
+    /// A callback that takes the bus, then the node's look at the truth of the same instant
+    /// ([`Node::observe`], its scorer's; not timed as the node's work).
+    fn call_observed(
+        &mut self,
+        truth: &TrueState,
+        bus: &mut Bus,
+        f: impl FnOnce(&mut dyn Node, &mut Bus) -> Result<()>,
+    ) -> Result<()> {
+        self.call(|node| f(node, bus))?;
+        self.node.observe(truth, bus);
+        Ok(())
     }
 }
 
@@ -266,7 +297,7 @@ impl CameraRig {
         now: Time,
         sim: &Simulation,
         nodes: &mut [Scheduled],
-        bus: &mut Bus,
+        (state, bus): (&TrueState, &mut Bus),
     ) -> Result<()> {
         let CameraRig {
             kinects,
@@ -321,14 +352,27 @@ impl CameraRig {
                 None => base,
             };
             cam.take();
+            // The camera on the robot's floor frame, as the robot's own kinematics place it
+            // (mount, joint, sway): the base's planar pose taken back out.
+            let on_base = carriers[c].is_none().then(|| {
+                let b = state.robot;
+                let planar = futago_sim::render::Pose::from_parts(
+                    glam::Vec3::new(b.x as f32, b.y as f32, 0.0),
+                    glam::Quat::from_rotation_z(b.theta as f32),
+                );
+                cam.optical_pose(&(planar.inverse() * base))
+            });
             let frame = CameraFrame {
                 frame: cam.capture(r, &base, now, true)?,
-                optical: cam.optical_pose(&base),
+                on_base,
             };
+            let optical = cam.optical_pose(&base);
             *seconds += t0.elapsed().as_secs_f64();
             frames[c] += 1;
             for i in wanting {
                 let mut truth = TrueDepth {
+                    state,
+                    optical,
                     renderer: r,
                     camera: cam,
                     base,
@@ -336,6 +380,7 @@ impl CameraRig {
                 };
                 let name = &cam.spec.name;
                 nodes[i].call(|node| node.on_frame(name, &frame, &mut truth, bus))?;
+                nodes[i].node.observe(state, bus);
             }
         }
         Ok(())
@@ -363,7 +408,8 @@ struct Finished {
     entries: Vec<(String, Value)>,
     files: Vec<String>,
     map: Option<OccupancyGrid>,
-    trajectories: Vec<(String, String)>,
+    trajectories: Vec<stack::Trajectory>,
+    pictures: Vec<(String, Vec<u8>)>,
     per_node: serde_json::Map<String, Value>,
 }
 
@@ -375,6 +421,7 @@ fn finish_nodes(nodes: &mut [Scheduled], bus: &mut Bus, out: Option<&Path>) -> R
         files: Vec::new(),
         map: None,
         trajectories: Vec::new(),
+        pictures: Vec::new(),
         per_node: serde_json::Map::new(),
     };
     for n in nodes.iter_mut() {
@@ -383,12 +430,14 @@ fn finish_nodes(nodes: &mut [Scheduled], bus: &mut Bus, out: Option<&Path>) -> R
             files: written,
             map: m,
             trajectories: t,
+            pictures,
             performance,
         } = n.call(|node| node.finish(bus, out))?;
         f.entries.extend(summary);
         f.files.extend(written);
         f.map = f.map.or(m);
         f.trajectories.extend(t);
+        f.pictures.extend(pictures);
         let mut p = performance;
         p.insert("wall_s".into(), json!(n.seconds));
         f.per_node
@@ -397,41 +446,57 @@ fn finish_nodes(nodes: &mut [Scheduled], bus: &mut Bus, out: Option<&Path>) -> R
     Ok(f)
 }
 
-/// The truth phase: the robot's, the agents' and the people's true poses on the bus, then
-/// each node that consumes `truth`.
+/// The truth phase: the robot's, the agents' and the people's true poses into the scorers'
+/// view and the robot's onto its true trajectory, then each node that consumes `truth`.
 fn publish_truth(
     sim: &Simulation,
-    bus: &mut Bus,
+    (truth, track, bus): (&mut TrueState, &mut Vec<tum::Stamped>, &mut Bus),
     nodes: &mut [Scheduled],
     truth_nodes: &[usize],
     (has_agents, has_people): (bool, bool),
 ) -> Result<()> {
-    bus.truth = sim.robot_pose();
+    truth.robot = sim.robot_pose();
+    track.push(tum::Stamped {
+        stamp: bus.now,
+        pose: futago_msgs::Pose3::from_pose2(&truth.robot, 0.0),
+    });
     if has_agents {
-        bus.agents = sim
+        truth.agents = sim
             .agent_poses()
             .into_iter()
             .map(|(n, p)| (n.to_string(), p))
             .collect();
     }
     if has_people {
-        bus.people = sim.people();
-        bus.person_collisions = sim.counters().person_contact_events;
+        truth.people = sim.people();
+        truth.person_collisions = sim.counters().person_contact_events;
     }
-    for &i in truth_nodes {
-        nodes[i].call(|node| node.on_truth(bus))?;
+    deliver_truth(nodes, truth_nodes, truth, bus)
+}
+
+/// Hands the truth to the nodes `to` that consume it, in node order.
+fn deliver_truth(
+    nodes: &mut [Scheduled],
+    to: &[usize],
+    truth: &TrueState,
+    bus: &mut Bus,
+) -> Result<()> {
+    for &i in to {
+        nodes[i].call(|node| node.on_truth(truth, bus))?;
     }
     Ok(())
 }
 
-/// Hands a message to the nodes `to`, in node order.
+/// Hands a message to the nodes `to`, in node order, each observing the truth after it.
 fn deliver(
     nodes: &mut [Scheduled],
     to: &[usize],
-    mut f: impl FnMut(&mut dyn Node) -> Result<()>,
+    truth: &TrueState,
+    bus: &mut Bus,
+    mut f: impl FnMut(&mut dyn Node, &mut Bus) -> Result<()>,
 ) -> Result<()> {
     for &i in to {
-        nodes[i].call(&mut f)?;
+        nodes[i].call_observed(truth, bus, &mut f)?;
     }
     Ok(())
 }
@@ -440,11 +505,11 @@ fn deliver(
 /// and hands the joints' commands to the simulation.
 fn control(
     nodes: &mut [Scheduled],
-    bus: &mut Bus,
+    (truth, bus): (&TrueState, &mut Bus),
     sim: &mut Simulation,
 ) -> Result<Option<futago_msgs::DriveCommand>> {
     for n in nodes.iter_mut() {
-        n.call(|node| node.on_control(bus))?;
+        n.call_observed(truth, bus, |node, bus| node.on_control(bus))?;
     }
     let cmd = bus.command.take();
     for (name, angle) in bus.joint_commands.drain(..) {
@@ -456,9 +521,13 @@ fn control(
 
 /// The first control tick, from the start pose alone, then every node's start; gives the
 /// first drive command.
-fn begin(nodes: &mut [Scheduled], bus: &mut Bus) -> Result<Option<futago_msgs::DriveCommand>> {
+fn begin(
+    nodes: &mut [Scheduled],
+    truth: &TrueState,
+    bus: &mut Bus,
+) -> Result<Option<futago_msgs::DriveCommand>> {
     for n in nodes.iter_mut() {
-        n.call(|node| node.on_control(bus))?;
+        n.call_observed(truth, bus, |node, bus| node.on_control(bus))?;
     }
     let cmd = bus.command.take();
     for n in nodes.iter_mut() {
@@ -472,14 +541,14 @@ fn begin(nodes: &mut [Scheduled], bus: &mut Bus) -> Result<Option<futago_msgs::D
 fn deliver_scan(
     nodes: &mut [Scheduled],
     to: &[usize],
-    name: &str,
-    scan: &futago_msgs::LaserScan,
-    hits: &[futago_sim::lidar::BeamHit],
+    (name, scan, hits): (&str, &futago_msgs::LaserScan, &[futago_sim::lidar::BeamHit]),
+    truth: &TrueState,
     bus: &mut Bus,
 ) -> Result<()> {
     for &i in to {
         nodes[i].call(|node| node.on_scan(name, scan, bus))?;
         nodes[i].node.on_scan_truth(name, hits);
+        nodes[i].node.observe(truth, bus);
     }
     Ok(())
 }
@@ -524,6 +593,7 @@ pub fn simulate_with(
     let has_people = !s.movers.people.is_empty() || !s.movers.flows.is_empty();
     let movers = (has_agents, has_people);
     let truth_nodes = consumers(&streams, "truth");
+    let step_truth_nodes = consumers(&streams, "truth/step");
     let odometry_nodes = consumers(&streams, "odometry");
     let laser_nodes: Vec<Vec<usize>> = s
         .lidars
@@ -555,13 +625,20 @@ pub fn simulate_with(
 
     // The first command, from the start pose alone, before any node has started.
     bus.bumps = sim.bumps();
-    let mut cmd = begin(&mut nodes, &mut bus)?;
+    let mut truth = TrueState {
+        robot: sim.robot_pose(),
+        ..TrueState::default()
+    };
+    let mut truth_track = Vec::new();
+    deliver_truth(&mut nodes, &step_truth_nodes, &truth, &mut bus)?;
+    let mut cmd = begin(&mut nodes, &truth, &mut bus)?;
     loop {
         let now = sim.time();
         bus.now = now;
         if now.nanos() >= next_gt * gt_period.0 {
             next_gt += 1;
-            publish_truth(&sim, &mut bus, &mut nodes, &truth_nodes, movers)?;
+            let view = (&mut truth, &mut truth_track, &mut bus);
+            publish_truth(&sim, view, &mut nodes, &truth_nodes, movers)?;
         }
         let done = nodes.iter().all(|n| n.node.finished());
         if now >= end || (done && sim.wheel_speeds() == (0.0, 0.0) && cmd.is_none()) {
@@ -576,11 +653,11 @@ pub fn simulate_with(
         let out = sim.step(cmd.take().as_ref());
         sim_seconds += t0.elapsed().as_secs_f64();
         let now = sim.time();
-        let truth = sim.robot_pose();
-        distance += truth.distance(&prev_truth);
-        prev_truth = truth;
+        truth.robot = sim.robot_pose();
+        distance += truth.robot.distance(&prev_truth);
+        prev_truth = truth.robot;
         bus.now = now;
-        bus.truth = truth;
+        deliver_truth(&mut nodes, &step_truth_nodes, &truth, &mut bus)?;
         bus.wheel_speeds = sim.wheel_speeds();
         bus.bumps = out.bumps.unwrap_or_default();
         if let Some(o) = out.odometry {
@@ -591,25 +668,28 @@ pub fn simulate_with(
             }
             odo.integrate(&o);
             bus.push_odometry(now, odo.pose);
-            deliver(&mut nodes, &odometry_nodes, |node| {
-                node.on_odometry(&o, &mut bus)
-            })?;
+            deliver(
+                &mut nodes,
+                &odometry_nodes,
+                &truth,
+                &mut bus,
+                |node, bus| node.on_odometry(&o, bus),
+            )?;
         }
-        cameras.capture(now, &sim, &mut nodes, &mut bus)?;
+        cameras.capture(now, &sim, &mut nodes, (&truth, &mut bus))?;
         for ((l, scan), hits) in out.scans.into_iter().zip(&out.hits) {
             scans[l] += 1;
             deliver_scan(
                 &mut nodes,
                 &laser_nodes[l],
-                &s.lidars[l].0.name,
-                &scan,
-                hits,
+                (&s.lidars[l].0.name, &scan, hits),
+                &truth,
                 &mut bus,
             )?;
         }
         // Control at the rate of the Create's sensor stream.
         if out.odometry.is_some() {
-            cmd = control(&mut nodes, &mut bus, &mut sim)?;
+            cmd = control(&mut nodes, (&truth, &mut bus), &mut sim)?;
         }
         if let Some(b) = &bar
             && sim.counters().steps.is_multiple_of(200)
@@ -620,7 +700,11 @@ pub fn simulate_with(
     bar.iter()
         .for_each(indicatif::ProgressBar::finish_and_clear);
     bus.now = sim.time();
-    bus.person_collisions = sim.counters().person_contact_events;
+    truth.robot = sim.robot_pose();
+    truth.person_collisions = sim.counters().person_contact_events;
+    for n in &mut nodes {
+        n.node.observe(&truth, &bus);
+    }
     let finished = finish_nodes(&mut nodes, &mut bus, out)?;
     let wall_time = started.elapsed().as_secs_f64();
     let c = sim.counters();
@@ -644,6 +728,8 @@ pub fn simulate_with(
         files: finished.files,
         map: finished.map,
         trajectories: finished.trajectories,
+        pictures: finished.pictures,
+        truth: truth_track,
         performance: json!({
             "simulation_s": sim_seconds,
             "rendering_s": cameras.seconds,
@@ -652,6 +738,9 @@ pub fn simulate_with(
     };
     Ok((outcome, nodes.into_iter().map(|n| n.node).collect()))
 }
+
+/// The run's summary (see [`Summary`]).
+pub const SUMMARY_FILE: &str = "summary.json";
 
 /// Cell size of the ground-truth map drawn in reports of runs without a 2D map, m.
 const REPORT_MAP_RESOLUTION: f64 = 0.05;
@@ -677,92 +766,63 @@ pub fn scenario_text(s: &Scenario) -> String {
     text + &toml::to_string(&s.config).unwrap_or_default()
 }
 
-/// The deterministic part of a run's summary (everything but `performance`): the run, the
-/// robot and its sensors, then each node's entries.
-pub fn summary(s: &Scenario, o: &Outcome, files: Value) -> Value {
-    let err = o.final_truth.distance(&o.final_odometry);
-    let herr = futago_msgs::wrap_angle(o.final_odometry.theta - o.final_truth.theta).to_degrees();
-    let mut v = json!({
-        "scenario": s.spec.name,
-        "description": s.spec.description,
-        "world": s.world.name,
-        "seed": o.seed,
-        "overlays": s.overlays.iter().map(|o| o.origin.display().to_string()).collect::<Vec<_>>(),
-        "sim_time_s": o.sim_time,
-        "physics_rate_hz": s.spec.physics.rate,
-        "steps": o.steps,
-        "robot": {
-            "start": [s.start.x, s.start.y, s.start.theta],
-            "final_pose": [o.final_truth.x, o.final_truth.y, o.final_truth.theta],
-            "distance_travelled_m": o.distance_travelled,
-            "bump_events": o.bump_events,
-            "wheel_drop_steps": o.wheel_drop_steps,
-        },
-        "odometry": {
-            "final_pose": [o.final_odometry.x, o.final_odometry.y, o.final_odometry.theta],
-            "final_position_error_m": err,
-            "final_heading_error_deg": herr,
-        },
-        "lidar": s.lidars.iter().zip(&o.scans).map(|((c, _), n)| json!({ "name": c.name, "preset": c.preset.name(), "scans": n })).collect::<Vec<_>>(),
-        "camera": s.cameras.iter().zip(&o.camera_frames).map(|(c, n)| json!({
-            "name": c.name,
-            "rgb": [c.rgb.width, c.rgb.height],
-            "depth": [c.depth.width, c.depth.height],
-            "rate_hz": c.rate,
-            "frames": n,
-        })).collect::<Vec<_>>(),
-        "laser_rays": o.laser_rays,
-        "files": files,
-    });
-    // Only scenarios that have them carry these keys.
-    for (i, (c, _)) in s.lidars.iter().enumerate() {
-        if let Some(j) = &c.joint {
-            v["lidar"][i]["joint"] = json!(j);
-        }
+/// A run scored in memory: what happened, the relations its trajectories were scored on
+/// (sampled from its ground truth), and every node's metrics.
+pub struct Scored {
+    pub outcome: Outcome,
+    pub relations: Vec<crate::relations::Relation>,
+    pub metrics: crate::ground_truth::Metrics,
+}
+
+impl Scored {
+    /// The scenario's gates evaluated on the metrics (gates against other scenarios' runs are
+    /// the suite's to check).
+    pub fn gates(&self, s: &Scenario) -> Vec<crate::ground_truth::GateResult> {
+        crate::ground_truth::evaluate(&s.spec.gate, &self.metrics)
     }
-    for (i, c) in s.cameras.iter().enumerate() {
-        if let Some(j) = &c.joint {
-            v["camera"][i]["joint"] = json!(j);
-        }
+}
+
+/// Runs a scenario and scores it from memory: the nodes' trajectories, maps and detections
+/// against the simulator's truth; with `out`, the recorders and nodes also write their files
+/// there (nothing is read back).
+fn simulate_scored(s: &Scenario, opts: &RunOptions, out: Option<&Path>) -> Result<Scored> {
+    let (outcome, nodes) = simulate(s, opts, out)?;
+    let relations = crate::ground_truth::sample_relations(&outcome.truth);
+    let truth = stack::Truth {
+        scenario: s,
+        poses: &outcome.truth,
+        relations: &relations,
+    };
+    let mut metrics = crate::ground_truth::Metrics::default();
+    for n in &nodes {
+        let m = n
+            .score(&truth)
+            .with_context(|| format!("scoring node `{}`", n.name()))?;
+        metrics.0.extend(m.0);
     }
-    if !s.movers.joints.is_empty() {
-        v["joints"] = s
-            .movers
-            .joints
-            .iter()
-            .zip(&o.final_joints)
-            .map(|(j, a)| json!({ "name": j.name, "mode": j.mode, "final_angle_deg": a.to_degrees() }))
-            .collect();
-    }
-    if !s.movers.agents.is_empty() {
-        v["agents"] = s
-            .movers
-            .agents
-            .iter()
-            .zip(&o.final_agents)
-            .map(|(a, p)| json!({ "name": a.name, "final_pose": [p.x, p.y, p.theta] }))
-            .collect();
-    }
-    for (k, e) in &o.entries {
-        v[k] = e.clone();
-    }
-    v
+    Ok(Scored {
+        outcome,
+        relations,
+        metrics,
+    })
+}
+
+/// Runs a scenario and scores it without writing anything: for a search or a check that
+/// needs a run's metrics and gates, not its files.
+pub fn evaluate(s: &Scenario, opts: &RunOptions) -> Result<Scored> {
+    simulate_scored(s, opts, None)
 }
 
 /// Runs a scenario and writes its results into `out` (created or replaced whole).
 pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcome)> {
     crash_if_asked(&s.spec.name);
     write_atomically(out, opts.force, "run", |tmp| {
-        let (outcome, nodes) = simulate(s, opts, Some(tmp))?;
-        let truth_text = std::fs::read_to_string(tmp.join(stack::record::GROUNDTRUTH_FILE))
-            .with_context(|| format!("reading back {}", stack::record::GROUNDTRUTH_FILE))?;
-        let truth_poses = futago_msgs::tum::parse(&truth_text).map_err(|e| {
-            anyhow::anyhow!("reading back {}: {e}", stack::record::GROUNDTRUTH_FILE)
-        })?;
-        let relations = crate::ground_truth::sample_relations(&truth_poses);
+        let scored = simulate_scored(s, opts, Some(tmp))?;
+        let relations = &scored.relations;
+        let outcome = &scored.outcome;
         std::fs::write(
             tmp.join(RELATIONS_FILE),
-            crate::relations::format(&relations),
+            crate::relations::format(relations),
         )
         .with_context(|| format!("writing {RELATIONS_FILE}"))?;
         let config = scenario_text(s);
@@ -770,7 +830,7 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
             .with_context(|| format!("writing {SCENARIO_FILE}"))?;
         // Every file the run wrote, but the summary itself and the report (which holds the
         // wall times).
-        let mut files = serde_json::Map::new();
+        let mut files = std::collections::BTreeMap::new();
         for f in outcome
             .files
             .iter()
@@ -781,45 +841,12 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
                 Some(dir) => sha256_tree(&tmp.join(dir))?,
                 None => sha256_file(&tmp.join(f))?,
             };
-            files.insert(f.to_string(), json!({ "sha256": digest }));
+            files.insert(f.to_string(), summary::Digest { sha256: digest });
         }
-        let mut sum = summary(s, &outcome, Value::Object(files));
-        let truth = stack::Truth {
-            dir: tmp,
-            scenario: s,
-            poses: &truth_poses,
-            relations: &relations,
-        };
-        let mut metrics = crate::ground_truth::Metrics::default();
-        for n in &nodes {
-            let m = n
-                .score(&truth)
-                .with_context(|| format!("scoring node `{}`", n.name()))?;
-            metrics.0.extend(m.0);
-        }
-        sum["gates"] = serde_json::to_value(crate::ground_truth::evaluate(&s.spec.gate, &metrics))?;
-        // Gates against other scenarios' runs are the suite's to check.
-        let versus: Vec<&crate::ground_truth::Gate> = s
-            .spec
-            .gate
-            .iter()
-            .filter(|g| g.scenario.is_some())
-            .collect();
-        if !versus.is_empty() {
-            sum["suite_gates"] = serde_json::to_value(versus)?;
-        }
-        sum["metrics"] = serde_json::to_value(metrics)?;
-        let mut performance = outcome.performance.clone();
-        performance["renderer"] = json!(outcome.renderer);
-        performance["wall_time_s"] = json!(outcome.wall_time);
-        performance["real_time_factor"] = json!(if outcome.wall_time > 0.0 {
-            outcome.sim_time / outcome.wall_time
-        } else {
-            0.0
-        });
-        sum["performance"] = performance;
-        let text = serde_json::to_string_pretty(&sum)? + "\n";
-        std::fs::write(tmp.join("summary.json"), text).context("writing summary.json")?;
+        let typed = Summary::new(s, &scored, files).with_performance(outcome);
+        std::fs::write(tmp.join(SUMMARY_FILE), typed.text())
+            .with_context(|| format!("writing {SUMMARY_FILE}"))?;
+        let sum = typed.to_value();
         if opts.report {
             let resolution = outcome
                 .map
@@ -827,17 +854,18 @@ pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcom
                 .map_or(REPORT_MAP_RESOLUTION, |m| m.resolution);
             let world = stack::world_map(s, resolution, report_height(s))?;
             let html = crate::report::run_report(
-                tmp,
+                &outcome.truth,
                 &sum,
                 &config,
                 &world,
                 outcome.map.as_ref(),
                 &outcome.trajectories,
+                &outcome.pictures,
             );
             std::fs::write(tmp.join(REPORT_FILE), html)
                 .with_context(|| format!("writing {REPORT_FILE}"))?;
         }
-        Ok((sum, outcome))
+        Ok((sum, scored.outcome))
     })
 }
 

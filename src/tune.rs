@@ -431,8 +431,8 @@ fn report_progress(trials: &[Trial], o: &TuneOptions, generation: usize) {
     );
 }
 
-/// Runs one candidate on one seed and reads its objective; keeps only the run's summary and
-/// scenario, so that long searches do not fill the disk.
+/// Runs one candidate on one seed, scored in memory, and gives its objective; writes only the
+/// run's summary and scenario into `dir`, so that long searches do not fill the disk.
 fn evaluate_one(
     scenario: &Path,
     base: &[Overlay],
@@ -456,22 +456,20 @@ fn evaluate_one(
         report: false,
         force: false,
     };
-    let (summary, _) = run::run(&s, &opts, dir).map_err(|e| format!("{e:#}"))?;
-    if let Ok(entries) = std::fs::read_dir(dir) {
-        for e in entries.flatten() {
-            let keep = ["summary.json", run::SCENARIO_FILE];
-            if !keep.iter().any(|k| e.file_name() == *k) {
-                let p = e.path();
-                let _ = if p.is_dir() {
-                    std::fs::remove_dir_all(&p)
-                } else {
-                    std::fs::remove_file(&p)
-                };
-            }
-        }
-    }
-    summary["metrics"][objective]
-        .as_f64()
+    // Scored in memory; the trial keeps its summary (no files listed: none were written)
+    // and the scenario as run, to rerun it.
+    let scored = run::evaluate(&s, &opts).map_err(|e| format!("{e:#}"))?;
+    let summary =
+        run::Summary::new(&s, &scored, Default::default()).with_performance(&scored.outcome);
+    std::fs::create_dir_all(dir)
+        .and_then(|()| std::fs::write(dir.join(run::SUMMARY_FILE), summary.text()))
+        .and_then(|()| std::fs::write(dir.join(run::SCENARIO_FILE), run::scenario_text(&s)))
+        .map_err(|e| format!("writing {}: {e}", dir.display()))?;
+    scored
+        .metrics
+        .0
+        .get(objective)
+        .copied()
         .ok_or_else(|| format!("the run produced no {objective}"))
 }
 

@@ -93,22 +93,14 @@ pub fn sample_relations(truth: &[futago_msgs::tum::Stamped]) -> Vec<crate::relat
     crate::relations::sample(&planar, RELATION_EVERY_S, RELATION_MAX_SPAN_S, 0)
 }
 
-/// Scores the trajectory `file` in the run's folder (TUM) against the run's ground truth, as
-/// `NAME.ate.*_m` (no alignment: the map frame is the world frame in simulation),
-/// `NAME.ate.p95_m`, `NAME.rpe_1m.trans.*_m` / `NAME.rpe_1m.rot.*_deg`, and the relations
-/// metric as `NAME.relations.*` (see [`RELATION_KEYS`]). A file the run did not write scores
+/// Scores the estimated trajectory `est` (in memory, as the node made it) against the run's
+/// ground truth, as `NAME.ate.*_m` (no alignment: the map frame is the world frame in
+/// simulation), `NAME.ate.p95_m`, `NAME.rpe_1m.trans.*_m` / `NAME.rpe_1m.rot.*_deg`, and the
+/// relations metric as `NAME.relations.*` (see [`RELATION_KEYS`]). An empty trajectory scores
 /// nothing.
-pub fn score_trajectory(truth: &Truth, name: &str, file: &str) -> anyhow::Result<Metrics> {
-    use anyhow::Context;
+pub fn score_trajectory(truth: &Truth, name: &str, est: &[futago_msgs::tum::Stamped]) -> Metrics {
     let mut m = Metrics::default();
-    let p = truth.dir.join(file);
-    if !p.exists() {
-        return Ok(m);
-    }
-    let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
-    let est =
-        futago_msgs::tum::parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
-    let pairs = trajectory::associate(truth.poses, &est, MAX_TIME_DIFF);
+    let pairs = trajectory::associate(truth.poses, est, MAX_TIME_DIFF);
     let ate = trajectory::ate(&pairs, trajectory::Alignment::None);
     if let Some(s) = Stats::of(&ate) {
         m.insert_stats(&format!("{name}.ate"), "_m", &s);
@@ -127,7 +119,7 @@ pub fn score_trajectory(truth: &Truth, name: &str, file: &str) -> anyhow::Result
     let planar: Vec<(futago_msgs::Time, futago_msgs::Pose2)> =
         est.iter().map(|s| (s.stamp, s.pose.to_pose2())).collect();
     let rel = crate::relations::evaluate(&planar, truth.relations);
-    if rel.relations > 0 {
+    if rel.relations > 0 && !est.is_empty() {
         let values = [
             rel.abs_trans_m.mean,
             rel.abs_trans_m.std,
@@ -142,7 +134,7 @@ pub fn score_trajectory(truth: &Truth, name: &str, file: &str) -> anyhow::Result
             m.insert(format!("{name}.relations.{k}"), v);
         }
     }
-    Ok(m)
+    m
 }
 
 const STATS: [&str; 6] = ["rmse", "mean", "median", "std", "min", "max"];
@@ -264,11 +256,27 @@ pub fn evaluate_versus(g: &Gate, own: &Metrics, other: Option<&Metrics>) -> Gate
     r.remove(0)
 }
 
-/// What the scorers are given: the run's folder and the simulated truth.
+/// The simulator's state as the scorers and recorders see it, kept by the run loop apart from
+/// the robot's [`Bus`](crate::stack::Bus): the robot's true pose (every physics step), each
+/// agent's and every person's (at the ground-truth rate), and the contacts with people. A
+/// stack module acts only on what the bus carries; this view reaches a node only through
+/// `Node::on_truth` and `Node::observe`, for its recorder or its scorer.
+#[derive(Debug, Clone, Default)]
+pub struct TrueState {
+    /// The robot base's true pose.
+    pub robot: futago_msgs::Pose2,
+    /// Each agent's true pose, in `movers.agents` order.
+    pub agents: Vec<(String, futago_msgs::Pose2)>,
+    /// Every person in the world.
+    pub people: Vec<futago_sim::people::PersonTruth>,
+    /// Contacts begun between the robot and a person so far (the physics' count).
+    pub person_collisions: u64,
+}
+
+/// What the scorers are given: the scenario and the simulated truth, in memory.
 pub struct Truth<'a> {
-    pub dir: &'a std::path::Path,
     pub scenario: &'a crate::scenario::Scenario,
-    /// The run's `groundtruth.txt`, read back.
+    /// The robot's true trajectory at the ground-truth rate (what `groundtruth.txt` holds).
     pub poses: &'a [futago_msgs::tum::Stamped],
     pub relations: &'a [crate::relations::Relation],
 }

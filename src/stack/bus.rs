@@ -21,9 +21,6 @@ const HISTORY: usize = 256;
 pub struct Bus {
     /// Simulation time of the current phase.
     pub now: Time,
-    /// The robot base's true pose now: for recorders, scorers and oracle pose sources only;
-    /// stack modules never read it.
-    pub truth: Pose2,
     /// The Create's wheel odometry integrated from the start pose (the `odom` frame).
     pub odometry: Pose2,
     /// The wheels' commanded speeds (left, right), m/s, as the Create reports them.
@@ -32,12 +29,6 @@ pub struct Bus {
     pub bumps: BumpsAndDrops,
     /// The drive command published at the last control tick, until the loop takes it.
     pub command: Option<DriveCommand>,
-    /// Each agent's true pose, at the ground-truth rate: for recorders and scorers only.
-    pub agents: Vec<(String, Pose2)>,
-    /// Every person in the world, at the ground-truth rate: for recorders and scorers only.
-    pub people: Vec<futago_sim::people::PersonTruth>,
-    /// Contacts begun between the robot and a person so far (the physics' count).
-    pub person_collisions: u64,
     /// `people/tracked`: the people the stack tracks, in the robot base's frame at the last
     /// scan (positions, m; velocities, m/s).
     pub people_tracked: Vec<futago_robot::tracking::people::TrackedPerson>,
@@ -68,14 +59,10 @@ impl Bus {
     ) -> Bus {
         Bus {
             now: Time::ZERO,
-            truth: start,
             odometry: start,
             wheel_speeds: (0.0, 0.0),
             bumps: BumpsAndDrops::default(),
             command: None,
-            agents: Vec::new(),
-            people: Vec::new(),
-            person_collisions: 0,
             people_tracked: Vec::new(),
             people_tracked_at: (Time::ZERO, start),
             joints: Vec::new(),
@@ -167,13 +154,13 @@ impl Bus {
         })
     }
 
-    /// The pose `source` gives now: the robot's true pose (the oracle source, for tests and
-    /// exact routes: the one place where a stack module's pose comes from the truth), its
-    /// odometry, or a node's estimate carried to now by odometry (odometry until the node
-    /// publishes one).
+    /// The pose `source` gives now: its odometry, or the estimate on the source's topic
+    /// ([`pose_topic`]) carried to now by odometry, odometry until one is published. The
+    /// ground-truth source is the oracle node's `pose/ground_truth` (see
+    /// [`crate::stack::oracle`]), held as published at every physics step.
     pub fn pose_from(&self, source: PoseSource) -> Pose2 {
         match source {
-            PoseSource::GroundTruth => self.truth,
+            PoseSource::GroundTruth => self.pose(GROUND_TRUTH).unwrap_or(self.odometry),
             PoseSource::Odometry => self.odometry,
             PoseSource::Localization => self.pose("localization").unwrap_or(self.odometry),
             PoseSource::Slam => self.pose("slam").unwrap_or(self.odometry),
@@ -209,11 +196,16 @@ impl Bus {
     }
 }
 
+/// The oracle's pose topic, `pose/ground_truth`: the robot's true pose, published only in
+/// scenarios where a module asks for it.
+pub const GROUND_TRUTH: &str = "ground_truth";
+
 /// The topic a node that takes its pose from `source` consumes (`pose/slam`), if any.
 pub fn pose_topic(source: PoseSource) -> Option<String> {
     match source {
         PoseSource::Localization => Some("pose/localization".into()),
         PoseSource::Slam => Some("pose/slam".into()),
-        PoseSource::GroundTruth | PoseSource::Odometry => None,
+        PoseSource::GroundTruth => Some(format!("pose/{GROUND_TRUTH}")),
+        PoseSource::Odometry => None,
     }
 }

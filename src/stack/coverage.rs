@@ -15,7 +15,7 @@
 //! route dark blue, the second route magenta, the driven path black).
 
 use super::driver::{ControllerConfig, controller, controller_type};
-use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
+use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, TrueState, Truth};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::coverage::{CLASSES, CameraCoverage, Footprint, Surfaces};
 use crate::ground_truth::regions::{CORRIDOR_WIDTH, Kind, MIN_AREA_FACTOR, Regions};
@@ -292,7 +292,9 @@ impl SecondPass {
     /// pose: each point goes from the camera into the base's frame (the camera's mount, which
     /// the robot knows) and from there by the pose the driver steers by.
     fn see(&mut self, frame: &CameraFrame, range: (f64, f64), bus: &Bus) {
-        let to_base = bus.truth.inverse();
+        let Some(on_base) = frame.on_base else {
+            return;
+        };
         let pose = self.pose(bus);
         let depth = &frame.frame.depth;
         let k = &frame.frame.depth_intrinsics;
@@ -302,16 +304,11 @@ impl SecondPass {
                 if !(z.is_finite() && z >= range.0 && z <= range.1) {
                     continue;
                 }
-                // The optical frame's place is the camera's mount on the base at the base's
-                // pose: through the true pose and back, only the mount remains.
-                let w = frame
-                    .optical
-                    .transform_point(k.back_project(u as f64, v as f64, z));
-                if w[2] < WALL_POINT_MIN_Z {
+                let b = on_base.transform_point(k.back_project(u as f64, v as f64, z));
+                if b[2] < WALL_POINT_MIN_Z {
                     continue;
                 }
-                let on_base = to_base.transform_point([w[0], w[1]]);
-                self.sight.add_point(pose.transform_point(on_base));
+                self.sight.add_point(pose.transform_point([b[0], b[1]]));
             }
         }
     }
@@ -500,8 +497,8 @@ impl Node for CoverageNode {
         }
     }
 
-    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
-        let pose = bus.truth;
+    fn on_truth(&mut self, truth: &TrueState, bus: &mut Bus) -> Result<()> {
+        let pose = truth.robot;
         self.footprint.add(&pose);
         if let Some(last) = self.last {
             self.driven_m += last.distance(&pose);
@@ -544,7 +541,7 @@ impl Node for CoverageNode {
         self.seen.add(
             &depth,
             &frame.frame.depth_intrinsics,
-            &frame.optical,
+            &truth.optical(),
             range,
             PIXEL_STRIDE,
         );
@@ -591,7 +588,7 @@ impl Node for CoverageNode {
 
     fn finish(&mut self, bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
         self.sample(bus.now);
-        let mut files = Vec::new();
+        let (mut files, mut pictures) = (Vec::new(), Vec::new());
         if let Some(dir) = out {
             let mut text = format!(
                 "# futago coverage route of {} ({}): x y, map frame, m\n",
@@ -603,9 +600,11 @@ impl Node for CoverageNode {
             }
             std::fs::write(dir.join(ROUTE_FILE), text)
                 .with_context(|| format!("writing {ROUTE_FILE}"))?;
-            std::fs::write(dir.join(PICTURE_FILE), self.picture())
+            let png = self.picture();
+            std::fs::write(dir.join(PICTURE_FILE), &png)
                 .with_context(|| format!("writing {PICTURE_FILE}"))?;
             files.extend([ROUTE_FILE, PICTURE_FILE].map(String::from));
+            pictures.push((PICTURE_FILE.to_string(), png));
         }
         let series: Vec<Value> = self
             .series
@@ -681,6 +680,7 @@ impl Node for CoverageNode {
         Ok(Report {
             summary: vec![("coverage".into(), summary)],
             files,
+            pictures,
             performance,
             ..Report::default()
         })

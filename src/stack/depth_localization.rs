@@ -25,7 +25,7 @@
 //!
 //! The estimated and true camera poses are written as 3D TUM files.
 
-use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth, tum_line};
+use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Trajectory, Truth};
 use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::trajectory::{
@@ -96,7 +96,7 @@ pub struct DepthLocalizationNode {
     period: Duration,
     next: Time,
     last_odometry: Option<Pose2>,
-    lines: String,
+    track: Trajectory,
     frames: Vec<FrameRecord>,
     summary: Option<serde_json::Value>,
     /// What the model is (for the summary).
@@ -164,7 +164,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         period: Duration::from_secs(1.0 / spec.rate),
         next: Time::ZERO,
         last_odometry: None,
-        lines: String::new(),
+        track: Trajectory::new("depth_localization"),
         frames: Vec::new(),
         summary: None,
         model,
@@ -439,14 +439,15 @@ impl Node for DepthLocalizationNode {
         &mut self,
         camera: &str,
         frame: &CameraFrame,
-        _truth: &mut dyn FrameTruth,
+        view: &mut dyn FrameTruth,
         bus: &mut Bus,
     ) -> Result<()> {
         if camera != self.camera {
             return Ok(());
         }
         self.next = bus.now + self.period;
-        let truth = body_of_optical(&frame.optical);
+        // The truth, for the scorer; the filter starts at it (the seed's tracking runs).
+        let truth = body_of_optical(&view.optical());
         let odo = bus.odometry;
         // The robot's odometry since the last frame, carried to the camera.
         let motion = match (self.odometry, self.mount2, self.last_odometry) {
@@ -501,7 +502,7 @@ impl Node for DepthLocalizationNode {
                 futago_msgs::wrap_angle(yaw),
             );
             bus.publish_pose("depth_localization", base, odo);
-            tum_line(&mut self.lines, bus.now, &base);
+            self.track.push(bus.now, &base);
         }
         self.frames.push(FrameRecord {
             time: bus.now,
@@ -522,18 +523,18 @@ impl Node for DepthLocalizationNode {
                 tum3(&mut est, f.time, &f.estimate);
                 tum3(&mut truth, f.time, &f.truth);
             }
-            let mut files = vec![(CAMERA_ESTIMATE_FILE, &est), (CAMERA_TRUTH_FILE, &truth)];
+            let files = [(CAMERA_ESTIMATE_FILE, &est), (CAMERA_TRUTH_FILE, &truth)];
             if self.mount2.is_some() {
-                files.push((DEPTH_LOCALIZATION_FILE, &self.lines));
-                report.trajectories.push((
-                    "depth_localization".to_string(),
-                    DEPTH_LOCALIZATION_FILE.to_string(),
-                ));
+                self.track.write(dir, DEPTH_LOCALIZATION_FILE, "")?;
+                report.files.push(DEPTH_LOCALIZATION_FILE.to_string());
             }
             for (name, text) in files {
                 std::fs::write(dir.join(name), text).with_context(|| format!("writing {name}"))?;
                 report.files.push(name.to_string());
             }
+        }
+        if self.mount2.is_some() {
+            report.trajectories.push(self.track.clone());
         }
         // The true path in the plane: the camera's true positions, a point every centimetre.
         let mut path: Vec<[f64; 2]> = Vec::new();
@@ -626,11 +627,7 @@ impl Node for DepthLocalizationNode {
 
     fn score(&self, truth: &Truth) -> Result<Metrics> {
         let mut m = if self.mount2.is_some() {
-            crate::ground_truth::score_trajectory(
-                truth,
-                "depth_localization",
-                DEPTH_LOCALIZATION_FILE,
-            )?
+            crate::ground_truth::score_trajectory(truth, &self.track.name, &self.track.poses)
         } else {
             Metrics::default()
         };

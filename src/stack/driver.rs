@@ -1,8 +1,9 @@
 //! The driver node: a scripted controller or the navigator, whichever the scenario's
 //! `[controller]` names. It publishes the drive command at every control tick.
 
+use super::bus::{GROUND_TRUTH, pose_topic};
 use super::{Bus, Node, Report, Streams, Truth};
-use crate::ground_truth::Metrics;
+use crate::ground_truth::{Metrics, TrueState};
 use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
 use anyhow::{Context, Result};
 use futago_msgs::{DriveCommand, Duration, LaserScan, Odometry, Pose2, Time};
@@ -42,9 +43,11 @@ pub struct DriverNode {
     pending: Vec<Odometry>,
     /// Return-to-start errors per lap of a waypoint list (seed 000, Fig. 2.8).
     laps: Vec<Value>,
+    /// The odometry and localisation poses at a lap's end, until the scorer sees the truth.
+    lap_ended: Option<(Pose2, Option<Pose2>)>,
     localizes: bool,
-    /// A scripted controller that drives on SLAM's pose.
-    scripted_on_slam: bool,
+    /// The pose source of a scripted waypoint list (none for other scripts).
+    scripted_source: Option<PoseSource>,
     /// How many goals a navigator was given (none for other drivers and for exploration).
     goals: Option<usize>,
     /// A route driver (`coverage`, `route`): the topic its routes come on (`path/TOPIC`), the
@@ -122,9 +125,13 @@ impl DriverNode {
             map_seen: None,
             pending: Vec::new(),
             laps: Vec::new(),
+            lap_ended: None,
             localizes: spec.module("localization").is_some()
                 || spec.module("visual_localization").is_some(),
-            scripted_on_slam: matches!(controller(s), ControllerConfig::Waypoints(w) if w.pose_source == PoseSource::Slam),
+            scripted_source: match controller(s) {
+                ControllerConfig::Waypoints(w) => Some(w.pose_source),
+                _ => None,
+            },
             goals: match controller(s) {
                 ControllerConfig::Navigate(n) => match n.task() {
                     Task::Goals(g) => Some(g.len()),
@@ -165,16 +172,19 @@ impl Node for DriverNode {
                 periods.extend(self.map_period.map(|p| ("map/slam".to_string(), p)));
             }
             Driver::Navigator {
-                pose_source: Some(PoseSource::Localization),
+                pose_source: Some(source),
                 ..
-            } => consumes.push("pose/localization".into()),
-            Driver::Navigator {
-                pose_source: Some(PoseSource::Slam),
-                ..
-            } => consumes.push("pose/slam".into()),
-            Driver::Scripted(_) if self.localizes => consumes.push("pose/localization".into()),
-            Driver::Scripted(_) if self.scripted_on_slam => consumes.push("pose/slam".into()),
-            _ => {}
+            } => consumes.extend(pose_topic(*source)),
+            Driver::Scripted(_) => {
+                if self.localizes {
+                    consumes.push("pose/localization".into());
+                }
+                consumes.extend(
+                    self.scripted_source
+                        .filter(|s| *s != PoseSource::Localization)
+                        .and_then(pose_topic),
+                );
+            }
         }
         Streams {
             consumes,
@@ -201,7 +211,7 @@ impl Node for DriverNode {
             now: bus.now,
             odometry: &self.pending,
             bumps: bus.bumps,
-            ground_truth: Some(bus.truth),
+            ground_truth: bus.pose(GROUND_TRUTH),
             localization,
             slam: bus.pose("slam"),
         };
@@ -283,14 +293,23 @@ impl Node for DriverNode {
         if let Driver::Scripted(c) = &self.driver
             && c.laps_completed() > self.laps.len()
         {
+            // Scored against the truth when the scorer observes this tick.
+            self.lap_ended = Some((bus.odometry, localization));
             self.laps.push(json!({
                 "lap": self.laps.len() + 1,
                 "time_s": bus.now.secs(),
-                "odometry_error_m": bus.odometry.distance(&bus.truth),
-                "localization_error_m": localization.map(|l| l.distance(&bus.truth)),
             }));
         }
         Ok(())
+    }
+
+    fn observe(&mut self, truth: &TrueState, _bus: &Bus) {
+        if let (Some((odometry, localization)), Some(lap)) =
+            (self.lap_ended.take(), self.laps.last_mut())
+        {
+            lap["odometry_error_m"] = json!(odometry.distance(&truth.robot));
+            lap["localization_error_m"] = json!(localization.map(|l| l.distance(&truth.robot)));
+        }
     }
 
     fn finished(&self) -> bool {

@@ -5,7 +5,7 @@
 //! (`map/localization`), writes `localization.txt`, and scores its trajectory, its worst
 //! recovery from a kidnapping and its convergence from a global start.
 
-use super::{Bus, Node, Report, Streams, Truth, tum_line};
+use super::{Bus, Node, Report, Streams, Trajectory, TrueState, Truth};
 use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
@@ -38,8 +38,10 @@ pub struct LocalizationNode {
     updates: u64,
     /// (time s, position error m, heading error rad) at each update.
     errors: Vec<(f64, f64, f64)>,
+    /// The estimate just published, until the scorer measures it against the truth.
+    unscored: Option<Pose2>,
     /// The estimates as TUM lines.
-    lines: String,
+    track: Trajectory,
     /// Kidnapping times, s, and whether the filter starts globally.
     events: Vec<f64>,
     global: bool,
@@ -76,7 +78,8 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<LocalizationNode>> {
         next: Time::ZERO,
         updates: 0,
         errors: Vec::new(),
-        lines: String::new(),
+        unscored: None,
+        track: Trajectory::new("localization"),
         events: s.spec.event.iter().map(|e| e.time).collect(),
         global: spec.global,
         map: Some(grid),
@@ -149,23 +152,28 @@ impl Node for LocalizationNode {
         bus.publish_pose("localization", est.pose, at);
         self.updates += 1;
         let now = bus.pose("localization").unwrap_or(est.pose);
-        self.errors.push((
-            bus.now.secs(),
-            now.distance(&bus.truth),
-            wrap_angle(now.theta - bus.truth.theta).abs(),
-        ));
-        tum_line(&mut self.lines, bus.now, &now);
+        self.unscored = Some(now);
+        self.track.push(bus.now, &now);
         Ok(())
     }
 
-    fn finish(&mut self, bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
-        let (mut files, mut trajectories) = (Vec::new(), Vec::new());
-        if let Some(dir) = out {
-            std::fs::write(dir.join(LOCALIZATION_FILE), &self.lines)
-                .with_context(|| format!("writing {LOCALIZATION_FILE}"))?;
-            files.push(LOCALIZATION_FILE.to_string());
-            trajectories.push(("localization".to_string(), LOCALIZATION_FILE.to_string()));
+    fn observe(&mut self, truth: &TrueState, bus: &Bus) {
+        if let Some(now) = self.unscored.take() {
+            self.errors.push((
+                bus.now.secs(),
+                now.distance(&truth.robot),
+                wrap_angle(now.theta - truth.robot.theta).abs(),
+            ));
         }
+    }
+
+    fn finish(&mut self, bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
+        let mut files = Vec::new();
+        if let Some(dir) = out {
+            self.track.write(dir, LOCALIZATION_FILE, "")?;
+            files.push(LOCALIZATION_FILE.to_string());
+        }
+        let trajectories = vec![self.track.clone()];
         let l = &self.errors;
         let n = l.len().max(1) as f64;
         let end = bus.now.secs();
@@ -200,7 +208,7 @@ impl Node for LocalizationNode {
 
     fn score(&self, truth: &Truth) -> Result<Metrics> {
         let mut m =
-            crate::ground_truth::score_trajectory(truth, "localization", LOCALIZATION_FILE)?;
+            crate::ground_truth::score_trajectory(truth, &self.track.name, &self.track.poses);
         for k in ["recovery_s", "convergence_s"] {
             if let Some(v) = self.summary.as_ref().and_then(|l| l[k].as_f64()) {
                 m.insert(format!("localization.{k}"), v);

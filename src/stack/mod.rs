@@ -10,15 +10,28 @@
 //!
 //! 1. **truth**: at the ground-truth rate, before the step ([`Node::on_truth`]);
 //! 2. the simulation steps;
-//! 3. **odometry**: the Create's report, when one fell due ([`Node::on_odometry`]);
-//! 4. **frames**: each camera that is due, in the scenario's order, is rendered only if some
+//! 3. **truth/step**: the truth after every step, for the nodes that consume it (the oracle,
+//!    [`oracle`]), and once before the first control tick;
+//! 4. **odometry**: the Create's report, when one fell due ([`Node::on_odometry`]);
+//! 5. **frames**: each camera that is due, in the scenario's order, is rendered only if some
 //!    consumer wants a frame now ([`Node::wants_frame`]), then handed to those that do
 //!    ([`Node::on_frame`]);
-//! 5. **scans**: each completed scan, in the scenario's laser order ([`Node::on_scan`]);
-//! 6. **control**: at the rate of the Create's reports ([`Node::on_control`]); the driver
+//! 6. **scans**: each completed scan, in the scenario's laser order ([`Node::on_scan`]);
+//! 7. **control**: at the rate of the Create's reports ([`Node::on_control`]); the driver
 //!    publishes the next drive command on the [`Bus`].
 //!
-//! Within a phase, nodes run in the order of [`build`]. Nothing depends on threads or the wall
+//! Within a phase, nodes run in the order of [`build`]. What a node publishes in a phase is
+//! seen by the nodes after it in the same phase, and by those before it only at their next
+//! callback: a lag of one callback, which the order of [`MODULES`] decides.
+//!
+//! The bus carries what the robot senses and what nodes publish, never the simulator's truth.
+//! Recorders and scorers see the truth through their own view ([`TrueState`]): at the
+//! ground-truth rate ([`Node::on_truth`]), after each of their callbacks ([`Node::observe`]),
+//! and as what a scan's beams hit ([`Node::on_scan_truth`]) or a frame's true depth
+//! ([`FrameTruth`]). A module that drives on the truth takes `pose/ground_truth` from the
+//! oracle node, built only where some node consumes it.
+//!
+//! Nothing depends on threads or the wall
 //! clock, so a scenario and a seed give the same bytes. A new module is a new file here with
 //! its node and its `Module` ([`StackModule`], [`ModuleConfig`]: its table, nodes and metric
 //! names), and one line in [`MODULES`]; the loader and the loop do not change.
@@ -28,6 +41,7 @@ pub mod coverage;
 pub mod depth_localization;
 pub mod driver;
 pub mod localization;
+pub mod oracle;
 pub mod people;
 pub mod record;
 pub mod rgbd_map;
@@ -36,7 +50,7 @@ pub mod slam;
 pub mod visual_localization;
 pub mod visual_map;
 
-pub use crate::ground_truth::{Truth, world_map};
+pub use crate::ground_truth::{TrueState, Truth, world_map};
 pub use bus::Bus;
 
 use crate::ground_truth::Metrics;
@@ -76,10 +90,17 @@ pub trait Node {
         Ok(())
     }
 
-    /// The ground truth at its rate (recorders only).
-    fn on_truth(&mut self, _bus: &Bus) -> Result<()> {
+    /// The truth, for the nodes that consume `truth` (at the ground-truth rate, before the
+    /// step) or `truth/step` (after every step): recorders, scorers and the oracle.
+    fn on_truth(&mut self, _truth: &TrueState, _bus: &mut Bus) -> Result<()> {
         Ok(())
     }
+
+    /// The truth at the instant of each of this node's callbacks (odometry, frame, scan,
+    /// control; not timed as its work) and once more before [`Node::finish`]: for the node's
+    /// scorer to measure what it just published against; what it publishes never depends on
+    /// it.
+    fn observe(&mut self, _truth: &TrueState, _bus: &Bus) {}
 
     /// A report of the Create's sensor stream, already integrated into the bus's odometry.
     fn on_odometry(&mut self, _odometry: &Odometry, _bus: &mut Bus) -> Result<()> {
@@ -142,15 +163,24 @@ pub trait Node {
     }
 }
 
-/// A camera frame with its optical frame's true pose (for recorders' ground truth).
+/// A camera frame, as the robot has it: the images, and where the camera is on the robot.
+/// Its true pose in the world is the scorer's ([`FrameTruth::optical`]).
 pub struct CameraFrame {
     pub frame: RgbdFrame,
-    pub optical: Pose3,
+    /// The optical frame in the robot's floor frame (x forward, y left, z up from the floor
+    /// under the base), as the robot's own kinematics give it: mount, joint and sway. `None`
+    /// for a camera an agent carries.
+    pub on_base: Option<Pose3>,
 }
 
-/// The true depth a camera would measure at the frame just taken (for scorers of 3D maps).
+/// The scorer's and recorder's view of the frame just taken: the depth a perfect camera would
+/// measure, the optical frame's true pose in the world, and the simulator's state at that
+/// instant. A stack module acts on it only where it says so (a pose source of
+/// `"ground_truth"`, an estimator started at the true pose).
 pub trait FrameTruth {
     fn true_depth(&mut self) -> Result<DepthImage>;
+    fn optical(&self) -> Pose3;
+    fn state(&self) -> &TrueState;
 }
 
 /// What a node leaves at the end.
@@ -162,8 +192,10 @@ pub struct Report {
     pub files: Vec<String>,
     /// Its estimated 2D map, drawn in the report.
     pub map: Option<OccupancyGrid>,
-    /// Trajectories it wrote (name, file), drawn in the report with their errors.
-    pub trajectories: Vec<(String, String)>,
+    /// Trajectories it estimated, drawn in the report with their errors.
+    pub trajectories: Vec<Trajectory>,
+    /// Pictures it wrote (file name, PNG bytes), embedded in the report.
+    pub pictures: Vec<(String, Vec<u8>)>,
     /// Its own measured costs beyond the wall time of its callbacks (`performance`).
     pub performance: serde_json::Map<String, Value>,
 }
@@ -302,7 +334,58 @@ pub fn build_with(
     for m in modules {
         nodes.extend(m.build(s, seed, out)?);
     }
+    // The oracle, only where a node drives or maps on the truth.
+    let topic = format!("pose/{}", bus::GROUND_TRUTH);
+    let consumers: Vec<String> = nodes
+        .iter()
+        .filter(|n| n.streams().consumes.contains(&topic))
+        .map(|n| n.name().to_string())
+        .collect();
+    if !consumers.is_empty() {
+        nodes.push(Box::new(oracle::OracleNode::new(consumers)));
+    }
     Ok(nodes)
+}
+
+/// A trajectory a node estimates, kept in memory as it is made: its scorer and the report
+/// read it there, and the run writes it as a TUM file only to hand it to the user.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Trajectory {
+    /// Its name in metrics and in the report (`localization`, `slam`).
+    pub name: String,
+    /// The file it was written to in the run's folder, once written.
+    pub file: Option<String>,
+    pub poses: Vec<tum::Stamped>,
+}
+
+impl Trajectory {
+    /// An empty trajectory named `name`.
+    pub fn new(name: &str) -> Trajectory {
+        Trajectory {
+            name: name.to_string(),
+            ..Trajectory::default()
+        }
+    }
+
+    /// Adds the planar pose `p` at `t` (on the floor, z = 0).
+    pub fn push(&mut self, t: Time, p: &Pose2) {
+        self.poses.push(tum::Stamped {
+            stamp: t,
+            pose: Pose3::from_pose2(p, 0.0),
+        });
+    }
+
+    /// Writes it as `file` in `dir`, under `header` (comment lines, each ending in a newline).
+    pub fn write(&mut self, dir: &Path, file: &str, header: &str) -> Result<()> {
+        use anyhow::Context;
+        let mut text = header.to_string();
+        for s in &self.poses {
+            tum::format_line(&mut text, s);
+        }
+        std::fs::write(dir.join(file), text).with_context(|| format!("writing {file}"))?;
+        self.file = Some(file.to_string());
+        Ok(())
+    }
 }
 
 /// Writes a pose as a TUM line.

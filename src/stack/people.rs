@@ -41,7 +41,7 @@
 //!
 //! Only scenarios with people (`[[person]]` or `[[flow]]`) run this node.
 
-use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
+use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, TrueState, Truth};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::detection::{Detection, DetectionFrame, by_range, score};
 use crate::ground_truth::mot::{Frame, clear_mot};
@@ -154,6 +154,7 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
             map_seen: None,
             frames: Vec::new(),
             scans: Vec::new(),
+            unscored: None,
             depth: match s.cameras.first() {
                 Some(cam) if depth_camera(&s.spec) => Some(DepthTracking {
                     camera: cam.name.clone(),
@@ -182,6 +183,7 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
         person_radius: s.movers.crowd.radius,
         period: 1.0 / s.spec.output.groundtruth_rate,
         collisions: 0,
+        final_collisions: 0,
         collisions_driving: 0,
         last_pose: None,
         min_clearance: f64::INFINITY,
@@ -207,6 +209,8 @@ struct Tracking {
     scans: Vec<ScanFrame>,
     /// People in depth images, feeding the same tracker.
     depth: Option<DepthTracking>,
+    /// The scan last tracked, until it is scored.
+    unscored: Option<UnscoredScan>,
 }
 
 /// The depth-image person detector on one camera, and its scored frames.
@@ -236,11 +240,12 @@ const BODY_TO: f64 = 2.3;
 
 impl DepthTracking {
     /// The true people `frame` sees, in the true base frame (see the module documentation).
-    fn visible(&self, frame: &CameraFrame, bus: &Bus) -> Vec<[f64; 2]> {
+    fn visible(&self, frame: &CameraFrame, view: &dyn FrameTruth) -> Vec<[f64; 2]> {
+        let (truth, optical) = (view.state(), view.optical());
         let (k, d) = (&frame.frame.depth_intrinsics, &frame.frame.depth);
         let voxel = self.config.voxel;
         let mut cells: Vec<std::collections::BTreeSet<[i64; 3]>> =
-            vec![Default::default(); bus.people.len()];
+            vec![Default::default(); truth.people.len()];
         let step = self.config.stride as usize;
         for v in (0..d.height).step_by(step) {
             for u in (0..d.width).step_by(step) {
@@ -248,21 +253,20 @@ impl DepthTracking {
                 if !(z.is_finite() && z > 0.0 && z <= self.config.max_depth) {
                     continue;
                 }
-                let w = frame
-                    .optical
-                    .transform_point(k.back_project(u as f64, v as f64, z));
+                let w = optical.transform_point(k.back_project(u as f64, v as f64, z));
                 if !(BODY_FROM..=BODY_TO).contains(&w[2]) {
                     continue;
                 }
-                for (p, set) in bus.people.iter().zip(cells.iter_mut()) {
+                for (p, set) in truth.people.iter().zip(cells.iter_mut()) {
                     if (w[0] - p.pose.x).hypot(w[1] - p.pose.y) <= BODY_REACH {
                         set.insert(w.map(|x| (x / voxel).floor() as i64));
                     }
                 }
             }
         }
-        let to_base = bus.truth.inverse();
-        bus.people
+        let to_base = truth.robot.inverse();
+        truth
+            .people
             .iter()
             .zip(&cells)
             .filter(|(_, set)| set.len() >= self.config.min_voxels)
@@ -272,6 +276,16 @@ impl DepthTracking {
 }
 
 /// One scan's detections and the people it sees, in the laser's frame.
+/// A scan tracked, until it is scored against the truth of its instant.
+struct UnscoredScan {
+    stamp: Time,
+    in_odometry: Pose2,
+    /// The beams' ends in the laser frame.
+    ends: Vec<[f64; 2]>,
+    found: Detections,
+    tracks: Vec<(u32, [f64; 2])>,
+}
+
 struct ScanFrame {
     stamp: Time,
     /// The laser's pose in the odometry frame, where the temporal difference works.
@@ -297,6 +311,8 @@ pub struct PeopleNode {
     /// The ground-truth period, s: each tick counts for this long.
     period: f64,
     collisions: u64,
+    /// The contacts counted at the scorer's last look (see `observe`).
+    final_collisions: u64,
     /// Contacts begun while the robot drove at the person.
     collisions_driving: u64,
     /// The robot's true pose at the last tick.
@@ -359,7 +375,7 @@ impl Node for PeopleNode {
         &mut self,
         camera: &str,
         frame: &CameraFrame,
-        _truth: &mut dyn FrameTruth,
+        truth: &mut dyn FrameTruth,
         bus: &mut Bus,
     ) -> Result<()> {
         let Some(t) = &mut self.tracking else {
@@ -376,7 +392,7 @@ impl Node for PeopleNode {
         while d.next <= bus.now {
             d.next = d.next + period;
         }
-        let truth = d.visible(frame, bus);
+        let truth = d.visible(frame, truth);
         let t0 = std::time::Instant::now();
         let found = match d.detector.detect(&frame.frame) {
             Some((found, _)) => found,
@@ -443,9 +459,7 @@ impl Node for PeopleNode {
                 })
                 .collect(),
         );
-        // The truth: people the scan sees, in the true laser frame.
-        let true_laser = bus.truth.compose(&t.mount);
-        let to_laser = true_laser.inverse();
+        // Scored when the scorer sees the truth of this instant.
         let ends: Vec<[f64; 2]> = (0..scan.ranges.len())
             .filter_map(|i| {
                 let r = scan.ranges[i] as f64;
@@ -455,44 +469,13 @@ impl Node for PeopleNode {
                 })
             })
             .collect();
-        let truth = bus
-            .people
-            .iter()
-            .filter(|p| {
-                let legs = p.legs_at(t.height).map(|l| to_laser.transform_point(l));
-                let on_legs = ends
-                    .iter()
-                    .filter(|e| {
-                        legs.iter()
-                            .any(|q| (e[0] - q[0]).hypot(e[1] - q[1]) < SEEN_WITHIN)
-                    })
-                    .count();
-                on_legs >= t.min_points
-            })
-            .map(|p| (p.id, to_laser.transform_point([p.pose.x, p.pose.y])))
-            .collect::<Vec<_>>();
-        t.scans.push(ScanFrame {
+        t.unscored = Some(UnscoredScan {
             stamp: scan.stamp,
             in_odometry,
-            truth: truth.iter().map(|p| p.1).collect(),
-            found: [
-                Some(as_points(&found.legs)),
-                found.map_difference.as_deref().map(as_points),
-                found.fused.as_deref().map(as_points),
-                None,
-            ],
+            ends,
+            found,
+            tracks,
         });
-        if let Some((when, c)) = &found.temporal
-            && let Ok(k) = t.scans.binary_search_by_key(when, |f| f.stamp)
-        {
-            let back = t.scans[k].in_odometry.inverse();
-            t.scans[k].found[3] = Some(
-                c.iter()
-                    .map(|q| (back.transform_point(q.position), q.confidence))
-                    .collect(),
-            );
-        }
-        t.frames.push(Frame { truth, tracks });
         Ok(())
     }
 
@@ -508,14 +491,14 @@ impl Node for PeopleNode {
         Ok(())
     }
 
-    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
+    fn on_truth(&mut self, truth: &TrueState, bus: &mut Bus) -> Result<()> {
         use std::fmt::Write as _;
-        let r = bus.truth;
-        if bus.person_collisions > self.collisions {
+        let r = truth.robot;
+        if truth.person_collisions > self.collisions {
             // Who began it: the robot's own speed towards the nearest person.
             let last = self.last_pose.unwrap_or(r);
             let v = [(r.x - last.x) / self.period, (r.y - last.y) / self.period];
-            let nearest = bus
+            let nearest = truth
                 .people
                 .iter()
                 .min_by(|a, b| a.pose.distance(&r).total_cmp(&b.pose.distance(&r)));
@@ -523,14 +506,14 @@ impl Node for PeopleNode {
                 let d = p.pose.distance(&r).max(1e-9);
                 let closing = (v[0] * (p.pose.x - r.x) + v[1] * (p.pose.y - r.y)) / d;
                 if closing > DRIVING_AT {
-                    self.collisions_driving += bus.person_collisions - self.collisions;
+                    self.collisions_driving += truth.person_collisions - self.collisions;
                 }
             }
         }
-        self.collisions = bus.person_collisions;
+        self.collisions = truth.person_collisions;
         self.last_pose = Some(r);
         let mut nearest = f64::INFINITY;
-        for p in &bus.people {
+        for p in &truth.people {
             self.seen.insert(p.id);
             let gap = p.pose.distance(&r) - self.robot_radius - self.person_radius;
             nearest = nearest.min(gap);
@@ -559,8 +542,18 @@ impl Node for PeopleNode {
         Ok(())
     }
 
-    fn finish(&mut self, bus: &mut Bus, _out: Option<&Path>) -> Result<Report> {
-        self.collisions = bus.person_collisions;
+    fn observe(&mut self, truth: &TrueState, _bus: &Bus) {
+        if let Some(t) = &mut self.tracking
+            && let Some(u) = t.unscored.take()
+        {
+            t.score_scan(u, truth);
+        }
+        // The last look, before `finish`, counts the contacts of the run's last steps.
+        self.final_collisions = truth.person_collisions;
+    }
+
+    fn finish(&mut self, _bus: &mut Bus, _out: Option<&Path>) -> Result<Report> {
+        self.collisions = self.final_collisions;
         let mut files = Vec::new();
         if let Some(f) = &mut self.file {
             f.flush()
@@ -672,6 +665,59 @@ fn insert_ap(m: &mut Metrics, name: &str, frames: &[DetectionFrame]) {
 }
 
 impl Tracking {
+    /// Scores the scan just tracked against the truth of its instant: the people it sees
+    /// (enough beams end on their legs), in the true laser frame, against each detector's
+    /// candidates and the tracks.
+    fn score_scan(&mut self, u: UnscoredScan, state: &TrueState) {
+        let UnscoredScan {
+            stamp,
+            in_odometry,
+            ends,
+            found,
+            tracks,
+        } = u;
+        let to_laser = state.robot.compose(&self.mount).inverse();
+        let t = self;
+        let truth = state
+            .people
+            .iter()
+            .filter(|p| {
+                let legs = p.legs_at(t.height).map(|l| to_laser.transform_point(l));
+                let on_legs = ends
+                    .iter()
+                    .filter(|e| {
+                        legs.iter()
+                            .any(|q| (e[0] - q[0]).hypot(e[1] - q[1]) < SEEN_WITHIN)
+                    })
+                    .count();
+                on_legs >= t.min_points
+            })
+            .map(|p| (p.id, to_laser.transform_point([p.pose.x, p.pose.y])))
+            .collect::<Vec<_>>();
+        t.scans.push(ScanFrame {
+            stamp,
+            in_odometry,
+            truth: truth.iter().map(|p| p.1).collect(),
+            found: [
+                Some(as_points(&found.legs)),
+                found.map_difference.as_deref().map(as_points),
+                found.fused.as_deref().map(as_points),
+                None,
+            ],
+        });
+        if let Some((when, c)) = &found.temporal
+            && let Ok(k) = t.scans.binary_search_by_key(when, |f| f.stamp)
+        {
+            let back = t.scans[k].in_odometry.inverse();
+            t.scans[k].found[3] = Some(
+                c.iter()
+                    .map(|q| (back.transform_point(q.position), q.confidence))
+                    .collect(),
+            );
+        }
+        t.frames.push(Frame { truth, tracks });
+    }
+
     /// The scans detector `k` of [`DETECTORS`] gave detections for, as detection frames;
     /// `None` when it gave none at all (it needs a map and there was none).
     fn detection_frames(&self, k: usize) -> Option<Vec<DetectionFrame>> {

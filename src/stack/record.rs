@@ -2,12 +2,13 @@
 //! (TUM trajectories, the CARMEN log, TUM RGB-D sequences). The odometry recorder's
 //! trajectory is scored like the stack's estimates.
 
-use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth, tum_line};
+use super::tum_line;
+use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Trajectory, TrueState, Truth};
 use crate::ground_truth::Metrics;
 use crate::rgbd::TumRgbdWriter;
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
-use futago_msgs::{LaserScan, Odometry, carmen};
+use futago_msgs::{LaserScan, Odometry, Pose2, carmen};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
@@ -28,21 +29,28 @@ fn create(dir: &Path, name: &str) -> Result<BufWriter<File>> {
     ))
 }
 
-/// The recorders a run writes with, in their order.
-pub fn recorders(s: &Scenario, dir: &Path) -> Result<Vec<Box<dyn Node>>> {
+/// The recorders a run writes with, in their order; without a folder, the odometry's alone,
+/// kept in memory for its scorer.
+pub fn recorders(s: &Scenario, dir: Option<&Path>) -> Result<Vec<Box<dyn Node>>> {
+    let odometry = TumRecorder {
+        source: Source::Odometry,
+        file: dir.map(|d| create(d, ODOMETRY_FILE)).transpose()?,
+        name: s.spec.name.clone(),
+        line: String::new(),
+        track: Trajectory::new("odometry"),
+    };
+    let Some(dir) = dir else {
+        return Ok(vec![Box::new(odometry)]);
+    };
     let mut out: Vec<Box<dyn Node>> = vec![
         Box::new(TumRecorder {
             source: Source::Truth,
-            file: create(dir, GROUNDTRUTH_FILE)?,
+            file: Some(create(dir, GROUNDTRUTH_FILE)?),
             name: s.spec.name.clone(),
             line: String::new(),
+            track: Trajectory::new("ground truth"),
         }),
-        Box::new(TumRecorder {
-            source: Source::Odometry,
-            file: create(dir, ODOMETRY_FILE)?,
-            name: s.spec.name.clone(),
-            line: String::new(),
-        }),
+        Box::new(odometry),
     ];
     if !s.movers.agents.is_empty() {
         std::fs::create_dir_all(dir.join(AGENTS_DIR))
@@ -122,9 +130,12 @@ enum Source {
 /// `groundtruth.txt` or `odometry.txt` (the latter scored as the `odometry` trajectory).
 struct TumRecorder {
     source: Source,
-    file: BufWriter<File>,
+    /// Its file, when the run writes files.
+    file: Option<BufWriter<File>>,
     name: String,
     line: String,
+    /// The odometry's trajectory in memory (the truth's is the run's).
+    track: Trajectory,
 }
 
 impl TumRecorder {
@@ -135,14 +146,16 @@ impl TumRecorder {
         }
     }
 
-    fn write(&mut self, bus: &Bus) -> Result<()> {
-        let pose = match self.source {
-            Source::Truth => bus.truth,
-            Source::Odometry => bus.odometry,
-        };
-        self.line.clear();
-        tum_line(&mut self.line, bus.now, &pose);
-        self.file.write_all(self.line.as_bytes())?;
+    /// Writes `pose` at the bus's time.
+    fn write(&mut self, bus: &Bus, pose: Pose2) -> Result<()> {
+        if self.source == Source::Odometry {
+            self.track.push(bus.now, &pose);
+        }
+        if let Some(f) = &mut self.file {
+            self.line.clear();
+            tum_line(&mut self.line, bus.now, &pose);
+            f.write_all(self.line.as_bytes())?;
+        }
         Ok(())
     }
 }
@@ -171,34 +184,36 @@ impl Node for TumRecorder {
             Source::Odometry => "wheel odometry of {}, integrated from the start pose",
         }
         .replace("{}", &self.name);
-        writeln!(
-            self.file,
-            "# futago {header}\n# timestamp tx ty tz qx qy qz qw"
-        )?;
+        if let Some(f) = &mut self.file {
+            writeln!(f, "# futago {header}\n# timestamp tx ty tz qx qy qz qw")?;
+        }
         // Odometry starts at the start pose; the truth's first line comes with its tick.
         if self.source == Source::Odometry {
-            self.write(bus)?;
+            self.write(bus, bus.odometry)?;
         }
         Ok(())
     }
 
-    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
-        self.write(bus)
+    fn on_truth(&mut self, truth: &TrueState, bus: &mut Bus) -> Result<()> {
+        self.write(bus, truth.robot)
     }
 
     fn on_odometry(&mut self, _o: &Odometry, bus: &mut Bus) -> Result<()> {
-        self.write(bus)
+        self.write(bus, bus.odometry)
     }
 
     fn finish(&mut self, _bus: &mut Bus, _out: Option<&Path>) -> Result<Report> {
         let file = self.file_name();
-        self.file
-            .flush()
-            .with_context(|| format!("writing {file}"))?;
+        let mut files = Vec::new();
+        if let Some(f) = &mut self.file {
+            f.flush().with_context(|| format!("writing {file}"))?;
+            files.push(file.to_string());
+            self.track.file = Some(file.to_string());
+        }
         Ok(Report {
-            files: vec![file.into()],
+            files,
             trajectories: (self.source == Source::Odometry)
-                .then(|| ("odometry".to_string(), file.to_string()))
+                .then(|| self.track.clone())
                 .into_iter()
                 .collect(),
             ..Report::default()
@@ -207,9 +222,11 @@ impl Node for TumRecorder {
 
     fn score(&self, truth: &Truth) -> Result<Metrics> {
         match self.source {
-            Source::Odometry => {
-                crate::ground_truth::score_trajectory(truth, "odometry", ODOMETRY_FILE)
-            }
+            Source::Odometry => Ok(crate::ground_truth::score_trajectory(
+                truth,
+                "odometry",
+                &self.track.poses,
+            )),
             Source::Truth => Ok(Metrics::default()),
         }
     }
@@ -248,8 +265,8 @@ impl Node for AgentRecorder {
         Ok(())
     }
 
-    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
-        for (f, (_, pose)) in self.files.iter_mut().zip(&bus.agents) {
+    fn on_truth(&mut self, truth: &TrueState, bus: &mut Bus) -> Result<()> {
+        for (f, (_, pose)) in self.files.iter_mut().zip(&truth.agents) {
             self.line.clear();
             tum_line(&mut self.line, bus.now, pose);
             f.write_all(self.line.as_bytes())?;
@@ -331,9 +348,9 @@ impl Node for CarmenRecorder {
         Ok(())
     }
 
-    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
+    fn on_truth(&mut self, truth: &TrueState, bus: &mut Bus) -> Result<()> {
         self.line.clear();
-        carmen::truepos(&mut self.line, bus.now.secs(), &bus.truth, &bus.odometry);
+        carmen::truepos(&mut self.line, bus.now.secs(), &truth.robot, &bus.odometry);
         self.file.write_all(self.line.as_bytes())?;
         Ok(())
     }
@@ -414,11 +431,11 @@ impl Node for RgbdDatasetRecorder {
         &mut self,
         camera: &str,
         frame: &CameraFrame,
-        _truth: &mut dyn FrameTruth,
+        truth: &mut dyn FrameTruth,
         _bus: &mut Bus,
     ) -> Result<()> {
         if let Some((_, Some(w))) = self.writers.iter_mut().find(|(n, _)| n == camera) {
-            w.write(&frame.frame, &frame.optical)?;
+            w.write(&frame.frame, &truth.optical())?;
         }
         Ok(())
     }
@@ -441,5 +458,5 @@ impl Node for RgbdDatasetRecorder {
 /// The recorders of a run's files (ground truth, odometry, the sensors' logs) and the odometry's scores.
 pub const MODULE: super::Plain = super::Plain {
     metric_names,
-    build: |s, _, out| out.map_or(Ok(Vec::new()), |dir| recorders(s, dir)),
+    build: |s, _, out| recorders(s, out),
 };

@@ -13,7 +13,7 @@
 
 use super::localization::LocalizationSpec;
 use super::slam::SlamSpec;
-use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
+use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, TrueState, Truth};
 use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::pollution::{FLOOR, HEAD_ROOM, PATH_RADIUS, PeoplePaths};
@@ -273,9 +273,9 @@ impl Node for RgbdMapNode {
         }
     }
 
-    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
+    fn on_truth(&mut self, truth: &TrueState, _bus: &mut Bus) -> Result<()> {
         if let Some(p) = &mut self.paths {
-            p.add(&bus.people);
+            p.add(&truth.people);
         }
         Ok(())
     }
@@ -309,14 +309,15 @@ impl Node for RgbdMapNode {
         self.offer_seconds += t0.elapsed().as_secs_f64();
         if taken {
             let depth = truth.true_depth()?;
-            let people: Vec<[f64; 2]> = bus.people.iter().map(|p| [p.pose.x, p.pose.y]).collect();
+            let state = truth.state();
+            let people: Vec<[f64; 2]> = state.people.iter().map(|p| [p.pose.x, p.pose.y]).collect();
             self.add_truth(
                 &depth,
                 &frame.frame.depth_intrinsics,
-                &frame.optical,
+                &truth.optical(),
                 &people,
             );
-            self.truth_poses.push(bus.truth);
+            self.truth_poses.push(state.robot);
         }
         Ok(())
     }
@@ -369,7 +370,7 @@ impl Node for RgbdMapNode {
         let truth = self.truth_points();
         counts["truth_points"] = json!(truth.len());
         counts["paused_frames"] = json!(self.paused_frames.get());
-        let mut files = Vec::new();
+        let (mut files, mut pictures) = (Vec::new(), Vec::new());
         if let (Some(dir), Some(first)) = (out, maps.first()) {
             let name = &self.scenario;
             let comment = format!(
@@ -402,11 +403,10 @@ impl Node for RgbdMapNode {
                 .filter(|p| (p.0[2] - self.slice_z).abs() <= SLICE_HALF_WIDTH)
                 .map(|p| [p.0[0], p.0[1]])
                 .collect();
-            std::fs::write(
-                dir.join(RGBD_SLICE_FILE),
-                crate::picture::points_over_map_png(&self.picture, &slice, 5),
-            )
-            .with_context(|| format!("writing {RGBD_SLICE_FILE}"))?;
+            let png = crate::picture::points_over_map_png(&self.picture, &slice, 5);
+            std::fs::write(dir.join(RGBD_SLICE_FILE), &png)
+                .with_context(|| format!("writing {RGBD_SLICE_FILE}"))?;
+            pictures.push((RGBD_SLICE_FILE.to_string(), png));
             files.extend(
                 [
                     RGBD_MAP_FILE,
@@ -425,6 +425,7 @@ impl Node for RgbdMapNode {
         Ok(Report {
             summary: vec![("rgbd_map".into(), counts)],
             files,
+            pictures,
             performance,
             ..Report::default()
         })

@@ -29,7 +29,7 @@
 //! ([`crate::ground_truth::completeness`]), and lengths measured in it against the same
 //! lengths cast in the world's colliders (`[[scan3d.length]]`, the seed's L1 and L2).
 
-use super::{Bus, Node, Report, Streams, Truth};
+use super::{Bus, Node, Report, Streams, TrueState, Truth};
 use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::completeness::{Completeness, length_along};
@@ -131,6 +131,8 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
         curve: Vec::new(),
         travel: 0.0,
         last_truth: None,
+        ticked: false,
+        view_pose: None,
         views_scored: 0,
         coverage_from: 0,
         band: m.planning.band,
@@ -229,6 +231,10 @@ pub struct Scan3dNode {
     /// Distance driven so far (m, true) and the last true pose.
     travel: f64,
     last_truth: Option<Pose2>,
+    /// A control tick happened, for the scorer to look at.
+    ticked: bool,
+    /// The pose a view that just began is placed by, until it is scored.
+    view_pose: Option<Pose2>,
     /// Views whose points the coverage has taken.
     views_scored: usize,
     /// Placed scans before this one the coverage has taken.
@@ -469,10 +475,7 @@ impl Node for Scan3dNode {
     }
 
     fn on_control(&mut self, bus: &mut Bus) -> Result<()> {
-        if let Some(p) = self.last_truth {
-            self.travel += (bus.truth.x - p.x).hypot(bus.truth.y - p.y);
-        }
-        self.last_truth = Some(bus.truth);
+        self.ticked = true;
         let pose = self.pose(bus);
         let table = self.table_now(bus);
         let was_sweeping = self.sweep_started.is_some();
@@ -494,10 +497,7 @@ impl Node for Scan3dNode {
         match (was_sweeping, sweeping) {
             (false, true) => {
                 self.sweep_started = Some(bus.now);
-                // The pose the view's scans are placed by, against the truth (scoring).
-                let e = pose.between(&bus.truth);
-                self.view_errors
-                    .push((e.x.hypot(e.y), e.theta.abs().to_degrees()));
+                self.view_pose = Some(pose);
             }
             (true, false) => {
                 if let Some(t) = self.sweep_started.take() {
@@ -506,8 +506,27 @@ impl Node for Scan3dNode {
             }
             _ => {}
         }
-        self.score_views();
         Ok(())
+    }
+
+    /// After a control tick: the distance truly driven, the error of a view's pose, and the
+    /// map's completeness when a view was added.
+    fn observe(&mut self, truth: &TrueState, _bus: &Bus) {
+        if !std::mem::take(&mut self.ticked) {
+            return;
+        }
+        let r = truth.robot;
+        if let Some(p) = self.last_truth {
+            self.travel += (r.x - p.x).hypot(r.y - p.y);
+        }
+        self.last_truth = Some(r);
+        // The pose the view's scans are placed by, against the truth.
+        if let Some(pose) = self.view_pose.take() {
+            let e = pose.between(&r);
+            self.view_errors
+                .push((e.x.hypot(e.y), e.theta.abs().to_degrees()));
+        }
+        self.score_views();
     }
 
     fn finished(&self) -> bool {

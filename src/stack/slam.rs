@@ -5,7 +5,7 @@
 //! the truth; in a world with people, also the share of the map that is people
 //! (`slam.map.people_pollution`, see `ground_truth::pollution`).
 
-use super::{Bus, Node, Report, Streams, Truth, tum_line};
+use super::{Bus, Node, Report, Streams, Trajectory, TrueState, Truth};
 use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::pollution::PeoplePaths;
@@ -36,6 +36,10 @@ pub struct SlamNode {
     at: Pose2,
     /// (position error m, heading error rad) at each scan.
     errors: Vec<(f64, f64)>,
+    /// The pose of the update just made, until the scorer measures it against the truth.
+    unscored: Option<Pose2>,
+    /// The optimised trajectory, at the end.
+    track: Trajectory,
     /// When a map was last published.
     last_map: Option<Time>,
     name: String,
@@ -60,6 +64,8 @@ pub fn node(s: &Scenario) -> Result<Option<SlamNode>> {
         mount: cfg.planar_mount(),
         at: s.start,
         errors: Vec::new(),
+        unscored: None,
+        track: Trajectory::default(),
         last_map: None,
         name: s.spec.name.clone(),
         map: None,
@@ -104,9 +110,9 @@ impl Node for SlamNode {
         }
     }
 
-    fn on_truth(&mut self, bus: &Bus) -> Result<()> {
+    fn on_truth(&mut self, truth: &TrueState, _bus: &mut Bus) -> Result<()> {
         if let Some(p) = &mut self.paths {
-            p.add(&bus.people);
+            p.add(&truth.people);
         }
         Ok(())
     }
@@ -114,6 +120,15 @@ impl Node for SlamNode {
     fn start(&mut self, bus: &mut Bus) -> Result<()> {
         bus.publish_pose("slam", self.slam.pose(), self.at);
         Ok(())
+    }
+
+    fn observe(&mut self, truth: &TrueState, _bus: &Bus) {
+        if let Some(pose) = self.unscored.take() {
+            self.errors.push((
+                pose.distance(&truth.robot),
+                wrap_angle(pose.theta - truth.robot.theta).abs(),
+            ));
+        }
     }
 
     fn on_scan(&mut self, laser: &str, scan: &LaserScan, bus: &mut Bus) -> Result<()> {
@@ -132,10 +147,7 @@ impl Node for SlamNode {
         let u = self.slam.update(scan, &at, &self.mount);
         self.at = at;
         bus.publish_pose("slam", self.slam.pose(), at);
-        self.errors.push((
-            u.pose.distance(&bus.truth),
-            wrap_angle(u.pose.theta - bus.truth.theta).abs(),
-        ));
+        self.unscored = Some(u.pose);
         // A planner that plans on the map gets a fresh copy at the period it asked for.
         if let Some(period) = bus.subscription("map/slam") {
             let due = match (self.last_map, period) {
@@ -169,16 +181,16 @@ impl Node for SlamNode {
             "beams_excluded": self.beams_excluded,
         });
         let mut files = Vec::new();
+        let mut track = Trajectory::new("slam");
+        for (t, p) in self.slam.trajectory() {
+            track.push(t, &p);
+        }
         if let Some(dir) = out {
-            let mut text = format!(
+            let header = format!(
                 "# futago SLAM of {} (laser `{}`), optimised at the end\n# timestamp tx ty tz qx qy qz qw\n",
                 self.name, self.laser
             );
-            for (t, p) in self.slam.trajectory() {
-                tum_line(&mut text, t, &p);
-            }
-            std::fs::write(dir.join(SLAM_TRAJECTORY_FILE), text)
-                .with_context(|| format!("writing {SLAM_TRAJECTORY_FILE}"))?;
+            track.write(dir, SLAM_TRAJECTORY_FILE, &header)?;
             grid.write_map_server(dir, SLAM_MAP_STEM)
                 .with_context(|| format!("writing {SLAM_MAP_STEM}.pgm and .yaml"))?;
             files.extend([
@@ -189,20 +201,18 @@ impl Node for SlamNode {
         }
         bus.publish_map("slam", grid.clone());
         self.map = Some(grid.clone());
+        self.track = track;
         Ok(Report {
             summary: vec![("slam".into(), summary)],
             files,
             map: Some(grid),
-            trajectories: out
-                .map(|_| ("slam".to_string(), SLAM_TRAJECTORY_FILE.to_string()))
-                .into_iter()
-                .collect(),
+            trajectories: vec![self.track.clone()],
             ..Report::default()
         })
     }
 
     fn score(&self, truth: &Truth) -> Result<Metrics> {
-        let mut m = crate::ground_truth::score_trajectory(truth, "slam", SLAM_TRAJECTORY_FILE)?;
+        let mut m = crate::ground_truth::score_trajectory(truth, "slam", &self.track.poses);
         if let Some(map) = &self.map {
             let world = truth.world_map(map.resolution, self.height)?;
             let s = truth.scenario.start;

@@ -20,7 +20,7 @@
 //! `performance`: speed is a benchmark's figure, not a score; the speed-up the seed reports is
 //! gated by the comparisons that matching makes, which are what its time is spent on.
 
-use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Truth};
+use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Trajectory, Truth};
 use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
 use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
@@ -152,7 +152,7 @@ pub struct VisualLocalizationNode {
     /// The robot base's true position at each frame.
     bases: Vec<[f64; 2]>,
     /// The driven estimate of the robot's pose, TUM lines.
-    lines: String,
+    track: Trajectory,
     /// Each frame's estimates, in [`LOCALISERS`] order.
     records: Vec<[Estimate; 4]>,
     sift_s: f64,
@@ -199,7 +199,7 @@ pub fn node(s: &Scenario) -> Result<Option<VisualLocalizationNode>> {
         poses: None,
         truths: Vec::new(),
         bases: Vec::new(),
-        lines: String::new(),
+        track: Trajectory::new("visual localisation"),
         records: Vec::new(),
         sift_s: 0.0,
         bumps: 0,
@@ -250,14 +250,14 @@ impl Node for VisualLocalizationNode {
         &mut self,
         _camera: &str,
         frame: &CameraFrame,
-        _truth: &mut dyn FrameTruth,
+        truth_view: &mut dyn FrameTruth,
         bus: &mut Bus,
     ) -> Result<()> {
         let Some(rgb) = &frame.frame.rgb else {
             return Ok(());
         };
         self.next = bus.now + self.period;
-        let truth = super::visual_map::planar_of_optical(&frame.optical);
+        let truth = super::visual_map::planar_of_optical(&truth_view.optical());
         let t0 = std::time::Instant::now();
         let keypoints = sift::detect(&grey(rgb.width, rgb.height, &rgb.data), &self.spec.sift);
         self.sift_s += t0.elapsed().as_secs_f64();
@@ -318,9 +318,10 @@ impl Node for VisualLocalizationNode {
         // The robot's pose under the camera.
         let robot = poses[drive].compose(&self.mount.inverse());
         bus.publish_pose_held("localization", robot);
-        super::tum_line(&mut self.lines, bus.now, &robot);
+        self.track.push(bus.now, &robot);
         self.truths.push((bus.now, truth));
-        self.bases.push([bus.truth.x, bus.truth.y]);
+        let robot = truth_view.state().robot;
+        self.bases.push([robot.x, robot.y]);
         self.records.push(estimates);
         Ok(())
     }
@@ -328,14 +329,10 @@ impl Node for VisualLocalizationNode {
     fn finish(&mut self, _bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
         let mut report = Report::default();
         if let Some(dir) = out {
-            let path = dir.join(TRAJECTORY_FILE);
-            std::fs::write(&path, &self.lines)
-                .with_context(|| format!("writing {}", path.display()))?;
+            self.track.write(dir, TRAJECTORY_FILE, "")?;
             report.files.push(TRAJECTORY_FILE.into());
-            report
-                .trajectories
-                .push(("visual localisation".into(), TRAJECTORY_FILE.into()));
         }
+        report.trajectories.push(self.track.clone());
         let n = self.records.len().max(1) as f64;
         let mut v = json!({
             "frames": self.records.len(),

@@ -354,7 +354,7 @@ impl Node for VisualMapNode {
         self.sift_s += t0.elapsed().as_secs_f64();
         if i == 0 {
             let depth = truth.true_depth()?;
-            self.true_depth = Some((bus.now, planar_of_optical(&frame.optical), depth));
+            self.true_depth = Some((bus.now, planar_of_optical(&truth.optical()), depth));
         }
         self.pending[i] = Some((bus.now, keypoints));
         if self
