@@ -456,10 +456,10 @@ fn publish_truth(
     (has_agents, has_people): (bool, bool),
 ) -> Result<()> {
     truth.robot = sim.robot_pose();
-    track.push(tum::Stamped {
+    track.push(tum::as_written(&tum::Stamped {
         stamp: bus.now,
         pose: futago_msgs::Pose3::from_pose2(&truth.robot, 0.0),
-    });
+    }));
     if has_agents {
         truth.agents = sim
             .agent_poses()

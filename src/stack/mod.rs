@@ -348,7 +348,9 @@ pub fn build_with(
 }
 
 /// A trajectory a node estimates, kept in memory as it is made: its scorer and the report
-/// read it there, and the run writes it as a TUM file only to hand it to the user.
+/// read it there, and the run writes it as a TUM file only to hand it to the user. Its poses
+/// are held as the file holds them, so that what futago scores is what a user's tools score
+/// on the file.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Trajectory {
     /// Its name in metrics and in the report (`localization`, `slam`).
@@ -367,12 +369,13 @@ impl Trajectory {
         }
     }
 
-    /// Adds the planar pose `p` at `t` (on the floor, z = 0).
+    /// Adds the planar pose `p` at `t` (on the floor, z = 0), as its TUM file holds it
+    /// ([`tum::as_written`]): a score from memory is the score of the file.
     pub fn push(&mut self, t: Time, p: &Pose2) {
-        self.poses.push(tum::Stamped {
+        self.poses.push(tum::as_written(&tum::Stamped {
             stamp: t,
             pose: Pose3::from_pose2(p, 0.0),
-        });
+        }));
     }
 
     /// Writes it as `file` in `dir`, under `header` (comment lines, each ending in a newline).

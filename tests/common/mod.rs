@@ -48,3 +48,34 @@ pub fn json_file(path: &Path) -> serde_json::Value {
 pub fn summary(dir: &Path) -> serde_json::Value {
     json_file(&dir.join("summary.json"))
 }
+
+/// Two 3 × 4 m rooms joined by a 0.9 m doorway; a wall across most of the east room hides its
+/// far side from the doorway, and a cabinet there makes the two rooms look different.
+pub const TWO_ROOMS: &str = r#"
+name = "two-rooms"
+[materials.plaster]
+color = [0.8, 0.8, 0.8]
+[floor]
+material = "plaster"
+[[walls]]
+material = "plaster"
+points = [[0, 0], [6, 0], [6, 4], [0, 4]]
+closed = true
+height = 1.0
+thickness = 0.1
+[[walls]]
+material = "plaster"
+points = [[3, 0], [3, 4]]
+height = 1.0
+thickness = 0.1
+openings = [{ at = [3, 2.8], width = 0.9, top = 0.9 }]
+[[walls]]
+material = "plaster"
+points = [[4.5, 0], [4.5, 3.0]]
+height = 1.0
+thickness = 0.1
+[[boxes]]
+material = "plaster"
+center = [5.2, 0.8]
+size = [0.8, 0.5, 0.6]
+"#;
