@@ -18,8 +18,7 @@ use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{Duration, Pose2, Time, tum};
 use futago_robot::localization::odometry::OdometryIntegrator;
 use futago_sim::Simulation;
-use futago_sim::kinect::Kinect;
-use futago_sim::noise::stream;
+use futago_sim::rig::Cameras;
 use futago_sim::render::Renderer;
 use futago_sim::sim::scene;
 use serde_json::{Value, json};
@@ -86,18 +85,14 @@ pub struct Outcome {
 struct TrueDepth<'a> {
     state: &'a TrueState,
     optical: futago_msgs::Pose3,
-    renderer: &'a mut Renderer,
-    camera: &'a Kinect,
-    base: rapier3d::math::Pose,
-    seconds: &'a mut f64,
+    cameras: &'a mut Cameras,
+    camera: usize,
+    carrier: rapier3d::math::Pose,
 }
 
 impl FrameTruth for TrueDepth<'_> {
     fn true_depth(&mut self) -> Result<DepthImage> {
-        let t0 = Instant::now();
-        let d = self.camera.true_depth(self.renderer, &self.base)?;
-        *self.seconds += t0.elapsed().as_secs_f64();
-        Ok(d)
+        Ok(self.cameras.true_depth(self.camera, &self.carrier)?)
     }
 
     fn optical(&self) -> futago_msgs::Pose3 {
@@ -204,20 +199,11 @@ fn map_subscriptions(streams: &[stack::Streams]) -> Vec<(String, Option<Duration
         .collect()
 }
 
-/// The run's cameras: each Kinect with the nodes that consume its frames, the joint or agent
-/// that carries it and its frame count, and the renderer they share, started only when some
-/// node consumes frames (cameras render on demand).
+/// The run's cameras on the simulator's rig, with the nodes that consume each one's frames;
+/// the renderer starts only when some node consumes frames (cameras render on demand).
 struct CameraRig {
-    kinects: Vec<Kinect>,
+    cameras: Cameras,
     consumers: Vec<Vec<usize>>,
-    /// The joint each camera rides on (index into the movers' joints).
-    joints: Vec<Option<usize>>,
-    /// The agent carrying each camera, if not the robot (index into the agents).
-    carriers: Vec<Option<usize>>,
-    frames: Vec<u64>,
-    renderer: Option<Renderer>,
-    /// Wall time spent rendering, s.
-    seconds: f64,
 }
 
 impl CameraRig {
@@ -248,29 +234,6 @@ impl CameraRig {
                 }
             }
         }
-        let carriers = s
-            .cameras
-            .iter()
-            .map(|c| {
-                c.carrier
-                    .as_ref()
-                    .and_then(|a| s.movers.agents.iter().position(|k| &k.name == a))
-            })
-            .collect();
-        let joints = s
-            .cameras
-            .iter()
-            .map(|c| {
-                c.joint
-                    .as_ref()
-                    .and_then(|j| s.movers.joints.iter().position(|k| &k.name == j))
-            })
-            .collect();
-        let kinects: Vec<Kinect> = s
-            .cameras
-            .iter()
-            .map(|c| Kinect::new(c.clone(), stream(seed, &format!("camera.{}", c.name))))
-            .collect();
         let renderer = if consumers.iter().any(|c| !c.is_empty()) {
             Some(
                 Renderer::new(&scene(&s.world, &s.spec.robot, &s.movers, s.start))
@@ -280,106 +243,47 @@ impl CameraRig {
             None
         };
         Ok(CameraRig {
-            frames: vec![0; kinects.len()],
-            kinects,
+            cameras: Cameras::new(&s.cameras, &s.movers, seed, renderer),
             consumers,
-            joints,
-            carriers,
-            renderer,
-            seconds: 0.0,
         })
     }
 
     /// Renders each camera that is due and wanted now, in the scenario's order, and hands the
-    /// frame to the nodes that want it.
+    /// frame to the nodes that want it, each observing the truth after it.
     fn capture(
         &mut self,
-        now: Time,
         sim: &Simulation,
         nodes: &mut [Scheduled],
         (state, bus): (&TrueState, &mut Bus),
     ) -> Result<()> {
-        let CameraRig {
-            kinects,
-            consumers,
-            joints,
-            carriers,
-            frames,
-            renderer,
-            seconds,
-        } = self;
-        let Some(r) = renderer.as_mut() else {
-            return Ok(());
-        };
-        let mut posed = None;
-        for (c, cam) in kinects.iter_mut().enumerate() {
-            if !cam.due(now.nanos()) {
+        let CameraRig { cameras, consumers } = self;
+        for (c, takers) in consumers.iter().enumerate() {
+            if !cameras.due(c, sim.time()) {
                 continue;
             }
-            let wanting: Vec<usize> = consumers[c]
+            let name = cameras.name(c).to_string();
+            let wanting: Vec<usize> = takers
                 .iter()
                 .copied()
-                .filter(|&i| nodes[i].node.wants_frame(&cam.spec.name, bus))
+                .filter(|&i| nodes[i].node.wants_frame(&name, bus))
                 .collect();
             if wanting.is_empty() {
                 continue;
             }
-            let t0 = Instant::now();
-            // Pose the scene once for every camera rendered at this step.
-            let base = match posed {
-                Some(b) => b,
-                None => {
-                    let poses = sim.scene_poses();
-                    r.set_poses(&poses)?;
-                    *posed.insert(poses[poses.len() - 1])
-                }
-            };
-            // A camera on a joint: its mount is on the joint's frame; on an agent: on the
-            // agent's frame on the floor; then its carrier's sway.
-            let base = match (joints[c], carriers[c]) {
-                (Some(j), _) => base * sim.joints()[j].transform(),
-                (None, Some(a)) => {
-                    let p = sim.agent_poses()[a].1;
-                    futago_sim::render::Pose::from_parts(
-                        glam::Vec3::new(p.x as f32, p.y as f32, 0.0),
-                        glam::Quat::from_rotation_z(p.theta as f32),
-                    )
-                }
-                (None, None) => base,
-            };
-            let base = match &cam.spec.sway {
-                Some(sway) => base * sway.pose(now),
-                None => base,
-            };
-            cam.take();
-            // The camera on the robot's floor frame, as the robot's own kinematics place it
-            // (mount, joint, sway): the base's planar pose taken back out.
-            let on_base = carriers[c].is_none().then(|| {
-                let b = state.robot;
-                let planar = futago_sim::render::Pose::from_parts(
-                    glam::Vec3::new(b.x as f32, b.y as f32, 0.0),
-                    glam::Quat::from_rotation_z(b.theta as f32),
-                );
-                cam.optical_pose(&(planar.inverse() * base))
-            });
+            let shot = cameras.capture(c, sim)?;
             let frame = CameraFrame {
-                frame: cam.capture(r, &base, now, true)?,
-                on_base,
+                frame: shot.frame,
+                on_base: shot.on_base,
             };
-            let optical = cam.optical_pose(&base);
-            *seconds += t0.elapsed().as_secs_f64();
-            frames[c] += 1;
             for i in wanting {
                 let mut truth = TrueDepth {
                     state,
-                    optical,
-                    renderer: r,
-                    camera: cam,
-                    base,
-                    seconds,
+                    optical: shot.optical,
+                    cameras,
+                    camera: c,
+                    carrier: shot.carrier,
                 };
-                let name = &cam.spec.name;
-                nodes[i].call(|node| node.on_frame(name, &frame, &mut truth, bus))?;
+                nodes[i].call(|node| node.on_frame(&name, &frame, &mut truth, bus))?;
                 nodes[i].node.observe(state, bus);
             }
         }
@@ -676,7 +580,7 @@ pub fn simulate_with(
                 |node, bus| node.on_odometry(&o, bus),
             )?;
         }
-        cameras.capture(now, &sim, &mut nodes, (&truth, &mut bus))?;
+        cameras.capture(&sim, &mut nodes, (&truth, &mut bus))?;
         for ((l, scan), hits) in out.scans.into_iter().zip(&out.hits) {
             scans[l] += 1;
             deliver_scan(
@@ -714,8 +618,8 @@ pub fn simulate_with(
         wall_time,
         steps: c.steps,
         scans,
-        camera_frames: cameras.frames,
-        renderer: cameras.renderer.map(|r| r.adapter()),
+        camera_frames: cameras.cameras.frames.clone(),
+        renderer: cameras.cameras.adapter(),
         laser_rays: c.laser_rays,
         bump_events: c.bump_events,
         wheel_drop_steps: c.wheel_drop_steps,
@@ -732,7 +636,7 @@ pub fn simulate_with(
         truth: truth_track,
         performance: json!({
             "simulation_s": sim_seconds,
-            "rendering_s": cameras.seconds,
+            "rendering_s": cameras.cameras.seconds,
             "nodes": finished.per_node,
         }),
     };

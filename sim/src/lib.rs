@@ -25,6 +25,7 @@ pub mod kinect;
 pub mod lidar;
 pub mod noise;
 pub mod people;
+pub mod rig;
 pub mod sim;
 pub mod sway;
 pub mod world;

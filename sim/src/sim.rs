@@ -104,8 +104,8 @@ pub struct Simulation {
     drive: CreateDrive,
     yaw_inertia: f64,
     lidars: Vec<Lidar>,
-    /// The joint each laser rides on, if any (index into `joints`).
-    lidar_joints: Vec<Option<usize>>,
+    /// The frame each laser is fixed to: the base or a joint on it.
+    lidar_frames: Vec<crate::rig::Parent>,
     joints: Vec<Joint>,
     /// Each agent and its kinematic body.
     agents: Vec<(AgentConfig, RigidBodyHandle)>,
@@ -305,13 +305,9 @@ impl Simulation {
             ],
         );
         let joints: Vec<Joint> = movers.joints.iter().map(Joint::new).collect();
-        let lidar_joints = lidars
+        let lidar_frames = lidars
             .iter()
-            .map(|(c, _)| {
-                c.joint
-                    .as_ref()
-                    .and_then(|j| joints.iter().position(|k| &k.config.name == j))
-            })
+            .map(|(c, _)| crate::rig::Parent::of(c.joint.as_deref(), None, movers))
             .collect();
         let lidars = lidars
             .iter()
@@ -340,7 +336,7 @@ impl Simulation {
             drive,
             yaw_inertia,
             lidars,
-            lidar_joints,
+            lidar_frames,
             joints,
             agents,
             crowd,
@@ -372,6 +368,11 @@ impl Simulation {
     /// The lasers, in configuration order.
     pub fn lidars(&self) -> &[Lidar] {
         &self.lidars
+    }
+
+    /// The robot base's pose as physics has it (the frame the rig's sensors hang from).
+    pub fn base_pose(&self) -> Pose {
+        *self.physics.bodies[self.robot].position()
     }
 
     /// Ground-truth pose of the robot's base frame (on the floor, between the drive wheels).
@@ -712,17 +713,18 @@ impl Simulation {
             ..drops
         };
 
-        // Lasers.
-        let base = *self.physics.bodies[self.robot].position();
+        // Lasers, from their frames on the rig.
+        let frames: Vec<Pose> = self
+            .lidar_frames
+            .iter()
+            .map(|&f| self.frame_pose(f))
+            .collect();
         let qp = self
             .physics
             .query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
         let mut rays = 0u64;
         for (i, l) in self.lidars.iter_mut().enumerate() {
-            let laser_pose = match self.lidar_joints[i] {
-                Some(j) => base * self.joints[j].transform() * l.mount,
-                None => base * l.mount,
-            };
+            let laser_pose = frames[i] * l.mount;
             let movers = &self.movers;
             let colliders = &self.physics.colliders;
             if let Some((scan, hits)) = l.update(self.time, &laser_pose, |o, d, max| {
