@@ -317,9 +317,16 @@ struct Finished {
     per_node: serde_json::Map<String, Value>,
 }
 
-/// Finishes every node in order (each writing into `out` when the run writes files) and
-/// gathers their reports, with each node's wall time.
-fn finish_nodes(nodes: &mut [Scheduled], bus: &mut Bus, out: Option<&Path>) -> Result<Finished> {
+/// Shows every node the truth at the end, then finishes them in order (each writing into
+/// `out` when the run writes files) and gathers their reports, with each node's wall time.
+fn finish_nodes(
+    nodes: &mut [Scheduled],
+    (truth, bus): (&TrueState, &mut Bus),
+    out: Option<&Path>,
+) -> Result<Finished> {
+    for n in nodes.iter_mut() {
+        n.node.observe(truth, bus);
+    }
     let mut f = Finished {
         entries: Vec::new(),
         files: Vec::new(),
@@ -606,10 +613,7 @@ pub fn simulate_with(
     bus.now = sim.time();
     truth.robot = sim.robot_pose();
     truth.person_collisions = sim.counters().person_contact_events;
-    for n in &mut nodes {
-        n.node.observe(&truth, &bus);
-    }
-    let finished = finish_nodes(&mut nodes, &mut bus, out)?;
+    let finished = finish_nodes(&mut nodes, (&truth, &mut bus), out)?;
     let wall_time = started.elapsed().as_secs_f64();
     let c = sim.counters();
     let outcome = Outcome {
