@@ -18,8 +18,8 @@ use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{Duration, Pose2, Time, tum};
 use futago_robot::localization::odometry::OdometryIntegrator;
 use futago_sim::Simulation;
-use futago_sim::rig::Cameras;
 use futago_sim::render::Renderer;
+use futago_sim::rig::Cameras;
 use futago_sim::sim::scene;
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
@@ -76,6 +76,9 @@ pub struct Outcome {
     pub truth: Vec<tum::Stamped>,
     /// The pictures the nodes drew (file, PNG bytes), for the report.
     pub pictures: Vec<(String, Vec<u8>)>,
+    /// The consumers that see a topic one callback late (a cycle of topics, see
+    /// [`stack::schedule`]).
+    pub lags: Vec<stack::schedule::Lag>,
     /// Where the wall time went: `simulation_s`, `rendering_s`, and per node (see
     /// [`performance`](Outcome::performance)).
     pub performance: Value,
@@ -464,9 +467,23 @@ fn deliver_scan(
     Ok(())
 }
 
-/// The nodes in their order, each with its wall time.
-fn schedule(nodes: impl Iterator<Item = Box<dyn Node>>) -> Vec<Scheduled> {
-    nodes.map(|node| Scheduled { node, seconds: 0.0 }).collect()
+/// The nodes in the order of what they consume and publish ([`stack::schedule`]), each with
+/// its wall time, and the lags that order leaves.
+fn schedule(
+    nodes: impl Iterator<Item = Box<dyn Node>>,
+) -> (Vec<Scheduled>, Vec<stack::schedule::Lag>) {
+    let nodes: Vec<Box<dyn Node>> = nodes.collect();
+    let names: Vec<&str> = nodes.iter().map(|n| n.name()).collect();
+    let streams: Vec<stack::Streams> = nodes.iter().map(|n| n.streams()).collect();
+    let sch = stack::schedule::schedule(&names, &streams);
+    let mut slots: Vec<Option<Box<dyn Node>>> = nodes.into_iter().map(Some).collect();
+    let ordered = sch
+        .order
+        .iter()
+        .filter_map(|&i| slots[i].take())
+        .map(|node| Scheduled { node, seconds: 0.0 })
+        .collect();
+    (ordered, sch.lags)
 }
 
 /// The run's bus at time zero: the robot at its start, the estimates and maps the nodes
@@ -496,7 +513,7 @@ pub fn simulate_with(
     let seed = opts.seed.unwrap_or(s.spec.seed);
     let duration = opts.duration.unwrap_or(s.spec.duration);
     let spec = &s.spec;
-    let mut nodes = schedule(stack::build(s, seed, out)?.into_iter().chain(extra));
+    let (mut nodes, lags) = schedule(stack::build(s, seed, out)?.into_iter().chain(extra));
     let streams: Vec<stack::Streams> = nodes.iter().map(|n| n.node.streams()).collect();
     check_publishers(&nodes, &streams)?;
     let mut bus = new_bus(s, &streams);
@@ -638,6 +655,7 @@ pub fn simulate_with(
         trajectories: finished.trajectories,
         pictures: finished.pictures,
         truth: truth_track,
+        lags,
         performance: json!({
             "simulation_s": sim_seconds,
             "rendering_s": cameras.cameras.seconds,

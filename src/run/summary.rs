@@ -40,6 +40,9 @@ pub struct Summary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub suite_gates: Option<Vec<Gate>>,
     pub metrics: Metrics,
+    /// The order's lags, where topics form a cycle (see `stack::schedule`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub schedule: Option<Schedule>,
     /// Wall times and the renderer: the one part that is not the same for every run of a
     /// scenario and seed.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -102,6 +105,12 @@ pub struct JointEnd {
 pub struct AgentEnd {
     pub name: String,
     pub final_pose: [f64; 3],
+}
+
+/// What the order of the nodes leaves: consumers that see a topic one callback late.
+#[derive(Debug, Clone, Serialize)]
+pub struct Schedule {
+    pub lags: Vec<crate::stack::schedule::Lag>,
 }
 
 /// A file's digest.
@@ -199,6 +208,9 @@ impl Summary {
             gates: scored.gates(s),
             suite_gates: (!versus.is_empty()).then_some(versus),
             metrics: scored.metrics.clone(),
+            schedule: (!o.lags.is_empty()).then(|| Schedule {
+                lags: o.lags.clone(),
+            }),
             performance: None,
             nodes: o.entries.iter().cloned().collect(),
         }

@@ -196,6 +196,9 @@ impl Bus {
     }
 }
 
+/// `navigation/route_done`: when the driver last finished a route ([`Bus::route_done`]).
+pub const ROUTE_DONE: &str = "navigation/route_done";
+
 /// The oracle's pose topic, `pose/ground_truth`: the robot's true pose, published only in
 /// scenarios where a module asks for it.
 pub const GROUND_TRUTH: &str = "ground_truth";

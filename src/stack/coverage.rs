@@ -14,6 +14,7 @@
 //! orange, walls and furniture the camera saw blue and those it did not red; the planned
 //! route dark blue, the second route magenta, the driven path black).
 
+use super::bus::ROUTE_DONE;
 use super::driver::{ControllerConfig, controller, controller_type};
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, TrueState, Truth};
 use crate::ground_truth::Metrics;
@@ -488,8 +489,13 @@ impl Node for CoverageNode {
     }
 
     fn streams(&self) -> Streams {
-        let mut consumes = vec!["truth".to_string()];
+        let mut consumes = vec!["truth".to_string(), ROUTE_DONE.to_string()];
         consumes.extend(self.camera.iter().map(|c| format!("camera/{}", c.name)));
+        consumes.extend(
+            self.second
+                .as_ref()
+                .and_then(|s| super::bus::pose_topic(s.pose_source)),
+        );
         Streams {
             consumes,
             publishes: vec!["path/coverage".into()],

@@ -186,9 +186,13 @@ impl Node for DriverNode {
                 );
             }
         }
+        let mut publishes = vec!["cmd_vel".to_string()];
+        if self.route.is_some() {
+            publishes.push(super::bus::ROUTE_DONE.into());
+        }
         Streams {
             consumes,
-            publishes: vec!["cmd_vel".into()],
+            publishes,
             periods,
         }
     }

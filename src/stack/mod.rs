@@ -20,9 +20,10 @@
 //! 7. **control**: at the rate of the Create's reports ([`Node::on_control`]); the driver
 //!    publishes the next drive command on the [`Bus`].
 //!
-//! Within a phase, nodes run in the order of [`build`]. What a node publishes in a phase is
-//! seen by the nodes after it in the same phase, and by those before it only at their next
-//! callback: a lag of one callback, which the order of [`MODULES`] decides.
+//! Within a phase, nodes run in the order of what they consume and publish ([`schedule`]): a
+//! node after the publishers of its inputs. Where topics form a cycle, the first node of it in
+//! [`MODULES`] order goes first and sees the others' outputs one callback late; the run's
+//! summary states each such lag (`schedule.lags`).
 //!
 //! The bus carries what the robot senses and what nodes publish, never the simulator's truth.
 //! Recorders and scorers see the truth through their own view ([`TrueState`]): at the
@@ -46,6 +47,7 @@ pub mod people;
 pub mod record;
 pub mod rgbd_map;
 pub mod scan3d;
+pub mod schedule;
 pub mod slam;
 pub mod visual_localization;
 pub mod visual_map;

@@ -419,6 +419,7 @@ impl Node for Scan3dNode {
             "odometry".to_string(),
             format!("scan/{}", self.vertical),
             format!("scan/{}", self.horizontal),
+            super::bus::ROUTE_DONE.to_string(),
         ];
         consumes.extend(self.source.node().and_then(super::bus::pose_topic));
         Streams {
