@@ -142,6 +142,32 @@ fn consumers(streams: &[stack::Streams], topic: &str) -> Vec<usize> {
         .collect()
 }
 
+/// Which nodes each stream of the loop goes to, in node order.
+struct Routes {
+    /// `truth`, at the ground-truth rate.
+    truth: Vec<usize>,
+    /// `truth/step`, after every step.
+    step_truth: Vec<usize>,
+    odometry: Vec<usize>,
+    /// `scan/NAME`, per laser in the scenario's order.
+    lasers: Vec<Vec<usize>>,
+}
+
+impl Routes {
+    fn new(s: &Scenario, streams: &[stack::Streams]) -> Routes {
+        Routes {
+            truth: consumers(streams, "truth"),
+            step_truth: consumers(streams, "truth/step"),
+            odometry: consumers(streams, "odometry"),
+            lasers: s
+                .lidars
+                .iter()
+                .map(|(c, _)| consumers(streams, &format!("scan/{}", c.name)))
+                .collect(),
+        }
+    }
+}
+
 /// Runs the scenario's closed loop; with `out`, the recorders write into it. Returns the
 /// outcome and the finished nodes (for their scorers).
 fn simulate(
@@ -520,25 +546,10 @@ pub fn simulate_with(
     let (has_agents, has_joints) = (!s.movers.agents.is_empty(), !s.movers.joints.is_empty());
     let has_people = !s.movers.people.is_empty() || !s.movers.flows.is_empty();
     let movers = (has_agents, has_people);
-    let truth_nodes = consumers(&streams, "truth");
-    let step_truth_nodes = consumers(&streams, "truth/step");
-    let odometry_nodes = consumers(&streams, "odometry");
-    let laser_nodes: Vec<Vec<usize>> = s
-        .lidars
-        .iter()
-        .map(|(c, _)| consumers(&streams, &format!("scan/{}", c.name)))
-        .collect();
+    let to = Routes::new(s, &streams);
     let mut cameras = CameraRig::new(s, seed, &streams, &nodes)?;
 
-    let mut sim = Simulation::new(
-        &s.world,
-        &spec.physics,
-        &spec.robot,
-        &s.lidars,
-        &s.movers,
-        s.start,
-        seed,
-    );
+    let mut sim = s.simulation(seed);
     let mut odo = OdometryIntegrator::new(s.start);
     let gt_period = Duration::from_secs(1.0 / spec.output.groundtruth_rate);
     let end = Time::from_secs(duration);
@@ -558,7 +569,7 @@ pub fn simulate_with(
         ..TrueState::default()
     };
     let mut truth_track = Vec::new();
-    deliver_truth(&mut nodes, &step_truth_nodes, &truth, &mut bus)?;
+    deliver_truth(&mut nodes, &to.step_truth, &truth, &mut bus)?;
     let mut cmd = begin(&mut nodes, &truth, &mut bus)?;
     loop {
         let now = sim.time();
@@ -566,7 +577,7 @@ pub fn simulate_with(
         if now.nanos() >= next_gt * gt_period.0 {
             next_gt += 1;
             let view = (&mut truth, &mut truth_track, &mut bus);
-            publish_truth(&sim, view, &mut nodes, &truth_nodes, movers)?;
+            publish_truth(&sim, view, &mut nodes, &to.truth, movers)?;
         }
         let done = nodes.iter().all(|n| n.node.finished());
         if now >= end || (done && sim.wheel_speeds() == (0.0, 0.0) && cmd.is_none()) {
@@ -585,7 +596,7 @@ pub fn simulate_with(
         distance += truth.robot.distance(&prev_truth);
         prev_truth = truth.robot;
         bus.now = now;
-        deliver_truth(&mut nodes, &step_truth_nodes, &truth, &mut bus)?;
+        deliver_truth(&mut nodes, &to.step_truth, &truth, &mut bus)?;
         bus.wheel_speeds = sim.wheel_speeds();
         bus.bumps = out.bumps.unwrap_or_default();
         if let Some(o) = out.odometry {
@@ -598,7 +609,7 @@ pub fn simulate_with(
             bus.push_odometry(now, odo.pose);
             deliver(
                 &mut nodes,
-                &odometry_nodes,
+                &to.odometry,
                 &truth,
                 &mut bus,
                 |node, bus| node.on_odometry(&o, bus),
@@ -609,7 +620,7 @@ pub fn simulate_with(
             scans[l] += 1;
             deliver_scan(
                 &mut nodes,
-                &laser_nodes[l],
+                &to.lasers[l],
                 (&s.lidars[l].0.name, &scan, hits),
                 &truth,
                 &mut bus,

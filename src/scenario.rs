@@ -503,6 +503,20 @@ pub fn resolve_laser(
 pub const MAX_LIDARS: usize = 2;
 
 impl Scenario {
+    /// The scenario's world, robot, lasers and movers in a simulation seeded with `seed`, the
+    /// robot at its start.
+    pub fn simulation(&self, seed: u64) -> futago_sim::Simulation {
+        futago_sim::Simulation::new(
+            &self.world,
+            &self.spec.physics,
+            &self.spec.robot,
+            &self.lidars,
+            &self.movers,
+            self.start,
+            seed,
+        )
+    }
+
     /// The scenario as it runs, with every key of every module, defaults included: what
     /// `futago config` prints, and the list of every parameter a `--set` can reach.
     pub fn effective_config(&self) -> toml::Table {

@@ -703,15 +703,7 @@ pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
         let mut config = m.config.clone();
         config.stops = vec![[s.start.x, s.start.y]];
         node.mapper = StopAndScan::new(config.clone(), node_mount(s, m)?);
-        let mut sim = futago_sim::Simulation::new(
-            &s.world,
-            &s.spec.physics,
-            &s.spec.robot,
-            &s.lidars,
-            &s.movers,
-            s.start,
-            seed,
-        );
+        let mut sim = s.simulation(seed);
         let t = Time::from_secs;
         let pose = s.start;
         // Asked for the route, driven it (standing there), settled: the sweep begins.
