@@ -607,13 +607,9 @@ pub fn simulate_with(
             }
             odo.integrate(&o);
             bus.push_odometry(now, odo.pose);
-            deliver(
-                &mut nodes,
-                &to.odometry,
-                &truth,
-                &mut bus,
-                |node, bus| node.on_odometry(&o, bus),
-            )?;
+            deliver(&mut nodes, &to.odometry, &truth, &mut bus, |node, bus| {
+                node.on_odometry(&o, bus)
+            })?;
         }
         cameras.capture(&sim, &mut nodes, (&truth, &mut bus))?;
         for ((l, scan), hits) in out.scans.into_iter().zip(&out.hits) {
