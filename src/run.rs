@@ -396,10 +396,10 @@ fn publish_truth(
     (has_agents, has_people): (bool, bool),
 ) -> Result<()> {
     truth.robot = sim.robot_pose();
-    track.push(tum::as_written(&tum::Stamped {
+    track.push(tum::Stamped {
         stamp: bus.now,
         pose: futago_msgs::Pose3::from_pose2(&truth.robot, 0.0),
-    }));
+    });
     if has_agents {
         truth.agents = sim
             .agent_poses()
@@ -720,10 +720,12 @@ impl Scored {
 /// there (nothing is read back).
 fn simulate_scored(s: &Scenario, opts: &RunOptions, out: Option<&Path>) -> Result<Scored> {
     let (outcome, nodes) = simulate(s, opts, out)?;
-    let relations = crate::ground_truth::sample_relations(&outcome.truth);
+    // The truth as groundtruth.txt holds it, as every trajectory is scored.
+    let poses: Vec<tum::Stamped> = outcome.truth.iter().map(tum::as_written).collect();
+    let relations = crate::ground_truth::sample_relations(&poses);
     let truth = stack::Truth {
         scenario: s,
-        poses: &outcome.truth,
+        poses: &poses,
         relations: &relations,
     };
     let mut metrics = crate::ground_truth::Metrics::default();

@@ -97,9 +97,15 @@ pub fn sample_relations(truth: &[futago_msgs::tum::Stamped]) -> Vec<crate::relat
 /// ground truth, as `NAME.ate.*_m` (no alignment: the map frame is the world frame in
 /// simulation), `NAME.ate.p95_m`, `NAME.rpe_1m.trans.*_m` / `NAME.rpe_1m.rot.*_deg`, and the
 /// relations metric as `NAME.relations.*` (see [`RELATION_KEYS`]). An empty trajectory scores
-/// nothing.
+/// nothing. Each pose is taken as its TUM file holds it ([`futago_msgs::tum::as_written`]),
+/// so the figures are those of the files under any tool that reads them (evo): the text's
+/// rounding decides, for one, which true pose an estimate stamped halfway between two pairs
+/// with.
 pub fn score_trajectory(truth: &Truth, name: &str, est: &[futago_msgs::tum::Stamped]) -> Metrics {
     let mut m = Metrics::default();
+    let est: Vec<futago_msgs::tum::Stamped> =
+        est.iter().map(futago_msgs::tum::as_written).collect();
+    let est = est.as_slice();
     let pairs = trajectory::associate(truth.poses, est, MAX_TIME_DIFF);
     let ate = trajectory::ate(&pairs, trajectory::Alignment::None);
     if let Some(s) = Stats::of(&ate) {
@@ -276,7 +282,7 @@ pub struct TrueState {
 /// What the scorers are given: the scenario and the simulated truth, in memory.
 pub struct Truth<'a> {
     pub scenario: &'a crate::scenario::Scenario,
-    /// The robot's true trajectory at the ground-truth rate (what `groundtruth.txt` holds).
+    /// The robot's true trajectory at the ground-truth rate, as `groundtruth.txt` holds it.
     pub poses: &'a [futago_msgs::tum::Stamped],
     pub relations: &'a [crate::relations::Relation],
 }

@@ -132,15 +132,25 @@ impl Bus {
 
     /// Publishes estimate `pose` on `pose/TOPIC`, made when odometry read `at`.
     pub fn publish_pose(&mut self, topic: &str, pose: Pose2, at: Pose2) {
-        self.estimates
-            .insert(topic.to_string(), Some((pose, Some(at))));
+        self.set_estimate(topic, Some((pose, Some(at))));
     }
 
     /// Publishes estimate `pose` on `pose/TOPIC` to be taken as it is until the next one,
     /// not carried by odometry: a localiser that runs without odometry (seed 001's camera
     /// alone).
     pub fn publish_pose_held(&mut self, topic: &str, pose: Pose2) {
-        self.estimates.insert(topic.to_string(), Some((pose, None)));
+        self.set_estimate(topic, Some((pose, None)));
+    }
+
+    /// Sets the estimate on `pose/TOPIC`, allocating its name only the first time (the oracle
+    /// publishes at every physics step).
+    fn set_estimate(&mut self, topic: &str, e: Option<(Pose2, Option<Pose2>)>) {
+        match self.estimates.get_mut(topic) {
+            Some(slot) => *slot = e,
+            None => {
+                self.estimates.insert(topic.to_string(), e);
+            }
+        }
     }
 
     /// The estimate on `pose/TOPIC` now, carried from when it was made by odometry (unless it

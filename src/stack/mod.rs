@@ -159,7 +159,7 @@ pub trait Node {
         Ok(Report::default())
     }
 
-    /// The metrics this node's scorer produces, from the run's folder and the truth.
+    /// The metrics this node's scorer produces, from what it kept in memory and the truth.
     fn score(&self, _truth: &Truth) -> Result<Metrics> {
         Ok(Metrics::default())
     }
@@ -350,9 +350,9 @@ pub fn build_with(
 }
 
 /// A trajectory a node estimates, kept in memory as it is made: its scorer and the report
-/// read it there, and the run writes it as a TUM file only to hand it to the user. Its poses
-/// are held as the file holds them, so that what futago scores is what a user's tools score
-/// on the file.
+/// read it there, and the run writes it as a TUM file only to hand it to the user. It is
+/// scored as the file holds it ([`crate::ground_truth::score_trajectory`]), so that what futago
+/// scores is what a user's tools score on the file.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Trajectory {
     /// Its name in metrics and in the report (`localization`, `slam`).
@@ -371,13 +371,12 @@ impl Trajectory {
         }
     }
 
-    /// Adds the planar pose `p` at `t` (on the floor, z = 0), as its TUM file holds it
-    /// ([`tum::as_written`]): a score from memory is the score of the file.
+    /// Adds the planar pose `p` at `t` (on the floor, z = 0).
     pub fn push(&mut self, t: Time, p: &Pose2) {
-        self.poses.push(tum::as_written(&tum::Stamped {
+        self.poses.push(tum::Stamped {
             stamp: t,
             pose: Pose3::from_pose2(p, 0.0),
-        }));
+        });
     }
 
     /// Writes it as `file` in `dir`, under `header` (comment lines, each ending in a newline).
