@@ -84,7 +84,8 @@ pub struct Outcome {
     pub performance: Value,
 }
 
-/// The camera's true depth at the frame just taken, rendered on demand (and timed).
+/// The scorers' view of the frame just taken: the state, the true optical pose, and the true
+/// depth rendered on demand (timed with the rendering).
 struct TrueDepth<'a> {
     state: &'a TrueState,
     optical: futago_msgs::Pose3,

@@ -275,7 +275,6 @@ impl DepthTracking {
     }
 }
 
-/// One scan's detections and the people it sees, in the laser's frame.
 /// A scan tracked, until it is scored against the truth of its instant.
 struct UnscoredScan {
     stamp: Time,
@@ -286,6 +285,7 @@ struct UnscoredScan {
     tracks: Vec<(u32, [f64; 2])>,
 }
 
+/// One scan's detections and the people it sees, in the laser's frame.
 struct ScanFrame {
     stamp: Time,
     /// The laser's pose in the odometry frame, where the temporal difference works.
