@@ -110,16 +110,6 @@ impl Cameras {
         }
     }
 
-    /// How many cameras there are.
-    pub fn len(&self) -> usize {
-        self.kinects.len()
-    }
-
-    /// Whether there are none.
-    pub fn is_empty(&self) -> bool {
-        self.kinects.is_empty()
-    }
-
     /// Camera `c`'s name.
     pub fn name(&self, c: usize) -> &str {
         &self.kinects[c].spec.name

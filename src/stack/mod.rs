@@ -357,8 +357,6 @@ pub fn build_with(
 pub struct Trajectory {
     /// Its name in metrics and in the report (`localization`, `slam`).
     pub name: String,
-    /// The file it was written to in the run's folder, once written.
-    pub file: Option<String>,
     pub poses: Vec<tum::Stamped>,
 }
 
@@ -380,14 +378,13 @@ impl Trajectory {
     }
 
     /// Writes it as `file` in `dir`, under `header` (comment lines, each ending in a newline).
-    pub fn write(&mut self, dir: &Path, file: &str, header: &str) -> Result<()> {
+    pub fn write(&self, dir: &Path, file: &str, header: &str) -> Result<()> {
         use anyhow::Context;
         let mut text = header.to_string();
         for s in &self.poses {
             tum::format_line(&mut text, s);
         }
         std::fs::write(dir.join(file), text).with_context(|| format!("writing {file}"))?;
-        self.file = Some(file.to_string());
         Ok(())
     }
 }

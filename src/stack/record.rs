@@ -208,7 +208,6 @@ impl Node for TumRecorder {
         if let Some(f) = &mut self.file {
             f.flush().with_context(|| format!("writing {file}"))?;
             files.push(file.to_string());
-            self.track.file = Some(file.to_string());
         }
         Ok(Report {
             files,
