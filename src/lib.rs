@@ -12,8 +12,8 @@
 //!    (`stack`);
 //! 5. **reports**: the HTML report (`report`);
 //! 6. **applications**: the loop and what runs it (`run`, `replay`, `legs_train`, `suite`,
-//!    `tune` with `cmaes`, `bench`, `fuzz`, `world_cmd`; and `config_walk`, a test that walks every
-//!    scenario's parameters).
+//!    `folds` (SLAM defaults chosen by leave-one-log-out), `tune` with `cmaes`, `bench`, `fuzz`,
+//!    `world_cmd`; and `config_walk`, a test that walks every scenario's parameters).
 //!
 //! The binary (`src/main.rs`) parses the command line and calls these.
 
@@ -36,6 +36,7 @@ pub mod bench;
 pub mod cmaes;
 #[cfg(test)]
 mod config_walk;
+pub mod folds;
 pub mod fuzz;
 pub mod legs_train;
 pub mod replay;

@@ -1,6 +1,6 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
-use futago::{bench, fuzz, legs_train, overlay, replay, run, stack, suite, tune, world_cmd};
+use futago::{bench, folds, fuzz, legs_train, overlay, replay, run, stack, suite, tune, world_cmd};
 
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
@@ -80,6 +80,36 @@ enum Command {
         /// The bag's nav_msgs/Odometry topic, where it has several.
         #[arg(long, value_name = "TOPIC")]
         odom_topic: Option<String>,
+    },
+    /// Choose SLAM defaults by leave-one-log-out: every value of every choice in the choice
+    /// file runs on every log; for each log in turn a value is chosen on the others and scored
+    /// on it. Writes folds.json, folds.md (the per-fold table) and chosen.toml (the values
+    /// kept, as a [slam] file for `replay --config`).
+    Folds {
+        /// The choice file: [[choice]] tables of name, key (under [slam]), values, neutral.
+        choices: PathBuf,
+        /// A log (CARMEN or ROS 1 bag); give two or more, each followed by its --relations.
+        #[arg(long = "log", value_name = "LOG", required = true)]
+        logs: Vec<PathBuf>,
+        /// The ground-truth relations of the log given before it.
+        #[arg(long = "relations", value_name = "FILE", required = true)]
+        relations: Vec<PathBuf>,
+        /// The base SLAM configuration: a TOML file of [slam] keys over the defaults.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Output folder [default: out/folds].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Replace the output even when it holds files futago did not write.
+        #[arg(long)]
+        force: bool,
+        /// Each configuration also runs with its keyframe spacing scaled by 1 ± this, and a
+        /// log's error is the mean of the three (0: one run).
+        #[arg(long, default_value_t = folds::PERTURBATION)]
+        perturb: f64,
+        /// Runs at a time [default: the CPU cores].
+        #[arg(long)]
+        jobs: Option<usize>,
     },
     /// Train the laser leg classifier on a scenario's simulated scans (its people give the
     /// labels): AdaBoost on every seed but the last, scored on the last. Writes the model
@@ -586,10 +616,69 @@ fn real_main() -> Result<u8> {
             replay::print(&s, &log, &out);
             0
         }
+        Command::Folds {
+            choices,
+            logs,
+            relations,
+            config,
+            out,
+            force,
+            perturb,
+            jobs,
+        } => folds_command(
+            &choices,
+            logs,
+            relations,
+            config.as_deref(),
+            out,
+            force,
+            perturb,
+            jobs,
+        )?,
         Command::World { command } => world(command)?,
         Command::Bench { command } => bench(command)?,
     };
     Ok(u8::try_from(status).unwrap_or(1))
+}
+
+/// `futago folds …`: pairs each log with its relations and runs the folds.
+#[allow(clippy::too_many_arguments)]
+fn folds_command(
+    choices: &std::path::Path,
+    logs: Vec<PathBuf>,
+    relations: Vec<PathBuf>,
+    config: Option<&std::path::Path>,
+    out: Option<PathBuf>,
+    force: bool,
+    perturb: f64,
+    jobs: Option<usize>,
+) -> Result<i32> {
+    if logs.len() != relations.len() {
+        bail!(
+            "{} --log and {} --relations: expected one relations file after each log",
+            logs.len(),
+            relations.len()
+        );
+    }
+    let logs: Vec<folds::LogSpec> = logs
+        .into_iter()
+        .zip(relations)
+        .map(|(log, relations)| folds::LogSpec { log, relations })
+        .collect();
+    let base = replay::slam_config(config, None)?;
+    let out = out.unwrap_or_else(|| PathBuf::from("out/folds"));
+    let md = folds::run(
+        &logs,
+        choices,
+        &base,
+        perturb,
+        resolve_jobs(jobs)?,
+        &out,
+        force,
+    )?;
+    print!("{md}");
+    println!("\nresults in {}", out.display());
+    Ok(0)
 }
 
 /// `futago world …`.

@@ -214,6 +214,16 @@ pub fn print(s: &Value, log: &Path, out: &Path) {
     if s.get("relations").is_some() {
         println!("{}\n{}", line("slam"), line("odometry"));
     }
+    let p = &s["loop_closure_precision"];
+    if let Some(n) = p["constraints"].as_u64().filter(|n| *n > 0) {
+        println!(
+            "loop closures: {n} in the final graph, {} held within {LOOP_TRUE_M} m and {LOOP_TRUE_DEG}° (precision {:.1} %; {} removed as outliers, {:.1} % of all found held)",
+            p["held"],
+            100.0 * p["precision"].as_f64().unwrap_or(f64::NAN),
+            p["removed_as_outliers"],
+            100.0 * p["precision_of_all_found"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
 }
 
 /// The people tracked in a replay: their scores in the summary's `people`, and their tracks
@@ -253,6 +263,53 @@ fn write_people(
     Ok(())
 }
 
+/// The SLAM over every scan of `log`, finished (the end-of-log search and optimisation done).
+pub fn slam_over(log: &carmen::Log, config: SlamConfig) -> Slam {
+    let mut slam = Slam::new(config, Pose2::IDENTITY);
+    for s in &log.scans {
+        slam.update(&s.scan, &s.odometry, &s.mount);
+    }
+    slam.finish();
+    slam
+}
+
+/// A SLAM trajectory (a pose per scan, in the order the scans were taken) with each pose under
+/// the stamp the log gave its scan, by which relations name it, sorted by that stamp.
+pub fn as_logged(path: &[(Time, Pose2)], log: &carmen::Log) -> Vec<(Time, Pose2)> {
+    let mut trajectory: Vec<(Time, Pose2)> = path
+        .iter()
+        .zip(&log.scans)
+        .map(|((_, p), s)| (s.logged, *p))
+        .collect();
+    trajectory.sort_by_key(|p| p.0);
+    trajectory
+}
+
+/// A loop closure that the optimised graph violates by more than this (m, degrees) is false,
+/// as Hess et al. 2016 count loop-closure precision (Table IV).
+pub const LOOP_TRUE_M: f64 = 0.2;
+pub const LOOP_TRUE_DEG: f64 = 1.0;
+
+/// The loop closures in the final graph and the share of them that it violates by at most
+/// [`LOOP_TRUE_M`] and [`LOOP_TRUE_DEG`] (Cartographer's Table IV convention).
+pub fn loop_precision(slam: &Slam) -> Value {
+    let loops = slam.loop_residuals();
+    let held = loops
+        .iter()
+        .filter(|l| l.translation <= LOOP_TRUE_M && l.rotation.to_degrees() <= LOOP_TRUE_DEG)
+        .count();
+    let found = loops.len() + slam.outliers();
+    json!({
+        "constraints": loops.len(),
+        "held": held,
+        "precision": if loops.is_empty() { Value::Null } else { json!(held as f64 / loops.len() as f64) },
+        // The loop closures removed as outliers at the end count as false too.
+        "removed_as_outliers": slam.outliers(),
+        "precision_of_all_found": if found == 0 { Value::Null } else { json!(held as f64 / found as f64) },
+        "rule": format!("a loop closure violated by more than {LOOP_TRUE_M} m or {LOOP_TRUE_DEG}° after optimisation is false (Hess et al. 2016, Table IV)"),
+    })
+}
+
 /// Runs the laser SLAM over `log`, writes `trajectory.txt`, `odometry.txt` (TUM),
 /// `map.pgm`/`map.yaml` and `summary.json` into `out`, and scores SLAM and raw odometry
 /// against `relations` when given. A damaged log gives the results of what it held (unless
@@ -287,23 +344,16 @@ pub fn replay(
         None => None,
     };
     let started = Instant::now();
-    let mut slam = Slam::new(config, Pose2::IDENTITY);
+    let mut slam = slam_over(&log, config);
     let first_odometry = log.scans[0].odometry;
-    let mut odometry = Vec::with_capacity(log.scans.len());
-    for s in &log.scans {
-        slam.update(&s.scan, &s.odometry, &s.mount);
-        odometry.push((s.logged, first_odometry.between(&s.odometry)));
-    }
-    slam.finish();
+    let mut odometry: Vec<(Time, Pose2)> = log
+        .scans
+        .iter()
+        .map(|s| (s.logged, first_odometry.between(&s.odometry)))
+        .collect();
     // The trajectory as the map was built: a pose per scan, in the order the scans were taken.
     let path = slam.trajectory();
-    // Each pose under the stamp the log gave its scan, by which relations name it.
-    let mut trajectory: Vec<(Time, Pose2)> = path
-        .iter()
-        .zip(&log.scans)
-        .map(|((_, p), s)| (s.logged, *p))
-        .collect();
-    trajectory.sort_by_key(|p| p.0);
+    let trajectory = as_logged(&path, &log);
     let drawn_odometry = odometry.clone();
     odometry.sort_by_key(|p| p.0);
     // Where the robot was at each scan: its odometry, or without any, the SLAM's estimate
@@ -342,6 +392,7 @@ pub fn replay(
             "log": log_path.display().to_string(),
             "slam": method_name(config.method),
             "loop_closures": slam.loop_closures(),
+            "loop_closure_precision": loop_precision(&slam),
             "optimizations": slam.optimizations(),
             "scans": log.scans.len(),
             "odometry_records": log.odometry.len(),

@@ -18,36 +18,6 @@ fn pose(k: u32) -> Pose2 {
     Pose2::new(-1.5 + 0.03 * k as f64, 0.0, 0.002 * k as f64)
 }
 
-/// The range along the beam at `a` (laser frame) from `p`: the room's walls, or the box.
-fn cast(p: Pose2, a: f64) -> f32 {
-    let (s, c) = (p.theta + a).sin_cos();
-    let mut t = f64::INFINITY;
-    for (d, o, lo, hi) in [(c, p.x, -3.0, 3.0), (s, p.y, -2.0, 2.0)] {
-        if d > 1e-12 {
-            t = t.min((hi - o) / d);
-        } else if d < -1e-12 {
-            t = t.min((lo - o) / d);
-        }
-    }
-    // The box [1, 1.5] × [0.8, 1.3] by slabs.
-    let (mut near, mut far) = (0.0f64, f64::INFINITY);
-    for (d, o, lo, hi) in [(c, p.x, 1.0, 1.5), (s, p.y, 0.8, 1.3)] {
-        if d.abs() < 1e-12 {
-            if o < lo || o > hi {
-                far = -1.0;
-            }
-        } else {
-            let (a, b) = ((lo - o) / d, (hi - o) / d);
-            near = near.max(a.min(b));
-            far = far.min(a.max(b));
-        }
-    }
-    if near <= far && near > 0.0 {
-        t = t.min(near);
-    }
-    t as f32
-}
-
 fn scan(k: u32, frame: &str) -> LaserScan {
     let inc = std::f64::consts::PI / 180.0;
     LaserScan {
@@ -59,7 +29,7 @@ fn scan(k: u32, frame: &str) -> LaserScan {
         range_min: 0.02,
         range_max: 20.0,
         ranges: (0..181)
-            .map(|b| cast(pose(k), -std::f64::consts::FRAC_PI_2 + b as f64 * inc))
+            .map(|b| room_cast(pose(k), -std::f64::consts::FRAC_PI_2 + b as f64 * inc))
             .collect(),
     }
 }

@@ -22,6 +22,7 @@ const LAYERS: &[(&str, &[&str])] = &[
             "replay",
             "legs_train",
             "suite",
+            "folds",
             "tune",
             "bench",
             "fuzz",

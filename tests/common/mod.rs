@@ -49,6 +49,37 @@ pub fn summary(dir: &Path) -> serde_json::Value {
     json_file(&dir.join("summary.json"))
 }
 
+/// The range along the beam at `a` (laser frame) from `p` in a 6 m × 4 m room centred on the
+/// origin with a box at [1, 1.5] × [0.8, 1.3]: the room's walls, or the box.
+pub fn room_cast(p: futago_msgs::Pose2, a: f64) -> f32 {
+    let (s, c) = (p.theta + a).sin_cos();
+    let mut t = f64::INFINITY;
+    for (d, o, lo, hi) in [(c, p.x, -3.0, 3.0), (s, p.y, -2.0, 2.0)] {
+        if d > 1e-12 {
+            t = t.min((hi - o) / d);
+        } else if d < -1e-12 {
+            t = t.min((lo - o) / d);
+        }
+    }
+    // The box [1, 1.5] × [0.8, 1.3] by slabs.
+    let (mut near, mut far) = (0.0f64, f64::INFINITY);
+    for (d, o, lo, hi) in [(c, p.x, 1.0, 1.5), (s, p.y, 0.8, 1.3)] {
+        if d.abs() < 1e-12 {
+            if o < lo || o > hi {
+                far = -1.0;
+            }
+        } else {
+            let (a, b) = ((lo - o) / d, (hi - o) / d);
+            near = near.max(a.min(b));
+            far = far.min(a.max(b));
+        }
+    }
+    if near <= far && near > 0.0 {
+        t = t.min(near);
+    }
+    t as f32
+}
+
 /// Two 3 × 4 m rooms joined by a 0.9 m doorway; a wall across most of the east room hides its
 /// far side from the doorway, and a cabinet there makes the two rooms look different.
 pub const TWO_ROOMS: &str = r#"

@@ -50,6 +50,13 @@ pub struct IcpConfig {
     /// finer where the scan's farthest point would move more than `max_distance_end` in one.
     pub rotation_search: f64,
     pub rotation_search_step: f64,
+    /// Make the heading search's step finer for far points (see `rotation_search`); off, the
+    /// step is `rotation_search_step` however far the points reach.
+    pub heading_step_by_range: bool,
+    /// A point's normal is fitted to its neighbours within `normal_radius`, or within this
+    /// many beam spacings at its range where that is wider, so that a far wall, whose returns
+    /// lie further apart than `normal_radius`, keeps its points (0: `normal_radius` alone).
+    pub normal_spacings: f64,
     /// Scan points are thinned to one per cell of this size, m (0: all kept), as
     /// Cartographer's voxel filter: dense near returns add time, not information.
     pub scan_voxel: f64,
@@ -71,6 +78,8 @@ impl Default for IcpConfig {
             prior_points: 120.0,
             rotation_search: 0.35,
             rotation_search_step: 0.025,
+            heading_step_by_range: true,
+            normal_spacings: 3.0,
             scan_voxel: 0.0,
         }
     }
@@ -100,6 +109,7 @@ impl IcpConfig {
                 ("rotation_search", self.rotation_search, 0.0, PI),
                 ("rotation_search_step", self.rotation_search_step, 1e-4, PI),
                 ("scan_voxel", self.scan_voxel, 0.0, 10.0),
+                ("normal_spacings", self.normal_spacings, 0.0, 100.0),
             ],
         )
     }
@@ -114,10 +124,6 @@ pub struct Oriented {
 
 /// Most neighbours taken on each side of a beam.
 const MAX_NEIGHBOURS: usize = 40;
-
-/// The normal's neighbourhood spans at least this many beam spacings at the point's range:
-/// two neighbours on each side of a wall seen at up to 48° from square on (`2/cos φ < 3`).
-const NEIGHBOUR_SPACINGS: f64 = 3.0;
 
 /// The line fitted to `near` (`p` and its neighbours): `p` with the normal facing the sensor,
 /// or `None` when too few points or not straight.
@@ -217,12 +223,14 @@ pub fn scan_points(
         let Some(p) = raw[k] else { continue };
         // Neighbours along the scan within a radius: fit a line through them (2×2 PCA). A
         // radius, not a beam count, so that range noise stays small against the extent; it
-        // grows with range to span `NEIGHBOUR_SPACINGS` beam spacings, so that a far wall,
-        // whose returns lie further apart than `normal_radius`, keeps its points.
+        // grows with range to span `normal_spacings` beam spacings (3 by default: two
+        // neighbours on each side of a wall seen at up to 48° from square on, `2/cos φ < 3`),
+        // so that a far wall, whose returns lie further apart than `normal_radius`, keeps
+        // its points.
         let range = (p[0] - mount.x).hypot(p[1] - mount.y);
         let radius = config
             .normal_radius
-            .max(NEIGHBOUR_SPACINGS * range * increment);
+            .max(config.normal_spacings * range * increment);
         let close = |j: usize| raw[j].filter(|q| (q[0] - p[0]).hypot(q[1] - p[1]) < radius);
         let mut near = vec![p];
         for j in (k.saturating_sub(MAX_NEIGHBOURS)..k).rev() {
@@ -481,9 +489,12 @@ fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) 
         .iter()
         .map(|o| o.p[0].hypot(o.p[1]))
         .fold(0.0, f64::max);
-    let step = c
-        .rotation_search_step
-        .min(c.max_distance_end / reach_m.max(1e-3));
+    let step = if c.heading_step_by_range {
+        c.rotation_search_step
+            .min(c.max_distance_end / reach_m.max(1e-3))
+    } else {
+        c.rotation_search_step
+    };
     let steps = (c.rotation_search / step).round() as i64;
     let mut best = (score(&guess), guess);
     for k in -steps..=steps {
