@@ -136,19 +136,12 @@ fn a_carmen_log_with_a_bad_line_is_replayed_around_it() {
     for k in 1..=SCANS {
         let p = pose(k);
         let s = scan(k, "front");
-        let ranges: Vec<String> = s.ranges.iter().map(|r| format!("{r:.3}")).collect();
         let t = k as f64 / 10.0;
         if k == 50 {
             text += "FLASER 181 garbage\n";
             continue;
         }
-        text += &format!(
-            "FLASER 181 {} {x} {y} {th} {x} {y} {th} {t} host {t}\n",
-            ranges.join(" "),
-            x = p.x,
-            y = p.y,
-            th = p.theta
-        );
+        text += &flaser_line(&s.ranges, p, t);
     }
     let log = write(tmp.path(), "log.clf", text.as_bytes());
     let out = tmp.path().join("o");

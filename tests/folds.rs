@@ -36,22 +36,11 @@ fn write_log(dir: &Path, d: usize, turn: f64, scale: f64) -> (PathBuf, PathBuf) 
             ));
         }
         let inc = std::f64::consts::PI / 180.0;
-        let ranges: Vec<String> = (0..181)
-            .map(|b| {
-                format!(
-                    "{:.3}",
-                    room_cast(p, -std::f64::consts::FRAC_PI_2 + b as f64 * inc)
-                )
-            })
+        let ranges: Vec<f32> = (0..181)
+            .map(|b| room_cast(p, -std::f64::consts::FRAC_PI_2 + b as f64 * inc))
             .collect();
         let t = 1.0 + k as f64 / 10.0;
-        log += &format!(
-            "FLASER 181 {} {x} {y} {th} {x} {y} {th} {t} host {t}\n",
-            ranges.join(" "),
-            x = odo.x,
-            y = odo.y,
-            th = odo.theta
-        );
+        log += &flaser_line(&ranges, odo, t);
         if k + 10 < SCANS {
             let r = p.between(&truth(d, k + 10));
             relations += &format!(

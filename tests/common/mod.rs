@@ -80,6 +80,20 @@ pub fn room_cast(p: futago_msgs::Pose2, a: f64) -> f32 {
     t as f32
 }
 
+/// A CARMEN `FLASER` line: `ranges` (written to the millimetre), the robot at `pose` as both
+/// the laser's and the odometry's pose, and the stamp `t` as both the IPC and the logger time.
+pub fn flaser_line(ranges: &[f32], pose: futago_msgs::Pose2, t: f64) -> String {
+    let ranges: Vec<String> = ranges.iter().map(|r| format!("{r:.3}")).collect();
+    format!(
+        "FLASER {} {} {x} {y} {th} {x} {y} {th} {t} host {t}\n",
+        ranges.len(),
+        ranges.join(" "),
+        x = pose.x,
+        y = pose.y,
+        th = pose.theta
+    )
+}
+
 /// Two 3 × 4 m rooms joined by a 0.9 m doorway; a wall across most of the east room hides its
 /// far side from the doorway, and a cabinet there makes the two rooms look different.
 pub const TWO_ROOMS: &str = r#"
