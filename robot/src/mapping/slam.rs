@@ -48,7 +48,7 @@ pub enum VelocityGuess {
     /// scan before (the one where it catches up). Wheel odometry that stalls reports exactly
     /// nothing; odometry that is merely noisy (Intel's) or right (the hospital's) is left
     /// alone, where a velocity guess that fitted a little better by chance did harm (see the
-    /// README's leave-one-log-out table: on MIT CSAIL it recovers most of what `Always` gives,
+    /// README's "Choosing defaults by leave-one-log-out": on MIT CSAIL it recovers most of what `Always` gives,
     /// on Intel it does not cost the 3.6 % that `Always` does).
     Stalls,
     /// Never: the odometry guess alone.
