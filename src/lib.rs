@@ -12,7 +12,8 @@
 //!    (`stack`);
 //! 5. **reports**: the HTML report (`report`);
 //! 6. **applications**: the loop and what runs it (`run`, `replay`, `legs_train`, `suite`,
-//!    `folds` (SLAM defaults chosen by leave-one-log-out), `tune` with `cmaes`, `bench`, `fuzz`,
+//!    `folds` (SLAM defaults chosen by leave-one-log-out), `calibrate` (a robot profile from a
+//!    real log), `tune` with `cmaes`, `bench`, `fuzz`,
 //!    `world_cmd`; and `config_walk`, a test that walks every scenario's parameters).
 //!
 //! The binary (`src/main.rs`) parses the command line and calls these.
@@ -33,6 +34,7 @@ pub mod stack;
 pub mod report;
 
 pub mod bench;
+pub mod calibrate;
 pub mod cmaes;
 #[cfg(test)]
 mod config_walk;

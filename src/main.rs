@@ -1,6 +1,8 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
-use futago::{bench, folds, fuzz, legs_train, overlay, replay, run, stack, suite, tune, world_cmd};
+use futago::{
+    bench, calibrate, folds, fuzz, legs_train, overlay, replay, run, stack, suite, tune, world_cmd,
+};
 
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
@@ -81,6 +83,10 @@ enum Command {
         #[arg(long, value_name = "TOPIC")]
         odom_topic: Option<String>,
     },
+    /// Estimate a robot profile from a real robot's log (CARMEN or ROS 1 bag): its laser's and
+    /// its odometry's error models against the stack's own SLAM of the log. Writes
+    /// profile.toml, summary.json, the reference trajectory.txt and map.pgm/map.yaml.
+    Calibrate(CalibrateArgs),
     /// Choose SLAM defaults by leave-one-log-out: every value of every choice in the choice
     /// file runs on every log; for each log in turn a value is chosen on the others and scored
     /// on it. Writes folds.json, folds.md (the per-fold table) and chosen.toml (the values
@@ -616,6 +622,7 @@ fn real_main() -> Result<u8> {
             replay::print(&s, &log, &out);
             0
         }
+        Command::Calibrate(args) => calibrate_command(args)?,
         Command::Folds {
             choices,
             logs,
@@ -639,6 +646,58 @@ fn real_main() -> Result<u8> {
         Command::Bench { command } => bench(command)?,
     };
     Ok(u8::try_from(status).unwrap_or(1))
+}
+
+/// `futago calibrate`'s arguments.
+#[derive(clap::Args, Debug)]
+struct CalibrateArgs {
+    /// The log (CARMEN: .clf, .log; ROS 1 bag: .bag).
+    log: PathBuf,
+    /// The stretch of the log to use, as fractions of its duration (e.g. 0:0.5, the first
+    /// half).
+    #[arg(long, default_value = "0:1")]
+    span: String,
+    /// The laser (its frame) to describe, where the log has several [default: the one
+    /// with the most scans].
+    #[arg(long)]
+    laser: Option<String>,
+    /// SLAM parameters for the reference: a TOML file of the `[slam]` table's keys.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Output folder [default: out/calibrate/<log name>].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Replace the output even when it holds files futago did not write.
+    #[arg(long)]
+    force: bool,
+    /// Refuse a damaged log instead of using what it holds.
+    #[arg(long)]
+    strict: bool,
+    /// The bag's sensor_msgs/LaserScan topic, where it has several.
+    #[arg(long, value_name = "TOPIC")]
+    scan_topic: Option<String>,
+    /// The bag's nav_msgs/Odometry topic, where it has several.
+    #[arg(long, value_name = "TOPIC")]
+    odom_topic: Option<String>,
+}
+
+/// `futago calibrate …`: estimates the profile and prints its main figures.
+fn calibrate_command(a: CalibrateArgs) -> Result<i32> {
+    let slam = replay::slam_config(a.config.as_deref(), None)?;
+    let out = a.out.unwrap_or_else(|| calibrate::default_out(&a.log));
+    let options = calibrate::CalibrateOptions {
+        read: futago_msgs::carmen::ReadOptions {
+            strict: a.strict,
+            scan_topic: a.scan_topic,
+            odom_topic: a.odom_topic,
+        },
+        span: calibrate::parse_span(&a.span)?,
+        laser: a.laser,
+        force: a.force,
+    };
+    let (profile, _) = calibrate::calibrate(&a.log, slam, &out, &options)?;
+    calibrate::print(&profile, &out);
+    Ok(0)
 }
 
 /// `futago folds …`: pairs each log with its relations and runs the folds.

@@ -55,7 +55,7 @@ pub fn read_log_with(path: &Path, o: &carmen::ReadOptions) -> Result<carmen::Log
     }
 }
 
-fn write_tum(path: &Path, header: &str, traj: &[(Time, Pose2)]) -> Result<()> {
+pub(crate) fn write_tum(path: &Path, header: &str, traj: &[(Time, Pose2)]) -> Result<()> {
     let mut text = format!("{header}\n# timestamp tx ty tz qx qy qz qw\n");
     for (t, p) in traj {
         tum::format_line(

@@ -23,6 +23,7 @@ const LAYERS: &[(&str, &[&str])] = &[
             "legs_train",
             "suite",
             "folds",
+            "calibrate",
             "tune",
             "bench",
             "fuzz",

@@ -14,6 +14,7 @@ pub mod grid;
 pub mod landmarks;
 pub mod map_server;
 pub mod ply;
+pub mod profile;
 pub mod rosbag;
 pub mod tum;
 

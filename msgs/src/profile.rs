@@ -1,0 +1,160 @@
+//! Robot profiles: the error models of a robot's laser and odometry, as `futago calibrate`
+//! estimates them from a log of the real robot, in a file a simulated robot can take.
+//!
+//! The laser's model is the beam model mixture of Thrun, Burgard and Fox (*Probabilistic
+//! Robotics*, 2005, §6.3): a reading is a hit on the mapped surface with Gaussian noise, a
+//! short reading (something the map does not hold) at an exponentially distributed range, a
+//! random reading anywhere in the range, or no return at all. Here the hit's spread grows with
+//! range (`σ(r)² = sigma² + (sigma_rel·r)²`), and the no-return probability is tabulated
+//! against the expected range and the incidence angle instead of being one constant. Mixed
+//! pixels (readings between the near and the far surface where a beam straddles a depth
+//! edge) are counted on their own.
+//!
+//! The odometry's model is Borenstein's UMBmark systematic terms (a translation scale, a
+//! rotation scale, a heading bias per metre driven: unequal wheel diameters and a wrong wheel
+//! base) plus a random walk whose variance grows with the distance driven and the angle
+//! turned, and the share of outliers (stalls, slips) the random walk does not explain.
+//!
+//! Every estimate carries its standard error and the number of samples behind it, so that a
+//! user can see what the log could and could not tell.
+
+use serde::{Deserialize, Serialize};
+
+/// A quantity estimated from data: its value, its standard error (0 where it was set, not
+/// estimated) and how many samples it rests on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Estimate {
+    pub value: f64,
+    pub sd: f64,
+    pub n: usize,
+}
+
+impl Estimate {
+    pub fn new(value: f64, sd: f64, n: usize) -> Estimate {
+        Estimate { value, sd, n }
+    }
+
+    /// A proportion `k` of `n` with its binomial standard error (0 of 0 is 0 ± 0).
+    pub fn proportion(k: usize, n: usize) -> Estimate {
+        if n == 0 {
+            return Estimate::new(0.0, 0.0, 0);
+        }
+        let p = k as f64 / n as f64;
+        Estimate::new(p, (p * (1.0 - p) / n as f64).sqrt(), n)
+    }
+}
+
+/// A value tabulated over a bin `[lo, hi)` of some variable (range in m, or angle in rad).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Bin {
+    pub lo: f64,
+    pub hi: f64,
+    pub value: f64,
+    pub sd: f64,
+    pub n: usize,
+}
+
+/// Where a profile comes from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Source {
+    /// The log, as it was named to `futago calibrate`.
+    pub log: String,
+    /// The stretch of the log used, s from its first scan.
+    pub from_s: f64,
+    pub to_s: f64,
+    /// Scans in that stretch.
+    pub scans: usize,
+    /// What estimated it and against what (the reference trajectory and map).
+    pub procedure: String,
+}
+
+/// A laser: its layout and timing as the log shows them, and its error model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LaserProfile {
+    /// The laser's name (its frame in the log), so that a robot with several lasers knows
+    /// which one this sets.
+    pub name: String,
+    pub beams: usize,
+    /// First beam's bearing and the angle between beams, rad.
+    pub angle_min: f64,
+    pub angle_increment: f64,
+    pub range_min: f64,
+    pub range_max: f64,
+    /// Scans per second (the median interval's inverse) and the interval's spread, s.
+    pub rate: f64,
+    pub period_spread_s: f64,
+    /// Time between beams, s (0 where the log does not say).
+    pub time_increment: f64,
+    /// The hit's spread: `σ(r)² = sigma² + (sigma_rel·r)²`, m and m/m.
+    pub sigma: Estimate,
+    pub sigma_rel: Estimate,
+    /// The hit's mean offset (measured minus expected), m: a range bias.
+    pub bias: Estimate,
+    /// Of the beams that return where the map holds a surface, the share that are short
+    /// readings, and their exponential rate, 1/m.
+    pub short_rate: Estimate,
+    pub short_lambda: Estimate,
+    /// Of the same, the share that are random readings (uniform over the range).
+    pub random_rate: Estimate,
+    /// Of the beams that should hit a mapped surface, the share with no return, overall.
+    pub no_return: Estimate,
+    /// The same by expected range, m.
+    pub no_return_by_range: Vec<Bin>,
+    /// The same by incidence angle (between the beam and the surface's normal), rad.
+    pub no_return_by_incidence: Vec<Bin>,
+    /// Of the beams that straddle a depth edge (neighbours' expected ranges apart by more than
+    /// the edge step), the share that read between the near and the far surface.
+    pub mixed_pixels: Estimate,
+    /// Of the beams where the map holds nothing within range, the share that return anyway
+    /// (things the map does not hold: people, clutter).
+    pub unmapped_returns: Estimate,
+    /// The hit's spread by expected range, net of the map's cells (what `sigma` and
+    /// `sigma_rel` were fitted to), m.
+    pub spread_by_range: Vec<Bin>,
+}
+
+/// Odometry's systematic and random errors, as the true motion relates to the reported.
+///
+/// Over a stretch of reported motion of length `L` (m) and turn `A` (rad, signed), the true
+/// motion is the reported one with every step's translation times `translation_scale` and its
+/// turn times `rotation_scale`, plus `heading_bias·L`; then a random walk of variance
+/// `translation_variance·L` along the path and `heading_variance_per_rad·|A| +
+/// heading_variance_per_m·L` in heading.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OdometryProfile {
+    pub translation_scale: Estimate,
+    pub rotation_scale: Estimate,
+    /// rad/m, counter-clockwise positive.
+    pub heading_bias: Estimate,
+    /// m²/m.
+    pub translation_variance: Estimate,
+    /// rad²/rad.
+    pub heading_variance_per_rad: Estimate,
+    /// rad²/m.
+    pub heading_variance_per_m: Estimate,
+    /// Share of stretches the model misses by more than five of its deviations (a stall, a
+    /// slip, a bump): the heavy tail.
+    pub outlier_rate: Estimate,
+    /// The stretches the estimates rest on: their count and mean length (m).
+    pub stretches: usize,
+    pub stretch_length_m: f64,
+    /// The delay of the odometry's stamps behind the laser's, s: the shift that best lines
+    /// up the odometry's turns with the scan matcher's (positive: odometry stamped late).
+    pub latency: Estimate,
+}
+
+/// A robot profile: the file `futago calibrate` writes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotProfile {
+    pub source: Source,
+    pub laser: LaserProfile,
+    /// None where the log has no odometry (a bag of scans alone) or too little motion.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odometry: Option<OdometryProfile>,
+}
