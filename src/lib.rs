@@ -13,7 +13,7 @@
 //! 5. **reports**: the HTML report (`report`);
 //! 6. **applications**: the loop and what runs it (`run`, `replay`, `legs_train`, `suite`,
 //!    `folds` (SLAM defaults chosen by leave-one-log-out), `calibrate` (a robot profile from a
-//!    real log), `tune` with `cmaes`, `bench`, `fuzz`,
+//!    real log), `twin` (the log's drive in simulation, side by side), `tune` with `cmaes`, `bench`, `fuzz`,
 //!    `world_cmd`; and `config_walk`, a test that walks every scenario's parameters).
 //!
 //! The binary (`src/main.rs`) parses the command line and calls these.
@@ -45,4 +45,5 @@ pub mod replay;
 pub mod run;
 pub mod suite;
 pub mod tune;
+pub mod twin;
 pub mod world_cmd;

@@ -1,7 +1,8 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
 use futago::{
-    bench, calibrate, folds, fuzz, legs_train, overlay, replay, run, stack, suite, tune, world_cmd,
+    bench, calibrate, folds, fuzz, legs_train, overlay, replay, run, stack, suite, tune, twin,
+    world_cmd,
 };
 
 use anyhow::{Result, bail};
@@ -87,6 +88,11 @@ enum Command {
     /// its odometry's error models against the stack's own SLAM of the log. Writes
     /// profile.toml, summary.json, the reference trajectory.txt and map.pgm/map.yaml.
     Calibrate(CalibrateArgs),
+    /// Replay a real log's drive in simulation with a robot profile (from `calibrate`): the
+    /// world from the log's SLAM map, the laser cast along the SLAM path at the log's scan
+    /// times, odometry with the profile's errors; the same SLAM scored on both. Writes
+    /// summary.json, twin.md (side by side), twin.clf and the world.
+    Twin(TwinArgs),
     /// Choose SLAM defaults by leave-one-log-out: every value of every choice in the choice
     /// file runs on every log; for each log in turn a value is chosen on the others and scored
     /// on it. Writes folds.json, folds.md (the per-fold table) and chosen.toml (the values
@@ -623,6 +629,7 @@ fn real_main() -> Result<u8> {
             0
         }
         Command::Calibrate(args) => calibrate_command(args)?,
+        Command::Twin(args) => twin_command(args)?,
         Command::Folds {
             choices,
             logs,
@@ -661,18 +668,25 @@ struct CalibrateArgs {
     /// with the most scans].
     #[arg(long)]
     laser: Option<String>,
-    /// SLAM parameters for the reference: a TOML file of the `[slam]` table's keys.
+    /// Refuse a damaged log instead of using what it holds.
+    #[arg(long)]
+    strict: bool,
+    #[command(flatten)]
+    common: LogRunArgs,
+}
+
+/// What `calibrate` and `twin` share: the SLAM's parameters, the output and a bag's topics.
+#[derive(clap::Args, Debug)]
+struct LogRunArgs {
+    /// SLAM parameters: a TOML file of the `[slam]` table's keys.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Output folder [default: out/calibrate/<log name>].
+    /// Output folder [default: out/calibrate/<log name> or out/twin/<log name>].
     #[arg(long)]
     out: Option<PathBuf>,
     /// Replace the output even when it holds files futago did not write.
     #[arg(long)]
     force: bool,
-    /// Refuse a damaged log instead of using what it holds.
-    #[arg(long)]
-    strict: bool,
     /// The bag's sensor_msgs/LaserScan topic, where it has several.
     #[arg(long, value_name = "TOPIC")]
     scan_topic: Option<String>,
@@ -683,20 +697,75 @@ struct CalibrateArgs {
 
 /// `futago calibrate …`: estimates the profile and prints its main figures.
 fn calibrate_command(a: CalibrateArgs) -> Result<i32> {
-    let slam = replay::slam_config(a.config.as_deref(), None)?;
-    let out = a.out.unwrap_or_else(|| calibrate::default_out(&a.log));
+    let c = a.common;
+    let slam = replay::slam_config(c.config.as_deref(), None)?;
+    let out = c.out.unwrap_or_else(|| calibrate::default_out(&a.log));
     let options = calibrate::CalibrateOptions {
         read: futago_msgs::carmen::ReadOptions {
             strict: a.strict,
-            scan_topic: a.scan_topic,
-            odom_topic: a.odom_topic,
+            scan_topic: c.scan_topic,
+            odom_topic: c.odom_topic,
         },
         span: calibrate::parse_span(&a.span)?,
         laser: a.laser,
-        force: a.force,
+        force: c.force,
     };
     let (profile, _) = calibrate::calibrate(&a.log, slam, &out, &options)?;
     calibrate::print(&profile, &out);
+    Ok(0)
+}
+
+/// `futago twin`'s arguments.
+#[derive(clap::Args, Debug)]
+struct TwinArgs {
+    /// The real log (CARMEN: .clf, .log; ROS 1 bag: .bag).
+    log: PathBuf,
+    /// The robot profile (`futago calibrate`'s profile.toml).
+    #[arg(long)]
+    profile: PathBuf,
+    /// The real log's ground-truth relations: their stamp pairs score both logs.
+    #[arg(long)]
+    relations: PathBuf,
+    /// Twin runs, each with its own noise (seeds 0 to N−1).
+    #[arg(long, default_value_t = 5)]
+    seeds: u64,
+    /// The stretch scored, as fractions of the log's duration [default: the second half].
+    #[arg(long, default_value = "0.5:1")]
+    score_span: String,
+    /// Seeds run at a time [default: the CPU cores].
+    #[arg(long)]
+    jobs: Option<usize>,
+    #[command(flatten)]
+    common: LogRunArgs,
+}
+
+/// `futago twin …`: runs the twin and prints the side-by-side table.
+fn twin_command(a: TwinArgs) -> Result<i32> {
+    let c = a.common;
+    let slam = replay::slam_config(c.config.as_deref(), None)?;
+    let out = c.out.unwrap_or_else(|| {
+        let stem = a
+            .log
+            .file_stem()
+            .map_or_else(|| "log".into(), |s| s.to_string_lossy().to_string());
+        PathBuf::from("out/twin").join(stem)
+    });
+    let options = twin::TwinOptions {
+        read: futago_msgs::carmen::ReadOptions {
+            strict: false,
+            scan_topic: c.scan_topic,
+            odom_topic: c.odom_topic,
+        },
+        seeds: a.seeds,
+        score_span: calibrate::parse_span(&a.score_span)
+            .map_err(|e| anyhow::anyhow!("{}", e.to_string().replace("--span", "--score-span")))?,
+        jobs: a.jobs.unwrap_or_else(|| {
+            std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+        }),
+        force: c.force,
+    };
+    let s = twin::twin(&a.log, &a.profile, &a.relations, slam, &out, &options)?;
+    twin::print(&s, &out);
     Ok(0)
 }
 

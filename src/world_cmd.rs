@@ -325,7 +325,9 @@ fn round_mm(v: f64) -> f64 {
 
 /// The grid cut to the bounding box of its known cells (a SLAM map is mostly the unknown
 /// space round the building); `None` when no cell is known.
-fn known_part(g: &futago_msgs::grid::OccupancyGrid) -> Option<futago_msgs::grid::OccupancyGrid> {
+pub(crate) fn known_part(
+    g: &futago_msgs::grid::OccupancyGrid,
+) -> Option<futago_msgs::grid::OccupancyGrid> {
     let (mut i0, mut j0, mut i1, mut j1) = (usize::MAX, usize::MAX, 0, 0);
     for j in 0..g.height {
         for i in 0..g.width {

@@ -132,9 +132,133 @@ fn calibrate_refuses_a_bad_span_and_an_unknown_laser_before_writing() {
             out.to_str().unwrap(),
         ];
         a.extend(args);
-        let o = futago(&a);
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(!o.status.success() && err.contains(says), "{a:?}: {err}");
-        assert!(!out.exists(), "{a:?} wrote {}", out.display());
+        refused(&a, says, &out);
+    }
+}
+
+/// Asserts that `futago ARGS` fails, says `says`, and writes nothing at `out`.
+fn refused(args: &[&str], says: &str, out: &std::path::Path) {
+    let o = futago(args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains(says), "{args:?}: {err}");
+    assert!(!out.exists(), "{args:?} wrote {}", out.display());
+}
+
+#[test]
+fn a_twin_of_a_simulated_robot_replays_its_drive_and_predicts_its_slam_and_ranges() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let cal = dir.path().join("cal");
+    let twin = dir.path().join("twin");
+    ok(&futago(&[
+        "run",
+        "scenarios/office-tour.toml",
+        "--duration",
+        "90",
+        "--out",
+        run.to_str().unwrap(),
+        "-q",
+        "--set",
+        &format!("robot.odometry.wheel_base_ratio={WHEEL_BASE_RATIO}"),
+        "--set",
+        "robot.odometry.noise=0.01",
+        "--set",
+        // A CARMEN log carries no beam timing, so the twin casts each scan at one instant:
+        // the robot's laser does the same here, to be of the profile's own kind.
+        "lidar=[{name=\"front\", preset=\"seed000\", xyz=[0.08, 0.0, 0.2], rate=10.0, beams=241, sweep=false}]",
+    ]));
+    let log = run.join("scans.clf");
+    ok(&futago(&[
+        "calibrate",
+        log.to_str().unwrap(),
+        "--span",
+        "0:0.5",
+        "--out",
+        cal.to_str().unwrap(),
+    ]));
+    let o = futago(&[
+        "twin",
+        log.to_str().unwrap(),
+        "--profile",
+        cal.join("profile.toml").to_str().unwrap(),
+        "--relations",
+        run.join("groundtruth.relations").to_str().unwrap(),
+        "--seeds",
+        "2",
+        "--out",
+        twin.to_str().unwrap(),
+    ]);
+    ok(&o);
+    let s = summary(&twin);
+    // Both are scored on the same stamp pairs of the second half.
+    let scored = s["real"]["relations"].as_u64().unwrap();
+    assert!(scored > 10, "{scored}");
+    for t in s["twins"].as_array().unwrap() {
+        assert_eq!(t["relations"].as_u64(), Some(scored));
+    }
+    // The twin's log is a CARMEN log of the real one's scans, which futago reads back.
+    let back = futago(&[
+        "replay",
+        twin.join("twin.clf").to_str().unwrap(),
+        "--out",
+        dir.path().join("back").to_str().unwrap(),
+    ]);
+    ok(&back);
+    let real_scans = summary(&dir.path().join("cal"))["profile"]["source"]["scans"]
+        .as_u64()
+        .unwrap();
+    let twin_scans = summary(&dir.path().join("back"))["scans"].as_u64().unwrap();
+    assert!(
+        twin_scans >= 2 * real_scans - 2,
+        "{twin_scans} scans against {real_scans} in the first half"
+    );
+    // The gates on the SLAM's relations error (a factor of 1.5) and the median range
+    // residual (25 %), on a robot whose laser is of the profile's own kind. (Raw odometry's
+    // error and the 95th percentile of the residuals are reported beside them; see the
+    // README for how far they are.)
+    let ratio = |figure: &str| {
+        let row = s["compared"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["figure"] == figure)
+            .unwrap()
+            .clone();
+        (row["ratio_median"].as_f64().unwrap(), row)
+    };
+    let (slam, row) = ratio("slam_relations_m");
+    assert!((1.0 / 1.5..=1.5).contains(&slam), "{row}");
+    let (residual, row) = ratio("residual_median_m");
+    assert!((0.75..=1.25).contains(&residual), "{row}");
+}
+
+#[test]
+fn twin_refuses_a_profile_it_cannot_read_and_zero_seeds() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = write(dir.path(), "bad.toml", "[source]\nlog = 1\n");
+    let rel = write(dir.path(), "r.relations", "0 1 0 0 0 0 0 0\n");
+    let log = write(dir.path(), "x.clf", "");
+    let out = dir.path().join("twin");
+    for (args, says) in [
+        (vec!["--profile", bad.to_str().unwrap()], "bad.toml"),
+        (
+            vec!["--profile", bad.to_str().unwrap(), "--seeds", "0"],
+            "--seeds",
+        ),
+        (
+            vec!["--profile", bad.to_str().unwrap(), "--score-span", "1:0"],
+            "--score-span",
+        ),
+    ] {
+        let mut a = vec![
+            "twin",
+            log.to_str().unwrap(),
+            "--relations",
+            rel.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        a.extend(args);
+        refused(&a, says, &out);
     }
 }

@@ -24,6 +24,7 @@ const LAYERS: &[(&str, &[&str])] = &[
             "suite",
             "folds",
             "calibrate",
+            "twin",
             "tune",
             "bench",
             "fuzz",

@@ -20,6 +20,9 @@
 
 use serde::{Deserialize, Serialize};
 
+/// A reading this far (m) beyond the surface the map predicts is a long reading.
+pub const LONG_READING_M: f64 = 1.0;
+
 /// A quantity estimated from data: its value, its standard error (0 where it was set, not
 /// estimated) and how many samples it rests on.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -100,6 +103,9 @@ pub struct LaserProfile {
     pub short_lambda: Estimate,
     /// Of the same, the share that are random readings (uniform over the range).
     pub random_rate: Estimate,
+    /// Of the same, the share that read more than `LONG_READING_M` beyond the surface: the
+    /// long tail (see-through, crosstalk), which sets the residuals' upper percentiles.
+    pub long_readings: Estimate,
     /// Of the beams that should hit a mapped surface, the share with no return, overall.
     pub no_return: Estimate,
     /// The same by expected range, m.
@@ -140,9 +146,15 @@ pub struct OdometryProfile {
     /// Share of stretches the model misses by more than five of its deviations (a stall, a
     /// slip, a bump): the heavy tail.
     pub outlier_rate: Estimate,
-    /// The stretches the estimates rest on: their count and mean length (m).
+    /// The outliers' root-mean-square error beyond the random walk: in position (m) and in
+    /// heading (rad).
+    pub outlier_translation: Estimate,
+    pub outlier_heading: Estimate,
+    /// The stretches the estimates rest on: their count, mean length (m) and mean turn
+    /// (rad): the outlier rate is per such stretch.
     pub stretches: usize,
     pub stretch_length_m: f64,
+    pub stretch_turn_rad: f64,
     /// The delay of the odometry's stamps behind the laser's, s: the shift that best lines
     /// up the odometry's turns with the scan matcher's (positive: odometry stamped late).
     pub latency: Estimate,

@@ -9,8 +9,11 @@
 //! - [`sway`]: the wobble of a sensor's carrier (a pushed wagon, a hand-held camera);
 //! - [`people`]: pedestrians on two legs, moved by a social-force model;
 //! - [`kinect`]: the Kinect v1 RGB-D camera model and its depth noise;
-//! - [`lidar`]: ray-cast laser range finders;
+//! - [`lidar`]: ray-cast laser range finders, and [`beam`]: their readings' errors beyond the
+//!   hit's noise (short, random and lost readings, mixed pixels);
 //! - [`noise`]: seeded random streams per noise source;
+//! - [`twin`]: a real log's drive replayed: its laser cast along a given path, its odometry made
+//!   from the path with a robot profile's errors;
 //! - [`render`]: the wgpu camera renderer (the `futago-render` crate, re-exported);
 //! - [`config`]: TOML loading with errors that name file, key and expectation.
 //!
@@ -18,6 +21,7 @@
 //! produces sensor messages.
 
 pub mod agent;
+pub mod beam;
 pub mod config;
 pub mod create;
 pub mod joint;
@@ -28,6 +32,7 @@ pub mod people;
 pub mod rig;
 pub mod sim;
 pub mod sway;
+pub mod twin;
 pub mod world;
 
 /// The camera renderer, its own crate ([`futago_render`]) so that the robot stack can draw

@@ -7,6 +7,7 @@
 //! a beam returns nothing beyond `range_max`, below `range_min` (reported −∞), or with
 //! probability `dropout`.
 
+use crate::beam::{BeamErrors, Reading};
 use crate::config::{SpecError, check_mount, check_name, check_range, mount_pose};
 use futago_msgs::{LaserScan, Time};
 use glam::Vec3;
@@ -183,6 +184,10 @@ pub struct LidarConfig {
     /// `rpy_deg` are then its mount at the joint's zero angle.
     #[serde(default)]
     pub joint: Option<String>,
+    /// Short, random and lost readings and mixed pixels (see [`crate::beam`]); none by
+    /// default.
+    #[serde(default)]
+    pub errors: BeamErrors,
 }
 
 fn default_name() -> String {
@@ -221,6 +226,7 @@ impl LidarConfig {
             dropout: 0.0,
             sweep: true,
             joint: None,
+            errors: BeamErrors::default(),
         }
     }
 
@@ -287,6 +293,7 @@ impl LidarConfig {
         )?;
         check_mount(file, key, self.xyz, self.rpy_deg)?;
         check_name(file, &k("name"), &self.name)?;
+        self.errors.validate(file, &k("errors"))?;
         Ok(s)
     }
 
@@ -303,6 +310,7 @@ pub struct Lidar {
     pub spec: LidarSpec,
     pub mount: Pose,
     dropout: f64,
+    errors: BeamErrors,
     sweep: bool,
     rng: ChaCha8Rng,
     /// Index of the next scan to start.
@@ -310,6 +318,9 @@ pub struct Lidar {
     scan: Option<LaserScan>,
     /// What each beam of the scan in progress hit.
     hits: Vec<BeamHit>,
+    /// The true range of each beam's surface in the scan in progress, kept for mixed pixels
+    /// only.
+    surfaces: Vec<Option<f64>>,
     /// Unit beam directions in the laser frame.
     directions: Vec<Vec3>,
 }
@@ -327,11 +338,13 @@ impl Lidar {
             name: config.name.clone(),
             mount: config.mount(),
             dropout: config.dropout,
+            errors: config.errors.clone(),
             sweep: config.sweep,
             rng,
             next_scan: 0,
             scan: None,
             hits: Vec::new(),
+            surfaces: Vec::new(),
             directions,
             spec,
         }
@@ -394,29 +407,52 @@ impl Lidar {
                 Some((_, w)) if !drop => w,
                 _ => BeamHit::Nothing,
             };
-            let r = match hit.map(|h| h.0) {
-                _ if drop => f32::INFINITY,
-                None => f32::INFINITY,
-                Some(d) => {
-                    let d = d as f64;
-                    let noisy = d + n * self.spec.sigma.max(self.spec.sigma_rel * d);
-                    if noisy > self.spec.range_max {
+            let surface = hit.map(|h| h.0 as f64);
+            if self.errors.mixed_pixels > 0.0 {
+                self.surfaces.push(surface);
+            }
+            let reading = if drop {
+                Reading::Lost
+            } else {
+                let noisy = surface
+                    .map(|d| d + n * self.errors.sigma(self.spec.sigma, self.spec.sigma_rel, d));
+                if self.errors.is_off() {
+                    Reading::Surface(noisy)
+                } else {
+                    self.errors.apply(
+                        surface,
+                        noisy,
+                        self.spec.range_min,
+                        self.spec.range_max,
+                        &mut self.rng,
+                    )
+                }
+            };
+            let r = match reading {
+                Reading::Lost | Reading::Surface(None) => f32::INFINITY,
+                Reading::Surface(Some(v)) | Reading::Phantom(v) => {
+                    if v > self.spec.range_max {
                         f32::INFINITY
-                    } else if noisy < self.spec.range_min {
+                    } else if v < self.spec.range_min {
                         f32::NEG_INFINITY
                     } else {
-                        noisy as f32
+                        v as f32
                     }
                 }
             };
             scan.ranges.push(r);
-            self.hits.push(if r.is_finite() {
+            // A phantom reading (short or random) hit nothing the world holds.
+            let phantom = matches!(reading, Reading::Phantom(_));
+            self.hits.push(if r.is_finite() && !phantom {
                 what
             } else {
                 BeamHit::Nothing
             });
         }
         if scan.ranges.len() == self.spec.beams {
+            let surfaces = std::mem::take(&mut self.surfaces);
+            self.errors
+                .mix_edges(&surfaces, &mut scan.ranges, &mut self.rng);
             let hits = std::mem::replace(&mut self.hits, Vec::with_capacity(self.spec.beams));
             self.scan.take().map(|s| (s, hits))
         } else {
@@ -500,5 +536,46 @@ mod tests {
         assert_eq!(scan.stamp, Time::ZERO);
         // The next scan starts at 0.1 s.
         assert!(l.update(Time::from_secs(0.095), &pose, cast).is_none());
+    }
+
+    #[test]
+    fn beam_errors_reach_the_scans_and_their_truth() {
+        // Every beam's surface lies at 1 m, in a bin where nothing returns, but for mixed
+        // pixels and phantoms, which are off: every reading is lost and hit nothing.
+        let mut cfg = LidarConfig::preset(LidarPreset::Urg04lx);
+        cfg.sweep = false;
+        cfg.errors.no_return_by_range = vec![crate::beam::RangeProbability {
+            lo: 0.5,
+            hi: 2.0,
+            p: 1.0,
+        }];
+        let spec = cfg.resolve(Path::new("x"), "l").unwrap();
+        let mut l = Lidar::new(&cfg, spec, stream(0, "x"));
+        let (scan, hits) = l
+            .update(Time::ZERO, &Pose::IDENTITY, |_, _, _| {
+                Some((1.0, BeamHit::Static))
+            })
+            .expect("an instant scan");
+        assert!(scan.ranges.iter().all(|r| *r == f32::INFINITY));
+        assert!(hits.iter().all(|h| *h == BeamHit::Nothing));
+        // Random readings alone: finite, anywhere in range, and hitting nothing the world
+        // holds.
+        cfg.errors.no_return_by_range.clear();
+        cfg.errors.random_rate = 1.0;
+        let spec = cfg.resolve(Path::new("x"), "l").unwrap();
+        let mut l = Lidar::new(&cfg, spec.clone(), stream(0, "x"));
+        let (scan, hits) = l
+            .update(Time::ZERO, &Pose::IDENTITY, |_, _, _| {
+                Some((1.0, BeamHit::Static))
+            })
+            .expect("an instant scan");
+        assert!(scan.ranges.iter().all(|r| r.is_finite()));
+        let far = scan.ranges.iter().filter(|r| **r > 1.5).count();
+        assert!(
+            far > scan.ranges.len() / 2,
+            "{far} of {}",
+            scan.ranges.len()
+        );
+        assert!(hits.iter().all(|h| *h == BeamHit::Nothing));
     }
 }

@@ -437,36 +437,21 @@ fn bins_of(edges: &[f64], counts: &[(usize, usize)], scale: f64) -> Vec<Bin> {
         .collect()
 }
 
-/// The error model's half of a laser profile from a tally (the layout and timing are the
-/// caller's); `None` without readings where the map predicts a surface.
-pub struct ErrorModel {
-    pub sigma: Estimate,
-    pub sigma_rel: Estimate,
-    pub bias: Estimate,
-    pub short_rate: Estimate,
-    pub short_lambda: Estimate,
-    pub random_rate: Estimate,
-    pub no_return: Estimate,
-    pub no_return_by_range: Vec<Bin>,
-    pub no_return_by_incidence: Vec<Bin>,
-    pub mixed_pixels: Estimate,
-    pub unmapped_returns: Estimate,
-    pub spread_by_range: Vec<Bin>,
-}
-
-/// Fits the mixture to a tally.
-pub fn error_model(t: &Tally, range_max: f64) -> Option<ErrorModel> {
+/// The laser profile of a tally: the mixture fitted to it over `layout` (a profile whose
+/// layout and timing are set); `None` with fewer than 100 readings where the map predicts a
+/// surface.
+pub fn error_model(t: &Tally, layout: LaserProfile) -> Option<LaserProfile> {
     if t.readings.len() < 100 {
         return None;
     }
-    let m = fit_mixture(&t.readings, range_max);
+    let m = fit_mixture(&t.readings, layout.range_max);
     let n = t.readings.len();
     let share = |w: f64| Estimate::new(w, (w * (1.0 - w) / n as f64).sqrt(), n);
     let hits = (m.weights[0] * n as f64).max(1.0);
     let shorts = m.weights[1] * n as f64;
     let hit_sd: f64 = m.spread.iter().map(|s| s.0).fold(0.0, f64::max);
     let ([sigma, sigma_rel], spread_by_range) = fit_spread(&m);
-    Some(ErrorModel {
+    Some(LaserProfile {
         sigma,
         sigma_rel,
         bias: Estimate::new(m.bias, hit_sd / hits.sqrt(), hits as usize),
@@ -477,6 +462,13 @@ pub fn error_model(t: &Tally, range_max: f64) -> Option<ErrorModel> {
             shorts as usize,
         ),
         random_rate: share(m.weights[2]),
+        long_readings: Estimate::proportion(
+            t.readings
+                .iter()
+                .filter(|r| r.measured - r.expected > futago_msgs::profile::LONG_READING_M)
+                .count(),
+            n,
+        ),
         no_return: Estimate::proportion(t.no_return.0, t.no_return.1),
         no_return_by_range: bins_of(&RANGE_EDGES, &t.by_range, 1.0),
         no_return_by_incidence: bins_of(
@@ -487,50 +479,8 @@ pub fn error_model(t: &Tally, range_max: f64) -> Option<ErrorModel> {
         mixed_pixels: Estimate::proportion(t.edges.0, t.edges.1),
         unmapped_returns: Estimate::proportion(t.unmapped.0, t.unmapped.1),
         spread_by_range,
+        ..layout
     })
-}
-
-impl ErrorModel {
-    /// The laser profile: this error model with the layout and timing given.
-    pub fn into_profile(self, layout: LaserProfileLayout) -> LaserProfile {
-        LaserProfile {
-            name: layout.name,
-            beams: layout.beams,
-            angle_min: layout.angle_min,
-            angle_increment: layout.angle_increment,
-            range_min: layout.range_min,
-            range_max: layout.range_max,
-            rate: layout.rate,
-            period_spread_s: layout.period_spread_s,
-            time_increment: layout.time_increment,
-            sigma: self.sigma,
-            sigma_rel: self.sigma_rel,
-            bias: self.bias,
-            short_rate: self.short_rate,
-            short_lambda: self.short_lambda,
-            random_rate: self.random_rate,
-            no_return: self.no_return,
-            no_return_by_range: self.no_return_by_range,
-            no_return_by_incidence: self.no_return_by_incidence,
-            mixed_pixels: self.mixed_pixels,
-            unmapped_returns: self.unmapped_returns,
-            spread_by_range: self.spread_by_range,
-        }
-    }
-}
-
-/// A laser's layout and timing as read from a log.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LaserProfileLayout {
-    pub name: String,
-    pub beams: usize,
-    pub angle_min: f64,
-    pub angle_increment: f64,
-    pub range_min: f64,
-    pub range_max: f64,
-    pub rate: f64,
-    pub period_spread_s: f64,
-    pub time_increment: f64,
 }
 
 #[cfg(test)]

@@ -14,8 +14,8 @@ pub mod odometry;
 use crate::replay::{read_log_with, slam_over, write_tum};
 use crate::run::write_atomically;
 use anyhow::{Context, Result, bail};
-use futago_msgs::profile::{RobotProfile, Source};
-use futago_msgs::{Time, carmen};
+use futago_msgs::profile::{Estimate, LaserProfile, OdometryProfile, RobotProfile, Source};
+use futago_msgs::{Pose2, Time, carmen};
 use futago_robot::mapping::occupancy::{OccupancyConfig, OccupancyMap};
 use futago_robot::mapping::slam::SlamConfig;
 use serde_json::{Value, json};
@@ -68,7 +68,11 @@ pub fn default_out(log: &Path) -> PathBuf {
 }
 
 /// The scans of laser `name` (or of the laser with the most scans) within `span`.
-fn chosen_scans(log: &carmen::Log, path: &Path, o: &CalibrateOptions) -> Result<carmen::Log> {
+pub(crate) fn chosen_scans(
+    log: &carmen::Log,
+    path: &Path,
+    o: &CalibrateOptions,
+) -> Result<carmen::Log> {
     let mut frames: std::collections::BTreeMap<&str, usize> = Default::default();
     for s in &log.scans {
         *frames.entry(s.scan.frame.as_str()).or_default() += 1;
@@ -95,37 +99,34 @@ fn chosen_scans(log: &carmen::Log, path: &Path, o: &CalibrateOptions) -> Result<
     let duration = (last - first).secs();
     let at = |f: f64| Time(first.0 + Time::from_secs(f * duration).0);
     let (from, to) = (at(o.span[0]), at(o.span[1]));
-    let scans: Vec<carmen::LogScan> = log
-        .scans
-        .iter()
-        .filter(|s| s.scan.frame == name && s.scan.stamp >= from && s.scan.stamp <= to)
-        .cloned()
-        .collect();
-    if scans.len() < MIN_SCANS {
+    let one = carmen::Log {
+        scans: log
+            .scans
+            .iter()
+            .filter(|s| s.scan.frame == name)
+            .cloned()
+            .collect(),
+        odometry: log.odometry.clone(),
+        odometry_absent: log.odometry_absent,
+        ..Default::default()
+    };
+    let chosen = within(&one, from, to);
+    if chosen.scans.len() < MIN_SCANS {
         bail!(
             "{}: {} scans of laser `{name}` within the span {}–{} s; a profile needs {MIN_SCANS} at least",
             path.display(),
-            scans.len(),
+            chosen.scans.len(),
             (from - first).secs(),
             (to - first).secs()
         );
     }
-    Ok(carmen::Log {
-        scans,
-        odometry: log
-            .odometry
-            .iter()
-            .filter(|(t, _)| *t >= from && *t <= to)
-            .copied()
-            .collect(),
-        odometry_absent: log.odometry_absent,
-        ..Default::default()
-    })
+    Ok(chosen)
 }
 
 /// The laser's layout and timing as its scans show them: the most common beam count and the
-/// first such scan's angles and limits; the rate from the median interval between scans.
-fn layout(log: &carmen::Log) -> laser::LaserProfileLayout {
+/// first such scan's angles and limits; the rate from the median interval between scans. The
+/// error model's estimates are left at none (0 of 0).
+fn layout(log: &carmen::Log) -> LaserProfile {
     let mut counts: std::collections::BTreeMap<usize, usize> = Default::default();
     for s in &log.scans {
         *counts.entry(s.scan.ranges.len()).or_default() += 1;
@@ -150,7 +151,8 @@ fn layout(log: &carmen::Log) -> laser::LaserProfileLayout {
     let mut deviations: Vec<f64> = intervals.iter().map(|v| (v - median).abs()).collect();
     deviations.sort_by(f64::total_cmp);
     let mad = deviations.get(deviations.len() / 2).copied().unwrap_or(0.0);
-    laser::LaserProfileLayout {
+    let none = Estimate::new(0.0, 0.0, 0);
+    LaserProfile {
         name: first.frame.clone(),
         beams,
         angle_min: first.angle_min,
@@ -160,6 +162,126 @@ fn layout(log: &carmen::Log) -> laser::LaserProfileLayout {
         rate: if median > 0.0 { 1.0 / median } else { 0.0 },
         period_spread_s: 1.4826 * mad,
         time_increment: first.time_increment,
+        sigma: none,
+        sigma_rel: none,
+        bias: none,
+        short_rate: none,
+        short_lambda: none,
+        random_rate: none,
+        long_readings: none,
+        no_return: none,
+        no_return_by_range: Vec::new(),
+        no_return_by_incidence: Vec::new(),
+        mixed_pixels: none,
+        unmapped_returns: none,
+        spread_by_range: Vec::new(),
+    }
+}
+
+/// What the calibration measures on a log of one laser.
+pub struct Measured {
+    /// The SLAM's pose at every scan, in scan order.
+    pub path: Vec<(Time, Pose2)>,
+    /// The occupancy grid of the scans at those poses, and its cell side (m).
+    pub map: OccupancyMap,
+    pub resolution: f64,
+    /// Every `stride`th scan's beams against the map.
+    pub tally: laser::Tally,
+    pub stride: usize,
+    pub laser: LaserProfile,
+    pub odometry: Option<OdometryProfile>,
+    pub keyframes: usize,
+    pub loop_closures: usize,
+}
+
+/// Runs the SLAM over `log` (scans of one laser) and measures its laser and odometry against
+/// the result (see the module documentation); an error says what was too little.
+pub fn measure(log: &carmen::Log, config: SlamConfig) -> Result<Measured, String> {
+    let slam = slam_over(log, config);
+    let path = slam.trajectory();
+    // The map the beams are judged against: every scan at its SLAM pose.
+    let range_max = log.scans[0].scan.range_max;
+    let grid_config = OccupancyConfig {
+        max_range: range_max.max(0.1),
+        ..OccupancyConfig::default()
+    };
+    let mut map = OccupancyMap::new(grid_config);
+    for (s, (_, p)) in log.scans.iter().zip(&path) {
+        map.insert(&p.compose(&s.mount), &s.scan);
+    }
+    let beams: usize = log.scans.iter().map(|s| s.scan.ranges.len()).sum();
+    let stride = beams.div_ceil(MAX_BEAMS).max(1);
+    let mut tally = laser::Tally::new();
+    for (s, (_, p)) in log.scans.iter().zip(&path).step_by(stride) {
+        tally.add(&map, grid_config.resolution, &p.compose(&s.mount), &s.scan);
+    }
+    let Some(laser) = laser::error_model(&tally, layout(log)) else {
+        return Err(format!(
+            "too few beams ({}) fall where the map holds a surface to estimate the laser's errors",
+            tally.readings.len()
+        ));
+    };
+    let odometry = if log.odometry_absent {
+        None
+    } else {
+        let samples: Vec<odometry::Sample> = log
+            .scans
+            .iter()
+            .zip(&path)
+            .map(|(s, (_, p))| odometry::Sample {
+                stamp: s.scan.stamp,
+                odometry: s.odometry,
+                reference: *p,
+            })
+            .collect();
+        odometry::calibrate(&samples, &log.odometry)
+    };
+    Ok(Measured {
+        path,
+        map,
+        resolution: grid_config.resolution,
+        tally,
+        stride,
+        laser,
+        odometry,
+        keyframes: slam.keyframes(),
+        loop_closures: slam.loop_closures(),
+    })
+}
+
+/// The beams of the scans of `log` stamped within `[from, to]` against the map of `m` (a
+/// measurement of the same log) at its poses, every `m.stride`th scan.
+pub fn tally_within(log: &carmen::Log, m: &Measured, from: Time, to: Time) -> laser::Tally {
+    let mut tally = laser::Tally::new();
+    for (s, (_, p)) in log
+        .scans
+        .iter()
+        .zip(&m.path)
+        .filter(|(s, _)| s.scan.stamp >= from && s.scan.stamp <= to)
+        .step_by(m.stride)
+    {
+        tally.add(&m.map, m.resolution, &p.compose(&s.mount), &s.scan);
+    }
+    tally
+}
+
+/// The scans of `log` stamped within `[from, to]` (with the odometry records there).
+pub fn within(log: &carmen::Log, from: Time, to: Time) -> carmen::Log {
+    carmen::Log {
+        scans: log
+            .scans
+            .iter()
+            .filter(|s| s.scan.stamp >= from && s.scan.stamp <= to)
+            .cloned()
+            .collect(),
+        odometry: log
+            .odometry
+            .iter()
+            .filter(|(t, _)| *t >= from && *t <= to)
+            .copied()
+            .collect(),
+        odometry_absent: log.odometry_absent,
+        ..Default::default()
     }
 }
 
@@ -179,48 +301,17 @@ pub fn calibrate(
     }
     let started = Instant::now();
     let log = chosen_scans(&full, log_path, o)?;
-    let slam = slam_over(&log, config);
-    let path = slam.trajectory();
-    // The map the beams are judged against: every scan of the stretch at its SLAM pose.
-    let range_max = log.scans[0].scan.range_max;
-    let grid_config = OccupancyConfig {
-        max_range: range_max.max(0.1),
-        ..OccupancyConfig::default()
-    };
-    let mut map = OccupancyMap::new(grid_config);
-    for (s, (_, p)) in log.scans.iter().zip(&path) {
-        map.insert(&p.compose(&s.mount), &s.scan);
-    }
-    let beams: usize = log.scans.iter().map(|s| s.scan.ranges.len()).sum();
-    let stride = beams.div_ceil(MAX_BEAMS).max(1);
-    let mut tally = laser::Tally::new();
-    for (s, (_, p)) in log.scans.iter().zip(&path).step_by(stride) {
-        tally.add(&map, grid_config.resolution, &p.compose(&s.mount), &s.scan);
-    }
-    let shape = layout(&log);
-    let Some(model) = laser::error_model(&tally, shape.range_max) else {
-        bail!(
-            "{}: too few beams ({}) fall where the map of the stretch holds a surface to estimate the laser's errors",
-            log_path.display(),
-            tally.readings.len()
-        );
-    };
-    let laser = model.into_profile(shape);
-    let odometry = if log.odometry_absent {
-        None
-    } else {
-        let samples: Vec<odometry::Sample> = log
-            .scans
-            .iter()
-            .zip(&path)
-            .map(|(s, (_, p))| odometry::Sample {
-                stamp: s.scan.stamp,
-                odometry: s.odometry,
-                reference: *p,
-            })
-            .collect();
-        odometry::calibrate(&samples, &log.odometry)
-    };
+    let Measured {
+        path,
+        map,
+        tally,
+        laser,
+        odometry,
+        stride,
+        resolution,
+        keyframes,
+        loop_closures,
+    } = measure(&log, config).map_err(|e| anyhow::anyhow!("{}: {e}", log_path.display()))?;
     let first = full.scans[0].scan.stamp;
     let profile = RobotProfile {
         source: Source {
@@ -233,7 +324,7 @@ pub fn calibrate(
                 env!("CARGO_PKG_VERSION"),
                 config.method,
                 stride,
-                grid_config.resolution,
+                resolution,
                 odometry::STRETCH_M,
                 odometry::STRETCH_RAD
             ),
@@ -265,8 +356,8 @@ pub fn calibrate(
             "profile": profile,
             "beams_compared": tally.no_return.1,
             "scan_stride": stride,
-            "keyframes": slam.keyframes(),
-            "loop_closures": slam.loop_closures(),
+            "keyframes": keyframes,
+            "loop_closures": loop_closures,
             "performance": { "wall_time_s": wall },
         });
         std::fs::write(

@@ -15,9 +15,16 @@ use futago_msgs::profile::{Estimate, OdometryProfile};
 use futago_msgs::{Outside, Pose2, Time, pose_at, wrap_angle};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
-/// A stretch ends when the reported path reaches this length (m) or its turns this sum (rad).
+/// A stretch ends when the reported path reaches this length (m) or its turns this sum (rad),
+/// times one of [`SCALES`].
 pub const STRETCH_M: f64 = 1.0;
 pub const STRETCH_RAD: f64 = 0.5;
+
+/// The stretches are cut at these multiples of [`STRETCH_M`] and [`STRETCH_RAD`], so that
+/// their lengths differ: with one length only, a variance that grows with the distance could
+/// not be told from the reference's own, which is the same for every stretch. Each scan
+/// serves once per scale, so standard errors are widened by √(number of scales).
+pub const SCALES: [f64; 4] = [0.5, 1.0, 2.0, 4.0];
 
 /// A stretch is dropped where two scans are further apart in time than this many median
 /// intervals: a gap in the log, over which nothing is known.
@@ -52,6 +59,8 @@ struct Stretch {
     reference: Pose2,
     length: f64,
     turn: f64,
+    /// The sum of the steps' turns' magnitudes, rad.
+    turned: f64,
 }
 
 /// The systematic parameters: translation scale, rotation scale, heading bias (rad/m).
@@ -69,8 +78,9 @@ fn predict(steps: &[Pose2], p: &Params) -> Pose2 {
     })
 }
 
-/// Stretches of the samples (see [`STRETCH_M`]); a stretch across a gap is dropped.
-fn stretches(samples: &[Sample]) -> Vec<Stretch> {
+/// Stretches of the samples at `scale` (see [`STRETCH_M`]); a stretch across a gap is
+/// dropped.
+fn stretches(samples: &[Sample], scale: f64) -> Vec<Stretch> {
     let mut intervals: Vec<f64> = samples
         .windows(2)
         .map(|w| (w[1].stamp - w[0].stamp).secs())
@@ -98,12 +108,13 @@ fn stretches(samples: &[Sample]) -> Vec<Stretch> {
         turn += s.theta;
         turned += s.theta.abs();
         steps.push(s);
-        if length >= STRETCH_M || turned >= STRETCH_RAD {
+        if length >= scale * STRETCH_M || turned >= scale * STRETCH_RAD {
             out.push(Stretch {
                 steps: std::mem::take(&mut steps),
                 reference: samples[start].reference.between(&b.reference),
                 length,
                 turn,
+                turned,
             });
             start = k;
             (length, turn, turned) = (0.0, 0.0, 0.0);
@@ -158,10 +169,11 @@ fn fit_systematic(
         let mut g = Vector3::<f64>::zeros();
         for (s, _) in all.iter().zip(inlier).filter(|(_, i)| **i) {
             let (vt, vh) = noise.variances(s);
-            // Both translation components share the along-path variance (the across part of
-            // a stretch's error comes from its heading, whose variance is of the same order
-            // over a metre).
-            let w = [1.0 / vt, 1.0 / vt, 1.0 / vh];
+            // Across the path, the heading's random walk adds up: a heading error growing
+            // linearly in variance along a path of length L moves its end sideways by a
+            // variance of L²·vh/3.
+            let vc = vt + s.length * s.length * vh / 3.0;
+            let w = [1.0 / vt, 1.0 / vc, 1.0 / vh];
             let r0 = residual(s, &p);
             let mut jac = [[0.0; 3]; 3];
             for (k, col) in [1e-6, 1e-6, 1e-7].into_iter().enumerate() {
@@ -260,7 +272,7 @@ fn fit_noise(all: &[Stretch], inlier: &[bool], p: &Params) -> (Noise, Noise) {
 /// `odometry` is the log's timed odometry records, for the latency (none: not estimated).
 /// `None` when the samples hold fewer than [`MIN_STRETCHES`] stretches.
 pub fn calibrate(samples: &[Sample], odometry: &[(Time, Pose2)]) -> Option<OdometryProfile> {
-    let all = stretches(samples);
+    let all: Vec<Stretch> = SCALES.iter().flat_map(|&k| stretches(samples, k)).collect();
     if all.len() < MIN_STRETCHES {
         return None;
     }
@@ -314,22 +326,48 @@ pub fn calibrate(samples: &[Sample], odometry: &[(Time, Pose2)]) -> Option<Odome
         .map(|(s, _)| {
             let r = residual(s, &p);
             let (vt, vh) = noise.variances(s);
-            (r[0] * r[0] + r[1] * r[1]) / vt + r[2] * r[2] / vh
+            let vc = vt + s.length * s.length * vh / 3.0;
+            r[0] * r[0] / vt + r[1] * r[1] / vc + r[2] * r[2] / vh
         })
         .sum();
     let scale = (chi2 / (3.0 * used as f64 - 3.0).max(1.0)).max(1.0);
-    let se = |k: usize| (cov[(k, k)] * scale).max(0.0).sqrt();
+    let reuse = (SCALES.len() as f64).sqrt();
+    let se = |k: usize| (cov[(k, k)] * scale).max(0.0).sqrt() * reuse;
     let latency = latency(samples, odometry, p[1]);
+    // The outliers' own spread (root mean square of their residuals beyond the random walk's
+    // share): what a stall or a slip does, for a simulator to draw from.
+    let (mut sum_t, mut sum_h) = (0.0, 0.0);
+    for (s, _) in all.iter().zip(&inlier).filter(|(_, i)| !**i) {
+        let r = residual(s, &p);
+        let (vt, vh) = noise.variances(s);
+        sum_t += (r[0] * r[0] + r[1] * r[1] - vt).max(0.0);
+        sum_h += (r[2] * r[2] - vh).max(0.0);
+    }
+    let spread_of = |sum: f64| {
+        if outliers == 0 {
+            Estimate::new(0.0, 0.0, 0)
+        } else {
+            let v = (sum / outliers as f64).sqrt();
+            Estimate::new(v, v / (2.0 * outliers as f64).sqrt(), outliers)
+        }
+    };
     Some(OdometryProfile {
         translation_scale: Estimate::new(p[0], se(0), used),
         rotation_scale: Estimate::new(p[1], se(1), used),
         heading_bias: Estimate::new(p[2], se(2), used),
-        translation_variance: Estimate::new(noise.translation[0], spread.translation[0], used),
-        heading_variance_per_rad: Estimate::new(noise.heading[0], spread.heading[0], used),
-        heading_variance_per_m: Estimate::new(noise.heading[1], spread.heading[1], used),
+        translation_variance: Estimate::new(
+            noise.translation[0],
+            spread.translation[0] * reuse,
+            used,
+        ),
+        heading_variance_per_rad: Estimate::new(noise.heading[0], spread.heading[0] * reuse, used),
+        heading_variance_per_m: Estimate::new(noise.heading[1], spread.heading[1] * reuse, used),
         outlier_rate: Estimate::proportion(outliers, n),
+        outlier_translation: spread_of(sum_t),
+        outlier_heading: spread_of(sum_h),
         stretches: n,
         stretch_length_m: all.iter().map(|s| s.length).sum::<f64>() / n as f64,
+        stretch_turn_rad: all.iter().map(|s| s.turned).sum::<f64>() / n as f64,
         latency,
     })
 }
