@@ -366,6 +366,9 @@ pub fn twin(
         bail!("--seeds: expected at least 1, found 0");
     }
     let profile: RobotProfile = futago_sim::config::load_toml(profile_path)?;
+    if let Err((key, expected)) = profile.validate() {
+        bail!("{}: `{key}`: {expected}", profile_path.display());
+    }
     let rels = relations::parse(
         &std::fs::read_to_string(relations_path)
             .with_context(|| format!("reading {}", relations_path.display()))?,

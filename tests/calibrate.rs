@@ -237,10 +237,20 @@ fn twin_refuses_a_profile_it_cannot_read_and_zero_seeds() {
     let dir = tempfile::tempdir().unwrap();
     let bad = write(dir.path(), "bad.toml", "[source]\nlog = 1\n");
     let rel = write(dir.path(), "r.relations", "0 1 0 0 0 0 0 0\n");
+    // A profile (calibrated on a simulated log) that reads but says a share is 1.4.
+    let mut absurd: toml::Value =
+        toml::from_str(&std::fs::read_to_string(root().join("tests/data/profile.toml")).unwrap())
+            .unwrap();
+    absurd["laser"]["short_rate"]["value"] = toml::Value::Float(1.4);
+    let absurd = write(dir.path(), "absurd.toml", toml::to_string(&absurd).unwrap());
     let log = write(dir.path(), "x.clf", "");
     let out = dir.path().join("twin");
     for (args, says) in [
         (vec!["--profile", bad.to_str().unwrap()], "bad.toml"),
+        (
+            vec!["--profile", absurd.to_str().unwrap()],
+            "`laser.short_rate.value`: expected a value in [0, 1], found 1.4",
+        ),
         (
             vec!["--profile", bad.to_str().unwrap(), "--seeds", "0"],
             "--seeds",

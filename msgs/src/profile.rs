@@ -170,3 +170,140 @@ pub struct RobotProfile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub odometry: Option<OdometryProfile>,
 }
+
+impl RobotProfile {
+    /// Checks that every value is one a simulator can use: shares in [0, 1], spreads,
+    /// variances and rates finite and not negative, scales positive, a layout of beams. The
+    /// error names the key and what was expected.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let l = &self.laser;
+        let mut checks: Vec<(String, f64, f64, f64)> = vec![
+            ("laser.sigma.value".into(), l.sigma.value, 0.0, 10.0),
+            ("laser.sigma_rel.value".into(), l.sigma_rel.value, 0.0, 1.0),
+            (
+                "laser.short_rate.value".into(),
+                l.short_rate.value,
+                0.0,
+                1.0,
+            ),
+            (
+                "laser.short_lambda.value".into(),
+                l.short_lambda.value,
+                0.0,
+                1e3,
+            ),
+            (
+                "laser.random_rate.value".into(),
+                l.random_rate.value,
+                0.0,
+                1.0,
+            ),
+            (
+                "laser.long_readings.value".into(),
+                l.long_readings.value,
+                0.0,
+                1.0,
+            ),
+            ("laser.no_return.value".into(), l.no_return.value, 0.0, 1.0),
+            (
+                "laser.mixed_pixels.value".into(),
+                l.mixed_pixels.value,
+                0.0,
+                1.0,
+            ),
+            ("laser.range_max".into(), l.range_max, 1e-3, 1e4),
+            ("laser.range_min".into(), l.range_min, 0.0, l.range_max),
+        ];
+        for (name, bins) in [
+            ("no_return_by_range", &l.no_return_by_range),
+            ("spread_by_range", &l.spread_by_range),
+        ] {
+            for (i, b) in bins.iter().enumerate() {
+                let top = if name == "spread_by_range" { 10.0 } else { 1.0 };
+                checks.push((format!("laser.{name}[{i}].value"), b.value, 0.0, top));
+            }
+        }
+        if let Some(o) = &self.odometry {
+            checks.extend([
+                (
+                    "odometry.translation_scale.value".into(),
+                    o.translation_scale.value,
+                    0.1,
+                    10.0,
+                ),
+                (
+                    "odometry.rotation_scale.value".into(),
+                    o.rotation_scale.value,
+                    0.1,
+                    10.0,
+                ),
+                (
+                    "odometry.heading_bias.value".into(),
+                    o.heading_bias.value,
+                    -10.0,
+                    10.0,
+                ),
+                (
+                    "odometry.translation_variance.value".into(),
+                    o.translation_variance.value,
+                    0.0,
+                    100.0,
+                ),
+                (
+                    "odometry.heading_variance_per_rad.value".into(),
+                    o.heading_variance_per_rad.value,
+                    0.0,
+                    100.0,
+                ),
+                (
+                    "odometry.heading_variance_per_m.value".into(),
+                    o.heading_variance_per_m.value,
+                    0.0,
+                    100.0,
+                ),
+                (
+                    "odometry.outlier_rate.value".into(),
+                    o.outlier_rate.value,
+                    0.0,
+                    1.0,
+                ),
+                (
+                    "odometry.outlier_translation.value".into(),
+                    o.outlier_translation.value,
+                    0.0,
+                    100.0,
+                ),
+                (
+                    "odometry.outlier_heading.value".into(),
+                    o.outlier_heading.value,
+                    0.0,
+                    100.0,
+                ),
+                (
+                    "odometry.stretch_length_m".into(),
+                    o.stretch_length_m,
+                    0.0,
+                    1e4,
+                ),
+                (
+                    "odometry.stretch_turn_rad".into(),
+                    o.stretch_turn_rad,
+                    0.0,
+                    1e4,
+                ),
+            ]);
+        }
+        for (key, v, lo, hi) in checks {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err((key, format!("expected a value in [{lo}, {hi}], found {v}")));
+            }
+        }
+        if l.beams == 0 || !(l.angle_increment.is_finite() && l.angle_increment != 0.0) {
+            return Err((
+                "laser.beams".into(),
+                "expected at least one beam and a finite, non-zero angle_increment".into(),
+            ));
+        }
+        Ok(())
+    }
+}

@@ -320,11 +320,12 @@ pub fn calibrate(
             to_s: (log.scans[log.scans.len() - 1].scan.stamp - first).secs(),
             scans: log.scans.len(),
             procedure: format!(
-                "futago {} calibrate: reference = the stack's laser SLAM ({:?}) over the span; laser = beam model mixture (Thrun et al. 2005, §6.3) fitted by EM to every {}th scan's beams against ranges cast in a {} m occupancy grid of the span's scans; odometry = UMBmark systematic terms and a random walk over stretches of {} m or {} rad",
+                "futago {} calibrate: reference = the stack's laser SLAM ({:?}) over the span; laser = beam model mixture (Thrun et al. 2005, §6.3) fitted by EM to the beams of one scan in {} against ranges cast in a {} m occupancy grid of the span's scans; odometry = UMBmark systematic terms and a random walk over stretches of {:?} × ({} m or {} rad)",
                 env!("CARGO_PKG_VERSION"),
                 config.method,
                 stride,
                 resolution,
+                odometry::SCALES,
                 odometry::STRETCH_M,
                 odometry::STRETCH_RAD
             ),
