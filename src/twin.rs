@@ -204,9 +204,13 @@ fn twin_log(
     real: &carmen::Log,
     truth: &[Pose2],
     sim: &futago_sim::Simulation,
-    mut laser: Option<TwinLaser>,
+    laser: Option<TwinLaser>,
     mut odometry: Option<TwinOdometry>,
 ) -> carmen::Log {
+    // A perfect laser: no spread and no other term.
+    let mut laser = laser.unwrap_or_else(|| {
+        TwinLaser::new(0.0, 0.0, BeamErrors::default(), stream(0, "twin.perfect"))
+    });
     let cast = |x: f64, y: f64, a: f64, max: f64| {
         sim.cast_ray(
             glam::Vec3::new(x as f32, y as f32, LASER_HEIGHT as f32),
@@ -222,11 +226,7 @@ fn twin_log(
         .zip(truth)
         .map(|(s, t)| {
             let pose = t.compose(&s.mount);
-            let scan = match laser.as_mut() {
-                Some(l) => l.scan(&s.scan, &pose, cast),
-                None => TwinLaser::new(0.0, 0.0, BeamErrors::default(), stream(0, "perfect"))
-                    .scan(&s.scan, &pose, cast),
-            };
+            let scan = laser.scan(&s.scan, &pose, cast);
             let reported = match odometry.as_mut() {
                 Some(o) => o.report(t),
                 None => first.between(t),

@@ -99,18 +99,8 @@ pub(crate) fn chosen_scans(
     let duration = (last - first).secs();
     let at = |f: f64| Time(first.0 + Time::from_secs(f * duration).0);
     let (from, to) = (at(o.span[0]), at(o.span[1]));
-    let one = carmen::Log {
-        scans: log
-            .scans
-            .iter()
-            .filter(|s| s.scan.frame == name)
-            .cloned()
-            .collect(),
-        odometry: log.odometry.clone(),
-        odometry_absent: log.odometry_absent,
-        ..Default::default()
-    };
-    let chosen = within(&one, from, to);
+    let mut chosen = within(log, from, to);
+    chosen.scans.retain(|s| s.scan.frame == name);
     if chosen.scans.len() < MIN_SCANS {
         bail!(
             "{}: {} scans of laser `{name}` within the span {}–{} s; a profile needs {MIN_SCANS} at least",
@@ -197,6 +187,12 @@ pub struct Measured {
 /// Runs the SLAM over `log` (scans of one laser) and measures its laser and odometry against
 /// the result (see the module documentation); an error says what was too little.
 pub fn measure(log: &carmen::Log, config: SlamConfig) -> Result<Measured, String> {
+    if log.scans.len() < MIN_SCANS {
+        return Err(format!(
+            "{} scans to measure; a profile needs {MIN_SCANS} at least",
+            log.scans.len()
+        ));
+    }
     let slam = slam_over(log, config);
     let path = slam.trajectory();
     // The map the beams are judged against: every scan at its SLAM pose.
