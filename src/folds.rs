@@ -31,9 +31,9 @@
 //! value kept is the one with the lowest score on all the logs among the neutral one and those
 //! that did not fail.
 
+use crate::parallel::parallel_map;
 use crate::relations::{self, Relation};
 use crate::replay::{as_logged, read_log_with, slam_over};
-use crate::suite::parallel_map;
 use anyhow::{Context, Result, bail};
 use futago_msgs::carmen;
 use futago_robot::mapping::slam::SlamConfig;

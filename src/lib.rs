@@ -11,10 +11,12 @@
 //! 4. **stack**: the bus, the node interface and every stack module's node and configuration
 //!    (`stack`);
 //! 5. **reports**: the HTML report (`report`);
-//! 6. **applications**: the loop and what runs it (`run`, `replay`, `legs_train`, `suite`,
-//!    `folds` (SLAM defaults chosen by leave-one-log-out), `calibrate` (a robot profile from a
-//!    real log), `twin` (the log's drive in simulation, side by side), `tune` with `cmaes`, `bench`, `fuzz`,
-//!    `world_cmd`; and `config_walk`, a test that walks every scenario's parameters).
+//! 6. **applications**: the loop and what runs it (`parallel`, work spread over threads;
+//!    `run`, `replay`, `legs_train`, `calibrate` (a robot profile from a real log), `twin`
+//!    (the log's drive in simulation, side by side, its SLAM configurations ranked, and twin
+//!    scenarios), `suite` (scenarios and twin scenarios), `folds` (SLAM defaults chosen by
+//!    leave-one-log-out), `tune` with `cmaes`, `bench`, `fuzz`, `world_cmd`; and
+//!    `config_walk`, a test that walks every scenario's parameters).
 //!
 //! The binary (`src/main.rs`) parses the command line and calls these.
 
@@ -26,6 +28,7 @@ pub mod ground_truth;
 pub mod relations;
 
 pub mod output;
+pub mod parallel;
 pub mod picture;
 pub mod rgbd;
 

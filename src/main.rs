@@ -527,14 +527,19 @@ fn real_main() -> Result<u8> {
             quiet,
             force,
         } => {
-            let opts = run::RunOptions {
-                seed,
-                duration,
-                progress: !quiet,
-                report: true,
-                force,
-            };
-            run::command(&scenario, &overlays.load()?, out, &opts)?
+            if twin::scenario::is_twin_file(&scenario) {
+                let options = !overlays.args().is_empty() || seed.is_some() || duration.is_some();
+                twin::scenario::command(&scenario, options, out, force, resolve_jobs(None)?)?
+            } else {
+                let opts = run::RunOptions {
+                    seed,
+                    duration,
+                    progress: !quiet,
+                    report: true,
+                    force,
+                };
+                run::command(&scenario, &overlays.load()?, out, &opts)?
+            }
         }
         Command::Suite {
             paths,
@@ -735,6 +740,10 @@ struct TwinArgs {
     /// Seeds run at a time [default: the CPU cores].
     #[arg(long)]
     jobs: Option<usize>,
+    /// Also rank the SLAM configurations of this file by relations error in the twin and on
+    /// the real log (e.g. choices/slam-configs.toml).
+    #[arg(long, value_name = "FILE")]
+    rank: Option<PathBuf>,
     #[command(flatten)]
     common: LogRunArgs,
 }
@@ -763,6 +772,7 @@ fn twin_command(a: TwinArgs) -> Result<i32> {
             std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
         }),
         force: c.force,
+        rank: a.rank,
     };
     let s = twin::twin(&a.log, &a.profile, &a.relations, slam, &out, &options)?;
     twin::print(&s, &out);

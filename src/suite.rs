@@ -8,14 +8,13 @@
 //! scenario from the K-th (in sorted order), so that N machines split a suite between them.
 
 use crate::overlay::Overlay;
+use crate::parallel::parallel_map;
 use crate::report::escape;
 use crate::run::{self, RunOptions};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Which part of a suite this machine runs: `k` of `n`, 1-based.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -89,8 +88,14 @@ struct Entry {
 struct Job {
     file: PathBuf,
     stem: String,
-    scenario: Scenario,
+    work: Work,
     seed: Option<u64>,
+}
+
+/// What a suite's run is: a scenario in a simulated world, or the twin of a real log.
+enum Work {
+    Scenario(Box<Scenario>),
+    Twin(crate::twin::scenario::TwinScenario),
 }
 
 impl Job {
@@ -100,37 +105,6 @@ impl Job {
             None => self.stem.clone(),
         }
     }
-}
-
-/// `f` of every item on `jobs` threads, the results in the items' order whatever order the
-/// threads finish in.
-pub fn parallel_map<T: Sync, R: Send>(
-    items: &[T],
-    jobs: usize,
-    f: impl Fn(usize, &T) -> R + Sync,
-) -> Vec<R> {
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<R>>> = Mutex::new((0..items.len()).map(|_| None).collect());
-    std::thread::scope(|scope| {
-        for _ in 0..jobs.max(1).min(items.len()) {
-            scope.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some(item) = items.get(i) else {
-                        break;
-                    };
-                    let r = f(i, item);
-                    results.lock().expect("no worker panicked")[i] = Some(r);
-                }
-            });
-        }
-    });
-    results
-        .into_inner()
-        .expect("no worker panicked")
-        .into_iter()
-        .map(|r| r.expect("every item was mapped"))
-        .collect()
 }
 
 /// Runs the suite, with `overlays` laid over every scenario, and writes `out/suite.json` and
@@ -151,7 +125,6 @@ pub fn suite(
     let mut runs = Vec::new();
     let mut stems = std::collections::BTreeSet::new();
     for f in &files {
-        let s = crate::stack::load_with(f, overlays)?;
         let stem = f
             .file_stem()
             .map(|s| s.to_string_lossy().to_string())
@@ -162,6 +135,22 @@ pub fn suite(
                 f.display()
             );
         }
+        if crate::twin::scenario::is_twin_file(f) {
+            if !overlays.is_empty() {
+                bail!(
+                    "{}: a twin scenario takes no --overlay or --set; run it in a suite of its own",
+                    f.display()
+                );
+            }
+            runs.push(Job {
+                file: f.clone(),
+                stem,
+                work: Work::Twin(crate::twin::scenario::load(f)?),
+                seed: None,
+            });
+            continue;
+        }
+        let s = crate::stack::load_with(f, overlays)?;
         let seeds: Vec<Option<u64>> = if s.spec.seeds.is_empty() {
             vec![None]
         } else {
@@ -171,7 +160,7 @@ pub fn suite(
             runs.push(Job {
                 file: f.clone(),
                 stem: stem.clone(),
-                scenario: s.clone(),
+                work: Work::Scenario(Box::new(s.clone())),
                 seed,
             });
         }
@@ -226,10 +215,13 @@ pub fn suite(
             force,
         };
         let name = job.name();
-        let result = match &isolation {
-            Some(i) => run_child(job, i, &out.join(&name), force),
-            None => run::run(&job.scenario, &opts, &out.join(&name))
+        let result = match (&isolation, &job.work) {
+            (Some(i), _) => run_child(job, i, &out.join(&name), force),
+            (None, Work::Scenario(s)) => run::run(s, &opts, &out.join(&name))
                 .map(|(summary, _)| summary)
+                .map_err(|e| format!("{e:#}")),
+            // The suite's jobs already share the cores: a twin's seeds run one at a time.
+            (None, Work::Twin(t)) => crate::twin::scenario::run(t, &out.join(&name), force, 1)
                 .map_err(|e| format!("{e:#}")),
         };
         bar.inc(1);
@@ -239,14 +231,16 @@ pub fn suite(
             name,
             sweep: job.seed.map(|k| (job.stem.clone(), k)),
             result,
-            versus: job
-                .scenario
-                .spec
-                .gate
-                .iter()
-                .filter(|g| g.scenario.is_some())
-                .cloned()
-                .collect(),
+            versus: match &job.work {
+                Work::Scenario(s) => s
+                    .spec
+                    .gate
+                    .iter()
+                    .filter(|g| g.scenario.is_some())
+                    .cloned()
+                    .collect(),
+                Work::Twin(_) => Vec::new(),
+            },
         }
     });
     bar.finish_and_clear();

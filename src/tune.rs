@@ -13,9 +13,9 @@
 
 use crate::cmaes::{Cmaes, RandomSearch};
 use crate::overlay::{Overlay, lookup};
+use crate::parallel::parallel_map;
 use crate::report::{Series, escape, line_chart_scaled};
 use crate::run::{self, RunOptions};
-use crate::suite::parallel_map;
 use anyhow::{Context, Result, bail};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};

@@ -22,6 +22,7 @@ use crate::relations::{self, Relation};
 use crate::replay::{as_logged, read_log_with};
 use crate::run::write_atomically;
 use anyhow::{Context, Result, bail};
+use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::profile::{LaserProfile, RobotProfile};
 use futago_msgs::{Pose2, Time, carmen};
 use futago_robot::mapping::slam::SlamConfig;
@@ -29,7 +30,10 @@ use futago_sim::beam::{BeamErrors, RangeProbability};
 use futago_sim::noise::stream;
 use futago_sim::twin::{TwinLaser, TwinOdometry};
 use serde_json::{Value, json};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+pub mod rank;
+pub mod scenario;
 
 /// Height of the simulated laser's beams above the floor, m: below the walls the map makes
 /// and above the floor.
@@ -44,6 +48,8 @@ pub struct TwinOptions {
     pub score_span: [f64; 2],
     pub jobs: usize,
     pub force: bool,
+    /// A file of SLAM configurations to rank in the twin and on the real log ([`rank`]).
+    pub rank: Option<PathBuf>,
 }
 
 /// The simulated laser that, measured as the real log was, reads as `real` does: `real` less
@@ -245,6 +251,57 @@ fn twin_log(
     }
 }
 
+/// Width of the bins of the range residuals' histogram, m, and their number (the last holds
+/// everything beyond): 1 cm bins out to 30 cm, past which the residuals are short, random or
+/// mixed readings rather than the spread of hits.
+pub const RESIDUAL_BIN_M: f64 = 0.01;
+pub const RESIDUAL_BINS: usize = 31;
+
+/// Shares of the tally's |range residual| per bin (see [`RESIDUAL_BIN_M`]).
+fn residual_histogram(t: &Tally) -> Vec<f64> {
+    let mut h = vec![0.0; RESIDUAL_BINS];
+    for r in &t.readings {
+        let k = ((r.measured - r.expected).abs() / RESIDUAL_BIN_M).floor();
+        h[(k.max(0.0) as usize).min(RESIDUAL_BINS - 1)] += 1.0;
+    }
+    let n = t.readings.len().max(1) as f64;
+    h.iter().map(|c| c / n).collect()
+}
+
+/// The histograms of the real log's range residuals and the twins' (the median over the
+/// seeds, bin by bin), as an SVG chart.
+fn residual_chart(real: &Figures, twins: &[Figures]) -> String {
+    let centre = |k: usize| (k as f64 + 0.5) * RESIDUAL_BIN_M;
+    let series = |name: &str, colour: &'static str, h: Vec<f64>| crate::report::Series {
+        name: name.into(),
+        colour,
+        markers: false,
+        // The last bin, everything beyond, is not a bin of the same width: left out.
+        points: h[..RESIDUAL_BINS - 1]
+            .iter()
+            .enumerate()
+            .map(|(k, v)| [centre(k), *v])
+            .collect(),
+    };
+    let twin: Vec<f64> = (0..RESIDUAL_BINS)
+        .map(|k| median(twins.iter().map(|t| t.residual_histogram[k]).collect()))
+        .collect();
+    crate::report::line_chart(
+        &format!(
+            "|range residual| (beyond {:.2} m: real {:.1} %, twin {:.1} %)",
+            RESIDUAL_BIN_M * (RESIDUAL_BINS - 1) as f64,
+            100.0 * real.residual_histogram[RESIDUAL_BINS - 1],
+            100.0 * twin[RESIDUAL_BINS - 1]
+        ),
+        "|measured − cast| (m)",
+        "share of readings per 1 cm",
+        &[
+            series("real log", "#d7191c", real.residual_histogram.clone()),
+            series("twin (median of seeds)", "#2c7bb6", twin),
+        ],
+    )
+}
+
 /// The `q`-quantiles of the range residuals |measured − expected| of a tally, m.
 fn residual_quantiles(t: &Tally, qs: &[f64]) -> Vec<f64> {
     let mut r: Vec<f64> = t
@@ -273,6 +330,9 @@ pub struct Figures {
     /// Median and 95th percentile of |range residual|, m.
     pub residual_median_m: f64,
     pub residual_p95_m: f64,
+    /// Shares of |range residual| in bins of [`RESIDUAL_BIN_M`] from 0, the last bin holding
+    /// every residual beyond.
+    pub residual_histogram: Vec<f64>,
     /// The odometry's random walk as `calibrate` measures it: m²/m, rad²/rad, rad²/m.
     pub translation_variance: f64,
     pub heading_variance_per_rad: f64,
@@ -292,7 +352,8 @@ fn figures(log: &carmen::Log, m: &Measured, rels: &[Relation], from: Time, to: T
     odometry.sort_by_key(|p| p.0);
     let s = relations::evaluate(&slam, rels);
     let o = relations::evaluate(&odometry, rels);
-    let q = residual_quantiles(&calibrate::tally_within(log, m, from, to), &[0.5, 0.95]);
+    let tally = calibrate::tally_within(log, m, from, to);
+    let q = residual_quantiles(&tally, &[0.5, 0.95]);
     let odo = m.odometry.as_ref();
     let v = |f: &dyn Fn(&futago_msgs::profile::OdometryProfile) -> f64| odo.map_or(f64::NAN, f);
     Figures {
@@ -301,6 +362,7 @@ fn figures(log: &carmen::Log, m: &Measured, rels: &[Relation], from: Time, to: T
         relations: s.relations,
         residual_median_m: q[0],
         residual_p95_m: q[1],
+        residual_histogram: residual_histogram(&tally),
         translation_variance: v(&|p| p.translation_variance.value),
         heading_variance_per_rad: v(&|p| p.heading_variance_per_rad.value),
         heading_variance_per_m: v(&|p| p.heading_variance_per_m.value),
@@ -374,6 +436,10 @@ pub fn twin(
             .with_context(|| format!("reading {}", relations_path.display()))?,
         &relations_path.display().to_string(),
     )?;
+    let candidates = match &o.rank {
+        Some(p) => rank::load(p, config)?,
+        None => Vec::new(),
+    };
     let full = read_log_with(log_path, &o.read)?;
     if full.scans.is_empty() {
         bail!("{}: the log holds no laser scans", log_path.display());
@@ -422,9 +488,20 @@ pub fn twin(
             sim: &sim,
             config,
         };
-        let fitted = fit(&setup, &profile)?;
+        let fitted = fit(&setup, &profile, (&twin_rels, score_from, score_to))?;
         let (twins, first_log, simulated) =
             run_seeds(&setup, &fitted, o, &twin_rels, (score_from, score_to))?;
+        let ranking = (!candidates.is_empty()).then(|| {
+            rank::rank(
+                &candidates,
+                &real,
+                &real_rels,
+                &twin_rels,
+                o.seeds,
+                o.jobs,
+                |seed| seed_log(&setup, &fitted, seed),
+            )
+        });
         let duration = (last - first).secs();
         let wall = started.elapsed().as_secs_f64();
         let summary = json!({
@@ -435,11 +512,13 @@ pub fn twin(
             "seeds": o.seeds,
             "real": real_figures,
             "twins": twins,
-            "compared": compared(&real_figures, &twins),
+            "uncalibrated": fitted.before,
+            "compared": compared(&real_figures, &twins, &fitted.before),
             "laser_model": fitted.laser,
             "odometry_model": fitted.odometry,
             "floor": fitted.floor,
             "fit": fitted.rounds,
+            "ranking": ranking,
             "performance": {
                 "wall_time_s": wall,
                 "log_duration_s": duration,
@@ -449,17 +528,65 @@ pub fn twin(
                 "simulation_real_time_factor": duration / median(simulated.clone()).max(1e-9),
             },
         });
-        std::fs::write(
-            tmp.join("summary.json"),
-            serde_json::to_string_pretty(&summary)? + "\n",
-        )
-        .context("writing summary.json")?;
-        std::fs::write(tmp.join("twin.md"), table(&summary)).context("writing twin.md")?;
-        if let Some(log) = &first_log {
-            std::fs::write(tmp.join("twin.clf"), clf(log, &truth)).context("writing twin.clf")?;
-        }
+        write_report(
+            tmp,
+            &Report {
+                summary: &summary,
+                real: &real_figures,
+                twins: &twins,
+                ranking: ranking.as_ref(),
+                rank_file: o.rank.as_deref(),
+                first: first_log.as_ref(),
+                real_map: &measured_real.map.to_grid(),
+                truth: &truth,
+            },
+        )?;
         Ok(summary)
     })
+}
+
+/// What a twin writes beside its summary.
+struct Report<'a> {
+    summary: &'a Value,
+    real: &'a Figures,
+    twins: &'a [Figures],
+    ranking: Option<&'a rank::Ranking>,
+    rank_file: Option<&'a Path>,
+    first: Option<&'a FirstSeed>,
+    real_map: &'a OccupancyGrid,
+    truth: &'a [Pose2],
+}
+
+/// Writes `summary.json`, `twin.md` (the side-by-side table, the pictures and the ranking),
+/// `residuals.svg`, `maps.png` and the first seed's `twin.clf` into `tmp`.
+fn write_report(tmp: &Path, r: &Report) -> Result<()> {
+    std::fs::write(
+        tmp.join("summary.json"),
+        serde_json::to_string_pretty(r.summary)? + "\n",
+    )
+    .context("writing summary.json")?;
+    std::fs::write(tmp.join("residuals.svg"), residual_chart(r.real, r.twins))
+        .context("writing residuals.svg")?;
+    let mut md = table(r.summary);
+    md += "\n![The real log's SLAM map (red), the first twin's (blue), where both hold a wall (black)](maps.png)\n\n![Histograms of |range residual|, real and twin](residuals.svg)\n";
+    if let Some(ranking) = r.ranking {
+        md += &format!(
+            "\n## SLAM configurations ranked ({})\n\n{}",
+            r.rank_file
+                .map_or(String::new(), |p| p.display().to_string()),
+            rank::table(ranking)
+        );
+    }
+    std::fs::write(tmp.join("twin.md"), md).context("writing twin.md")?;
+    if let Some((log, map)) = r.first {
+        std::fs::write(
+            tmp.join("maps.png"),
+            crate::picture::overlay_png(r.real_map, map, 1),
+        )
+        .context("writing maps.png")?;
+        std::fs::write(tmp.join("twin.clf"), clf(log, r.truth)).context("writing twin.clf")?;
+    }
+    Ok(())
 }
 
 /// What every twin run shares: the real log, the twin's truth (a pose per scan), the world's
@@ -476,6 +603,8 @@ struct Fitted {
     laser: LaserModel,
     odometry: Option<futago_msgs::profile::OdometryProfile>,
     floor: LaserProfile,
+    /// The figures of the twin before calibration: a perfect laser and odometry.
+    before: Figures,
     rounds: Vec<Value>,
 }
 
@@ -513,9 +642,14 @@ fn twin_world(dir: &Path, measured: &Measured) -> Result<futago_sim::Simulation>
     Ok(sim)
 }
 
-/// The floor, then [`FIT_ROUNDS`] of fitting the laser through the measurement on the
-/// profile's own stretch of the log.
-fn fit(setup: &Setup, profile: &RobotProfile) -> Result<Fitted> {
+/// The floor (whose figures over the scored relations are the uncalibrated twin's), then
+/// [`FIT_ROUNDS`] of fitting the laser through the measurement on the profile's own stretch
+/// of the log.
+fn fit(
+    setup: &Setup,
+    profile: &RobotProfile,
+    (rels, score_from, score_to): (&[Relation], Time, Time),
+) -> Result<Fitted> {
     let floor_log = twin_log(setup.real, setup.truth, setup.sim, None, None);
     let floor = calibrate::measure(&floor_log, setup.config)
         .map_err(|e| anyhow::anyhow!("the perfect twin: {e}"))?;
@@ -561,12 +695,33 @@ fn fit(setup: &Setup, profile: &RobotProfile) -> Result<Fitted> {
     Ok(Fitted {
         laser,
         odometry,
+        before: figures(&floor_log, &floor, rels, score_from, score_to),
         floor: floor.laser,
         rounds,
     })
 }
 
-/// One twin per seed, `o.jobs` at a time: each seed's figures, the first seed's log, and the
+/// The twin log of `seed` with the fitted models.
+fn seed_log(setup: &Setup, fitted: &Fitted, seed: u64) -> carmen::Log {
+    let laser = TwinLaser::new(
+        fitted.laser.sigma,
+        fitted.laser.sigma_rel,
+        fitted.laser.errors.clone(),
+        stream(seed, "twin.laser"),
+    );
+    let odometry = fitted
+        .odometry
+        .clone()
+        .map(|p| TwinOdometry::new(p, stream(seed, "twin.odometry")));
+    twin_log(setup.real, setup.truth, setup.sim, Some(laser), odometry)
+}
+
+/// A seed's twin log and the map its SLAM made.
+type FirstSeed = (carmen::Log, OccupancyGrid);
+/// A seed's figures, log, map and the wall time its log took to simulate, s.
+type SeedRun = (Figures, carmen::Log, OccupancyGrid, f64);
+
+/// One twin per seed, `o.jobs` at a time: each seed's figures, the first seed's log and SLAM map, and the
 /// wall time each took to simulate its log (the stack's runs apart), s.
 fn run_seeds(
     setup: &Setup,
@@ -574,29 +729,19 @@ fn run_seeds(
     o: &TwinOptions,
     rels: &[Relation],
     (from, to): (Time, Time),
-) -> Result<(Vec<Figures>, Option<carmen::Log>, Vec<f64>)> {
-    let run_seed = |seed: u64| -> Result<(Figures, carmen::Log, f64)> {
-        let laser = TwinLaser::new(
-            fitted.laser.sigma,
-            fitted.laser.sigma_rel,
-            fitted.laser.errors.clone(),
-            stream(seed, "twin.laser"),
-        );
-        let odometry = fitted
-            .odometry
-            .clone()
-            .map(|p| TwinOdometry::new(p, stream(seed, "twin.odometry")));
+) -> Result<(Vec<Figures>, Option<FirstSeed>, Vec<f64>)> {
+    let run_seed = |seed: u64| -> Result<SeedRun> {
         let clock = std::time::Instant::now();
-        let log = twin_log(setup.real, setup.truth, setup.sim, Some(laser), odometry);
+        let log = seed_log(setup, fitted, seed);
         let simulated = clock.elapsed().as_secs_f64();
         let m = calibrate::measure(&log, setup.config)
             .map_err(|e| anyhow::anyhow!("the twin of seed {seed}: {e}"))?;
-        Ok((figures(&log, &m, rels, from, to), log, simulated))
+        let f = figures(&log, &m, rels, from, to);
+        Ok((f, log, m.map.to_grid(), simulated))
     };
     let seeds: Vec<u64> = (0..o.seeds).collect();
     let per = seeds.len().div_ceil(o.jobs.max(1));
-    let mut results: Vec<Option<Result<(Figures, carmen::Log, f64)>>> =
-        (0..seeds.len()).map(|_| None).collect();
+    let mut results: Vec<Option<Result<SeedRun>>> = (0..seeds.len()).map(|_| None).collect();
     std::thread::scope(|scope| {
         for (chunk, slots) in seeds.chunks(per).zip(results.chunks_mut(per)) {
             let run_seed = &run_seed;
@@ -611,11 +756,11 @@ fn run_seeds(
     let mut first = None;
     let mut simulated = Vec::new();
     for r in results {
-        let (f, log, s) = r.expect("every seed ran")?;
+        let (f, log, map, s) = r.expect("every seed ran")?;
         twins.push(f);
         simulated.push(s);
         if first.is_none() {
-            first = Some(log);
+            first = Some((log, map));
         }
     }
     Ok((twins, first, simulated))
@@ -636,8 +781,8 @@ const COMPARED: [Figure; 7] = [
 ];
 
 /// Real beside twin (the median over the seeds) and their ratio (the median of the seeds'
-/// ratios), for each compared figure.
-fn compared(real: &Figures, twins: &[Figures]) -> Vec<Value> {
+/// ratios), and beside the uncalibrated twin `before`, for each compared figure.
+fn compared(real: &Figures, twins: &[Figures], before: &Figures) -> Vec<Value> {
     COMPARED
         .iter()
         .map(|(name, f)| {
@@ -646,6 +791,8 @@ fn compared(real: &Figures, twins: &[Figures]) -> Vec<Value> {
                 "real": f(real),
                 "twin_median": median(twins.iter().map(f).collect()),
                 "ratio_median": median(twins.iter().map(|t| f(t) / f(real)).collect()),
+                "uncalibrated": f(before),
+                "uncalibrated_ratio": f(before) / f(real),
             })
         })
         .collect()
@@ -654,21 +801,24 @@ fn compared(real: &Figures, twins: &[Figures]) -> Vec<Value> {
 /// The side-by-side table of a twin's summary, Markdown.
 pub fn table(summary: &Value) -> String {
     let mut s = format!(
-        "# Twin of {}\n\nProfile {}; relations {} within {:?} of the log; {} seeds (the twin column is their median).\n\n| figure | real | twin | twin / real |\n|---|---|---|---|\n",
+        "# Twin of {}\n\nProfile {}; relations {} within {}–{} of the log's duration; {} seeds (the twin column is their median). Uncalibrated: the twin with a perfect laser and odometry, as a simulator's presets come close to.\n\n| figure | real | twin | twin / real | uncalibrated | uncalibrated / real |\n|---|---|---|---|---|---|\n",
         summary["log"].as_str().unwrap_or(""),
         summary["profile"].as_str().unwrap_or(""),
         summary["relations"].as_str().unwrap_or(""),
-        summary["score_span"],
+        summary["score_span"][0],
+        summary["score_span"][1],
         summary["seeds"]
     );
     for row in summary["compared"].as_array().into_iter().flatten() {
         let f = |k: &str| row[k].as_f64().map_or("–".into(), |v| format!("{v:.4}"));
         s += &format!(
-            "| {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} |\n",
             row["figure"].as_str().unwrap_or(""),
             f("real"),
             f("twin_median"),
-            f("ratio_median")
+            f("ratio_median"),
+            f("uncalibrated"),
+            f("uncalibrated_ratio")
         );
     }
     s

@@ -1,0 +1,340 @@
+//! Transfer of decisions: a set of SLAM configurations ranked by relations error in the twin
+//! and on the real log (`futago twin --rank FILE`).
+//!
+//! A twin is worth tuning in only if the ordering it gives is the robot's. Each configuration
+//! runs on the real log, scored against its relations, and on every seed's twin log, scored
+//! against the twin's truth at the same stamp pairs (the twin's error is the median over the
+//! seeds). The two orderings are compared by Spearman's rank correlation, and the
+//! configuration best in the twin by its real error over the real log's best (the regret of
+//! choosing in the twin).
+//!
+//! The file lists the configurations, each a name and the keys it sets over the base
+//! configuration (dotted, under `[slam]`):
+//!
+//! ```toml
+//! [[config]]
+//! name = "keyframes twice as sparse"
+//! set = { keyframe_distance = 0.6, keyframe_angle = 0.7 }
+//! ```
+
+use crate::parallel::parallel_map;
+use crate::relations::{self, Relation};
+use crate::replay::{as_logged, slam_over};
+use anyhow::{Result, anyhow, bail};
+use futago_msgs::carmen;
+use futago_robot::mapping::slam::SlamConfig;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A configuration to rank: its name and the whole SLAM configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    pub name: String,
+    pub config: SlamConfig,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CandidateFile {
+    #[serde(default)]
+    config: Vec<Entry>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Entry {
+    name: String,
+    #[serde(default)]
+    set: toml::Table,
+}
+
+/// Reads the configurations of the file at `path`, each laid over `base` and checked; the
+/// error names the file, the configuration and the key.
+pub fn load(path: &Path, base: SlamConfig) -> Result<Vec<Candidate>> {
+    let file: CandidateFile = futago_sim::config::load_toml(path)?;
+    let at = path.display();
+    if file.config.len() < 2 {
+        bail!(
+            "{at}: `config`: expected at least two [[config]] to rank, found {}",
+            file.config.len()
+        );
+    }
+    let toml::Value::Table(base_table) = toml::Value::try_from(base)? else {
+        bail!("the base SLAM configuration is not a table");
+    };
+    let mut candidates: Vec<Candidate> = Vec::new();
+    for (k, e) in file.config.into_iter().enumerate() {
+        if candidates.iter().any(|c| c.name == e.name) {
+            bail!(
+                "{at}: config[{k}].name = {:?}: expected a name no other configuration has",
+                e.name
+            );
+        }
+        let mut table = base_table.clone();
+        for (key, value) in &e.set {
+            crate::overlay::Overlay::assign(key, value.clone())
+                .map_err(|m| anyhow!("{at}: config[{k}].set.`{key}`: {}", m.message))?
+                .apply(&mut table);
+        }
+        let config: SlamConfig = toml::Value::Table(table)
+            .try_into()
+            .map_err(|m| anyhow!("{at}: config[{k}].set: not a SLAM setting ({m})"))?;
+        config
+            .validate()
+            .map_err(|(key, why)| anyhow!("{at}: config[{k}].set: `{key}`: {why}"))?;
+        candidates.push(Candidate {
+            name: e.name,
+            config,
+        });
+    }
+    Ok(candidates)
+}
+
+/// One configuration's place in both orderings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Row {
+    pub name: String,
+    /// Mean translational relations error on the real log, m.
+    pub real_m: f64,
+    /// The same in the twin: the median over the seeds, and each seed's.
+    pub twin_m: f64,
+    pub twin_seeds_m: Vec<f64>,
+    /// Ranks, 1 the best (ties share the mean of their ranks).
+    pub real_rank: f64,
+    pub twin_rank: f64,
+}
+
+/// Both orderings and how well they agree.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Ranking {
+    pub rows: Vec<Row>,
+    /// Spearman's rank correlation between the twin's and the real log's errors.
+    pub spearman: f64,
+    pub best_in_twin: String,
+    pub best_on_real: String,
+    /// The real error of the configuration best in the twin over the real log's best: 1 when
+    /// the twin picks the real best.
+    pub regret: f64,
+}
+
+/// Ranks `candidates`: each runs the SLAM over `real` (scored on `real_rels`) and over the
+/// twin log of every seed `0..seeds` that `twin_log` makes (scored on `twin_rels`), `jobs` at
+/// a time.
+pub fn rank(
+    candidates: &[Candidate],
+    real: &carmen::Log,
+    real_rels: &[Relation],
+    twin_rels: &[Relation],
+    seeds: u64,
+    jobs: usize,
+    twin_log: impl Fn(u64) -> carmen::Log + Sync,
+) -> Ranking {
+    let runs: Vec<(usize, Option<u64>)> = (0..candidates.len())
+        .flat_map(|c| std::iter::once((c, None)).chain((0..seeds).map(move |s| (c, Some(s)))))
+        .collect();
+    let errors = parallel_map(&runs, jobs, |_, &(c, seed)| {
+        let config = candidates[c].config;
+        match seed {
+            None => relations_error(real, config, real_rels),
+            Some(s) => relations_error(&twin_log(s), config, twin_rels),
+        }
+    });
+    let per = 1 + seeds as usize;
+    let real_m: Vec<f64> = errors.chunks(per).map(|e| e[0]).collect();
+    let twin_seeds: Vec<Vec<f64>> = errors.chunks(per).map(|e| e[1..].to_vec()).collect();
+    let twin_m: Vec<f64> = twin_seeds
+        .iter()
+        .map(|e| super::median(e.clone()))
+        .collect();
+    ranking(candidates, real_m, twin_m, twin_seeds)
+}
+
+/// The orderings of errors already measured.
+fn ranking(
+    candidates: &[Candidate],
+    real_m: Vec<f64>,
+    twin_m: Vec<f64>,
+    twin_seeds: Vec<Vec<f64>>,
+) -> Ranking {
+    let real_rank = ranks(&real_m);
+    let twin_rank = ranks(&twin_m);
+    let best = |r: &[f64]| {
+        (0..r.len())
+            .min_by(|&a, &b| r[a].total_cmp(&r[b]))
+            .unwrap_or(0)
+    };
+    let (bt, br) = (best(&twin_rank), best(&real_rank));
+    let rows = candidates
+        .iter()
+        .enumerate()
+        .map(|(i, c)| Row {
+            name: c.name.clone(),
+            real_m: real_m[i],
+            twin_m: twin_m[i],
+            twin_seeds_m: twin_seeds[i].clone(),
+            real_rank: real_rank[i],
+            twin_rank: twin_rank[i],
+        })
+        .collect();
+    Ranking {
+        rows,
+        spearman: pearson(&real_rank, &twin_rank),
+        best_in_twin: candidates[bt].name.clone(),
+        best_on_real: candidates[br].name.clone(),
+        regret: real_m[bt] / real_m[br],
+    }
+}
+
+/// The SLAM's mean translational relations error over `log` with `config`, m.
+fn relations_error(log: &carmen::Log, config: SlamConfig, rels: &[Relation]) -> f64 {
+    let slam = slam_over(log, config);
+    let trajectory = as_logged(&slam.trajectory(), log);
+    relations::evaluate(&trajectory, rels).abs_trans_m.mean
+}
+
+/// Ranks of `v`, 1 the smallest; ties share the mean of their ranks, and a value that is not
+/// finite (a run with nothing scored) ranks last.
+pub fn ranks(v: &[f64]) -> Vec<f64> {
+    let key = |x: f64| if x.is_finite() { x } else { f64::INFINITY };
+    let mut order: Vec<usize> = (0..v.len()).collect();
+    order.sort_by(|&a, &b| key(v[a]).total_cmp(&key(v[b])));
+    let mut r = vec![0.0; v.len()];
+    let mut i = 0;
+    while i < order.len() {
+        let mut j = i;
+        while j + 1 < order.len() && key(v[order[j + 1]]) == key(v[order[i]]) {
+            j += 1;
+        }
+        let mean = (i + j) as f64 / 2.0 + 1.0;
+        for &k in &order[i..=j] {
+            r[k] = mean;
+        }
+        i = j + 1;
+    }
+    r
+}
+
+/// Pearson's correlation of `a` and `b` (of ranks: Spearman's), NaN where either is constant.
+fn pearson(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        ab += (x - ma) * (y - mb);
+        aa += (x - ma).powi(2);
+        bb += (y - mb).powi(2);
+    }
+    ab / (aa * bb).sqrt()
+}
+
+/// The ranking as a Markdown table, with its agreement.
+pub fn table(r: &Ranking) -> String {
+    let mut s = String::from(
+        "| configuration | real, m | rank | twin, m | rank |\n|---|---|---|---|---|\n",
+    );
+    for row in &r.rows {
+        s += &format!(
+            "| {} | {:.4} | {} | {:.4} | {} |\n",
+            row.name, row.real_m, row.real_rank, row.twin_m, row.twin_rank
+        );
+    }
+    s += &format!(
+        "\nSpearman's ρ {:.3}. Best in the twin: {}; on the real log: {}; the twin's choice on the real log over the real best: {:.3}.\n",
+        r.spearman, r.best_in_twin, r.best_on_real, r.regret
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn candidates(n: usize) -> Vec<Candidate> {
+        (0..n)
+            .map(|i| Candidate {
+                name: format!("c{i}"),
+                config: SlamConfig::default(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn ties_share_their_mean_rank_and_a_failed_run_ranks_last() {
+        assert_eq!(
+            ranks(&[0.3, 0.1, 0.3, f64::NAN, 0.2]),
+            vec![3.5, 1.0, 3.5, 5.0, 2.0]
+        );
+    }
+
+    #[test]
+    fn spearman_is_one_for_the_same_order_and_minus_one_reversed() {
+        let real = vec![0.1, 0.2, 0.3, 0.4];
+        // A twin three times more accurate, in the same order: a perfect ranking.
+        let same = ranking(
+            &candidates(4),
+            real.clone(),
+            vec![0.03, 0.07, 0.1, 0.13],
+            vec![vec![]; 4],
+        );
+        assert!((same.spearman - 1.0).abs() < 1e-12);
+        assert_eq!(same.regret, 1.0);
+        let reversed = ranking(
+            &candidates(4),
+            real,
+            vec![0.4, 0.3, 0.2, 0.1],
+            vec![vec![]; 4],
+        );
+        assert!((reversed.spearman + 1.0).abs() < 1e-12);
+        assert_eq!(reversed.best_in_twin, "c3");
+        assert_eq!(reversed.best_on_real, "c0");
+        assert!((reversed.regret - 4.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn one_swap_of_neighbours_in_four_gives_the_textbook_rho() {
+        // ρ = 1 − 6 Σd² / (n(n² − 1)) = 1 − 6·2/60 = 0.8.
+        let r = ranking(
+            &candidates(4),
+            vec![0.1, 0.2, 0.3, 0.4],
+            vec![0.1, 0.3, 0.2, 0.4],
+            vec![vec![]; 4],
+        );
+        assert!((r.spearman - 0.8).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_committed_set_loads_and_bad_sets_are_refused_by_key() {
+        let dir = std::env::temp_dir().join(format!("futago-rank-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let set = Path::new(env!("CARGO_MANIFEST_DIR")).join("choices/slam-configs.toml");
+        let loaded = load(&set, SlamConfig::default()).unwrap();
+        assert!(loaded.len() >= 8, "issue 44 asks for at least 8");
+        assert_eq!(loaded[0].config, SlamConfig::default());
+        assert!(
+            loaded
+                .iter()
+                .skip(1)
+                .all(|c| c.config != SlamConfig::default())
+        );
+        let bad = |body: &str, expected: &str| {
+            let p = dir.join("set.toml");
+            std::fs::write(&p, body).unwrap();
+            let e = format!("{:#}", load(&p, SlamConfig::default()).unwrap_err());
+            assert!(e.contains(expected), "{e} lacks {expected}");
+        };
+        bad("[[config]]\nname = \"a\"\n", "at least two");
+        bad(
+            "[[config]]\nname = \"a\"\n[[config]]\nname = \"a\"\n",
+            "config[1].name",
+        );
+        bad(
+            "[[config]]\nname = \"a\"\n[[config]]\nname = \"b\"\nset = { keyframe_distance = -1.0 }\n",
+            "keyframe_distance",
+        );
+        bad(
+            "[[config]]\nname = \"a\"\n[[config]]\nname = \"b\"\nset = { \"icp.no_such_key\" = 1 }\n",
+            "config[1].set",
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
