@@ -773,6 +773,7 @@ fn twin_command(a: TwinArgs) -> Result<i32> {
         }),
         force: c.force,
         rank: a.rank,
+        profile_as: None,
     };
     let s = twin::twin(&a.log, &a.profile, &a.relations, slam, &out, &options)?;
     twin::print(&s, &out);

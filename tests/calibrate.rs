@@ -207,6 +207,10 @@ fn a_twin_of_a_simulated_robot_replays_its_drive_and_predicts_its_slam_and_range
     assert_eq!(result["gates"].as_array().unwrap().len(), 4, "{result}");
     let twin = suite.join("twin-sim/twin");
     let s = summary(&twin);
+    // The summary names the profile where it lies once the run is in place.
+    let profile = suite.join("twin-sim/calibrate/profile.toml");
+    assert!(profile.is_file());
+    assert_eq!(s["profile"], profile.display().to_string());
     // Both are scored on the same stamp pairs of the second half.
     let scored = s["real"]["relations"].as_u64().unwrap();
     assert!(scored > 10, "{scored}");

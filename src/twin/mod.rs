@@ -50,6 +50,9 @@ pub struct TwinOptions {
     pub force: bool,
     /// A file of SLAM configurations to rank in the twin and on the real log ([`rank`]).
     pub rank: Option<PathBuf>,
+    /// The profile's path as the summary names it, where it is read from a folder that is
+    /// moved into place after (a twin scenario's): none, the path it is read from.
+    pub profile_as: Option<PathBuf>,
 }
 
 /// The simulated laser that, measured as the real log was, reads as `real` does: `real` less
@@ -506,7 +509,7 @@ pub fn twin(
         let wall = started.elapsed().as_secs_f64();
         let summary = json!({
             "log": log_path.display().to_string(),
-            "profile": profile_path.display().to_string(),
+            "profile": o.profile_as.as_deref().unwrap_or(profile_path).display().to_string(),
             "relations": relations_path.display().to_string(),
             "score_span": o.score_span,
             "seeds": o.seeds,

@@ -192,7 +192,7 @@ fn data_folder(dir: &Path) -> Option<PathBuf> {
         .ancestors()
         .find(|a| a.join(futago_msgs::datasets::LIST).is_file())
         .unwrap_or(&dir);
-    futago_msgs::datasets::folder(root)
+    futago_msgs::datasets::folder(root).map(|d| d.canonicalize().unwrap_or(d))
 }
 
 /// The flat metrics of a twin's summary.
@@ -251,6 +251,7 @@ pub fn run(s: &TwinScenario, out: &Path, force: bool, jobs: usize) -> Result<Val
                 jobs,
                 force: false,
                 rank: s.rank.clone(),
+                profile_as: Some(out.join("calibrate/profile.toml")),
             },
         )?;
         let m = metrics(&twin);
