@@ -166,6 +166,9 @@ pub struct Tally {
     pub edges: (usize, usize),
     /// Beams where the map holds nothing within range: (returned, all).
     pub unmapped: (usize, usize),
+    /// Range residuals of neighbouring beams on one surface, in pairs (see
+    /// [`LaserProfile::neighbour_correlation`]).
+    pub neighbours: Vec<(f64, f64)>,
 }
 
 fn bin_of(edges: &[f64], v: f64) -> Option<usize> {
@@ -260,7 +263,54 @@ impl Tally {
             self.edges.0 += usize::from(between);
             self.edges.1 += 1;
         }
+        self.add_neighbours(&casts, scan);
     }
+
+    /// The residual pairs of neighbouring beams that hit one surface.
+    fn add_neighbours(&mut self, casts: &[Cast], scan: &LaserScan) {
+        use futago_msgs::profile::{NEIGHBOUR_CORE_M, NEIGHBOUR_STEP_M};
+        let residual = |k: usize, range: f64| {
+            let r = scan.ranges[k] as f64;
+            (returned(r, scan) && (r - range).abs() <= NEIGHBOUR_CORE_M).then_some(r - range)
+        };
+        for k in 1..casts.len() {
+            let (Cast::Hit { range: a, .. }, Cast::Hit { range: b, .. }) = (casts[k - 1], casts[k])
+            else {
+                continue;
+            };
+            if (a - b).abs() > NEIGHBOUR_STEP_M {
+                continue;
+            }
+            if let (Some(x), Some(y)) = (residual(k - 1, a), residual(k, b)) {
+                self.neighbours.push((x, y));
+            }
+        }
+    }
+}
+
+/// The correlation of residual pairs, with Fisher's standard error `(1 − ρ²)/√(n − 3)` (the
+/// pairs taken as independent, which neighbours along a scan are not quite: a lower bound).
+pub fn pair_correlation(pairs: &[(f64, f64)]) -> Estimate {
+    let n = pairs.len();
+    if n < 4 {
+        return Estimate::new(0.0, 0.0, n);
+    }
+    let m = n as f64;
+    let (mx, my) = pairs
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x / m, b + y / m));
+    let (mut xy, mut xx, mut yy) = (0.0, 0.0, 0.0);
+    for (x, y) in pairs {
+        xy += (x - mx) * (y - my);
+        xx += (x - mx).powi(2);
+        yy += (y - my).powi(2);
+    }
+    let r = if xx > 0.0 && yy > 0.0 {
+        xy / (xx * yy).sqrt()
+    } else {
+        0.0
+    };
+    Estimate::new(r, (1.0 - r * r) / (m - 3.0).sqrt(), n)
 }
 
 /// The beam model mixture fitted to the returned readings.
@@ -478,6 +528,7 @@ pub fn error_model(t: &Tally, layout: LaserProfile) -> Option<LaserProfile> {
         ),
         mixed_pixels: Estimate::proportion(t.edges.0, t.edges.1),
         unmapped_returns: Estimate::proportion(t.unmapped.0, t.unmapped.1),
+        neighbour_correlation: pair_correlation(&t.neighbours),
         spread_by_range,
         ..layout
     })
@@ -488,6 +539,22 @@ mod tests {
     use super::*;
     use futago_robot::mapping::occupancy::OccupancyConfig;
     use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn neighbour_correlation_is_one_for_a_shared_error_and_near_zero_for_independent_ones() {
+        let shared: Vec<(f64, f64)> = (0..50)
+            .map(|k| (k as f64 * 0.001, k as f64 * 0.002))
+            .collect();
+        assert!((pair_correlation(&shared).value - 1.0).abs() < 1e-12);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let independent: Vec<(f64, f64)> = (0..10_000)
+            .map(|_| (rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5))
+            .collect();
+        let e = pair_correlation(&independent);
+        // Fisher's standard error of ρ = 0 over 10,000 pairs: 1/√9997 = 0.01.
+        assert!((e.sd - 0.01).abs() < 1e-4, "{e:?}");
+        assert!(e.value.abs() < 4.0 * e.sd, "{e:?}");
+    }
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, Normal};
 

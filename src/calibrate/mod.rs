@@ -164,6 +164,7 @@ fn layout(log: &carmen::Log) -> LaserProfile {
         no_return_by_incidence: Vec::new(),
         mixed_pixels: none,
         unmapped_returns: none,
+        neighbour_correlation: none,
         spread_by_range: Vec::new(),
     }
 }
@@ -371,7 +372,7 @@ pub fn calibrate(
 pub fn print(p: &RobotProfile, out: &Path) {
     let l = &p.laser;
     println!(
-        "laser `{}`: {} beams, {:.1} Hz; hit σ(r) = √({:.4}² + ({:.5}·r)²) m, bias {:+.4} m; short {:.2} % (λ {:.2}/m), random {:.2} %, no return {:.2} %, mixed pixels {:.1} % of {} edges",
+        "laser `{}`: {} beams, {:.1} Hz; hit σ(r) = √({:.4}² + ({:.5}·r)²) m, bias {:+.4} m; short {:.2} % (λ {:.2}/m), random {:.2} %, no return {:.2} %, mixed pixels {:.1} % of {} edges; neighbours' residuals correlated {:.2} ± {:.2}",
         l.name,
         l.beams,
         l.rate,
@@ -383,7 +384,9 @@ pub fn print(p: &RobotProfile, out: &Path) {
         100.0 * l.random_rate.value,
         100.0 * l.no_return.value,
         100.0 * l.mixed_pixels.value,
-        l.mixed_pixels.n
+        l.mixed_pixels.n,
+        l.neighbour_correlation.value,
+        l.neighbour_correlation.sd
     );
     match &p.odometry {
         Some(o) => println!(

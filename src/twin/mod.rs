@@ -336,6 +336,9 @@ pub struct Figures {
     /// Shares of |range residual| in bins of [`RESIDUAL_BIN_M`] from 0, the last bin holding
     /// every residual beyond.
     pub residual_histogram: Vec<f64>,
+    /// The correlation of neighbouring beams' residuals on one surface (see
+    /// [`LaserProfile::neighbour_correlation`]).
+    pub residual_neighbour_correlation: f64,
     /// The odometry's random walk as `calibrate` measures it: m²/m, rad²/rad, rad²/m.
     pub translation_variance: f64,
     pub heading_variance_per_rad: f64,
@@ -366,6 +369,7 @@ fn figures(log: &carmen::Log, m: &Measured, rels: &[Relation], from: Time, to: T
         residual_median_m: q[0],
         residual_p95_m: q[1],
         residual_histogram: residual_histogram(&tally),
+        residual_neighbour_correlation: calibrate::laser::pair_correlation(&tally.neighbours).value,
         translation_variance: v(&|p| p.translation_variance.value),
         heading_variance_per_rad: v(&|p| p.heading_variance_per_rad.value),
         heading_variance_per_m: v(&|p| p.heading_variance_per_m.value),
@@ -773,11 +777,14 @@ fn run_seeds(
 type Figure = (&'static str, fn(&Figures) -> f64);
 
 /// The figures compared, in the table's order.
-const COMPARED: [Figure; 7] = [
+const COMPARED: [Figure; 8] = [
     ("slam_relations_m", |f| f.slam_relations_m),
     ("odometry_relations_m", |f| f.odometry_relations_m),
     ("residual_median_m", |f| f.residual_median_m),
     ("residual_p95_m", |f| f.residual_p95_m),
+    ("residual_neighbour_correlation", |f| {
+        f.residual_neighbour_correlation
+    }),
     ("translation_variance", |f| f.translation_variance),
     ("heading_variance_per_rad", |f| f.heading_variance_per_rad),
     ("heading_variance_per_m", |f| f.heading_variance_per_m),
@@ -884,6 +891,7 @@ mod tests {
             no_return_by_incidence: Vec::new(),
             mixed_pixels: e(mixed),
             unmapped_returns: e(0.0),
+            neighbour_correlation: e(0.0),
             spread_by_range: [(1.0, 2.0), (4.0, 6.0)]
                 .iter()
                 .map(|&(lo, hi)| Bin {
