@@ -6,6 +6,8 @@
 //! its seed, and writes into its own folder, `OUT/<scenario file stem>/`. So the number of
 //! parallel jobs changes the wall time only, never the results. `--shard K/N` keeps every N-th
 //! scenario from the K-th (in sorted order), so that N machines split a suite between them.
+//! A scenario file with a `[twin]` table is a twin scenario ([`crate::twin::scenario`]): the
+//! calibration and twin of a real log, gated as a scenario is.
 
 use crate::overlay::Overlay;
 use crate::parallel::parallel_map;
