@@ -273,6 +273,16 @@ pub fn slam_over(log: &carmen::Log, config: SlamConfig) -> Slam {
     slam
 }
 
+/// The log's raw odometry at each scan, under the stamp the log gave the scan, relative to the
+/// first scan's (the frame the SLAM starts in), in the order the scans were taken.
+pub fn odometry_path(log: &carmen::Log) -> Vec<(Time, Pose2)> {
+    let first = log.scans.first().map_or(Pose2::IDENTITY, |s| s.odometry);
+    log.scans
+        .iter()
+        .map(|s| (s.logged, first.between(&s.odometry)))
+        .collect()
+}
+
 /// A SLAM trajectory (a pose per scan, in the order the scans were taken) with each pose under
 /// the stamp the log gave its scan, by which relations name it, sorted by that stamp.
 pub fn as_logged(path: &[(Time, Pose2)], log: &carmen::Log) -> Vec<(Time, Pose2)> {
@@ -345,12 +355,7 @@ pub fn replay(
     };
     let started = Instant::now();
     let mut slam = slam_over(&log, config);
-    let first_odometry = log.scans[0].odometry;
-    let mut odometry: Vec<(Time, Pose2)> = log
-        .scans
-        .iter()
-        .map(|s| (s.logged, first_odometry.between(&s.odometry)))
-        .collect();
+    let mut odometry = odometry_path(&log);
     // The trajectory as the map was built: a pose per scan, in the order the scans were taken.
     let path = slam.trajectory();
     let trajectory = as_logged(&path, &log);

@@ -349,12 +349,7 @@ pub struct Figures {
 /// over the scans within `[from, to]`.
 fn figures(log: &carmen::Log, m: &Measured, rels: &[Relation], from: Time, to: Time) -> Figures {
     let slam = as_logged(&m.path, log);
-    let first = log.scans[0].odometry;
-    let mut odometry: Vec<(Time, Pose2)> = log
-        .scans
-        .iter()
-        .map(|s| (s.logged, first.between(&s.odometry)))
-        .collect();
+    let mut odometry = crate::replay::odometry_path(log);
     odometry.sort_by_key(|p| p.0);
     let s = relations::evaluate(&slam, rels);
     let o = relations::evaluate(&odometry, rels);
