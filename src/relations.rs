@@ -12,7 +12,7 @@
 
 use anyhow::{Result, bail};
 use futago_msgs::{Duration, Pose2, Time, wrap_angle};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One ground-truth relation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -96,6 +96,175 @@ pub fn sample(truth: &[(Time, Pose2)], every_s: f64, max_span_s: f64, seed: u64)
         t1 = t1 + step;
     }
     out
+}
+
+/// Cycles of three relations fewer than which [`reference_noise`] measures nothing.
+pub const MIN_CYCLES: usize = 10;
+
+/// A median cycle closure below which relations are taken as cut from one trajectory, m (a
+/// file's six printed decimals round to 5e-7 m).
+pub const CLOSED_M: f64 = 1e-5;
+
+/// The relations' own error, as far as their cycles show it.
+///
+/// A relations file is a measurement too: Kümmerle et al. made each relation by matching two
+/// scans and checking the match by eye, so a relation carries the error of that match. Where
+/// three relations join stamps a→b, b→c and a→c, their composition `ab·bc·ac⁻¹` is the identity
+/// up to that error; with independent errors of per-axis spread σ on each relation, the
+/// closure's per-axis spread is √3·σ (its heading's too; the closure's translation also takes
+/// the heading errors times the relations' lengths, neglected here, so σ is an upper estimate
+/// where relations are long). σ comes from the closures' medians, robust to a bad relation:
+/// the median of a 2D isotropic Gaussian's norm is σ·√(2 ln 2), of a 1D one's magnitude
+/// 0.6745·σ. Relations cut from one trajectory close exactly (below [`CLOSED_M`]) and read 0:
+/// their error, if any, is the trajectory's and no cycle shows it. Fewer than [`MIN_CYCLES`]
+/// cycles measure nothing (σ 0).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceNoise {
+    /// Cycles of three relations found.
+    pub cycles: usize,
+    /// The median closure's translation, m (0 with fewer than [`MIN_CYCLES`] cycles).
+    pub closure_median_m: f64,
+    /// One relation's per-axis translation spread, m.
+    pub sigma_xy_m: f64,
+    /// One relation's heading spread, rad.
+    pub sigma_theta_rad: f64,
+    /// The mean translational error σ implies for one relation, σ·√(π/2), m: what a relations
+    /// error cannot go below on average for an estimate whose errors are independent of the
+    /// reference's (E|s + n| grows with |s| for a zero-mean Gaussian n; an estimate that made
+    /// the relations, or was tuned on them, can follow their errors).
+    pub mean_error_m: f64,
+}
+
+/// The noise of `relations` measured on their cycles of three (see [`ReferenceNoise`]).
+pub fn reference_noise(relations: &[Relation]) -> ReferenceNoise {
+    use std::collections::{BTreeSet, HashMap};
+    // Each relation both ways: (from, to) → (index, pose of `to` in the frame of `from`).
+    let mut edges: HashMap<Time, Vec<(Time, usize, Pose2)>> = HashMap::new();
+    for (i, r) in relations.iter().enumerate() {
+        if r.t1 == r.t2 {
+            continue;
+        }
+        edges.entry(r.t1).or_default().push((r.t2, i, r.delta));
+        edges
+            .entry(r.t2)
+            .or_default()
+            .push((r.t1, i, r.delta.inverse()));
+    }
+    let mut seen = BTreeSet::new();
+    let (mut trans, mut heading) = (Vec::new(), Vec::new());
+    for (i, r) in relations.iter().enumerate() {
+        let Some(from_a) = edges.get(&r.t1) else {
+            continue;
+        };
+        for &(b, j, ab) in from_a {
+            if j == i || b == r.t2 {
+                continue;
+            }
+            for &(c, k, bc) in edges.get(&b).map_or(&[][..], |v| v.as_slice()) {
+                if c != r.t2 || k == i || k == j {
+                    continue;
+                }
+                let mut key = [i, j, k];
+                key.sort_unstable();
+                if !seen.insert(key) {
+                    continue;
+                }
+                let closure = ab.compose(&bc).compose(&r.delta.inverse());
+                trans.push(closure.x.hypot(closure.y));
+                heading.push(wrap_angle(closure.theta).abs());
+            }
+        }
+    }
+    let cycles = trans.len();
+    if cycles < MIN_CYCLES {
+        return ReferenceNoise {
+            cycles,
+            closure_median_m: 0.0,
+            sigma_xy_m: 0.0,
+            sigma_theta_rad: 0.0,
+            mean_error_m: 0.0,
+        };
+    }
+    // The middle value, or the mean of the two middle ones (selected, not sorted).
+    let median = |mut v: Vec<f64>| {
+        let n = v.len();
+        let (below, mid, _) = v.select_nth_unstable_by(n / 2, f64::total_cmp);
+        match below.iter().copied().max_by(f64::total_cmp) {
+            Some(lower) if n.is_multiple_of(2) => 0.5 * (lower + *mid),
+            _ => *mid,
+        }
+    };
+    let closure_median_m = median(trans);
+    if closure_median_m < CLOSED_M {
+        return ReferenceNoise {
+            cycles,
+            closure_median_m,
+            sigma_xy_m: 0.0,
+            sigma_theta_rad: 0.0,
+            mean_error_m: 0.0,
+        };
+    }
+    let sqrt3 = 3f64.sqrt();
+    let sigma_xy_m = closure_median_m / ((2.0 * std::f64::consts::LN_2).sqrt() * sqrt3);
+    let sigma_theta_rad = median(heading) / (0.674_489_750_196_081_7 * sqrt3);
+    ReferenceNoise {
+        cycles,
+        closure_median_m,
+        sigma_xy_m,
+        sigma_theta_rad,
+        mean_error_m: sigma_xy_m * std::f64::consts::FRAC_PI_2.sqrt(),
+    }
+}
+
+/// What [`reference_noise`] found, in a sentence.
+pub fn describe(n: &ReferenceNoise) -> String {
+    if n.cycles < MIN_CYCLES {
+        format!(
+            "the relations hold {} cycles of three, fewer than {MIN_CYCLES}: their own error is not measured",
+            n.cycles
+        )
+    } else if n.mean_error_m == 0.0 {
+        format!(
+            "the relations' {} cycles of three close to {:.1e} m (median): they were cut from one trajectory, whose own error no cycle shows",
+            n.cycles, n.closure_median_m
+        )
+    } else {
+        format!(
+            "the relations' own error, from their {} cycles of three (median closure {:.4} m): σ {:.4} m per axis and {:.3}° in heading per relation, a mean error of {:.4} m that no estimate independent of the reference's goes below on average",
+            n.cycles,
+            n.closure_median_m,
+            n.sigma_xy_m,
+            n.sigma_theta_rad.to_degrees(),
+            n.mean_error_m
+        )
+    }
+}
+
+/// `relations` as a reference with `noise` would have measured them: each relation composed
+/// with an error of per-axis spread `noise.sigma_xy_m` and heading spread
+/// `noise.sigma_theta_rad`, drawn from `rng` in order. A twin scored against these is scored as
+/// the real log is, against relations that err as the real ones do.
+pub fn with_noise(
+    relations: &[Relation],
+    noise: &ReferenceNoise,
+    rng: &mut impl rand::Rng,
+) -> Vec<Relation> {
+    use rand_distr::{Distribution, StandardNormal};
+    relations
+        .iter()
+        .map(|r| {
+            let mut n = || -> f64 { StandardNormal.sample(rng) };
+            let e = Pose2::new(
+                noise.sigma_xy_m * n(),
+                noise.sigma_xy_m * n(),
+                noise.sigma_theta_rad * n(),
+            );
+            Relation {
+                delta: r.delta.compose(&e),
+                ..*r
+            }
+        })
+        .collect()
 }
 
 /// Relations in the datasets' text format: `t1 t2 x y z roll pitch yaw` per line.
@@ -216,6 +385,90 @@ pub fn by_span(relations: &[Relation]) -> Vec<(String, Vec<Relation>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// A wandering path of `n` poses 0.3 m apart, one per second.
+    fn path(n: usize) -> Vec<(Time, Pose2)> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut p = Pose2::IDENTITY;
+        (0..n)
+            .map(|i| {
+                p = p.compose(&Pose2::new(0.3, 0.0, rng.random_range(-0.3..0.3)));
+                (Time::from_secs(i as f64), p)
+            })
+            .collect()
+    }
+
+    /// Triangles i→i+1, i+1→i+2 and i→i+2 every second pose (neighbouring triangles share
+    /// no relation), exact.
+    fn triangles(truth: &[(Time, Pose2)]) -> Vec<Relation> {
+        let rel = |a: usize, b: usize| Relation {
+            t1: truth[a].0,
+            t2: truth[b].0,
+            delta: truth[a].1.between(&truth[b].1),
+        };
+        (0..truth.len() - 2)
+            .step_by(2)
+            .flat_map(|i| [rel(i, i + 1), rel(i + 1, i + 2), rel(i, i + 2)])
+            .collect()
+    }
+
+    #[test]
+    fn cycles_of_three_recover_the_spread_drawn_into_the_relations() {
+        let truth = path(801);
+        let exact = triangles(&truth);
+        let drawn = ReferenceNoise {
+            cycles: 0,
+            closure_median_m: 0.0,
+            sigma_xy_m: 0.02,
+            sigma_theta_rad: 0.005,
+            mean_error_m: 0.0,
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let noisy = with_noise(&exact, &drawn, &mut rng);
+        let n = reference_noise(&noisy);
+        assert_eq!(n.cycles, 400);
+        // The median of 400 closures is within ~4 % (1σ) of its expectation; the heading
+        // errors add about 0.3 m · 0.005 rad to the closure's translation, 1 % of it.
+        assert!((n.sigma_xy_m / 0.02 - 1.0).abs() < 0.15, "{n:?}");
+        assert!((n.sigma_theta_rad / 0.005 - 1.0).abs() < 0.15, "{n:?}");
+        // The exact truth scored against the noisy relations errs by what the noise implies.
+        let measured = evaluate(&truth, &noisy).abs_trans_m.mean;
+        assert!(
+            (measured / n.mean_error_m - 1.0).abs() < 0.15,
+            "{measured} {n:?}"
+        );
+    }
+
+    #[test]
+    fn relations_cut_from_one_trajectory_close_and_too_few_cycles_measure_nothing() {
+        let truth = path(101);
+        let exact = triangles(&truth);
+        let n = reference_noise(&exact);
+        assert_eq!(n.cycles, 50);
+        assert_eq!(
+            (n.sigma_xy_m, n.sigma_theta_rad, n.mean_error_m),
+            (0.0, 0.0, 0.0)
+        );
+        assert!(describe(&n).contains("cut from one trajectory"));
+        // The same triangles listed backwards (t2 before t1) are the same cycles.
+        let reversed: Vec<Relation> = exact
+            .iter()
+            .map(|r| Relation {
+                t1: r.t2,
+                t2: r.t1,
+                delta: r.delta.inverse(),
+            })
+            .collect();
+        assert_eq!(reference_noise(&reversed).cycles, 50);
+        let few = reference_noise(&exact[..3 * (MIN_CYCLES - 1)]);
+        assert_eq!(few.cycles, MIN_CYCLES - 1);
+        assert_eq!((few.sigma_xy_m, few.mean_error_m), (0.0, 0.0));
+        assert!(describe(&few).contains("not measured"));
+        // A chain without cycles has none.
+        let chain: Vec<Relation> = exact.iter().step_by(3).copied().collect();
+        assert_eq!(reference_noise(&chain).cycles, 0);
+    }
 
     #[test]
     fn relations_split_by_span_at_the_bounds_whichever_way_round() {

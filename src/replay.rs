@@ -213,6 +213,11 @@ pub fn print(s: &Value, log: &Path, out: &Path) {
     }
     if s.get("relations").is_some() {
         println!("{}\n{}", line("slam"), line("odometry"));
+        if let Ok(n) = serde_json::from_value::<relations::ReferenceNoise>(
+            s["relations"]["reference_noise"].clone(),
+        ) {
+            println!("{}", relations::describe(&n));
+        }
     }
     let p = &s["loop_closure_precision"];
     if let Some(n) = p["constraints"].as_u64().filter(|n| *n > 0) {
@@ -428,6 +433,7 @@ pub fn replay(
                 "slam": metrics_json(&relations::evaluate(&trajectory, rels)),
                 "odometry": metrics_json(&relations::evaluate(&odometry, rels)),
                 "by_span": by_span,
+                "reference_noise": relations::reference_noise(rels),
             });
         }
         summary["performance"] = json!({

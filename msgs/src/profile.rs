@@ -23,6 +23,9 @@ use serde::{Deserialize, Serialize};
 /// A reading this far (m) beyond the surface the map predicts is a long reading.
 pub const LONG_READING_M: f64 = 1.0;
 
+/// The quantiles [`LaserProfile::long_excess_m`] holds: 0, 1/N, …, 1.
+pub const LONG_EXCESS_QUANTILES: usize = 20;
+
 /// A quantity estimated from data: its value, its standard error (0 where it was set, not
 /// estimated) and how many samples it rests on.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
@@ -112,6 +115,12 @@ pub struct LaserProfile {
     /// Of the same, the share that read more than `LONG_READING_M` beyond the surface: the
     /// long tail (see-through, crosstalk), which sets the residuals' upper percentiles.
     pub long_readings: Estimate,
+    /// How far beyond the surface the long readings lie, m: their quantiles at 0, 1/N, …, 1
+    /// (N = [`LONG_EXCESS_QUANTILES`]); empty where the log has none. A simulated long reading
+    /// lies this far beyond its surface, drawn from this distribution, instead of anywhere in
+    /// the range (a profile without it draws over the range).
+    #[serde(default)]
+    pub long_excess_m: Vec<f64>,
     /// Of the beams that should hit a mapped surface, the share with no return, overall.
     pub no_return: Estimate,
     /// The same by expected range, m.
@@ -226,6 +235,10 @@ impl RobotProfile {
             ("laser.range_max".into(), l.range_max, 1e-3, 1e4),
             ("laser.range_min".into(), l.range_min, 0.0, l.range_max),
         ];
+        for (i, q) in l.long_excess_m.iter().enumerate() {
+            let below = if i == 0 { 0.0 } else { l.long_excess_m[i - 1] };
+            checks.push((format!("laser.long_excess_m[{i}]"), *q, below, 1e4));
+        }
         for (name, bins) in [
             ("no_return_by_range", &l.no_return_by_range),
             ("spread_by_range", &l.spread_by_range),

@@ -6,7 +6,9 @@
 //!   surface (a person, a chair leg, dust), at a range drawn from an exponential of rate
 //!   `short_lambda` cut at the surface.
 //! - **Random readings**: with probability `random_rate`, anywhere between the range limits
-//!   (specular bounces, crosstalk).
+//!   (specular bounces, crosstalk); or, where `random_excess` is given, beyond the surface by
+//!   a distance drawn from those quantiles (see-through, a bounce to the next wall), as a
+//!   profile measures the real laser's long readings.
 //! - **No return by range**: the probability that a beam whose surface lies in a range bin
 //!   returns nothing, on top of the laser's constant `dropout` (dark or far surfaces).
 //! - **Mixed pixels**: where neighbouring beams' surfaces lie more than `edge_step` apart, the
@@ -42,6 +44,9 @@ pub struct BeamErrors {
     /// 1/m.
     pub short_lambda: f64,
     pub random_rate: f64,
+    /// Quantiles at 0, 1/N, …, 1 (N = length − 1) of how far beyond the surface a random
+    /// reading lies, m (non-decreasing, at least two); empty: uniform over the range.
+    pub random_excess: Vec<f64>,
     pub no_return_by_range: Vec<RangeProbability>,
     pub mixed_pixels: f64,
     /// m.
@@ -55,6 +60,7 @@ impl Default for BeamErrors {
             short_rate: 0.0,
             short_lambda: 1.0,
             random_rate: 0.0,
+            random_excess: Vec::new(),
             no_return_by_range: Vec::new(),
             mixed_pixels: 0.0,
             edge_step: 0.5,
@@ -88,6 +94,28 @@ impl BeamErrors {
             "1/m",
         )?;
         check_range(file, &k("random_rate"), self.random_rate, 0.0, 1.0, p)?;
+        if self.random_excess.len() == 1 {
+            return Err(SpecError::new(
+                file,
+                k("random_excess"),
+                "expected no quantiles or at least two (0 and 1), found one".to_string(),
+            ));
+        }
+        for (i, q) in self.random_excess.iter().enumerate() {
+            let below = if i == 0 {
+                0.0
+            } else {
+                self.random_excess[i - 1]
+            };
+            check_range(
+                file,
+                &k(&format!("random_excess[{i}]")),
+                *q,
+                below,
+                1e4,
+                "m, non-decreasing",
+            )?;
+        }
         check_range(file, &k("mixed_pixels"), self.mixed_pixels, 0.0, 1.0, p)?;
         check_range(file, &k("edge_step"), self.edge_step, 0.01, 100.0, "m")?;
         if self.short_rate + self.random_rate > 1.0 {
@@ -154,7 +182,17 @@ impl BeamErrors {
                 return Reading::Phantom(range_min - (1.0 - q * span).ln() / lambda);
             }
             if u < self.short_rate + self.random_rate {
-                return Reading::Phantom(rng.random_range(range_min..=range_max));
+                return match (surface, self.random_excess.len()) {
+                    (Some(d), 2..) => {
+                        let r = d + quantile(&self.random_excess, rng.random());
+                        if r <= range_max {
+                            Reading::Phantom(r)
+                        } else {
+                            Reading::Lost
+                        }
+                    }
+                    _ => Reading::Phantom(rng.random_range(range_min..=range_max)),
+                };
             }
         }
         Reading::Surface(noisy)
@@ -193,6 +231,14 @@ impl BeamErrors {
             && self.no_return_by_range.is_empty()
             && self.mixed_pixels == 0.0
     }
+}
+
+/// The value at `q` ∈ [0, 1] of a distribution given by its quantiles at 0, 1/N, …, 1 (at
+/// least two), linear between them.
+fn quantile(qs: &[f64], q: f64) -> f64 {
+    let at = q.clamp(0.0, 1.0) * (qs.len() - 1) as f64;
+    let lo = (at.floor() as usize).min(qs.len() - 2);
+    qs[lo] + (at - lo as f64) * (qs[lo + 1] - qs[lo])
 }
 
 #[cfg(test)]
@@ -245,6 +291,46 @@ mod tests {
         // The mean of an exponential of rate 2 from 0.1 cut at 5 m is about 0.1 + 0.5.
         let mean = short_sum / short as f64;
         assert!(mean > 0.5 && mean < 1.2, "{mean}");
+    }
+
+    #[test]
+    fn random_readings_with_an_excess_lie_beyond_the_surface_as_its_quantiles_say() {
+        // Excess uniform over 1–3 m (quantiles every quarter), surface at 5 m, limit 7.5 m.
+        let e = BeamErrors {
+            random_rate: 1.0,
+            random_excess: vec![1.0, 1.5, 2.0, 2.5, 3.0],
+            ..Default::default()
+        };
+        let mut rng = stream(4, "beam");
+        let mut beyond = Vec::new();
+        let mut lost = 0;
+        for _ in 0..20_000 {
+            match e.apply(Some(5.0), Some(5.0), 0.1, 7.5, &mut rng) {
+                Reading::Phantom(r) => beyond.push(r - 5.0),
+                Reading::Lost => lost += 1,
+                Reading::Surface(_) => panic!("every reading is random"),
+            }
+        }
+        assert!(beyond.iter().all(|x| (1.0..=2.5).contains(x)));
+        // Beyond the range limit (an excess over 2.5 m, a quarter) there is no return.
+        assert!((lost as f64 / 20_000.0 - 0.25).abs() < 0.01, "{lost}");
+        let mean = beyond.iter().sum::<f64>() / beyond.len() as f64;
+        assert!((mean - 1.75).abs() < 0.01, "{mean}");
+        // Without a surface the reading is anywhere in the range, as without quantiles.
+        let anywhere: Vec<f64> = (0..2_000)
+            .filter_map(|_| match e.apply(None, None, 0.1, 7.5, &mut rng) {
+                Reading::Phantom(r) => Some(r),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(anywhere.len(), 2_000);
+        assert!(anywhere.iter().any(|r| *r < 1.0));
+        let bad = BeamErrors {
+            random_excess: vec![2.0, 1.0],
+            ..Default::default()
+        };
+        let err = bad.validate(Path::new("w.toml"), "laser").unwrap_err();
+        assert!(err.to_string().contains("laser.random_excess[1]"), "{err}");
     }
 
     #[test]

@@ -9,6 +9,7 @@
 //! and doors included: the residuals are those of a map made from the same scans, as a
 //! robot's own map is.
 
+use crate::ground_truth::trajectory::Stats;
 use futago_msgs::LaserScan;
 use futago_msgs::Pose2;
 use futago_msgs::profile::{Bin, Estimate, LaserProfile};
@@ -487,6 +488,25 @@ fn bins_of(edges: &[f64], counts: &[(usize, usize)], scale: f64) -> Vec<Bin> {
         .collect()
 }
 
+/// How far beyond their surface the long readings lie (more than
+/// [`futago_msgs::profile::LONG_READING_M`]), m: quantiles 0, 1/N, …, 1 by linear interpolation
+/// between order statistics (N = [`futago_msgs::profile::LONG_EXCESS_QUANTILES`]); empty with
+/// fewer than N long readings, too few to say.
+pub fn long_excess(readings: &[Reading]) -> Vec<f64> {
+    use futago_msgs::profile::{LONG_EXCESS_QUANTILES as N, LONG_READING_M};
+    let excess: Vec<f64> = readings
+        .iter()
+        .map(|r| r.measured - r.expected)
+        .filter(|e| *e > LONG_READING_M)
+        .collect();
+    if excess.len() < N {
+        return Vec::new();
+    }
+    (0..=N)
+        .filter_map(|i| Stats::percentile(&excess, 100.0 * i as f64 / N as f64))
+        .collect()
+}
+
 /// The laser profile of a tally: the mixture fitted to it over `layout` (a profile whose
 /// layout and timing are set); `None` with fewer than 100 readings where the map predicts a
 /// surface.
@@ -526,6 +546,7 @@ pub fn error_model(t: &Tally, layout: LaserProfile) -> Option<LaserProfile> {
             &t.by_incidence,
             std::f64::consts::PI / 180.0,
         ),
+        long_excess_m: long_excess(&t.readings),
         mixed_pixels: Estimate::proportion(t.edges.0, t.edges.1),
         unmapped_returns: Estimate::proportion(t.unmapped.0, t.unmapped.1),
         neighbour_correlation: pair_correlation(&t.neighbours),
@@ -614,6 +635,27 @@ mod tests {
             cast(&map, 0.05, 0.0, 0.0, std::f64::consts::PI, 10.0),
             Cast::Unknown
         );
+    }
+
+    #[test]
+    fn long_excess_quantiles_follow_the_long_readings_alone() {
+        let reading = |measured: f64| Reading {
+            measured,
+            expected: 2.0,
+            chord: 0.05,
+        };
+        // Hits and short readings, then long readings 1.5 to 3.5 m beyond the surface.
+        let mut readings: Vec<Reading> = (0..500)
+            .map(|i| reading(1.9 + 0.2 * (i % 2) as f64))
+            .collect();
+        readings.extend((0..=200).map(|i| reading(2.0 + 1.5 + 2.0 * i as f64 / 200.0)));
+        let q = long_excess(&readings);
+        assert_eq!(q.len(), futago_msgs::profile::LONG_EXCESS_QUANTILES + 1);
+        assert!((q[0] - 1.5).abs() < 1e-9 && (q[q.len() - 1] - 3.5).abs() < 1e-9);
+        assert!((q[q.len() / 2] - 2.5).abs() < 1e-9, "{q:?}");
+        assert!(q.windows(2).all(|w| w[0] <= w[1]));
+        // Too few long readings to say.
+        assert!(long_excess(&readings[..510]).is_empty());
     }
 
     #[test]

@@ -159,6 +159,7 @@ fn layout(log: &carmen::Log) -> LaserProfile {
         short_lambda: none,
         random_rate: none,
         long_readings: none,
+        long_excess_m: Vec::new(),
         no_return: none,
         no_return_by_range: Vec::new(),
         no_return_by_incidence: Vec::new(),

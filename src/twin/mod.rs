@@ -14,8 +14,12 @@
 //! 4. The same SLAM runs on each twin log; the real log is scored against its relations, each
 //!    twin against its truth at the same stamp pairs, over the span `--score-span` (by
 //!    default the second half, so that a profile calibrated on the first half is judged on
-//!    what it was not fitted to). Range residuals, odometry errors and relations errors go
-//!    side by side with their ratios (twin over real, the median over the seeds).
+//!    what it was not fitted to). The relations are a measurement with an error of their own,
+//!    which their cycles show ([`relations::reference_noise`]); each seed's truth is scored
+//!    with an error of that spread drawn in, so that like is compared with like, and its error
+//!    against the exact truth is reported beside. Range residuals, odometry errors and
+//!    relations errors go side by side with their ratios (twin over real, the median over the
+//!    seeds).
 
 use crate::calibrate::{self, Measured, laser::Tally};
 use crate::relations::{self, Relation};
@@ -94,6 +98,8 @@ pub fn laser_model(real: &LaserProfile, floor: &LaserProfile) -> (f64, f64, Beam
         short_rate,
         short_lambda: real.short_lambda.value.clamp(1e-3, 1e3),
         random_rate: random_rate.min(1.0 - short_rate),
+        // ... and lie as far beyond their surface as the real ones do.
+        random_excess: real.long_excess_m.clone(),
         no_return_by_range,
         mixed_pixels: beyond(real.mixed_pixels.value, floor.mixed_pixels.value),
         ..BeamErrors::default()
@@ -325,9 +331,14 @@ fn residual_quantiles(t: &Tally, qs: &[f64]) -> Vec<f64> {
 /// The figures compared between the real log and a twin.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Figures {
-    /// Mean translational relations error, m: the SLAM's and raw odometry's.
+    /// Mean translational relations error, m: the SLAM's and raw odometry's, a twin's against
+    /// its truth with the reference's error added ([`relations::with_noise`]), as the real log
+    /// is scored against relations that carry it.
     pub slam_relations_m: f64,
     pub odometry_relations_m: f64,
+    /// The SLAM's error against the relations as they are: a twin's against its exact truth
+    /// (the real log's is `slam_relations_m`).
+    pub slam_relations_exact_m: f64,
     /// Relations scored.
     pub relations: usize,
     /// Median and 95th percentile of |range residual|, m.
@@ -345,14 +356,18 @@ pub struct Figures {
     pub heading_variance_per_m: f64,
 }
 
+/// The relations a log is scored on: as the reference measured them, and exact (a twin's
+/// truth; the real log's are the same).
+type Scored<'a> = (&'a [Relation], &'a [Relation]);
+
 /// Scores a measured log: its SLAM path and odometry against `rels`, its range residuals
 /// over the scans within `[from, to]`.
-fn figures(log: &carmen::Log, m: &Measured, rels: &[Relation], from: Time, to: Time) -> Figures {
+fn figures(log: &carmen::Log, m: &Measured, rels: Scored, from: Time, to: Time) -> Figures {
     let slam = as_logged(&m.path, log);
     let mut odometry = crate::replay::odometry_path(log);
     odometry.sort_by_key(|p| p.0);
-    let s = relations::evaluate(&slam, rels);
-    let o = relations::evaluate(&odometry, rels);
+    let s = relations::evaluate(&slam, rels.0);
+    let o = relations::evaluate(&odometry, rels.0);
     let tally = calibrate::tally_within(log, m, from, to);
     let q = residual_quantiles(&tally, &[0.5, 0.95]);
     let odo = m.odometry.as_ref();
@@ -360,6 +375,7 @@ fn figures(log: &carmen::Log, m: &Measured, rels: &[Relation], from: Time, to: T
     Figures {
         slam_relations_m: s.abs_trans_m.mean,
         odometry_relations_m: o.abs_trans_m.mean,
+        slam_relations_exact_m: relations::evaluate(&slam, rels.1).abs_trans_m.mean,
         relations: s.relations,
         residual_median_m: q[0],
         residual_p95_m: q[1],
@@ -371,19 +387,10 @@ fn figures(log: &carmen::Log, m: &Measured, rels: &[Relation], from: Time, to: T
     }
 }
 
-/// The median of `v` (NaN when empty).
+/// The median of `v`'s finite values (NaN when there are none).
 fn median(mut v: Vec<f64>) -> f64 {
     v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    crate::ground_truth::trajectory::Stats::percentile(&v, 50.0).unwrap_or(f64::NAN)
 }
 
 /// The relations of `rels` within `[from, to]`, and the same stamp pairs measured on `truth`
@@ -481,7 +488,22 @@ pub fn twin(
     );
     let scan_at = |f: f64| Time(s0.0 + Time::from_secs(f * (s1 - s0).secs()).0);
     let (score_from, score_to) = (scan_at(o.score_span[0]), scan_at(o.score_span[1]));
-    let real_figures = figures(&real, &measured_real, &real_rels, score_from, score_to);
+    let real_figures = figures(
+        &real,
+        &measured_real,
+        (&real_rels, &real_rels),
+        score_from,
+        score_to,
+    );
+    // The reference's own error, from every cycle of the file (it is the reference's, not the
+    // robot's: no part of the log is fitted by it), and each seed's relations as a reference
+    // with that error would have measured its truth.
+    let reference = relations::reference_noise(&rels);
+    let seed_rels: Vec<Vec<Relation>> = (0..o.seeds)
+        .map(|seed| {
+            relations::with_noise(&twin_rels, &reference, &mut stream(seed, "twin.reference"))
+        })
+        .collect();
     write_atomically(out, o.force, "twin", |tmp| {
         let sim = twin_world(&tmp.join("world"), &measured_real)?;
         let setup = Setup {
@@ -491,18 +513,17 @@ pub fn twin(
             config,
         };
         let fitted = fit(&setup, &profile, (&twin_rels, score_from, score_to))?;
-        let (twins, first_log, simulated) =
-            run_seeds(&setup, &fitted, o, &twin_rels, (score_from, score_to))?;
+        let (twins, first_log, simulated) = run_seeds(
+            &setup,
+            &fitted,
+            o,
+            (&seed_rels, &twin_rels),
+            (score_from, score_to),
+        )?;
         let ranking = (!candidates.is_empty()).then(|| {
-            rank::rank(
-                &candidates,
-                &real,
-                &real_rels,
-                &twin_rels,
-                o.seeds,
-                o.jobs,
-                |seed| seed_log(&setup, &fitted, seed),
-            )
+            rank::rank(&candidates, &real, &real_rels, &seed_rels, o.jobs, |seed| {
+                seed_log(&setup, &fitted, seed)
+            })
         });
         let duration = (last - first).secs();
         let wall = started.elapsed().as_secs_f64();
@@ -512,6 +533,7 @@ pub fn twin(
             "relations": relations_path.display().to_string(),
             "score_span": o.score_span,
             "seeds": o.seeds,
+            "reference_noise": reference,
             "real": real_figures,
             "twins": twins,
             "uncalibrated": fitted.before,
@@ -697,7 +719,8 @@ fn fit(
     Ok(Fitted {
         laser,
         odometry,
-        before: figures(&floor_log, &floor, rels, score_from, score_to),
+        // A simulator's presets score against the exact truth: they model no reference.
+        before: figures(&floor_log, &floor, (rels, rels), score_from, score_to),
         floor: floor.laser,
         rounds,
     })
@@ -729,7 +752,7 @@ fn run_seeds(
     setup: &Setup,
     fitted: &Fitted,
     o: &TwinOptions,
-    rels: &[Relation],
+    (seed_rels, exact): (&[Vec<Relation>], &[Relation]),
     (from, to): (Time, Time),
 ) -> Result<(Vec<Figures>, Option<FirstSeed>, Vec<f64>)> {
     let run_seed = |seed: u64| -> Result<SeedRun> {
@@ -738,7 +761,7 @@ fn run_seeds(
         let simulated = clock.elapsed().as_secs_f64();
         let m = calibrate::measure(&log, setup.config)
             .map_err(|e| anyhow::anyhow!("the twin of seed {seed}: {e}"))?;
-        let f = figures(&log, &m, rels, from, to);
+        let f = figures(&log, &m, (&seed_rels[seed as usize], exact), from, to);
         Ok((f, log, m.map.to_grid(), simulated))
     };
     let seeds: Vec<u64> = (0..o.seeds).collect();
@@ -826,6 +849,27 @@ pub fn table(summary: &Value) -> String {
             f("uncalibrated_ratio")
         );
     }
+    if let Ok(n) =
+        serde_json::from_value::<relations::ReferenceNoise>(summary["reference_noise"].clone())
+    {
+        let exact = median(
+            summary["twins"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|t| t["slam_relations_exact_m"].as_f64())
+                .collect(),
+        );
+        let mut line = relations::describe(&n);
+        line[..1].make_ascii_uppercase();
+        s += &if n.mean_error_m > 0.0 {
+            format!(
+                "\n{line}. Each twin seed is scored against its truth with that error drawn in; against the exact truth its SLAM's error is {exact:.4} m (the median over the seeds).\n"
+            )
+        } else {
+            format!("\n{line}; the twin is scored against its exact truth.\n")
+        };
+    }
     s
 }
 
@@ -884,6 +928,7 @@ mod tests {
                 })
                 .collect(),
             no_return_by_incidence: Vec::new(),
+            long_excess_m: Vec::new(),
             mixed_pixels: e(mixed),
             unmapped_returns: e(0.0),
             neighbour_correlation: e(0.0),

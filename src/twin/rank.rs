@@ -15,6 +15,11 @@
 //! 1, 1 − p and 1 + p ([`PERTURBATION`]), and each twin seed runs at one of those spacings in
 //! turn (seed 0 at the configuration's own), its error the median over the seeds.
 //!
+//! The relations themselves err (their cycles show it, [`relations::reference_noise`]); where
+//! the configurations' real errors differ by less than the mean over the relations scatters,
+//! the real ordering is the relations' own. [`resampled_agreement`] says how far the relations
+//! resolve it: the agreement of the real ranking with those of its relations resampled.
+//!
 //! The file lists the configurations, each a name and the keys it sets over the base
 //! configuration (dotted, under `[slam]`):
 //!
@@ -130,20 +135,67 @@ pub struct Ranking {
     /// The real error of the configuration best in the twin over the real log's best: 1 when
     /// the twin picks the real best.
     pub regret: f64,
+    /// How well the relations resolve the real ranking: Spearman's ρ between the real ranking
+    /// and the rankings of [`BOOTSTRAP`] resamplings of the scored relations (with
+    /// replacement), their median and 10th percentile ([`resampled_agreement`]).
+    pub real_resampled_spearman: [f64; 2],
+}
+
+/// Resamplings of the relations for [`Ranking::real_resampled_spearman`].
+pub const BOOTSTRAP: usize = 200;
+
+/// The agreement of the ranking by `errors` (per configuration, each relation's error: the
+/// mean over its runs, none where a run left it unscored) with the rankings of [`BOOTSTRAP`]
+/// resamplings of the relations, drawn with replacement from a fixed stream: Spearman's ρ's
+/// median and 10th percentile. Where configurations differ by less than the scatter of the
+/// mean over the relations, the relations cannot order them, and no twin can agree with an
+/// ordering that its own data do not hold (Efron and Tibshirani, *An Introduction to the
+/// Bootstrap*, 1993).
+pub fn resampled_agreement(errors: &[Vec<Option<f64>>]) -> [f64; 2] {
+    use rand::Rng;
+    let n = errors.iter().map(Vec::len).min().unwrap_or(0);
+    if n == 0 || errors.len() < 2 {
+        return [f64::NAN; 2];
+    }
+    let mean_over = |e: &[Option<f64>], picks: &mut dyn Iterator<Item = usize>| {
+        let (mut sum, mut k) = (0.0, 0usize);
+        for i in picks {
+            if let Some(x) = e[i] {
+                sum += x;
+                k += 1;
+            }
+        }
+        if k == 0 { f64::NAN } else { sum / k as f64 }
+    };
+    let full: Vec<f64> = errors.iter().map(|e| mean_over(e, &mut (0..n))).collect();
+    let full_rank = ranks(&full);
+    let mut rng = futago_sim::noise::stream(0, "twin.rank.bootstrap");
+    let mut rhos: Vec<f64> = (0..BOOTSTRAP)
+        .map(|_| {
+            let picks: Vec<usize> = (0..n).map(|_| rng.random_range(0..n)).collect();
+            let means: Vec<f64> = errors
+                .iter()
+                .map(|e| mean_over(e, &mut picks.iter().copied()))
+                .collect();
+            pearson(&ranks(&means), &full_rank)
+        })
+        .collect();
+    rhos.sort_by(f64::total_cmp);
+    [rhos[BOOTSTRAP / 2], rhos[BOOTSTRAP / 10]]
 }
 
 /// Ranks `candidates`: each runs the SLAM over `real` at each spacing of [`FACTORS`] (scored on
 /// `real_rels`) and over the twin log of every seed `0..seeds` that `twin_log` makes (scored on
-/// `twin_rels`), `jobs` at a time.
+/// that seed's `twin_rels[seed]`, `seeds` of them), `jobs` at a time.
 pub fn rank(
     candidates: &[Candidate],
     real: &carmen::Log,
     real_rels: &[Relation],
-    twin_rels: &[Relation],
-    seeds: u64,
+    twin_rels: &[Vec<Relation>],
     jobs: usize,
     twin_log: impl Fn(u64) -> carmen::Log + Sync,
 ) -> Ranking {
+    let seeds = twin_rels.len() as u64;
     // (configuration, the spacing factor, the twin's seed: none for the real log)
     let runs: Vec<(usize, f64, Option<u64>)> = (0..candidates.len())
         .flat_map(|c| {
@@ -152,15 +204,37 @@ pub fn rank(
             real.chain(twins)
         })
         .collect();
-    let errors = parallel_map(&runs, jobs, |_, &(c, f, seed)| {
+    let per_relation = parallel_map(&runs, jobs, |_, &(c, f, seed)| {
         let mut config = candidates[c].config;
         config.keyframe_distance *= f;
         match seed {
-            None => relations_error(real, config, real_rels),
-            Some(s) => relations_error(&twin_log(s), config, twin_rels),
+            None => relations_errors(real, config, real_rels),
+            Some(s) => relations_errors(&twin_log(s), config, &twin_rels[s as usize]),
         }
     });
+    let mean = |e: &Vec<Option<f64>>| {
+        let v: Vec<f64> = e.iter().flatten().copied().collect();
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    let errors: Vec<f64> = per_relation.iter().map(mean).collect();
     let per = FACTORS.len() + seeds as usize;
+    // Each relation's real error per configuration, the mean over the spacings.
+    let real_per_relation: Vec<Vec<Option<f64>>> = per_relation
+        .chunks(per)
+        .map(|runs| {
+            let runs = &runs[..FACTORS.len()];
+            (0..real_rels.len())
+                .map(|i| {
+                    let v: Option<Vec<f64>> = runs.iter().map(|r| r[i]).collect();
+                    v.map(|v| v.iter().sum::<f64>() / v.len() as f64)
+                })
+                .collect()
+        })
+        .collect();
     let real_runs: Vec<Vec<f64>> = errors
         .chunks(per)
         .map(|e| e[..FACTORS.len()].to_vec())
@@ -169,7 +243,9 @@ pub fn rank(
         .chunks(per)
         .map(|e| e[FACTORS.len()..].to_vec())
         .collect();
-    ranking(candidates, real_runs, twin_seeds)
+    let mut r = ranking(candidates, real_runs, twin_seeds);
+    r.real_resampled_spearman = resampled_agreement(&real_per_relation);
+    r
 }
 
 /// The orderings of errors already measured: each configuration's real runs (their mean
@@ -214,14 +290,18 @@ fn ranking(
         best_in_twin: candidates[bt].name.clone(),
         best_on_real: candidates[br].name.clone(),
         regret: real_m[bt] / real_m[br],
+        real_resampled_spearman: [f64::NAN; 2],
     }
 }
 
-/// The SLAM's mean translational relations error over `log` with `config`, m.
-fn relations_error(log: &carmen::Log, config: SlamConfig, rels: &[Relation]) -> f64 {
+/// The SLAM's translational error over `log` with `config` on each of `rels`, m (none where
+/// the trajectory does not reach a relation's stamps).
+fn relations_errors(log: &carmen::Log, config: SlamConfig, rels: &[Relation]) -> Vec<Option<f64>> {
     let slam = slam_over(log, config);
     let trajectory = as_logged(&slam.trajectory(), log);
-    relations::evaluate(&trajectory, rels).abs_trans_m.mean
+    rels.iter()
+        .map(|r| relations::error(&trajectory, r).map(|e| e.0))
+        .collect()
 }
 
 /// Ranks of `v`, 1 the smallest; ties share the mean of their ranks, and a value that is not
@@ -271,8 +351,13 @@ pub fn table(r: &Ranking) -> String {
         );
     }
     s += &format!(
-        "\nSpearman's ρ {:.3}. Best in the twin: {}; on the real log: {}; the twin's choice on the real log over the real best: {:.3}.\n",
-        r.spearman, r.best_in_twin, r.best_on_real, r.regret
+        "\nSpearman's ρ {:.3}. Best in the twin: {}; on the real log: {}; the twin's choice on the real log over the real best: {:.3}. The relations resolve the real ranking to ρ {:.3} (the median over {BOOTSTRAP} resamplings of them; 10th percentile {:.3}).\n",
+        r.spearman,
+        r.best_in_twin,
+        r.best_on_real,
+        r.regret,
+        r.real_resampled_spearman[0],
+        r.real_resampled_spearman[1]
     );
     s
 }
@@ -293,6 +378,35 @@ mod tests {
                 config: SlamConfig::default(),
             })
             .collect()
+    }
+
+    #[test]
+    fn resampling_tells_separated_configurations_from_ones_within_the_scatter() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        // Six configurations over 300 relations, each relation's error scattered by 0.02 m.
+        let errors = |gap: f64, rng: &mut rand_chacha::ChaCha8Rng| -> Vec<Vec<Option<f64>>> {
+            let shared: Vec<f64> = (0..300).map(|_| rng.random_range(0.0..0.04)).collect();
+            (0..6)
+                .map(|c| {
+                    shared
+                        .iter()
+                        .map(|x| Some(x + c as f64 * gap + rng.random_range(0.0..0.04)))
+                        .collect()
+                })
+                .collect()
+        };
+        // Means 0.01 m apart, their standard error about 0.0007 m: the order holds.
+        let apart = resampled_agreement(&errors(0.01, &mut rng));
+        assert!(apart[1] > 0.99, "{apart:?}");
+        // No difference at all: resampling reshuffles them.
+        let same = resampled_agreement(&errors(0.0, &mut rng));
+        assert!(same[0] < 0.8, "{same:?}");
+        // A relation left unscored by a run is left out of that configuration's mean.
+        let mut holes = errors(0.01, &mut rng);
+        holes[2][7] = None;
+        assert!(resampled_agreement(&holes)[0] > 0.99);
+        assert!(resampled_agreement(&holes[..1])[0].is_nan());
     }
 
     #[test]

@@ -107,6 +107,10 @@ pub fn metric_names() -> Vec<String> {
     }
     names.push("twin.rank.spearman".into());
     names.push("twin.rank.regret".into());
+    names.push("twin.rank.real_resampled_spearman".into());
+    names.push("twin.reference.cycles".into());
+    names.push("twin.reference.mean_error_m".into());
+    names.push("twin.slam_relations_exact_m.twin".into());
     names.push("twin.simulation_real_time_factor".into());
     names
 }
@@ -217,6 +221,24 @@ fn metrics(summary: &Value) -> Metrics {
         if let Some(v) = r[k].as_f64() {
             m.insert(format!("twin.rank.{k}"), v);
         }
+    }
+    if let Some(v) = r["real_resampled_spearman"][0].as_f64() {
+        m.insert("twin.rank.real_resampled_spearman", v);
+    }
+    let n = &summary["reference_noise"];
+    for k in ["cycles", "mean_error_m"] {
+        if let Some(v) = n[k].as_f64() {
+            m.insert(format!("twin.reference.{k}"), v);
+        }
+    }
+    let exact: Vec<f64> = summary["twins"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|t| t["slam_relations_exact_m"].as_f64())
+        .collect();
+    if !exact.is_empty() {
+        m.insert("twin.slam_relations_exact_m.twin", super::median(exact));
     }
     if let Some(v) = summary["performance"]["simulation_real_time_factor"].as_f64() {
         m.insert("twin.simulation_real_time_factor", v);
@@ -356,9 +378,14 @@ mod tests {
             "compared": [{ "figure": "slam_relations_m", "real": 0.03, "twin_median": 0.006, "ratio_median": 0.2 }],
             "ranking": { "spearman": 0.9, "regret": 1.05 },
             "performance": { "simulation_real_time_factor": 1000.0 },
+            "reference_noise": { "cycles": 54, "mean_error_m": 0.028 },
+            "twins": [{ "slam_relations_exact_m": 0.007 }, { "slam_relations_exact_m": 0.005 },
+                      { "slam_relations_exact_m": 0.009 }],
         });
         let m = metrics(&summary);
         assert_eq!(m.0["twin.slam_relations_m.ratio"], 0.2);
+        assert_eq!(m.0["twin.reference.mean_error_m"], 0.028);
+        assert_eq!(m.0["twin.slam_relations_exact_m.twin"], 0.007);
         assert_eq!(m.0["twin.rank.spearman"], 0.9);
         let gate = |metric: &str, op: &str, value: f64| -> Gate {
             toml::from_str(&format!(
