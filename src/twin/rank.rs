@@ -15,10 +15,12 @@
 //! 1, 1 − p and 1 + p ([`PERTURBATION`]), and each twin seed runs at one of those spacings in
 //! turn (seed 0 at the configuration's own), its error the median over the seeds.
 //!
-//! The relations themselves err (their cycles show it, [`relations::reference_noise`]); where
-//! the configurations' real errors differ by less than the mean over the relations scatters,
-//! the real ordering is the relations' own. [`resampled_agreement`] says how far the relations
-//! resolve it: the agreement of the real ranking with those of its relations resampled.
+//! The real ordering rests on a finite set of relations: where the configurations' real errors
+//! differ by less than their mean over the relations scatters, the relations cannot order
+//! them. [`resampled_agreement`] says how far they resolve it: the agreement of the real
+//! ranking with those of its relations resampled. (The relations' own error,
+//! [`relations::reference_noise`], is common to every configuration and is not resampled away:
+//! it favours a configuration whose errors happen to follow it, which this does not show.)
 //!
 //! The file lists the configurations, each a name and the keys it sets over the base
 //! configuration (dotted, under `[slam]`):
