@@ -534,6 +534,8 @@ pub fn twin(
             "score_span": o.score_span,
             "seeds": o.seeds,
             "reference_noise": reference,
+            // The twin's SLAM against its exact truth, the median over the seeds.
+            "slam_relations_exact_m": median(twins.iter().map(|t| t.slam_relations_exact_m).collect()),
             "real": real_figures,
             "twins": twins,
             "uncalibrated": fitted.before,
@@ -852,14 +854,9 @@ pub fn table(summary: &Value) -> String {
     if let Ok(n) =
         serde_json::from_value::<relations::ReferenceNoise>(summary["reference_noise"].clone())
     {
-        let exact = median(
-            summary["twins"]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .filter_map(|t| t["slam_relations_exact_m"].as_f64())
-                .collect(),
-        );
+        let exact = summary["slam_relations_exact_m"]
+            .as_f64()
+            .unwrap_or(f64::NAN);
         let mut line = relations::describe(&n);
         line[..1].make_ascii_uppercase();
         s += &if n.mean_error_m > 0.0 {

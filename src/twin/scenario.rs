@@ -231,14 +231,8 @@ fn metrics(summary: &Value) -> Metrics {
             m.insert(format!("twin.reference.{k}"), v);
         }
     }
-    let exact: Vec<f64> = summary["twins"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(|t| t["slam_relations_exact_m"].as_f64())
-        .collect();
-    if !exact.is_empty() {
-        m.insert("twin.slam_relations_exact_m.twin", super::median(exact));
+    if let Some(v) = summary["slam_relations_exact_m"].as_f64() {
+        m.insert("twin.slam_relations_exact_m.twin", v);
     }
     if let Some(v) = summary["performance"]["simulation_real_time_factor"].as_f64() {
         m.insert("twin.simulation_real_time_factor", v);
@@ -379,8 +373,7 @@ mod tests {
             "ranking": { "spearman": 0.9, "regret": 1.05 },
             "performance": { "simulation_real_time_factor": 1000.0 },
             "reference_noise": { "cycles": 54, "mean_error_m": 0.028 },
-            "twins": [{ "slam_relations_exact_m": 0.007 }, { "slam_relations_exact_m": 0.005 },
-                      { "slam_relations_exact_m": 0.009 }],
+            "slam_relations_exact_m": 0.007,
         });
         let m = metrics(&summary);
         assert_eq!(m.0["twin.slam_relations_m.ratio"], 0.2);
