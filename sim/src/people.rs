@@ -91,6 +91,13 @@ pub struct FlowConfig {
     /// Radius of the places, m.
     #[serde(default = "spread")]
     pub spread: f64,
+    /// Where given, people appear anywhere along the segment from `from` to `from_end` (a
+    /// doorway, the side of a square) rather than about one point, m; `spread` still applies.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub from_end: Option<[f64; 2]>,
+    /// Where given, people leave anywhere along the segment from `to` to `to_end`, m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub to_end: Option<[f64; 2]>,
     /// First and last time an arrival may come, s.
     #[serde(default)]
     pub start_time: f64,
@@ -153,6 +160,13 @@ pub struct CrowdConfig {
     pub n_prime: f64,
     /// The radius people see the robot as when they avoid it, m (pedsim_ros's r_r).
     pub robot_radius: f64,
+    /// The probability that a flow's arrival is two people walking together (a pair), who
+    /// share their speed and keep abreast `pair_spacing` apart. Real crowds walk largely in
+    /// groups, mostly pairs (Moussaïd et al., PLoS ONE 2010); `futago crowd calibrate`
+    /// measures it. Zero (the default) draws nothing, so crowds without it keep their bytes.
+    pub pair_fraction: f64,
+    /// The distance between a pair's walkers, side by side, m.
+    pub pair_spacing: f64,
     /// How often the forces are evaluated, Hz (people move on at every physics step under
     /// the forces last evaluated).
     pub rate: f64,
@@ -192,6 +206,8 @@ impl Default for CrowdConfig {
             n: 2.0,
             n_prime: 3.0,
             robot_radius: 0.5,
+            pair_fraction: 0.0,
+            pair_spacing: 0.75,
             rate: 50.0,
             max_speed_factor: 1.3,
             waypoint_radius: 0.3,
@@ -272,6 +288,12 @@ impl FlowConfig {
         check_name(file, &k("name"), &self.name)?;
         check_point(file, &k("from"), &self.from)?;
         check_point(file, &k("to"), &self.to)?;
+        if let Some(p) = &self.from_end {
+            check_point(file, &k("from_end"), p)?;
+        }
+        if let Some(p) = &self.to_end {
+            check_point(file, &k("to_end"), p)?;
+        }
         if self.via.len() > 10_000 {
             return Err(SpecError::new(
                 file,
@@ -326,6 +348,8 @@ impl CrowdConfig {
             ("n", self.n, 0.0, 100.0, ""),
             ("n_prime", self.n_prime, 0.0, 100.0, ""),
             ("robot_radius", self.robot_radius, 0.0, 5.0, "m"),
+            ("pair_fraction", self.pair_fraction, 0.0, 1.0, ""),
+            ("pair_spacing", self.pair_spacing, 0.0, 5.0, "m"),
             ("rate", self.rate, 1.0, 10_000.0, "Hz"),
             ("max_speed_factor", self.max_speed_factor, 1.0, 10.0, ""),
             ("waypoint_radius", self.waypoint_radius, 0.01, 10.0, "m"),
@@ -391,6 +415,9 @@ struct Walker {
     /// Gait phase in strides, and the current step length.
     phase: f64,
     step: f64,
+    /// The slot of the companion they walk with, if any (while both are in the world and
+    /// name each other).
+    partner: Option<usize>,
     shirt: [f64; 3],
     trousers: [f64; 3],
 }
@@ -433,7 +460,17 @@ impl PersonTruth {
 struct Arrivals {
     next: f64,
     rng: ChaCha8Rng,
-    waiting: Option<([f64; 2], [f64; 2], f64)>,
+    waiting: Option<Arrival>,
+}
+
+/// One arrival of a flow: where they start, where they go, their speed, and whether a
+/// companion walks with them.
+#[derive(Debug, Clone, Copy)]
+struct Arrival {
+    from: [f64; 2],
+    to: [f64; 2],
+    speed: f64,
+    pair: bool,
 }
 
 /// The people of a run: the pool of slots (declared people, then each flow's `max`), their
@@ -489,6 +526,7 @@ impl Crowd {
                 start_time: p.start_time,
                 phase: 0.0,
                 step: 0.0,
+                partner: None,
                 shirt: p.shirt,
                 trousers: p.trousers,
             });
@@ -513,6 +551,7 @@ impl Crowd {
                     start_time: 0.0,
                     phase: 0.0,
                     step: 0.0,
+                    partner: None,
                     shirt: shirt_of(f, k),
                     trousers: trousers(),
                 });
@@ -704,7 +743,9 @@ impl Crowd {
             a[1] += c.social_force * f[1];
         };
         for (j, o) in self.walkers.iter().enumerate() {
-            if j != i && o.active {
+            // Companions do not avoid each other: they keep abreast by their routes and
+            // pace (see `desired_velocity`), their bodies apart by `separate`.
+            if j != i && o.active && self.companion(i) != Some(j) {
                 push(o.p, o.v, 0.0);
             }
         }
@@ -779,8 +820,23 @@ impl Crowd {
             PathMode::BackAndForth => w.route.len() == 1,
             PathMode::Once => w.target + 1 == w.route.len(),
         };
-        let s = if last { w.speed * d.min(1.0) } else { w.speed };
+        let mut s = if last { w.speed * d.min(1.0) } else { w.speed };
+        if let Some(j) = self.companion(i) {
+            // Abreast of the companion: slower when ahead of them along the way, faster when
+            // behind, by half the lead in units of the pair's spacing.
+            let o = &self.walkers[j];
+            let lead = ((w.p[0] - o.p[0]) * dx + (w.p[1] - o.p[1]) * dy) / d;
+            let spacing = self.config.pair_spacing.max(2.0 * self.config.radius);
+            s *= (1.0 - 0.5 * lead / spacing).clamp(0.5, self.config.max_speed_factor);
+        }
         [s * dx / d, s * dy / d]
+    }
+
+    /// The slot of the companion walking with slot `i`, while both are in the world.
+    fn companion(&self, i: usize) -> Option<usize> {
+        let j = self.walkers[i].partner?;
+        let o = self.walkers.get(j)?;
+        (o.active && o.partner == Some(i)).then_some(j)
     }
 
     /// Moves each walker's target on when it is reached; a flow's people leave at the end.
@@ -816,8 +872,11 @@ impl Crowd {
     }
 
     /// Lets in the arrivals due by `t`. An arrival steps in only where nobody stands within
-    /// two body radii of their start; until then they wait, and the arrivals behind them too.
+    /// two body radii of their start (of both starts, for a pair); until then they wait, and
+    /// the arrivals behind them too. A pair takes two of the flow's slots; with one free, the
+    /// companion is turned away and the other walks alone.
     fn arrive(&mut self, t: f64) {
+        let pairs = self.config.pair_fraction;
         for f in 0..self.flows.len() {
             loop {
                 let flow = &self.flows[f];
@@ -827,54 +886,114 @@ impl Crowd {
                         break;
                     }
                     let rng = &mut a.rng;
-                    let from = in_disc(rng, flow.from, flow.spread);
-                    let to = in_disc(rng, flow.to, flow.spread);
+                    let from = place(rng, flow.from, flow.from_end, flow.spread);
+                    let to = place(rng, flow.to, flow.to_end, flow.spread);
                     let speed = draw_speed(rng, flow.speed, flow.speed_std);
+                    // Drawn only where pairs may come, so that other crowds keep their bytes.
+                    let pair = pairs > 0.0 && rng.random::<f64>() < pairs;
                     a.next += Exp::new(flow.rate / 60.0)
                         .map(|e| e.sample(rng))
                         .unwrap_or(f64::INFINITY);
-                    a.waiting = Some((from, to, speed));
+                    a.waiting = Some(Arrival {
+                        from,
+                        to,
+                        speed,
+                        pair,
+                    });
                 }
-                let Some((from, to, speed)) = a.waiting else {
+                let Some(arrival) = a.waiting else {
                     break;
                 };
+                let mut route = vec![arrival.from];
+                route.extend(flow.via.iter().copied());
+                route.push(arrival.to);
+                let routes = if arrival.pair {
+                    abreast(&route, self.config.pair_spacing)
+                } else {
+                    vec![route]
+                };
                 let room = 2.0 * self.config.radius;
-                if self
-                    .walkers
-                    .iter()
-                    .any(|w| w.active && norm(w.p[0] - from[0], w.p[1] - from[1]) < room)
-                {
+                if routes.iter().any(|r| {
+                    self.walkers
+                        .iter()
+                        .any(|w| w.active && norm(w.p[0] - r[0][0], w.p[1] - r[0][1]) < room)
+                }) {
                     break;
                 }
                 self.arrivals[f].waiting = None;
-                let slot = self
-                    .walkers
-                    .iter()
-                    .position(|w| w.source == Source::Flow(f) && !w.active);
-                let Some(slot) = slot else {
-                    self.turned_away += 1;
-                    continue;
-                };
-                let mut route = vec![from];
-                route.extend(flow.via.iter().copied());
-                route.push(to);
-                let w = &mut self.walkers[slot];
-                w.id = self.next_id;
-                self.next_id += 1;
-                w.active = true;
-                w.p = from;
-                w.v = [0.0; 2];
-                let (dx, dy) = (route[1][0] - from[0], route[1][1] - from[1]);
-                w.heading = dy.atan2(dx);
-                w.speed = speed;
-                w.route = route;
-                w.target = 1;
-                w.start_time = 0.0;
-                w.phase = 0.0;
-                w.step = 0.0;
+                let mut slots = Vec::new();
+                for route in routes {
+                    let slot = self
+                        .walkers
+                        .iter()
+                        .position(|w| w.source == Source::Flow(f) && !w.active);
+                    let Some(slot) = slot else {
+                        self.turned_away += 1;
+                        continue;
+                    };
+                    self.enter(slot, route, arrival.speed);
+                    slots.push(slot);
+                }
+                if let [a, b] = slots[..] {
+                    self.walkers[a].partner = Some(b);
+                    self.walkers[b].partner = Some(a);
+                }
             }
         }
     }
+
+    /// Slot `slot` takes in a flow's arrival on `route` at `speed`.
+    fn enter(&mut self, slot: usize, route: Vec<[f64; 2]>, speed: f64) {
+        let w = &mut self.walkers[slot];
+        w.id = self.next_id;
+        self.next_id += 1;
+        w.active = true;
+        w.p = route[0];
+        w.v = [0.0; 2];
+        let (dx, dy) = (route[1][0] - route[0][0], route[1][1] - route[0][1]);
+        w.heading = dy.atan2(dx);
+        w.speed = speed;
+        w.route = route;
+        w.target = 1;
+        w.start_time = 0.0;
+        w.phase = 0.0;
+        w.step = 0.0;
+        w.partner = None;
+    }
+}
+
+/// A pair's two routes: `route` moved `spacing / 2` to its left and to its right, square to
+/// the way from its first point to its second.
+fn abreast(route: &[[f64; 2]], spacing: f64) -> Vec<Vec<[f64; 2]>> {
+    let (dx, dy) = (route[1][0] - route[0][0], route[1][1] - route[0][1]);
+    let d = norm(dx, dy);
+    let (lx, ly) = if d > 1e-9 {
+        (-dy / d, dx / d)
+    } else {
+        (0.0, 1.0)
+    };
+    [0.5, -0.5]
+        .iter()
+        .map(|side| {
+            route
+                .iter()
+                .map(|p| [p[0] + side * spacing * lx, p[1] + side * spacing * ly])
+                .collect()
+        })
+        .collect()
+}
+
+/// Where a flow's arrival starts or ends: about `at`, or anywhere along the segment from `at`
+/// to `end` where one is given, then within `spread` of that.
+fn place(rng: &mut ChaCha8Rng, at: [f64; 2], end: Option<[f64; 2]>, spread: f64) -> [f64; 2] {
+    let c = match end {
+        Some(b) => {
+            let u = rng.random::<f64>();
+            [at[0] + u * (b[0] - at[0]), at[1] + u * (b[1] - at[1])]
+        }
+        None => at,
+    };
+    in_disc(rng, c, spread)
 }
 
 /// The length of (x, y). Coordinates here are bounded by the world's extent, so the plain
@@ -1103,6 +1222,8 @@ mod tests {
             via: vec![],
             rate: 30.0,
             spread: 0.5,
+            from_end: None,
+            to_end: None,
             start_time: 0.0,
             end_time: 200.0,
             max: 40,
@@ -1137,6 +1258,79 @@ mod tests {
         assert_eq!(ids, ids2);
     }
 
+    /// A flow between two segments, all its arrivals pairs: each pair starts on the entry
+    /// segment, walks abreast at the pair's spacing (neither avoiding the other), at one
+    /// speed, and leaves on the exit segment.
+    #[test]
+    fn pairs_walk_abreast_from_segment_to_segment() {
+        let flow = FlowConfig {
+            name: "f".into(),
+            from: [0.0, -3.0],
+            to: [12.0, -3.0],
+            via: vec![],
+            rate: 12.0,
+            spread: 0.0,
+            from_end: Some([0.0, 3.0]),
+            to_end: Some([12.0, 3.0]),
+            start_time: 0.0,
+            end_time: 60.0,
+            max: 40,
+            speed: 1.2,
+            speed_std: 0.2,
+        };
+        let config = CrowdConfig {
+            pair_fraction: 1.0,
+            pair_spacing: 0.8,
+            ..CrowdConfig::default()
+        };
+        let mut c = Crowd::new(&[], &[flow], config, 5);
+        let around = Surroundings {
+            robot: None,
+            nearest_obstacle: &open,
+        };
+        let (mut starts, mut gaps, mut seen) = (Vec::new(), Vec::new(), 0usize);
+        run(&mut c, 90.0, &around, |c| {
+            for i in 0..c.slots() {
+                let Some(j) = c.companion(i) else { continue };
+                let (a, b) = (&c.walkers[i], &c.walkers[j]);
+                if a.id > b.id {
+                    continue;
+                }
+                seen = seen.max(b.id as usize + 1);
+                assert_eq!(a.speed, b.speed, "a pair shares its speed");
+                if a.p[0] < 0.05 {
+                    starts.push(a.p);
+                }
+                if (3.0..9.0).contains(&a.p[0]) {
+                    gaps.push(norm(a.p[0] - b.p[0], a.p[1] - b.p[1]));
+                }
+            }
+        });
+        // 12 arrivals a minute for 60 s: about 12 pairs (Poisson: ±3σ = ±10.4), every one a
+        // pair, so 24 people seen in pairs.
+        assert!((4..=46).contains(&seen) && seen % 2 == 0, "{seen} people");
+        assert!(starts.iter().all(|p| p[1].abs() <= 3.0 + 0.4 + 1e-9));
+        let ys: Vec<f64> = starts.iter().map(|p| p[1]).collect();
+        let spread = ys.iter().cloned().fold(f64::MIN, f64::max)
+            - ys.iter().cloned().fold(f64::MAX, f64::min);
+        assert!(
+            spread > 2.0,
+            "starts along the segment, not at a point: {ys:?}"
+        );
+        gaps.sort_by(f64::total_cmp);
+        let median = gaps[gaps.len() / 2];
+        assert!(
+            (median - 0.8).abs() < 0.1,
+            "abreast at 0.8 m: median {median}"
+        );
+        assert!(
+            gaps[gaps.len() * 9 / 10] < 1.2,
+            "kept together: {:?}",
+            &gaps[gaps.len() * 9 / 10..]
+        );
+        assert!(c.truth().is_empty(), "all left at the exit segment");
+    }
+
     #[test]
     fn bad_people_and_flows_are_refused_by_key() {
         let p = Path::new("s.toml");
@@ -1165,6 +1359,8 @@ mod tests {
             via: vec![],
             rate: 0.0,
             spread: 0.5,
+            from_end: None,
+            to_end: None,
             start_time: 0.0,
             end_time: 1.0,
             max: 1,

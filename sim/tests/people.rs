@@ -165,6 +165,8 @@ fn people_in_a_corridor_keep_off_its_walls_and_each_other() {
         via: vec![],
         rate: 12.0,
         spread: 0.3,
+        from_end: None,
+        to_end: None,
         start_time: 0.0,
         end_time: 60.0,
         max: 10,
