@@ -140,6 +140,30 @@ fn landmarks_seed(root: &Path) -> Result<Vec<u8>> {
     Ok(serde_json::to_vec(&f)?)
 }
 
+/// A pedestrian trajectory file (ETH/UCY), read and measured as `futago crowd` does.
+fn parse_pedestrians(s: &Seed, _: &mut Worlds) {
+    if let Ok(t) = futago_msgs::pedestrians::parse(&text(&s.bytes)) {
+        let o = crate::ground_truth::crowd::CrowdOptions {
+            frame_step: t.frame_step,
+            ..Default::default()
+        };
+        let _ = crate::ground_truth::crowd::measure(&t.samples, &o);
+    }
+}
+
+/// Three people over six frames, two of them abreast, in the ETH/UCY layout with its label
+/// column.
+fn pedestrians_seed() -> String {
+    let mut s = String::new();
+    for k in 0..6 {
+        let x = 0.4 * k as f64;
+        s += &format!("{}.0\t1.0\t4\t{x:.2}\t0.5\n", 10 * k);
+        s += &format!("{}.0\t2.0\t4\t{x:.2}\t1.3\n", 10 * k);
+        s += &format!("{}.0\t3.0\t1\t3.0\t{:.2}\n", 10 * k, 5.0 - x);
+    }
+    s
+}
+
 fn parse_relations(s: &Seed, _: &mut Worlds) {
     let _ = crate::relations::parse(&text(&s.bytes), "fuzz");
 }
@@ -326,6 +350,15 @@ pub fn targets(root: &Path) -> Result<Vec<Target>> {
             text: true,
             seeds: vec![made("fuzz.relations", relations_seed().into_bytes())],
             parse: parse_relations,
+        },
+        Target {
+            name: "pedestrians",
+            text: true,
+            seeds: vec![made(
+                "fuzz-pedestrians.txt",
+                pedestrians_seed().into_bytes(),
+            )],
+            parse: parse_pedestrians,
         },
         Target {
             name: "landmarks",
@@ -624,7 +657,7 @@ mod tests {
     #[test]
     fn every_target_has_seeds_that_parse() {
         let targets = targets(&root()).unwrap();
-        assert_eq!(targets.len(), 11);
+        assert_eq!(targets.len(), 12);
         for t in &targets {
             assert!(!t.seeds.is_empty(), "{}", t.name);
         }
@@ -635,6 +668,8 @@ mod tests {
             futago_msgs::map_server::parse(Path::new("m.yaml"), &yaml, |_| Ok(map_seed().to_pgm()));
         assert_eq!(map.unwrap(), map_seed());
         assert_eq!(tum::parse(&tum_seed()).unwrap().len(), 5);
+        let p = futago_msgs::pedestrians::parse(&pedestrians_seed()).unwrap();
+        assert_eq!((p.samples.len(), p.frame_step), (18, 10));
         assert_eq!(
             crate::relations::parse(&relations_seed(), "x")
                 .unwrap()

@@ -14,7 +14,8 @@
 //! 6. **applications**: the loop and what runs it (`parallel`, work spread over threads;
 //!    `run`, `replay`, `legs_train`, `calibrate` (a robot profile from a real log), `twin`
 //!    (the log's drive in simulation, side by side, its SLAM configurations ranked, and twin
-//!    scenarios), `suite` (scenarios and twin scenarios), `folds` (SLAM defaults chosen by
+//!    scenarios), `crowd` (real crowds measured, the crowd model calibrated on them and
+//!    compared), `suite` (scenarios and twin scenarios), `folds` (SLAM defaults chosen by
 //!    leave-one-log-out), `tune` with `cmaes`, `bench`, `fuzz`, `world_cmd`; and
 //!    `config_walk`, a test that walks every scenario's parameters).
 //!
@@ -41,6 +42,7 @@ pub mod calibrate;
 pub mod cmaes;
 #[cfg(test)]
 mod config_walk;
+pub mod crowd;
 pub mod folds;
 pub mod fuzz;
 pub mod legs_train;

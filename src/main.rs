@@ -1,8 +1,8 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
 use futago::{
-    bench, calibrate, folds, fuzz, legs_train, overlay, replay, run, stack, suite, tune, twin,
-    world_cmd,
+    bench, calibrate, crowd, folds, fuzz, legs_train, overlay, replay, run, stack, suite, tune,
+    twin, world_cmd,
 };
 
 use anyhow::{Result, bail};
@@ -245,6 +245,12 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// Measure real crowds (ETH/UCY trajectory files: `frame person [label] x y`), calibrate
+    /// the crowd model on them and compare simulated crowds with them statistic by statistic.
+    Crowd {
+        #[command(subcommand)]
+        command: CrowdCommand,
+    },
     /// Inspect worlds and export their ground truth.
     World {
         #[command(subcommand)]
@@ -425,6 +431,160 @@ enum BenchCommand {
         #[arg(long, default_value_t = 1_000_000)]
         rays: usize,
     },
+}
+
+#[derive(Subcommand)]
+enum CrowdCommand {
+    /// Fit the crowd model (walking speed and its spread, pairs and their spacing) to real
+    /// trajectories, each file weighing the same, and write it as a crowd profile.
+    Calibrate {
+        /// Trajectory files (ETH/UCY: `frame person [label] x y`, metres).
+        files: Vec<PathBuf>,
+        /// The profile to write (TOML).
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        arena: ArenaArgs,
+        /// Replace the profile even when futago did not write it.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Simulate a crowd at each file's density and walkable area and compare its statistics
+    /// with the file's: writes crowd.json, crowd.md and each file's simulated trajectories.
+    /// Exits with 3 when a gated statistic is more than 15 % from the real one.
+    Compare {
+        /// Trajectory files (ETH/UCY: `frame person [label] x y`, metres).
+        files: Vec<PathBuf>,
+        /// The crowd profile (`futago crowd calibrate`'s) [default: the simulator's defaults].
+        #[arg(long)]
+        profile: Option<PathBuf>,
+        /// Simulated crowds per file, seeds 0 to N−1; the median is compared.
+        #[arg(long, default_value_t = 5)]
+        seeds: u64,
+        /// Output folder [default: out/crowd].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[command(flatten)]
+        arena: ArenaArgs,
+        /// Replace the output even when it holds files futago did not write.
+        #[arg(long)]
+        force: bool,
+    },
+}
+
+/// What the crowd commands share: the files' frame period and the simulation's length.
+#[derive(clap::Args, Debug)]
+struct ArenaArgs {
+    /// Time between the files' frames, s (ETH and UCY: 0.4).
+    #[arg(long, default_value_t = 0.4)]
+    period: f64,
+    /// Simulated seconds measured per crowd (after a minute to settle).
+    #[arg(long, default_value_t = 600.0)]
+    duration: f64,
+    /// Crowds simulated at a time [default: the CPU cores].
+    #[arg(long)]
+    jobs: Option<usize>,
+}
+
+impl ArenaArgs {
+    fn options(&self) -> Result<crowd::ArenaOptions> {
+        if !(self.duration.is_finite() && (1.0..=1e5).contains(&self.duration)) {
+            bail!("--duration {}: expected 1 to 100000 s", self.duration);
+        }
+        Ok(crowd::ArenaOptions {
+            duration: self.duration,
+            ..crowd::ArenaOptions::default()
+        })
+    }
+
+    fn jobs(&self) -> Result<usize> {
+        resolve_jobs(self.jobs)
+    }
+}
+
+/// `futago crowd …`.
+fn crowd_command(command: CrowdCommand) -> Result<i32> {
+    let read = |files: &[PathBuf], period: f64| -> Result<Vec<crowd::Sequence>> {
+        if files.is_empty() {
+            bail!("no trajectory files given");
+        }
+        files.iter().map(|f| crowd::read(f, period)).collect()
+    };
+    match command {
+        CrowdCommand::Calibrate {
+            files,
+            out,
+            arena,
+            force,
+        } => {
+            let seqs = read(&files, arena.period)?;
+            let (p, real) = crowd::calibrate(
+                &seqs,
+                &crowd::CrowdProfile::default(),
+                &arena.options()?,
+                arena.jobs()?,
+            )?;
+            crowd::write_profile(&out, &p, &seqs, force)?;
+            for (s, r) in seqs.iter().zip(&real) {
+                println!(
+                    "{}: speed {:.3} ± {:.3} m/s, nearest neighbour {:.2} m (p10 {:.2}), {:.0} % in groups {:.2} m apart, {:.0} % standing, {:.2} people on {:.0} m²",
+                    s.name,
+                    r.speed_mean,
+                    r.speed_std,
+                    r.nn_median_m,
+                    r.nn_p10_m,
+                    100.0 * r.grouped_fraction,
+                    r.group_distance_m,
+                    100.0 * r.standing_fraction,
+                    r.mean_count,
+                    r.area_m2
+                );
+            }
+            println!(
+                "profile: wanted speed {:.3} ± {:.3} m/s, pairs {:.0} % of arrivals {:.2} m apart → {}",
+                p.walking.speed,
+                p.walking.speed_std,
+                100.0 * p.crowd.pair_fraction,
+                p.crowd.pair_spacing,
+                out.display()
+            );
+            Ok(0)
+        }
+        CrowdCommand::Compare {
+            files,
+            profile,
+            seeds,
+            out,
+            arena,
+            force,
+        } => {
+            if !(1..=1000).contains(&seeds) {
+                bail!("--seeds {seeds}: expected 1 to 1000");
+            }
+            let seqs = read(&files, arena.period)?;
+            let p = match &profile {
+                Some(f) => crowd::CrowdProfile::load(f)?,
+                None => crowd::CrowdProfile::default(),
+            };
+            let out = out.unwrap_or_else(|| PathBuf::from("out/crowd"));
+            let cs = crowd::compare_all(
+                &seqs,
+                &p,
+                &arena.options()?,
+                seeds,
+                arena.jobs()?,
+                &out,
+                force,
+            )?;
+            let outside = crowd::print(&cs);
+            println!(
+                "{} of the gated statistics outside ±15 %; report: {}",
+                outside,
+                out.join("crowd.md").display()
+            );
+            Ok(if outside > 0 { 3 } else { 0 })
+        }
+    }
 }
 
 #[derive(Subcommand)]
@@ -654,6 +814,7 @@ fn real_main() -> Result<u8> {
             perturb,
             jobs,
         )?,
+        Command::Crowd { command } => crowd_command(command)?,
         Command::World { command } => world(command)?,
         Command::Bench { command } => bench(command)?,
     };

@@ -2424,3 +2424,87 @@ fn bench_visual_times_the_localisers_by_parts() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("no [visual_localization]"));
 }
+
+/// `futago crowd`: a small sequence calibrated and compared end to end (the profile written
+/// loads again, the report holds every statistic, the simulated crowd reads back in the
+/// trajectory format), and bad files refused by name, line and key with nothing written.
+#[test]
+fn crowd_calibrates_compares_and_refuses_bad_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Two companions abreast along x at 1 m/s, a third walking across them, 60 frames.
+    let mut text = String::from("# frame person x y\n");
+    for k in 0..60 {
+        let t = 0.4 * k as f64;
+        text += &format!("{}\t1\t{:.2}\t2.0\n", 10 * k, t % 12.0);
+        text += &format!("{}\t2\t{:.2}\t2.8\n", 10 * k, t % 12.0);
+        text += &format!("{}\t3\t4\t{:.2}\n", 10 * k, (1.3 * t) % 10.0);
+    }
+    let seq = write(tmp.path(), "square.txt", &text);
+    let profile = tmp.path().join("crowd.toml");
+    let o = futago(&[
+        "crowd",
+        "calibrate",
+        seq.to_str().unwrap(),
+        "--duration",
+        "60",
+        "--out",
+        profile.to_str().unwrap(),
+    ]);
+    exits_with(&o, 0);
+    let out = tmp.path().join("cmp");
+    let o = futago(&[
+        "crowd",
+        "compare",
+        seq.to_str().unwrap(),
+        "--profile",
+        profile.to_str().unwrap(),
+        "--seeds",
+        "2",
+        "--duration",
+        "60",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(matches!(o.status.code(), Some(0 | 3)), "{o:?}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("crowd.json")).unwrap()).unwrap();
+    let s = &json["sequences"][0];
+    assert_eq!(s["rows"].as_array().unwrap().len(), 8);
+    assert_eq!(s["sim"].as_array().unwrap().len(), 2);
+    assert_eq!(s["real"]["people"], 3);
+    let sim = std::fs::read_to_string(out.join("square.sim.txt")).unwrap();
+    assert!(sim.starts_with("# futago's crowd"));
+    assert!(sim.lines().filter(|l| !l.starts_with('#')).count() > 100);
+    assert!(
+        std::fs::read_to_string(out.join("crowd.md"))
+            .unwrap()
+            .contains("nn_median_m")
+    );
+
+    let bad = write(tmp.path(), "bad.txt", "0 1 0.0 0.0\n10 1 0.4\n");
+    refused_before_running(
+        &["crowd", "compare", bad.to_str().unwrap()],
+        &tmp.path().join("fresh"),
+        "bad.txt: line 2: expected 4 or 5 numbers",
+        Some(1),
+    );
+    let bad_profile = write(
+        tmp.path(),
+        "p.toml",
+        std::fs::read_to_string(&profile)
+            .unwrap()
+            .replace("pair_spacing =", "pair_spacing = 9.0\n#"),
+    );
+    refused_before_running(
+        &[
+            "crowd",
+            "compare",
+            seq.to_str().unwrap(),
+            "--profile",
+            bad_profile.to_str().unwrap(),
+        ],
+        &tmp.path().join("fresh"),
+        "crowd.pair_spacing",
+        Some(1),
+    );
+}

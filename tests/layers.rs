@@ -24,6 +24,7 @@ const LAYERS: &[(&str, &[&str])] = &[
             "legs_train",
             "calibrate",
             "twin",
+            "crowd",
             "suite",
             "folds",
             "tune",

@@ -13,6 +13,7 @@ pub mod datasets;
 pub mod grid;
 pub mod landmarks;
 pub mod map_server;
+pub mod pedestrians;
 pub mod ply;
 pub mod profile;
 pub mod rosbag;

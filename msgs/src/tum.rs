@@ -61,7 +61,8 @@ pub fn as_written(s: &Stamped) -> Stamped {
     }
 }
 
-/// An error reading a TUM file: the line number (1-based) and what was wrong.
+/// An error reading a text file of numbers (TUM, CARMEN, pedestrian trajectories): the line
+/// number (1-based; 0 for the file as a whole) and what was wrong.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ParseError {
     pub line: usize,
@@ -70,19 +71,35 @@ pub struct ParseError {
 
 impl std::fmt::Display for ParseError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "line {}: {}", self.line, self.message)
+        if self.line == 0 {
+            write!(f, "{}", self.message)
+        } else {
+            write!(f, "line {}: {}", self.line, self.message)
+        }
     }
 }
 
 impl std::error::Error for ParseError {}
 
-/// The lines of a TUM text file that hold data (1-based number, trimmed text): blank lines
-/// and `#` comments are skipped.
-fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+/// The lines of a text file that hold data (1-based number, trimmed text): blank lines and
+/// `#` comments are skipped.
+pub(crate) fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
     text.lines()
         .enumerate()
         .map(|(i, l)| (i + 1, l.trim()))
         .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+}
+
+/// The whitespace-separated numbers of line `line_no`, or which word is not one.
+pub(crate) fn numbers(line_no: usize, line: &str) -> Result<Vec<f64>, ParseError> {
+    line.split_whitespace()
+        .map(|w| {
+            w.parse::<f64>().map_err(|_| ParseError {
+                line: line_no,
+                message: format!("`{w}` is not a number"),
+            })
+        })
+        .collect()
 }
 
 /// Parses a TUM trajectory. Blank lines and `#` comments are skipped; anything else must be
@@ -94,13 +111,7 @@ pub fn parse(text: &str) -> Result<Vec<Stamped>, ParseError> {
             line: line_no,
             message,
         };
-        let v: Vec<f64> = line
-            .split_whitespace()
-            .map(|w| {
-                w.parse::<f64>()
-                    .map_err(|_| err(format!("`{w}` is not a number")))
-            })
-            .collect::<Result<_, _>>()?;
+        let v = numbers(line_no, line)?;
         if v.len() != 8 {
             return Err(err(format!(
                 "expected 8 numbers (t tx ty tz qx qy qz qw), found {}",

@@ -7,6 +7,7 @@
 pub mod cloud;
 pub mod completeness;
 pub mod coverage;
+pub mod crowd;
 pub mod detection;
 pub mod map;
 pub mod mot;
