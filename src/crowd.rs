@@ -69,24 +69,21 @@ impl CrowdProfile {
         let text = futago_sim::config::read_text(path)?;
         let p: CrowdProfile = futago_sim::config::parse_toml(path, &text)?;
         p.crowd.validate(path)?;
-        for (key, v, hi) in [
-            ("walking.speed", p.walking.speed, 3.0),
-            ("walking.speed_std", p.walking.speed_std, 1.0),
+        for (key, v, lo, hi) in [
+            ("walking.speed", p.walking.speed, 0.1, 3.0),
+            ("walking.speed_std", p.walking.speed_std, 0.0, 1.0),
         ] {
-            if !(v.is_finite() && (0.0..=hi).contains(&v)) {
-                bail!("{}: {key} = {v}: expected 0 to {hi} m/s", path.display());
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                bail!("{}: {key} = {v}: expected {lo} to {hi} m/s", path.display());
             }
-        }
-        if p.walking.speed < 0.1 {
-            bail!(
-                "{}: walking.speed = {}: expected at least 0.1 m/s",
-                path.display(),
-                p.walking.speed
-            );
         }
         Ok(p)
     }
 }
+
+/// The most people per frame a sequence may hold: its crowd is simulated with every pair of
+/// people interacting at every step.
+pub const MAX_PEOPLE: f64 = 1000.0;
 
 /// A real sequence: its file, name and samples.
 pub struct Sequence {
@@ -104,6 +101,19 @@ pub fn read(path: &Path, period: f64) -> Result<Sequence> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let t = pedestrians::parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let frames = t
+        .samples
+        .windows(2)
+        .filter(|w| w[0].frame != w[1].frame)
+        .count()
+        + 1;
+    let per_frame = t.samples.len() as f64 / frames as f64;
+    if per_frame > MAX_PEOPLE {
+        bail!(
+            "{}: {per_frame:.0} people per frame on average; the simulated crowd holds at most {MAX_PEOPLE}",
+            path.display()
+        );
+    }
     let name = path
         .file_stem()
         .map(|s| s.to_string_lossy().to_string())

@@ -2488,6 +2488,16 @@ fn crowd_calibrates_compares_and_refuses_bad_files() {
         "bad.txt: line 2: expected 4 or 5 numbers",
         Some(1),
     );
+    let crowded: String = (0..1001)
+        .map(|k| format!("0 {k} {} 0\n", 0.5 * k as f64))
+        .collect();
+    let crowded = write(tmp.path(), "crowded.txt", crowded);
+    refused_before_running(
+        &["crowd", "calibrate", crowded.to_str().unwrap()],
+        &tmp.path().join("fresh.toml"),
+        "crowded.txt: 1001 people per frame",
+        Some(1),
+    );
     let bad_profile = write(
         tmp.path(),
         "p.toml",

@@ -158,7 +158,7 @@ pub fn measure(samples: &[Sample], o: &CrowdOptions) -> CrowdStats {
     let area = cells.len() as f64 * o.cell * o.cell;
     let mean_count = samples.len() as f64 / frames.len().max(1) as f64;
     let nan = f64::NAN;
-    let (speed_mean, speed_std) = mean_std(&moving).unwrap_or((nan, nan));
+    let (speed_mean, speed_std) = Stats::of(&moving).map_or((nan, nan), |s| (s.mean, s.std));
     let with_speed = moving.len() + standing;
     CrowdStats {
         frames: frames.len(),
@@ -197,17 +197,6 @@ fn by_frame(samples: &[Sample]) -> BTreeMap<i64, Vec<Sample>> {
 
 fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
-}
-
-/// Mean and population standard deviation; `None` for no values.
-fn mean_std(v: &[f64]) -> Option<(f64, f64)> {
-    if v.is_empty() {
-        return None;
-    }
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
-    Some((mean, var.sqrt()))
 }
 
 #[cfg(test)]
