@@ -194,6 +194,26 @@ pub struct CrowdConfig {
     pub height: f64,
 }
 
+/// How far a swinging foot stays from the robot's body, m: beyond the contact margins of the
+/// physics, so that a person who walks up to a standing robot never touches it.
+const FOOT_CLEARANCE: f64 = 0.02;
+
+impl CrowdConfig {
+    /// The longest step a person whose centre is `gap` from the robot's edge can take with
+    /// both feet [`FOOT_CLEARANCE`] clear of it, wherever the robot lies: a foot swings half a
+    /// step along the heading from a hip `hip_width / 2` to the side, and is `leg_radius`
+    /// thick. People shorten their steps beside an obstacle rather than kick it (a body kept
+    /// `radius` from the robot still leaves room for steps of 0.2 m with the defaults).
+    pub fn step_clear_of(&self, gap: f64) -> f64 {
+        let reach = gap - self.leg_radius - FOOT_CLEARANCE;
+        let hip = self.hip_width / 2.0;
+        if reach <= hip {
+            return 0.0;
+        }
+        (2.0 * (reach * reach - hip * hip).sqrt()).min(self.max_step)
+    }
+}
+
 impl Default for CrowdConfig {
     fn default() -> Self {
         CrowdConfig {
@@ -715,9 +735,13 @@ impl Crowd {
             if speed > 0.1 {
                 w.heading = v[1].atan2(v[0]);
             }
-            // The gait: steps grow with speed up to max_step; the phase advances a stride per
-            // two steps walked.
-            w.step = (speed * c.stride_period / 2.0).min(c.max_step);
+            // The gait: steps grow with speed up to max_step, and shorten beside the robot so
+            // that no foot touches it; the phase advances a stride per two steps walked.
+            let longest = match around.robot {
+                Some((rp, _, rr)) => c.step_clear_of(norm(p[0] - rp[0], p[1] - rp[1]) - rr),
+                None => c.max_step,
+            };
+            w.step = (speed * c.stride_period / 2.0).min(longest);
             if w.step > 1e-6 {
                 w.phase = (w.phase + speed * dt / (2.0 * w.step)).fract();
             }
@@ -734,7 +758,17 @@ impl Crowd {
             return [0.0; 2];
         }
         let mut a = [0.0; 2];
-        let want = self.desired_velocity(i, t);
+        let mut want = self.desired_velocity(i, t);
+        // A person who would walk into a wall, furniture or a robot within a step of touching
+        // it walks along it instead, rather than press against it until the forces let go
+        // (a lane that runs into a locker, a robot standing in the way).
+        let obstacle = (around.nearest_obstacle)(w.p, c.radius + 5.0 * c.obstacle_sigma);
+        if let Some(q) = obstacle {
+            want = along_surface(want, w.v, [w.p[0] - q[0], w.p[1] - q[1]], c.radius);
+        }
+        if let Some((rp, _, rr)) = around.robot {
+            want = along_surface(want, w.v, [w.p[0] - rp[0], w.p[1] - rp[1]], rr + c.radius);
+        }
         a[0] += (want[0] - w.v[0]) / c.relaxation_time;
         a[1] += (want[1] - w.v[1]) / c.relaxation_time;
         let mut push = |pj: [f64; 2], vj: [f64; 2], nearer: f64| {
@@ -752,7 +786,7 @@ impl Crowd {
         if let Some((rp, rv, _)) = around.robot.filter(|_| w.yields) {
             push(rp, rv, (c.robot_radius - c.radius).max(0.0));
         }
-        if let Some(q) = (around.nearest_obstacle)(w.p, c.radius + 5.0 * c.obstacle_sigma) {
+        if let Some(q) = obstacle {
             let (dx, dy) = (w.p[0] - q[0], w.p[1] - q[1]);
             let d = norm(dx, dy);
             if d > 1e-9 {
@@ -1031,6 +1065,41 @@ fn shirt_of(flow: usize, k: usize) -> [f64; 3] {
     PALETTE[(flow * 3 + k) % PALETTE.len()]
 }
 
+/// How near touching a surface a person begins to walk along it rather than into it, m.
+const SLIDE_REACH: f64 = 0.1;
+/// The speed along a surface, m/s, from which a person keeps to the side they move to.
+const SLIDING: f64 = 0.05;
+
+/// A wanted velocity that presses into a surface, turned along it at the same speed: `away`
+/// runs from the surface (its nearest point, or a round body's centre) to the person, who
+/// touches it at `contact` from there. Only within [`SLIDE_REACH`] of touching, and only the
+/// velocity into it, so that nobody stands pressed against a wall or a robot that they could
+/// walk round. The person keeps to the side they already move along it (else their wish
+/// would flip from side to side about the point square to their goal, and hold them there);
+/// from rest, to the side their wish leans to, and to their right when it is square on (as
+/// people keep right).
+fn along_surface(want: [f64; 2], v: [f64; 2], away: [f64; 2], contact: f64) -> [f64; 2] {
+    let d = norm(away[0], away[1]);
+    if d < 1e-9 || d > contact + SLIDE_REACH {
+        return want;
+    }
+    let n = [away[0] / d, away[1] / d];
+    if want[0] * n[0] + want[1] * n[1] >= 0.0 {
+        return want;
+    }
+    let speed = norm(want[0], want[1]);
+    // The surface's tangent to the right of someone walking square into it.
+    let right = [-n[1], n[0]];
+    let moving = v[0] * right[0] + v[1] * right[1];
+    let lean = if moving.abs() > SLIDING {
+        moving
+    } else {
+        want[0] * right[0] + want[1] * right[1]
+    };
+    let side = if lean >= 0.0 { 1.0 } else { -1.0 };
+    [side * speed * right[0], side * speed * right[1]]
+}
+
 /// The social force on a person at `pi` moving at `vi` from one at `pj` moving at `vj`, whose
 /// distance counts as `nearer` metres less than it is (a walker bigger than a person)
 /// (Moussaïd, Helbing, Garnier, Johansson, Combe & Theraulaz 2009, as pedsim uses it): an
@@ -1181,6 +1250,89 @@ mod tests {
         });
         // The body's edge (0.2 m) stays off the wall.
         assert!(highest <= 0.5 - 0.2 + 1e-9, "reached y = {highest}");
+    }
+
+    #[test]
+    fn steps_shorten_beside_the_robot_so_that_no_foot_reaches_it() {
+        let c = CrowdConfig::default();
+        // Far off, the longest step; at the body's radius (0.2 m from the robot's edge) a
+        // foot may swing s with √(s² + 0.1²) + 0.05 + 0.02 ≤ 0.2: s = 0.0831, a step twice it.
+        assert_eq!(c.step_clear_of(5.0), c.max_step);
+        let s = (0.13f64 * 0.13 - 0.1 * 0.1).sqrt();
+        assert!((c.step_clear_of(0.2) - 2.0 * s).abs() < 1e-12);
+        // Closer than a hip and a shin from it: no step at all.
+        assert_eq!(c.step_clear_of(0.17), 0.0);
+        assert_eq!(c.step_clear_of(-1.0), 0.0);
+        // Shorter the nearer, and never longer than max_step.
+        let steps: Vec<f64> = (0..60)
+            .map(|k| c.step_clear_of(0.15 + 0.01 * k as f64))
+            .collect();
+        assert!(steps.windows(2).all(|w| w[0] <= w[1]), "{steps:?}");
+        assert!(steps.iter().all(|s| *s <= c.max_step));
+    }
+
+    #[test]
+    fn a_person_walks_round_a_robot_standing_square_in_their_way() {
+        // The robot stands on the route of someone who does not look out for it (no social
+        // force from it): they neither stop against it nor touch it with a foot, and get to
+        // the end.
+        let mut walker = person("a", vec![[0.0, 0.0], [10.0, 0.0]], 1.3);
+        walker.yields = false;
+        let mut c = Crowd::new(&[walker], &[], CrowdConfig::default(), 1);
+        let cfg = *c.config();
+        let (rp, rr) = ([5.0, 0.0], 0.17);
+        let around = Surroundings {
+            robot: Some((rp, [0.0, 0.0], rr)),
+            nearest_obstacle: &open,
+        };
+        let (mut body, mut foot) = (f64::INFINITY, f64::INFINITY);
+        run(&mut c, 12.0, &around, |c| {
+            let (pose, feet) = c.body(0).expect("walking");
+            body = body.min(norm(pose.x - rp[0], pose.y - rp[1]));
+            for (side, f) in [1.0, -1.0].into_iter().zip(feet) {
+                let hip = pose.transform_point([0.0, side * cfg.hip_width / 2.0]);
+                let at = [hip[0] + f * pose.theta.cos(), hip[1] + f * pose.theta.sin()];
+                foot = foot.min(norm(at[0] - rp[0], at[1] - rp[1]) - cfg.leg_radius);
+            }
+        });
+        assert!(
+            body >= rr + cfg.radius - 1e-9,
+            "the body came {body} m from its centre"
+        );
+        assert!(
+            foot >= rr + 0.01,
+            "a foot came {foot} m from the robot's centre"
+        );
+        let end = c.truth()[0].pose;
+        assert!(end.x > 9.5 && end.y.abs() < 0.3, "ended at {end:?}");
+    }
+
+    #[test]
+    fn a_person_whose_lane_runs_into_a_box_walks_along_it_and_on() {
+        // A box from x = 5 to 7 and y = 0 to 1 (a row of lockers) faces the way at x = 5; the lane
+        // runs at y = 0.6 into it and on beyond. Pressed square on, a person would stand
+        // against it; they walk along it, round its corner at y = 0, and on.
+        let face = |p: [f64; 2], range: f64| -> Option<[f64; 2]> {
+            let q = [p[0].clamp(5.0, 7.0), p[1].clamp(0.0, 1.0)];
+            (norm(p[0] - q[0], p[1] - q[1]) <= range).then_some(q)
+        };
+        let box_of = |p: [f64; 2]| (5.0..=7.0).contains(&p[0]) && (0.0..=1.0).contains(&p[1]);
+        let mut c = Crowd::new(
+            &[person("a", vec![[0.0, 0.6], [12.0, 0.6]], 1.2)],
+            &[],
+            CrowdConfig::default(),
+            1,
+        );
+        let around = Surroundings {
+            robot: None,
+            nearest_obstacle: &face,
+        };
+        run(&mut c, 20.0, &around, |c| {
+            let p = c.truth()[0].pose;
+            assert!(!box_of([p.x, p.y]), "walked into the box at {p:?}");
+        });
+        let end = c.truth()[0].pose;
+        assert!(end.x > 11.5, "ended at {end:?}");
     }
 
     #[test]

@@ -154,6 +154,55 @@ fn a_robot_that_drives_into_a_person_collides_with_a_person() {
 }
 
 #[test]
+fn people_walk_round_a_standing_robot_without_touching_it() {
+    // Four people walk back and forth along lines through the robot's place, from four sides,
+    // two of them heedless of it (no social force from the robot): each goes round it, none
+    // touches it, and it stays where it stands.
+    let world = box_room(10.0, 10.0, "");
+    let through = |name: &str, from: [f64; 2], to: [f64; 2], yields: bool| PersonConfig {
+        route: vec![from, to],
+        mode: PathMode::BackAndForth,
+        start_time: 0.0,
+        yields,
+        ..standing(name, from, 0.0)
+    };
+    let movers = Movers {
+        people: vec![
+            through("east", [1.0, 5.0], [9.0, 5.0], false),
+            through("north", [5.0, 1.0], [5.0, 9.0], true),
+            through("west", [9.0, 5.3], [1.0, 5.3], false),
+            through("south", [4.7, 9.0], [4.7, 1.0], true),
+        ],
+        ..Default::default()
+    };
+    let start = Pose2::new(5.0, 5.0, 0.3);
+    let mut s = sim_with(&world, &CreateConfig::default(), &[], &movers, start, 1);
+    let mut crossings = [0usize; 4];
+    let mut sides = [None::<bool>; 4];
+    for _ in 0..(60 * 200) {
+        s.step(None);
+        for p in s.people() {
+            let i = p.id as usize;
+            let side = if i % 2 == 0 {
+                p.pose.x > 5.0
+            } else {
+                p.pose.y > 5.0
+            };
+            if sides[i].is_some_and(|was| was != side) {
+                crossings[i] += 1;
+            }
+            sides[i] = Some(side);
+        }
+    }
+    let c = s.counters();
+    assert_eq!(c.person_contact_events, 0, "{c:?}");
+    // Eight metres at 1.2 m/s each way: a minute is at least six passes of the robot each.
+    assert!(crossings.iter().all(|&k| k >= 6), "{crossings:?}");
+    let end = s.robot_pose();
+    assert!(end.distance(&start) < 1e-3, "the robot moved to {end:?}");
+}
+
+#[test]
 fn people_in_a_corridor_keep_off_its_walls_and_each_other() {
     // A corridor 1.6 m wide along x, 20 m long; two flows walk it in opposite directions, past
     // the robot.
