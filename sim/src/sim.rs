@@ -621,13 +621,19 @@ impl Simulation {
                 } else {
                     pair.collider1
                 };
-                pair.has_any_active_contact()
-                    && self
-                        .physics
-                        .colliders
-                        .get(other)
-                        .is_some_and(|c| c.collision_groups().memberships.contains(PEOPLE_GROUP))
+                pair.has_any_active_contact() && self.is_person(other)
             })
+    }
+
+    /// Whether `collider` is part of a person: one of the crowd's bodies carries it. (Not a
+    /// test of its collision group: the world's and the agents' colliders keep rapier's
+    /// default, every group, people's among them.)
+    fn is_person(&self, collider: ColliderHandle) -> bool {
+        self.physics
+            .colliders
+            .get(collider)
+            .and_then(|c| c.parent())
+            .is_some_and(|b| self.people_bodies.iter().any(|h| h.contains(&b)))
     }
 
     /// Advances one physics step. `command`, if given, replaces the drive command (it holds

@@ -123,11 +123,14 @@ fn a_laser_at_shin_height_sees_a_standing_person_as_two_legs() {
     }
 }
 
+/// A person standing in a passage 0.7 m wide, narrower than the robot's 0.34 m and their
+/// 0.4 m side by side, cannot step round a robot driving up it: they give way along it to
+/// its end, where the robot runs into them. (In the open they would walk round it.)
 #[test]
 fn a_robot_that_drives_into_a_person_collides_with_a_person() {
-    let world = box_room(8.0, 6.0, "");
+    let world = box_room(6.0, 0.7, "");
     let movers = Movers {
-        people: vec![standing("bob", [3.0, 3.0], 0.0)],
+        people: vec![standing("bob", [4.0, 0.35], 0.0)],
         ..Default::default()
     };
     let mut s = sim_with(
@@ -135,7 +138,7 @@ fn a_robot_that_drives_into_a_person_collides_with_a_person() {
         &CreateConfig::default(),
         &[],
         &movers,
-        Pose2::new(1.0, 3.0, 0.0),
+        Pose2::new(1.0, 0.35, 0.0),
         1,
     );
     let go = DriveCommand::DriveDirect {
@@ -149,8 +152,42 @@ fn a_robot_that_drives_into_a_person_collides_with_a_person() {
     let c = s.counters();
     assert!(c.person_contact_events >= 1, "{c:?}");
     assert!(c.person_contact_steps >= c.person_contact_events);
-    // Nothing else was touched in the open room's middle: every bumper press was the person.
+    // The robot drove up the passage's middle, 0.18 m off its sides, and the person stopped
+    // it short of the end wall.
     assert!(c.bump_events >= 1, "{c:?}");
+    assert!(s.robot_pose().x < 6.0 - 0.17 - 0.2, "{:?}", s.robot_pose());
+}
+
+/// The contacts counted as people's are with people only: a robot pressed against a wall,
+/// with a person standing across the room, touches no person (the world's colliders belong
+/// to every collision group, people's among them, so a test by group alone counted walls,
+/// pillars and furniture as people).
+#[test]
+fn a_robot_that_drives_into_a_wall_touches_no_person() {
+    let world = box_room(8.0, 6.0, "");
+    let movers = Movers {
+        people: vec![standing("cai", [6.0, 3.0], 0.0)],
+        ..Default::default()
+    };
+    let mut s = sim_with(
+        &world,
+        &CreateConfig::default(),
+        &[],
+        &movers,
+        Pose2::new(1.0, 3.0, std::f64::consts::PI),
+        1,
+    );
+    let mut command = Some(DriveCommand::DriveDirect {
+        left: 0.2,
+        right: 0.2,
+    });
+    for _ in 0..(10.0 * 200.0) as usize {
+        s.step(command.take().as_ref());
+    }
+    let c = s.counters();
+    assert!(c.bump_events >= 1, "the robot reached the wall: {c:?}");
+    assert_eq!(c.person_contact_events, 0, "{c:?}");
+    assert_eq!(c.person_contact_steps, 0, "{c:?}");
 }
 
 #[test]

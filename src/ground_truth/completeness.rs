@@ -111,20 +111,34 @@ impl Completeness {
     }
 }
 
+/// How [`length_along`] finds a surface on its line.
+#[derive(Debug, Clone, Copy)]
+pub struct LengthProbe {
+    /// Points within this of the line near `from` belong to it, m ...
+    pub radius: f64,
+    /// ... and the reach grows by this per metre along the line (a cone, not a cylinder): a
+    /// laser's points on a surface thin out as the square of its range, so a fixed disc
+    /// that holds a near wall's points holds one or two of a far wall's.
+    pub spread: f64,
+    /// The projections of one surface gather within this, m ...
+    pub window: f64,
+    /// ... at least this many of them.
+    pub min_points: usize,
+}
+
 /// A length measured in a point cloud along a line: the distance between the first surfaces
 /// the line meets on either side of `from` (the seed's L1 and L2, say a corridor's width).
 ///
-/// On each side the points within `radius` of the line are projected onto it; the surface is
-/// the first run of at least `min_points` projections within `window` of each other, its
-/// place the median of the points within `window` of that run's median. `None` when a side
-/// has no such run.
+/// On each side the points within `probe.radius + probe.spread * t` of the line, `t` their
+/// distance along it from `from`, are projected onto it; the surface is the first run of at
+/// least `probe.min_points` projections within `probe.window` of each other, its place the
+/// median of the points within the window of that run's median. `None` when a side has no
+/// such run.
 pub fn length_along(
     points: &[[f64; 3]],
     from: [f64; 3],
     direction: [f64; 3],
-    radius: f64,
-    window: f64,
-    min_points: usize,
+    probe: LengthProbe,
 ) -> Option<f64> {
     let n = direction.iter().map(|d| d * d).sum::<f64>().sqrt();
     if !(n.is_finite() && n > 0.0) {
@@ -136,7 +150,8 @@ pub fn length_along(
         let v = [p[0] - from[0], p[1] - from[1], p[2] - from[2]];
         let t = v[0] * u[0] + v[1] * u[1] + v[2] * u[2];
         let off2 = v.iter().map(|c| c * c).sum::<f64>() - t * t;
-        if off2 <= radius * radius {
+        let reach = probe.radius + probe.spread * t.abs();
+        if off2 <= reach * reach {
             if t >= 0.0 {
                 ahead.push(t);
             } else {
@@ -144,7 +159,8 @@ pub fn length_along(
             }
         }
     }
-    Some(first_surface(ahead, window, min_points)? + first_surface(behind, window, min_points)?)
+    let (w, k) = (probe.window, probe.min_points);
+    Some(first_surface(ahead, w, k)? + first_surface(behind, w, k)?)
 }
 
 /// The nearest surface among distances along a ray (see [`length_along`]).
@@ -217,11 +233,52 @@ mod tests {
             pts.push([x, 3.0, z]);
         }
         pts.extend([[0.0, 0.5, 1.0], [0.01, 0.5, 1.0], [0.0, 0.51, 1.01]]);
-        let l = length_along(&pts, [0.0, 0.0, 1.0], [0.0, 2.0, 0.0], 0.15, 0.08, 10).unwrap();
+        let probe = LengthProbe {
+            radius: 0.15,
+            spread: 0.0,
+            window: 0.08,
+            min_points: 10,
+        };
+        let l = length_along(&pts, [0.0, 0.0, 1.0], [0.0, 2.0, 0.0], probe).unwrap();
         assert!((l - 2.12).abs() < 0.005, "{l}");
         // Nothing on one side: no length.
         let half: Vec<[f64; 3]> = pts.iter().filter(|p| p[1] > 0.0).copied().collect();
-        assert!(length_along(&half, [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], 0.15, 0.08, 10).is_none());
-        assert!(length_along(&pts, [0.0; 3], [0.0; 3], 0.15, 0.08, 10).is_none());
+        assert!(length_along(&half, [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], probe).is_none());
+        assert!(length_along(&pts, [0.0; 3], [0.0; 3], probe).is_none());
+    }
+
+    /// A wall 1 m to the left sampled every 1 cm and one 7 m to the right sampled as a
+    /// turntable laser leaves it there, a point per 10 cm across and 6 cm up, none on the
+    /// line: a 5 cm cylinder holds two of the far wall's points, too few for a surface, and
+    /// the length goes unmeasured; spreading the reach by 2 cm a metre (19 cm at 7 m) holds
+    /// about ten and measures the 8 m between the walls.
+    #[test]
+    fn a_far_walls_sparse_points_are_found_by_a_reach_that_spreads() {
+        let mut pts = Vec::new();
+        for i in -30..30 {
+            for j in -10..10 {
+                let (x, z) = (0.03 + 0.1 * i as f64, 1.53 + 0.06 * j as f64);
+                pts.push([x, -7.0, z]);
+            }
+        }
+        for i in -100..100 {
+            for j in -100..100 {
+                pts.push([0.01 * i as f64, 1.0, 1.5 + 0.01 * j as f64]);
+            }
+        }
+        let cylinder = LengthProbe {
+            radius: 0.05,
+            spread: 0.0,
+            window: 0.08,
+            min_points: 3,
+        };
+        let (from, along) = ([0.0, 0.0, 1.5], [0.0, 1.0, 0.0]);
+        assert!(length_along(&pts, from, along, cylinder).is_none());
+        let cone = LengthProbe {
+            spread: 0.02,
+            ..cylinder
+        };
+        let l = length_along(&pts, from, along, cone).unwrap();
+        assert!((l - 8.0).abs() < 1e-9, "{l}");
     }
 }

@@ -32,7 +32,7 @@
 use super::{Bus, Node, Report, Streams, TrueState, Truth};
 use super::{Nodes, StackModule, boxed};
 use crate::ground_truth::Metrics;
-use crate::ground_truth::completeness::{Completeness, length_along};
+use crate::ground_truth::completeness::{Completeness, LengthProbe, length_along};
 use crate::ground_truth::coverage::Surfaces;
 use crate::scenario::{
     ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec, take_name, typed_table,
@@ -84,15 +84,21 @@ const INTERIOR_CELL: f64 = 0.05;
 /// reach, m: the Create's radius and a margin, so that a wall's inner face (0.17 m from the
 /// nearest centre) counts and its outer face (a wall's 0.2 m thickness farther) does not.
 const INTERIOR_REACH: f64 = 0.3;
-/// A length's surfaces are the points within this of its line, m (keep lines twice this
-/// far from surfaces parallel to them) ...
-const LENGTH_RADIUS: f64 = 0.05;
-/// ... whose projections gather within this, m (the LMS200's ±4 cm) ...
-const LENGTH_WINDOW: f64 = 0.08;
-/// ... at least this many: a view's scans 0.8° apart with 0.5° beams put about 10 points in
-/// the line's disc on a wall 2.5 m away, but 2 at the 6 m range; three asks for a near view
-/// or two far ones, and more than the odd stray point.
-const LENGTH_MIN_POINTS: usize = 3;
+/// How a length's surfaces are found on its line: the points within 5 cm of it near its
+/// start (keep lines twice this far from surfaces parallel to them), the reach growing by
+/// 2 cm a metre along it, whose projections gather within 8 cm (the LMS200's ±4 cm), at
+/// least three of them. A view's scans 0.8° apart with 0.5° beams put about 10 points in a
+/// 5 cm disc on a wall 2.5 m away but one or two at 7 m, since the points thin out as the
+/// square of the range; a reach growing as the range, 0.05 m / 2.5 m, holds about as many
+/// at any range (the distance along the line stands in for the range: the survey's views
+/// stand near the lines). Three asks for a near view or two far ones, and more than the odd
+/// stray point.
+const LENGTH_PROBE: LengthProbe = LengthProbe {
+    radius: 0.05,
+    spread: 0.02,
+    window: 0.08,
+    min_points: 3,
+};
 /// Joint readings kept for interpolating the table's angle.
 const JOINT_HISTORY: usize = 64;
 
@@ -387,14 +393,7 @@ impl Scan3dNode {
         self.lengths
             .iter()
             .map(|(l, truth)| {
-                let measured = length_along(
-                    carved,
-                    l.from,
-                    l.direction,
-                    LENGTH_RADIUS,
-                    LENGTH_WINDOW,
-                    LENGTH_MIN_POINTS,
-                );
+                let measured = length_along(carved, l.from, l.direction, LENGTH_PROBE);
                 (l.name.clone(), *truth, measured)
             })
             .collect()
