@@ -220,7 +220,7 @@ fn people_walk_round_a_standing_robot_without_touching_it() {
         s.step(None);
         for p in s.people() {
             let i = p.id as usize;
-            let side = if i % 2 == 0 {
+            let side = if i.is_multiple_of(2) {
                 p.pose.x > 5.0
             } else {
                 p.pose.y > 5.0
