@@ -114,11 +114,12 @@ impl Completeness {
 /// How [`length_along`] finds a surface on its line.
 #[derive(Debug, Clone, Copy)]
 pub struct LengthProbe {
-    /// Points within this of the line near `from` belong to it, m ...
+    /// Points within this of the line belong to it, m ...
     pub radius: f64,
-    /// ... and the reach grows by this per metre along the line (a cone, not a cylinder): a
-    /// laser's points on a surface thin out as the square of its range, so a fixed disc
-    /// that holds a near wall's points holds one or two of a far wall's.
+    /// ... or within this much per metre of their distance along it from `from`, where that
+    /// is more (a cylinder that opens into a cone): a laser's points on a surface thin out as
+    /// the square of its range, so a fixed disc that holds a near wall's points holds one or
+    /// two of a far wall's.
     pub spread: f64,
     /// The projections of one surface gather within this, m ...
     pub window: f64,
@@ -129,8 +130,8 @@ pub struct LengthProbe {
 /// A length measured in a point cloud along a line: the distance between the first surfaces
 /// the line meets on either side of `from` (the seed's L1 and L2, say a corridor's width).
 ///
-/// On each side the points within `probe.radius + probe.spread * t` of the line, `t` their
-/// distance along it from `from`, are projected onto it; the surface is the first run of at
+/// On each side the points within `max(probe.radius, probe.spread * t)` of the line, `t`
+/// their distance along it from `from`, are projected onto it; the surface is the first run of at
 /// least `probe.min_points` projections within `probe.window` of each other, its place the
 /// median of the points within the window of that run's median. `None` when a side has no
 /// such run.
@@ -150,7 +151,7 @@ pub fn length_along(
         let v = [p[0] - from[0], p[1] - from[1], p[2] - from[2]];
         let t = v[0] * u[0] + v[1] * u[1] + v[2] * u[2];
         let off2 = v.iter().map(|c| c * c).sum::<f64>() - t * t;
-        let reach = probe.radius + probe.spread * t.abs();
+        let reach = probe.radius.max(probe.spread * t.abs());
         if off2 <= reach * reach {
             if t >= 0.0 {
                 ahead.push(t);
@@ -250,7 +251,7 @@ mod tests {
     /// A wall 1 m to the left sampled every 1 cm and one 7 m to the right sampled as a
     /// turntable laser leaves it there, a point per 10 cm across and 6 cm up, none on the
     /// line: a 5 cm cylinder holds two of the far wall's points, too few for a surface, and
-    /// the length goes unmeasured; spreading the reach by 2 cm a metre (19 cm at 7 m) holds
+    /// the length goes unmeasured; a reach of 2 cm a metre beyond 2.5 m (14 cm at 7 m) holds
     /// about ten and measures the 8 m between the walls.
     #[test]
     fn a_far_walls_sparse_points_are_found_by_a_reach_that_spreads() {

@@ -84,15 +84,15 @@ const INTERIOR_CELL: f64 = 0.05;
 /// reach, m: the Create's radius and a margin, so that a wall's inner face (0.17 m from the
 /// nearest centre) counts and its outer face (a wall's 0.2 m thickness farther) does not.
 const INTERIOR_REACH: f64 = 0.3;
-/// How a length's surfaces are found on its line: the points within 5 cm of it near its
-/// start (keep lines twice this far from surfaces parallel to them), the reach growing by
-/// 2 cm a metre along it, whose projections gather within 8 cm (the LMS200's ±4 cm), at
+/// How a length's surfaces are found on its line: the points within 5 cm of it (keep lines
+/// twice this far from surfaces parallel to them), or 2 cm per metre of their distance along
+/// it where that is more, whose projections gather within 8 cm (the LMS200's ±4 cm), at
 /// least three of them. A view's scans 0.8° apart with 0.5° beams put about 10 points in a
 /// 5 cm disc on a wall 2.5 m away but one or two at 7 m, since the points thin out as the
-/// square of the range; a reach growing as the range, 0.05 m / 2.5 m, holds about as many
-/// at any range (the distance along the line stands in for the range: the survey's views
-/// stand near the lines). Three asks for a near view or two far ones, and more than the odd
-/// stray point.
+/// square of the range; a reach that grows as the range beyond 2.5 m (0.05 m / 2.5 m) holds
+/// about as many at any range (the distance along the line stands in for the range: the
+/// survey's views stand near the lines). Three asks for a near view or two far ones, and
+/// more than the odd stray point.
 const LENGTH_PROBE: LengthProbe = LengthProbe {
     radius: 0.05,
     spread: 0.02,
