@@ -123,32 +123,38 @@ fn a_laser_at_shin_height_sees_a_standing_person_as_two_legs() {
     }
 }
 
+/// The robot, from `start`, drives straight at `speed` for `seconds` in `world` with one
+/// person standing at `person`: the simulation as it ends.
+fn drive_past_a_standing_person(
+    world: &World,
+    person: [f64; 2],
+    start: Pose2,
+    speed: f64,
+    seconds: f64,
+) -> Simulation {
+    let movers = Movers {
+        people: vec![standing("bob", person, 0.0)],
+        ..Default::default()
+    };
+    let mut s = sim_with(world, &CreateConfig::default(), &[], &movers, start, 1);
+    let mut command = Some(DriveCommand::DriveDirect {
+        left: speed,
+        right: speed,
+    });
+    for _ in 0..(seconds * 200.0) as usize {
+        s.step(command.take().as_ref());
+    }
+    s
+}
+
 /// A person standing in a passage 0.7 m wide, narrower than the robot's 0.34 m and their
 /// 0.4 m side by side, cannot step round a robot driving up it: they give way along it to
 /// its end, where the robot runs into them. (In the open they would walk round it.)
 #[test]
 fn a_robot_that_drives_into_a_person_collides_with_a_person() {
     let world = box_room(6.0, 0.7, "");
-    let movers = Movers {
-        people: vec![standing("bob", [4.0, 0.35], 0.0)],
-        ..Default::default()
-    };
-    let mut s = sim_with(
-        &world,
-        &CreateConfig::default(),
-        &[],
-        &movers,
-        Pose2::new(1.0, 0.35, 0.0),
-        1,
-    );
-    let go = DriveCommand::DriveDirect {
-        left: 0.4,
-        right: 0.4,
-    };
-    let mut command = Some(go);
-    for _ in 0..(20.0 * 200.0) as usize {
-        s.step(command.take().as_ref());
-    }
+    let s =
+        drive_past_a_standing_person(&world, [4.0, 0.35], Pose2::new(1.0, 0.35, 0.0), 0.4, 20.0);
     let c = s.counters();
     assert!(c.person_contact_events >= 1, "{c:?}");
     assert!(c.person_contact_steps >= c.person_contact_events);
@@ -165,25 +171,8 @@ fn a_robot_that_drives_into_a_person_collides_with_a_person() {
 #[test]
 fn a_robot_that_drives_into_a_wall_touches_no_person() {
     let world = box_room(8.0, 6.0, "");
-    let movers = Movers {
-        people: vec![standing("cai", [6.0, 3.0], 0.0)],
-        ..Default::default()
-    };
-    let mut s = sim_with(
-        &world,
-        &CreateConfig::default(),
-        &[],
-        &movers,
-        Pose2::new(1.0, 3.0, std::f64::consts::PI),
-        1,
-    );
-    let mut command = Some(DriveCommand::DriveDirect {
-        left: 0.2,
-        right: 0.2,
-    });
-    for _ in 0..(10.0 * 200.0) as usize {
-        s.step(command.take().as_ref());
-    }
+    let start = Pose2::new(1.0, 3.0, std::f64::consts::PI);
+    let s = drive_past_a_standing_person(&world, [6.0, 3.0], start, 0.2, 10.0);
     let c = s.counters();
     assert!(c.bump_events >= 1, "the robot reached the wall: {c:?}");
     assert_eq!(c.person_contact_events, 0, "{c:?}");
