@@ -181,8 +181,10 @@ fn simulate(
         ([0.0, side + m], [side, side + m]),
     ];
     let people = density * area;
-    // Mean time on the square: a crossing at the wanted speed.
-    let crossing = MEAN_CROSSING * side / profile.walking.speed.max(0.1);
+    // Mean time on the square: a crossing at the wanted speed, and the stops on the way.
+    let c = &profile.crowd;
+    let crossing =
+        MEAN_CROSSING * side / profile.walking.speed.max(0.1) * (1.0 + c.stop_rate * c.stop_time);
     let per_minute = 60.0 * people / crossing * rate_scale;
     let mut flows = Vec::new();
     for (i, from) in sides.iter().enumerate() {
@@ -287,13 +289,15 @@ pub struct Row {
 
 /// The statistics compared: name, how to read it, whether it is one of the goal's four.
 type Statistic = (&'static str, fn(&CrowdStats) -> f64, bool);
-const STATISTICS: [Statistic; 8] = [
+const STATISTICS: [Statistic; 10] = [
     ("speed_mean_mps", |s| s.speed_mean, true),
     ("speed_std_mps", |s| s.speed_std, true),
     ("nn_median_m", |s| s.nn_median_m, true),
     ("nn_p10_m", |s| s.nn_p10_m, true),
     ("people_per_frame", |s| s.mean_count, false),
     ("standing_fraction", |s| s.standing_fraction, false),
+    ("stop_rate_per_s", |s| s.stop_rate, false),
+    ("stop_time_s", |s| s.stop_time, false),
     ("grouped_fraction", |s| s.grouped_fraction, false),
     ("group_distance_m", |s| s.group_distance_m, false),
 ];
@@ -377,6 +381,30 @@ pub fn calibrate(
     p.crowd.pair_spacing = mean(|s| s.group_distance_m, "companions' distance")
         .unwrap_or(start.crowd.pair_spacing)
         .clamp(2.0 * p.crowd.radius, 5.0);
+    // Stops: as often per second walked as the real spells of standing, and as long once
+    // the time to slow down and speed up is added back. A walker at v who wants to stand
+    // reads as standing (below s) τ·ln(v/s) after the stop begins, and walks again
+    // τ·ln(v/(v − s)) after it ends: the spell is τ·ln((v − s)/s) shorter than the stop.
+    p.crowd.stop_rate = mean(|s| s.stop_rate, "rate of stops")
+        .unwrap_or(0.0)
+        .clamp(0.0, 1.0);
+    let tau = p.crowd.relaxation_time;
+    let stops: Vec<f64> = (sequences.iter().zip(&real))
+        .filter_map(|(q, r)| {
+            let s = q.options.standing_speed;
+            let lag = if r.speed_mean > 2.0 * s {
+                tau * ((r.speed_mean - s) / s).ln()
+            } else {
+                0.0
+            };
+            Some(r.stop_time + lag).filter(|t| t.is_finite())
+        })
+        .collect();
+    p.crowd.stop_time = if stops.is_empty() {
+        start.crowd.stop_time
+    } else {
+        (stops.iter().sum::<f64>() / stops.len() as f64).clamp(0.1, 3600.0)
+    };
     let speed = mean(|s| s.speed_mean, "walking speed")?;
     p.walking.speed_std = mean(|s| s.speed_std, "walking speed's spread")?.clamp(0.0, 1.0);
     p.walking.speed = speed.clamp(0.1, 3.0);
@@ -565,6 +593,8 @@ mod tests {
             crowd: CrowdConfig {
                 pair_fraction: 0.5,
                 pair_spacing: 0.9,
+                stop_rate: 0.05,
+                stop_time: 6.0,
                 ..CrowdConfig::default()
             },
         };
@@ -599,6 +629,18 @@ mod tests {
             p.crowd.pair_spacing
         );
         assert!((p.walking.speed - 1.0).abs() < 0.1, "{}", p.walking.speed);
+        // Stops: about 10 people × 400 s / (20 s + 6 s) ≈ 150 of them, so the rate and the
+        // mean length are each known to about a tenth (an exponential's spread is its mean).
+        assert!(
+            (p.crowd.stop_rate - 0.05).abs() < 0.015,
+            "{}",
+            p.crowd.stop_rate
+        );
+        assert!(
+            (p.crowd.stop_time - 6.0).abs() < 1.5,
+            "{}",
+            p.crowd.stop_time
+        );
         assert!(
             (p.walking.speed_std - 0.25).abs() < 0.1,
             "{}",

@@ -541,11 +541,13 @@ fn crowd_command(command: CrowdCommand) -> Result<i32> {
                 );
             }
             println!(
-                "profile: wanted speed {:.3} ± {:.3} m/s, pairs {:.0} % of arrivals {:.2} m apart → {}",
+                "profile: wanted speed {:.3} ± {:.3} m/s, pairs {:.0} % of arrivals {:.2} m apart, a stop per {:.0} s walked lasting {:.1} s → {}",
                 p.walking.speed,
                 p.walking.speed_std,
                 100.0 * p.crowd.pair_fraction,
                 p.crowd.pair_spacing,
+                1.0 / p.crowd.stop_rate,
+                p.crowd.stop_time,
                 out.display()
             );
             Ok(0)

@@ -2469,7 +2469,13 @@ fn crowd_calibrates_compares_and_refuses_bad_files() {
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("crowd.json")).unwrap()).unwrap();
     let s = &json["sequences"][0];
-    assert_eq!(s["rows"].as_array().unwrap().len(), 8);
+    let rows = s["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 10);
+    // Nobody in the file stands, so the calibrated crowd never stops.
+    assert_eq!(s["real"]["stop_rate"], 0.0);
+    assert!(rows.iter().any(|r| r["statistic"] == "stop_time_s"));
+    let profile_text = std::fs::read_to_string(&profile).unwrap();
+    assert!(profile_text.contains("stop_rate = 0.0"), "{profile_text}");
     assert_eq!(s["sim"].as_array().unwrap().len(), 2);
     assert_eq!(s["real"]["people"], 3);
     let sim = std::fs::read_to_string(out.join("square.sim.txt")).unwrap();

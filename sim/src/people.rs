@@ -167,6 +167,14 @@ pub struct CrowdConfig {
     pub pair_fraction: f64,
     /// The distance between a pair's walkers, side by side, m.
     pub pair_spacing: f64,
+    /// How often a flow's walker stops and stands, per second walked (a Poisson stream over
+    /// the time they walk): real people stop to talk, wait or look about, a quarter of the
+    /// samples of the ETH and UCY sequences stand. A pair stops together. Zero (the default)
+    /// draws nothing, so crowds without it keep their bytes; `futago crowd calibrate`
+    /// measures it as standing spells per second of walking.
+    pub stop_rate: f64,
+    /// How long a stop lasts, s: drawn per stop from an exponential of this mean.
+    pub stop_time: f64,
     /// How often the forces are evaluated, Hz (people move on at every physics step under
     /// the forces last evaluated).
     pub rate: f64,
@@ -228,6 +236,8 @@ impl Default for CrowdConfig {
             robot_radius: 0.5,
             pair_fraction: 0.0,
             pair_spacing: 0.75,
+            stop_rate: 0.0,
+            stop_time: 5.0,
             rate: 50.0,
             max_speed_factor: 1.3,
             waypoint_radius: 0.3,
@@ -370,6 +380,8 @@ impl CrowdConfig {
             ("robot_radius", self.robot_radius, 0.0, 5.0, "m"),
             ("pair_fraction", self.pair_fraction, 0.0, 1.0, ""),
             ("pair_spacing", self.pair_spacing, 0.0, 5.0, "m"),
+            ("stop_rate", self.stop_rate, 0.0, 1.0, "per s"),
+            ("stop_time", self.stop_time, 0.1, 3600.0, "s"),
             ("rate", self.rate, 1.0, 10_000.0, "Hz"),
             ("max_speed_factor", self.max_speed_factor, 1.0, 10.0, ""),
             ("waypoint_radius", self.waypoint_radius, 0.01, 10.0, "m"),
@@ -438,6 +450,10 @@ struct Walker {
     /// The slot of the companion they walk with, if any (while both are in the world and
     /// name each other).
     partner: Option<usize>,
+    /// Standing still until this time, s (a stop, `CrowdConfig::stop_rate`).
+    stand_until: f64,
+    /// Seconds still to walk before the next stop.
+    walk_to_stop: f64,
     shirt: [f64; 3],
     trousers: [f64; 3],
 }
@@ -507,6 +523,8 @@ pub struct Crowd {
     turned_away: u64,
     /// Each slot's acceleration from the last evaluation of the forces.
     accel: Vec<[f64; 2]>,
+    /// The stream of the flows' stops (`CrowdConfig::stop_rate`), drawn in slot order.
+    stops: ChaCha8Rng,
 }
 
 /// Where an empty slot's bodies wait: far below the floor, out of every sensor's sight.
@@ -547,6 +565,8 @@ impl Crowd {
                 phase: 0.0,
                 step: 0.0,
                 partner: None,
+                stand_until: f64::NEG_INFINITY,
+                walk_to_stop: f64::INFINITY,
                 shirt: p.shirt,
                 trousers: p.trousers,
             });
@@ -572,6 +592,8 @@ impl Crowd {
                     phase: 0.0,
                     step: 0.0,
                     partner: None,
+                    stand_until: f64::NEG_INFINITY,
+                    walk_to_stop: f64::INFINITY,
                     shirt: shirt_of(f, k),
                     trousers: trousers(),
                 });
@@ -594,6 +616,7 @@ impl Crowd {
             walkers,
             arrivals,
             turned_away: 0,
+            stops: stream(seed, "people.stops"),
         }
     }
 
@@ -747,6 +770,7 @@ impl Crowd {
             }
         }
         self.advance_routes(t + dt);
+        self.advance_stops(t + dt, dt);
     }
 
     /// Person `i`'s acceleration at `t`: towards their waypoint, away from the others, the
@@ -840,7 +864,7 @@ impl Crowd {
     /// a metre of where they will stop.
     fn desired_velocity(&self, i: usize, t: f64) -> [f64; 2] {
         let w = &self.walkers[i];
-        if t < w.start_time || w.route.is_empty() {
+        if t < w.start_time || t < w.stand_until || w.route.is_empty() {
             return [0.0; 2];
         }
         let goal = w.route[w.target];
@@ -864,6 +888,38 @@ impl Crowd {
             s *= (1.0 - 0.5 * lead / spacing).clamp(0.5, self.config.max_speed_factor);
         }
         [s * dx / d, s * dy / d]
+    }
+
+    /// Starts and ends the flows' walkers' stops at `t`, after `dt` more seconds in the world:
+    /// a walker's clock to the next stop runs while they walk; a pair's first slot keeps the
+    /// clock and both stand.
+    fn advance_stops(&mut self, t: f64, dt: f64) {
+        let c = self.config;
+        if c.stop_rate <= 0.0 {
+            return;
+        }
+        for i in 0..self.walkers.len() {
+            let w = &self.walkers[i];
+            if !w.active || !matches!(w.source, Source::Flow(_)) || t < w.stand_until {
+                continue;
+            }
+            if self.companion(i).is_some_and(|j| j < i) {
+                continue;
+            }
+            let left = w.walk_to_stop - dt;
+            if left > 0.0 {
+                self.walkers[i].walk_to_stop = left;
+                continue;
+            }
+            let until = t + exp_draw(&mut self.stops, 1.0 / c.stop_time);
+            let next = exp_draw(&mut self.stops, c.stop_rate);
+            let w = &mut self.walkers[i];
+            w.stand_until = until;
+            w.walk_to_stop = next;
+            if let Some(j) = self.companion(i) {
+                self.walkers[j].stand_until = until;
+            }
+        }
     }
 
     /// The slot of the companion walking with slot `i`, while both are in the world.
@@ -993,7 +1049,20 @@ impl Crowd {
         w.phase = 0.0;
         w.step = 0.0;
         w.partner = None;
+        w.stand_until = f64::NEG_INFINITY;
+        w.walk_to_stop = if self.config.stop_rate > 0.0 {
+            exp_draw(&mut self.stops, self.config.stop_rate)
+        } else {
+            f64::INFINITY
+        };
     }
+}
+
+/// A draw from the exponential of `rate` (mean 1 / rate); infinite for no rate.
+fn exp_draw(rng: &mut ChaCha8Rng, rate: f64) -> f64 {
+    Exp::new(rate)
+        .map(|e| e.sample(rng))
+        .unwrap_or(f64::INFINITY)
 }
 
 /// A pair's two routes: `route` moved `spacing / 2` to its left and to its right, square to
@@ -1481,6 +1550,85 @@ mod tests {
             &gaps[gaps.len() * 9 / 10..]
         );
         assert!(c.truth().is_empty(), "all left at the exit segment");
+    }
+
+    /// One flow of pairs down a 2 km lane, stopping once per 10 s walked for 5 s on average.
+    fn stopping_flow(pair_fraction: f64) -> (Crowd, Surroundings<'static>) {
+        let flow = FlowConfig {
+            name: "f".into(),
+            from: [0.0, 0.0],
+            to: [2000.0, 0.0],
+            via: vec![],
+            rate: 1e-3,
+            spread: 0.0,
+            from_end: None,
+            to_end: None,
+            start_time: 0.0,
+            end_time: 1.0,
+            max: 2,
+            speed: 1.2,
+            speed_std: 0.0,
+        };
+        let config = CrowdConfig {
+            stop_rate: 0.1,
+            stop_time: 5.0,
+            pair_fraction,
+            ..CrowdConfig::default()
+        };
+        let mut c = Crowd::new(&[], &[flow], config, 7);
+        // The one arrival, due in the first second, brought in now.
+        c.arrivals[0].next = 0.0;
+        let around = Surroundings {
+            robot: None,
+            nearest_obstacle: &open,
+        };
+        (c, around)
+    }
+
+    /// A walker standing a share of their time that follows from the stops' rate and length:
+    /// a stop of mean T = 5 s per 1/λ = 10 s walked. With τ = 0.5 s, the speed falls below
+    /// 0.2 m/s τ·ln(1.2/0.2) = 0.90 s into a stop and rises past it τ·ln(1.2/1.0) = 0.09 s
+    /// after, so (T − 0.81) / (1/λ + T) = 0.279 of the time reads as standing.
+    #[test]
+    fn a_flow_walker_stops_as_often_and_as_long_as_asked() {
+        let (mut c, around) = stopping_flow(0.0);
+        let (mut standing, mut samples, mut spells, mut was) = (0usize, 0usize, 0usize, false);
+        run(&mut c, 1200.0, &around, |c| {
+            let Some(w) = c.walkers.iter().find(|w| w.active) else {
+                return;
+            };
+            samples += 1;
+            let now = norm(w.v[0], w.v[1]) < 0.2;
+            standing += usize::from(now);
+            spells += usize::from(now && !was);
+            was = now;
+        });
+        let share = standing as f64 / samples as f64;
+        // About 80 stops in 1,200 s: the share's spread from the stops' exponential lengths
+        // and Poisson count is about 0.03; 0.1 is more than three of it.
+        assert!((share - 0.279).abs() < 0.1, "standing {share}");
+        assert!((50..=120).contains(&spells), "{spells} stops");
+    }
+
+    #[test]
+    fn a_pair_stops_and_walks_on_together() {
+        let (mut c, around) = stopping_flow(1.0);
+        let (mut both, mut one) = (0usize, 0usize);
+        run(&mut c, 600.0, &around, |c| {
+            let w: Vec<&Walker> = c.walkers.iter().filter(|w| w.active).collect();
+            if let [a, b] = w[..] {
+                let (sa, sb) = (a.stand_until, b.stand_until);
+                assert_eq!(sa, sb, "the companions' stops end together");
+                let standing = |w: &Walker| norm(w.v[0], w.v[1]) < 0.2;
+                both += usize::from(standing(a) && standing(b));
+                one += usize::from(standing(a) != standing(b));
+            }
+        });
+        assert!(both > 1000, "the pair stood together {both} steps");
+        assert!(
+            one * 20 < both,
+            "one stood while the other walked {one} steps"
+        );
     }
 
     #[test]

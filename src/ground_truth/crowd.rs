@@ -3,7 +3,8 @@
 //! statistic by statistic:
 //! - walking speed, mean and spread over the samples of moving people, a sample's speed
 //!   being its displacement to the same person's next frame over the frame period;
-//! - the share of samples standing (slower than `standing_speed`);
+//! - the share of samples standing (slower than `standing_speed`), and how people stand: how
+//!   often a spell of standing begins per second walked, and how long one lasts on average;
 //! - each person's distance to their nearest neighbour in each frame with two or more people:
 //!   median and 10th percentile;
 //! - the share of people who walk with someone (a group): two moving people closer than
@@ -70,6 +71,10 @@ pub struct CrowdStats {
     pub speed_samples: usize,
     /// The share of samples with a speed that are standing.
     pub standing_fraction: f64,
+    /// Spells of standing (a person's consecutive standing samples) begun per second of
+    /// moving samples, and their mean length, s.
+    pub stop_rate: f64,
+    pub stop_time: f64,
     /// Nearest-neighbour distance, m: median and 10th percentile, and how many distances.
     pub nn_median_m: f64,
     pub nn_p10_m: f64,
@@ -97,14 +102,17 @@ pub fn measure(samples: &[Sample], o: &CrowdOptions) -> CrowdStats {
     };
     let mut moving = Vec::new();
     let mut standing = 0usize;
+    let mut stood = std::collections::BTreeSet::new();
     let mut nn = Vec::new();
     let mut together: BTreeMap<(i64, i64), (usize, Vec<f64>)> = BTreeMap::new();
     for frame in frames.values() {
         let v: Vec<Option<[f64; 2]>> = frame.iter().map(&velocity).collect();
-        for s in v.iter().flatten() {
+        for (a, s) in frame.iter().zip(&v) {
+            let Some(s) = s else { continue };
             let speed = s[0].hypot(s[1]);
             if speed < o.standing_speed {
                 standing += 1;
+                stood.insert((a.person, a.frame));
             } else {
                 moving.push(speed);
             }
@@ -160,6 +168,15 @@ pub fn measure(samples: &[Sample], o: &CrowdOptions) -> CrowdStats {
     let nan = f64::NAN;
     let (speed_mean, speed_std) = Stats::of(&moving).map_or((nan, nan), |s| (s.mean, s.std));
     let with_speed = moving.len() + standing;
+    // A spell begins at a standing sample whose person did not stand the frame before.
+    let spells = stood
+        .iter()
+        .filter(|&&(p, f)| {
+            f.checked_sub(o.frame_step)
+                .is_none_or(|before| !stood.contains(&(p, before)))
+        })
+        .count();
+    let moving_time = moving.len() as f64 * o.period;
     CrowdStats {
         frames: frames.len(),
         people: people.len(),
@@ -171,6 +188,16 @@ pub fn measure(samples: &[Sample], o: &CrowdOptions) -> CrowdStats {
         speed_samples: moving.len(),
         standing_fraction: if with_speed > 0 {
             standing as f64 / with_speed as f64
+        } else {
+            nan
+        },
+        stop_rate: if moving_time > 0.0 {
+            spells as f64 / moving_time
+        } else {
+            nan
+        },
+        stop_time: if spells > 0 {
+            standing as f64 * o.period / spells as f64
         } else {
             nan
         },
@@ -232,6 +259,9 @@ mod tests {
         assert_eq!(m.speed_samples, 18);
         assert!((m.speed_mean - 1.0).abs() < 1e-9 && m.speed_std < 1e-9);
         assert!((m.standing_fraction - 9.0 / 27.0).abs() < 1e-12);
+        // One spell of standing, 9 samples (3.6 s) long, over 18 moving samples (7.2 s).
+        assert!((m.stop_rate - 1.0 / 7.2).abs() < 1e-12);
+        assert!((m.stop_time - 3.6).abs() < 1e-12);
         // The walkers are each other's nearest at 0.8 m in every frame (20 of 30 distances);
         // the stander's nearest is 3 m or more away.
         assert_eq!(m.nn_samples, 30);
@@ -244,6 +274,22 @@ mod tests {
         // stander's one: 5 m².
         assert_eq!(m.area_m2, 5.0);
         assert!((m.density - 0.6).abs() < 1e-12);
+    }
+
+    /// A walker who stops twice, for one and then three frames: two spells, four standing
+    /// samples between them, over the frames they walk.
+    #[test]
+    fn spells_of_standing_are_counted_and_timed() {
+        let o = CrowdOptions::default();
+        // Positions frame by frame: walk, stand 1 frame, walk 2, stand 3, walk 1.
+        let xs = [0.0, 0.4, 0.4, 0.8, 1.2, 1.2, 1.2, 1.2, 1.6];
+        let s: Vec<Sample> = (xs.iter().enumerate())
+            .map(|(k, &x)| sample(10 * k as i64, 1, x, 0.0))
+            .collect();
+        let m = measure(&s, &o);
+        assert!((m.standing_fraction - 4.0 / 8.0).abs() < 1e-12);
+        assert!((m.stop_rate - 2.0 / (4.0 * 0.4)).abs() < 1e-12);
+        assert!((m.stop_time - 2.0 * 0.4).abs() < 1e-12);
     }
 
     #[test]
