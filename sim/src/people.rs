@@ -168,10 +168,10 @@ pub struct CrowdConfig {
     /// The distance between a pair's walkers, side by side, m.
     pub pair_spacing: f64,
     /// How often a flow's walker stops and stands, per second walked (a Poisson stream over
-    /// the time they walk): real people stop to talk, wait or look about, a quarter of the
-    /// samples of the ETH and UCY sequences stand. A pair stops together. Zero (the default)
-    /// draws nothing, so crowds without it keep their bytes; `futago crowd calibrate`
-    /// measures it as standing spells per second of walking.
+    /// the time they walk): real people stop to talk, wait or look about (a quarter of the
+    /// samples of the ETH hotel and UCY students sequences stand). A pair stops together.
+    /// Zero (the default) draws nothing, so crowds without it keep their bytes; `futago crowd
+    /// calibrate` measures it as standing spells per second of walking.
     pub stop_rate: f64,
     /// How long a stop lasts, s: drawn per stop from an exponential of this mean.
     pub stop_time: f64,
