@@ -599,9 +599,7 @@ impl Crowd {
                 });
             }
             let mut rng = stream(seed, &format!("people.flow.{}", flow.name));
-            let gap = Exp::new(flow.rate / 60.0)
-                .map(|e| e.sample(&mut rng))
-                .unwrap_or(f64::INFINITY);
+            let gap = exp_draw(&mut rng, flow.rate / 60.0);
             arrivals.push(Arrivals {
                 next: flow.start_time + gap,
                 rng,
@@ -981,9 +979,7 @@ impl Crowd {
                     let speed = draw_speed(rng, flow.speed, flow.speed_std);
                     // Drawn only where pairs may come, so that other crowds keep their bytes.
                     let pair = pairs > 0.0 && rng.random::<f64>() < pairs;
-                    a.next += Exp::new(flow.rate / 60.0)
-                        .map(|e| e.sample(rng))
-                        .unwrap_or(f64::INFINITY);
+                    a.next += exp_draw(rng, flow.rate / 60.0);
                     a.waiting = Some(Arrival {
                         from,
                         to,
@@ -1552,7 +1548,8 @@ mod tests {
         assert!(c.truth().is_empty(), "all left at the exit segment");
     }
 
-    /// One flow of pairs down a 2 km lane, stopping once per 10 s walked for 5 s on average.
+    /// One arrival (a pair when `pair_fraction` is 1) down a 2 km lane, stopping once per
+    /// 10 s walked for 5 s on average.
     fn stopping_flow(pair_fraction: f64) -> (Crowd, Surroundings<'static>) {
         let flow = FlowConfig {
             name: "f".into(),
