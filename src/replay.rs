@@ -219,6 +219,25 @@ pub fn print(s: &Value, log: &Path, out: &Path) {
             println!("{}", relations::describe(&n));
         }
     }
+    if let Some(p) = s.get("people") {
+        let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+        let part = |t: &Value, d: &Value| {
+            format!(
+                "MOTA {:.3}, MOTP {:.3} m, legs AP@0.5 {:.3} over {} scans",
+                f(&t["mota"]),
+                f(&t["motp_m"]),
+                f(&d["legs"]["by_radius_m"]["0.5"]["ap"]),
+                t["frames"]
+            )
+        };
+        let h = &p["annotated_halves"];
+        println!(
+            "people, annotated scans: {}\n  first half: {}\n  second half: {}",
+            part(&p["annotated_frames"], &p["detection_on_annotated_frames"]),
+            part(&h["first"]["tracking"], &h["first"]["detection"]),
+            part(&h["second"]["tracking"], &h["second"]["detection"])
+        );
+    }
     let p = &s["loop_closure_precision"];
     if let Some(n) = p["constraints"].as_u64().filter(|n| *n > 0) {
         println!(
@@ -243,6 +262,8 @@ fn write_people(
     let PeopleReplay {
         mot,
         detection,
+        halves,
+        leg_scans,
         tracks,
     } = people;
     summary["people"] = json!({
@@ -251,6 +272,8 @@ fn write_people(
         "all_frames": mot[0].summary(),
         "annotated_frames": mot[1].summary(),
         "detection_on_annotated_frames": detection,
+        "annotated_halves": halves,
+        "leg_scans": leg_scans,
     });
     let mut text = format!(
         "# people tracked by futago on {}: timestamp id x y ({} frame, m)\n",
@@ -474,8 +497,20 @@ pub fn replay(
 struct PeopleReplay {
     mot: [crate::ground_truth::mot::Mot; 2],
     detection: Value,
+    /// The annotated scans' two halves in time, each scored as the whole is.
+    halves: Value,
+    /// What the annotated scans show of the people ([`crate::ground_truth::leg_scans`]).
+    leg_scans: Value,
     tracks: Vec<(Time, u32, [f64; 2])>,
 }
+
+/// One scan's laser pose in the odometry frame, and its leg and temporal-difference
+/// detections in the laser's frame (the temporal ones where that detector kept the scan).
+type ScanDetections = (
+    Pose2,
+    Vec<crate::ground_truth::detection::Detection>,
+    Option<Vec<crate::ground_truth::detection::Detection>>,
+);
 
 /// Detects and tracks people in every scan of `log` (the shipped leg classifier and the
 /// default detectors and tracker, in the odometry frame: the log has no map), and scores the
@@ -484,25 +519,28 @@ struct PeopleReplay {
 /// track where nobody is annotated is a false positive) and over the annotated scans alone;
 /// the detectors over the annotated scans (DROW's AP, as in simulation).
 fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
-    use crate::ground_truth::detection::{Detection, DetectionFrame, score};
     use futago_robot::tracking::PeopleConfig;
     use futago_robot::tracking::laser_people::LaserPeople;
-    let mut people = LaserPeople::new(
-        PeopleConfig::default(),
-        crate::stack::people::default_model()?,
-    );
+    let config = PeopleConfig::default();
+    let mut people = LaserPeople::new(config, crate::stack::people::default_model()?);
     let mut frames = vec![crate::ground_truth::mot::Frame::default(); log.scans.len()];
     for m in &log.people {
         frames[m.scan].truth.push((m.id, m.position));
     }
     let mut tracks = Vec::new();
-    // Per scan: the laser in odometry, the leg and the temporal detections (laser frame).
-    let mut found: Vec<(Pose2, Vec<Detection>, Option<Vec<Detection>>)> =
-        Vec::with_capacity(log.scans.len());
+    let mut leg_scans = crate::ground_truth::leg_scans::LegScans::default();
+    let mut found: Vec<ScanDetections> = Vec::with_capacity(log.scans.len());
     let stamps: Vec<Time> = log.scans.iter().map(|s| s.scan.stamp).collect();
     for ((s, frame), base) in log.scans.iter().zip(frames.iter_mut()).zip(robot) {
         let laser = base.compose(&s.mount);
         let d = people.update(&s.scan, None, laser);
+        if !frame.truth.is_empty() {
+            let marks: Vec<[f64; 2]> = frame.truth.iter().map(|t| t.1).collect();
+            leg_scans.add(
+                &futago_robot::perception::legs::segments(&s.scan, &config.legs),
+                &marks,
+            );
+        }
         found.push((
             laser,
             d.legs.iter().map(|q| (q.position, q.confidence)).collect(),
@@ -524,20 +562,66 @@ fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
             tracks.push((s.logged, p.id, p.position));
         }
     }
+    let annotated: Vec<usize> = (0..frames.len())
+        .filter(|&i| !frames[i].truth.is_empty())
+        .collect();
+    // The annotated stretch cut in two at its middle in time: the first half to develop on,
+    // the second to report on (issue 45's protocol).
+    let split = match (annotated.first(), annotated.last()) {
+        (Some(&a), Some(&b)) => 0.5 * (stamps[a].secs() + stamps[b].secs()),
+        _ => 0.0,
+    };
+    let part = |keep: &dyn Fn(usize) -> bool| -> (crate::ground_truth::mot::Mot, Value) {
+        let kept: Vec<usize> = annotated.iter().copied().filter(|&i| keep(i)).collect();
+        let scored: Vec<crate::ground_truth::mot::Frame> =
+            kept.iter().map(|&i| frames[i].clone()).collect();
+        let mot = crate::ground_truth::mot::clear_mot(&scored, MOT_GATE);
+        (mot, detection_scores(&kept, &frames, &found))
+    };
+    let (whole, detection) = part(&|_| true);
+    let halves = [
+        part(&|i| stamps[i].secs() <= split),
+        part(&|i| stamps[i].secs() > split),
+    ];
+    let first_annotated = annotated.first().map_or(0.0, |&i| stamps[i].secs());
+    let halves = json!({
+        "split_after_first_annotation_s": split - first_annotated,
+        "first": {"tracking": halves[0].0.summary(), "detection": halves[0].1},
+        "second": {"tracking": halves[1].0.summary(), "detection": halves[1].1},
+    });
+    Ok(PeopleReplay {
+        mot: [
+            crate::ground_truth::mot::clear_mot(&frames, MOT_GATE),
+            whole,
+        ],
+        detection,
+        halves,
+        leg_scans: leg_scans.summary(),
+        tracks,
+    })
+}
+
+/// The leg and temporal-difference detectors' scores (DROW's AP at each match radius) over
+/// the scans `kept` (indices into `frames` and `found`, every one annotated).
+fn detection_scores(
+    kept: &[usize],
+    frames: &[crate::ground_truth::mot::Frame],
+    found: &[ScanDetections],
+) -> Value {
+    use crate::ground_truth::detection::{DetectionFrame, score};
     let mut detection = serde_json::Map::new();
     for (name, which) in [("legs", 0), ("temporal", 1)] {
-        let cut: Vec<DetectionFrame> = frames
+        let cut: Vec<DetectionFrame> = kept
             .iter()
-            .zip(&found)
-            .filter(|(f, _)| !f.truth.is_empty())
-            .filter_map(|(f, (_, legs, temporal))| {
+            .filter_map(|&i| {
+                let (_, legs, temporal) = &found[i];
                 let d = if which == 0 {
                     Some(legs)
                 } else {
                     temporal.as_ref()
                 };
                 d.map(|d| DetectionFrame {
-                    truth: f.truth.iter().map(|t| t.1).collect(),
+                    truth: frames[i].truth.iter().map(|t| t.1).collect(),
                     detections: d.clone(),
                 })
             })
@@ -551,19 +635,7 @@ fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
             json!({"scans": cut.len(), "by_radius_m": radii}),
         );
     }
-    let annotated: Vec<crate::ground_truth::mot::Frame> = frames
-        .iter()
-        .filter(|f| !f.truth.is_empty())
-        .cloned()
-        .collect();
-    Ok(PeopleReplay {
-        mot: [
-            crate::ground_truth::mot::clear_mot(&frames, MOT_GATE),
-            crate::ground_truth::mot::clear_mot(&annotated, MOT_GATE),
-        ],
-        detection: Value::Object(detection),
-        tracks,
-    })
+    Value::Object(detection)
 }
 
 /// The SLAM configuration of `futago replay`: the `[slam]` keys of `config` (a TOML file; the

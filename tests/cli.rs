@@ -1843,6 +1843,28 @@ fn replay_of_an_annotated_people_log_scores_its_tracks() {
     // A tighter radius never finds more.
     let tp = |r: &str| legs["by_radius_m"][r]["true_positives"].as_u64().unwrap();
     assert!(tp("0.3") <= tp("0.5"));
+    // The annotated stretch cut in two in time: each half scored on its own scans and
+    // people, the two adding up to the whole, and neither empty.
+    let halves = &p["annotated_halves"];
+    let count = |v: &serde_json::Value, k: &str| v[k].as_u64().unwrap();
+    for k in ["frames", "objects"] {
+        let (a, b) = (
+            count(&halves["first"]["tracking"], k),
+            count(&halves["second"]["tracking"], k),
+        );
+        assert_eq!(a + b, count(&p["annotated_frames"], k), "{k}");
+        assert!(a > 0 && b > 0, "{k}: {a} and {b}");
+    }
+    assert_eq!(
+        count(&halves["first"]["detection"]["legs"], "scans"),
+        count(&halves["first"]["tracking"], "frames")
+    );
+    assert!(halves["split_after_first_annotation_s"].as_f64().unwrap() > 0.0);
+    // What the scans show of the people: each of the 153 annotations (all within 8 m) is
+    // counted in one range bin.
+    let bins = p["leg_scans"]["by_range"].as_array().unwrap();
+    let people: u64 = bins.iter().map(|b| b["people"].as_u64().unwrap()).sum();
+    assert_eq!(people, 153);
 }
 
 /// `futago bench people` times detection and tracking over scans of walking people and the

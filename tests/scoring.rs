@@ -140,3 +140,30 @@ fn the_oracle_runs_only_where_a_module_asks_for_the_truth_and_the_summary_says_s
             .all(|n| n.name() != "oracle")
     );
 }
+
+/// The people node measures what its laser shows of the people it sees, as the replay of a
+/// real annotated log does (`people.leg_scans`): every person the scan sees within 10 m is
+/// counted once, in one range bin, and the segments near them measure a shin.
+#[test]
+fn the_people_a_scan_sees_are_measured_by_the_segments_near_them() {
+    let s = scenario("train-legs");
+    let tmp = tempfile::tempdir().unwrap();
+    let (summary, _) = run::run(&s, &options(20.0), &tmp.path().join("run")).unwrap();
+    let people = &summary["people"];
+    let bins = people["leg_scans"]["by_range"].as_array().unwrap();
+    assert!(!bins.is_empty(), "{people}");
+    let mut counted = 0;
+    for b in bins {
+        counted += b["people"].as_u64().unwrap();
+        let shares: f64 = ["none", "one", "two", "three_or_more"]
+            .iter()
+            .map(|k| b["share_by_segments"][k].as_f64().unwrap())
+            .sum();
+        assert!((shares - 1.0).abs() < 1e-9, "{b}");
+        // A shin is 0.1 m across: its visible chord, or two legs merged, not a wall.
+        let w = b["width_m"]["median"].as_f64().unwrap();
+        assert!((0.05..=0.2).contains(&w), "{b}");
+    }
+    // The URG-04LX reaches 5.6 m: everyone the scan sees lies in a bin.
+    assert_eq!(counted, people["tracking"]["objects"].as_u64().unwrap());
+}

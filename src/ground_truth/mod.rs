@@ -9,6 +9,7 @@ pub mod completeness;
 pub mod coverage;
 pub mod crowd;
 pub mod detection;
+pub mod leg_scans;
 pub mod map;
 pub mod mot;
 pub mod planes;

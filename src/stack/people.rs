@@ -22,7 +22,11 @@
 //! frame (each scan), in the laser's frame, within 0.75 m. The true people of a frame are
 //! those the scan sees: as many beams as a segment needs (3) end within 0.15 m of their legs
 //! where they cross the laser's plane (`people.mota`, `people.motp_m`, `people.id_switches`,
-//! `people.false_positives`, `people.misses`).
+//! `people.false_positives`, `people.misses`). The tracks scored are those in view
+//! (`PeopleTracker::people`); the driver is given every track held, hidden ones too.
+//! What the scans show of those people, the segments near each by range
+//! ([`crate::ground_truth::leg_scans`]), is in the summary's `leg_scans`, measured as
+//! `futago replay` measures a real log's annotations.
 //!
 //! Detection, against the same true people: each detector's candidates (`legs`,
 //! `map_difference` and `fused` with a map, `temporal`) are scored by DROW's average
@@ -44,12 +48,13 @@
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, TrueState, Truth};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::detection::{Detection, DetectionFrame, by_range, score};
+use crate::ground_truth::leg_scans::LegScans;
 use crate::ground_truth::mot::{Frame, clear_mot};
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Pose2, Time};
 use futago_robot::perception::depth_people::{DepthPeople, DepthPeopleConfig};
-use futago_robot::perception::legs::AdaBoost;
+use futago_robot::perception::legs::{AdaBoost, LegConfig, Segment, segments};
 use futago_robot::tracking::laser_people::{Detections, LaserPeople};
 use futago_robot::tracking::people::{Candidate, TrackedPerson};
 use serde_json::{Value, json};
@@ -150,6 +155,8 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
             mount: l.planar_mount(),
             height: l.xyz[2],
             min_points: s.spec.people.legs.min_points,
+            legs: s.spec.people.legs,
+            leg_scans: LegScans::default(),
             people: LaserPeople::new(s.spec.people, default_model()?),
             map_seen: None,
             frames: Vec::new(),
@@ -202,6 +209,10 @@ struct Tracking {
     height: f64,
     /// Beams that must end on a person's legs for the scan to see them.
     min_points: usize,
+    /// The leg detector's segmentation, to measure what the scans show of the people.
+    legs: LegConfig,
+    /// The segments of the people each scan sees ([`LegScans`]).
+    leg_scans: LegScans,
     people: LaserPeople,
     /// The time of the map last given to `people`.
     map_seen: Option<Time>,
@@ -281,6 +292,8 @@ struct UnscoredScan {
     in_odometry: Pose2,
     /// The beams' ends in the laser frame.
     ends: Vec<[f64; 2]>,
+    /// The scan's segments, as the leg detector cuts it.
+    segments: Vec<Segment>,
     found: Detections,
     tracks: Vec<(u32, [f64; 2])>,
 }
@@ -437,11 +450,14 @@ impl Node for PeopleNode {
             _ => in_odometry,
         };
         let back = laser.inverse();
-        let people = t.people.people();
-        let tracks = people
+        // Scored: the people in view. Published: every person remembered, for the driver.
+        let tracks = t
+            .people
+            .people()
             .iter()
             .map(|p| (p.id, back.transform_point(p.position)))
             .collect();
+        let people = t.people.remembered();
         // Published in the base's frame, for the driver.
         let base = laser.compose(&t.mount.inverse());
         let to_base = base.inverse();
@@ -473,6 +489,7 @@ impl Node for PeopleNode {
             stamp: scan.stamp,
             in_odometry,
             ends,
+            segments: segments(scan, &t.legs),
             found,
             tracks,
         });
@@ -573,6 +590,7 @@ impl Node for PeopleNode {
             let mut tracking = m.summary();
             tracking["laser"] = json!(t.laser);
             entry["tracking"] = tracking;
+            entry["leg_scans"] = t.leg_scans.summary();
             let mut detection = serde_json::Map::new();
             for (k, name) in DETECTORS.iter().enumerate() {
                 if let Some(frames) = t.detection_frames(k) {
@@ -673,6 +691,7 @@ impl Tracking {
             stamp,
             in_odometry,
             ends,
+            segments,
             found,
             tracks,
         } = u;
@@ -694,6 +713,8 @@ impl Tracking {
             })
             .map(|p| (p.id, to_laser.transform_point([p.pose.x, p.pose.y])))
             .collect::<Vec<_>>();
+        let centres: Vec<[f64; 2]> = truth.iter().map(|p| p.1).collect();
+        t.leg_scans.add(&segments, &centres);
         t.scans.push(ScanFrame {
             stamp,
             in_odometry,

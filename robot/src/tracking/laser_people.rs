@@ -176,10 +176,16 @@ impl LaserPeople {
         }
     }
 
-    /// The confirmed people, in the tracking frame (the map's with a map and a pose in it,
-    /// else odometry's).
+    /// The confirmed people in view, in the tracking frame (the map's with a map and a pose
+    /// in it, else odometry's); see [`PeopleTracker::people`].
     pub fn people(&self) -> Vec<TrackedPerson> {
         self.tracker.people()
+    }
+
+    /// Every confirmed person held, those out of view for a while included, in the tracking
+    /// frame; see [`PeopleTracker::remembered`].
+    pub fn remembered(&self) -> Vec<TrackedPerson> {
+        self.tracker.remembered()
     }
 }
 
