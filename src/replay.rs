@@ -504,6 +504,50 @@ struct PeopleReplay {
     tracks: Vec<(Time, u32, [f64; 2])>,
 }
 
+/// Marks of one person this far apart in time give their velocity, s: the annotations'
+/// jitter (about 5 cm) then moves it by under 0.1 m/s, half the speed below which a person
+/// stands.
+const MARK_SPAN: f64 = 0.4;
+
+/// Each annotation's velocity over the ground (odometry frame, m/s), keyed by scan and id:
+/// from the same person's marks at least [`MARK_SPAN`] before and after it (or on one side
+/// only), within 2 s. Marks with no such neighbour have none. `lasers` is each scan's laser
+/// pose in the odometry frame.
+fn mark_velocities(
+    log: &carmen::Log,
+    lasers: &[Pose2],
+) -> std::collections::HashMap<(usize, u32), [f64; 2]> {
+    let mut by_id: std::collections::BTreeMap<u32, Vec<(f64, usize, [f64; 2])>> =
+        Default::default();
+    for m in &log.people {
+        let t = log.scans[m.scan].scan.stamp.secs();
+        let p = lasers[m.scan].transform_point(m.position);
+        by_id.entry(m.id).or_default().push((t, m.scan, p));
+    }
+    let mut out = std::collections::HashMap::new();
+    for (id, mut marks) in by_id {
+        marks.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for &(t, scan, p) in &marks {
+            let before = marks
+                .iter()
+                .rev()
+                .find(|m| m.0 <= t - MARK_SPAN && m.0 >= t - 2.0);
+            let after = marks
+                .iter()
+                .find(|m| m.0 >= t + MARK_SPAN && m.0 <= t + 2.0);
+            let (a, b) = match (before, after) {
+                (Some(a), Some(b)) => ((a.0, a.2), (b.0, b.2)),
+                (Some(a), None) => ((a.0, a.2), (t, p)),
+                (None, Some(b)) => ((t, p), (b.0, b.2)),
+                (None, None) => continue,
+            };
+            let dt = b.0 - a.0;
+            out.insert((scan, id), [(b.1[0] - a.1[0]) / dt, (b.1[1] - a.1[1]) / dt]);
+        }
+    }
+    out
+}
+
 /// One scan's laser pose in the odometry frame, and its leg and temporal-difference
 /// detections in the laser's frame (the temporal ones where that detector kept the scan).
 type ScanDetections = (
@@ -519,6 +563,7 @@ type ScanDetections = (
 /// track where nobody is annotated is a false positive) and over the annotated scans alone;
 /// the detectors over the annotated scans (DROW's AP, as in simulation).
 fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
+    use crate::ground_truth::leg_scans::Seen;
     use futago_robot::tracking::PeopleConfig;
     use futago_robot::tracking::laser_people::LaserPeople;
     let config = PeopleConfig::default();
@@ -531,11 +576,29 @@ fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
     let mut leg_scans = crate::ground_truth::leg_scans::LegScans::default();
     let mut found: Vec<ScanDetections> = Vec::with_capacity(log.scans.len());
     let stamps: Vec<Time> = log.scans.iter().map(|s| s.scan.stamp).collect();
-    for ((s, frame), base) in log.scans.iter().zip(frames.iter_mut()).zip(robot) {
-        let laser = base.compose(&s.mount);
+    let lasers: Vec<Pose2> = log
+        .scans
+        .iter()
+        .zip(robot)
+        .map(|(s, base)| base.compose(&s.mount))
+        .collect();
+    let velocities = mark_velocities(log, &lasers);
+    for (k, (s, frame)) in log.scans.iter().zip(frames.iter_mut()).enumerate() {
+        let laser = lasers[k];
         let d = people.update(&s.scan, None, laser);
         if !frame.truth.is_empty() {
-            let marks: Vec<[f64; 2]> = frame.truth.iter().map(|t| t.1).collect();
+            let (c, sn) = (laser.theta.cos(), laser.theta.sin());
+            let marks: Vec<Seen> = frame
+                .truth
+                .iter()
+                .map(|&(id, centre)| Seen {
+                    centre,
+                    // Over the ground, turned into the laser's axes.
+                    velocity: velocities
+                        .get(&(k, id))
+                        .map(|v| [c * v[0] + sn * v[1], -sn * v[0] + c * v[1]]),
+                })
+                .collect();
             leg_scans.add(
                 &futago_robot::perception::legs::segments(&s.scan, &config.legs),
                 &marks,

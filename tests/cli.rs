@@ -1865,6 +1865,12 @@ fn replay_of_an_annotated_people_log_scores_its_tracks() {
     let bins = p["leg_scans"]["by_range"].as_array().unwrap();
     let people: u64 = bins.iter().map(|b| b["people"].as_u64().unwrap()).sum();
     assert_eq!(people, 153);
+    // Counted again by how they move, those whose marks give a velocity: the log has people
+    // standing in a group and people walking at the robot.
+    let moving = &p["leg_scans"]["by_motion"];
+    let by = |m: &str| moving[m]["people"].as_u64().unwrap();
+    assert!(by("standing") + by("along") + by("across") <= 153);
+    assert!(by("standing") > 0 && by("along") > 0, "{moving}");
 }
 
 /// `futago bench people` times detection and tracking over scans of walking people and the

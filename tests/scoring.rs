@@ -166,4 +166,11 @@ fn the_people_a_scan_sees_are_measured_by_the_segments_near_them() {
     }
     // The URG-04LX reaches 5.6 m: everyone the scan sees lies in a bin.
     assert_eq!(counted, people["tracking"]["objects"].as_u64().unwrap());
+    // The twin knows every person's velocity: each is counted once more by how they move.
+    let moving = &people["leg_scans"]["by_motion"];
+    let by_motion: u64 = ["standing", "along", "across"]
+        .iter()
+        .map(|m| moving[m]["people"].as_u64().unwrap())
+        .sum();
+    assert_eq!(by_motion, counted);
 }

@@ -48,7 +48,7 @@
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, TrueState, Truth};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::detection::{Detection, DetectionFrame, by_range, score};
-use crate::ground_truth::leg_scans::LegScans;
+use crate::ground_truth::leg_scans::{LegScans, Seen};
 use crate::ground_truth::mot::{Frame, clear_mot};
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
@@ -697,6 +697,8 @@ impl Tracking {
         } = u;
         let to_laser = state.robot.compose(&self.mount).inverse();
         let t = self;
+        let (c, s) = (to_laser.theta.cos(), to_laser.theta.sin());
+        let mut seen = Vec::new();
         let truth = state
             .people
             .iter()
@@ -711,10 +713,17 @@ impl Tracking {
                     .count();
                 on_legs >= t.min_points
             })
-            .map(|p| (p.id, to_laser.transform_point([p.pose.x, p.pose.y])))
+            .map(|p| {
+                let centre = to_laser.transform_point([p.pose.x, p.pose.y]);
+                let v = p.velocity;
+                seen.push(Seen {
+                    centre,
+                    velocity: Some([c * v[0] - s * v[1], s * v[0] + c * v[1]]),
+                });
+                (p.id, centre)
+            })
             .collect::<Vec<_>>();
-        let centres: Vec<[f64; 2]> = truth.iter().map(|p| p.1).collect();
-        t.leg_scans.add(&segments, &centres);
+        t.leg_scans.add(&segments, &seen);
         t.scans.push(ScanFrame {
             stamp,
             in_odometry,
