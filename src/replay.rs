@@ -587,16 +587,14 @@ fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
         let laser = lasers[k];
         let d = people.update(&s.scan, None, laser);
         if !frame.truth.is_empty() {
-            let (c, sn) = (laser.theta.cos(), laser.theta.sin());
+            let to_laser = laser.inverse();
             let marks: Vec<Seen> = frame
                 .truth
                 .iter()
                 .map(|&(id, centre)| Seen {
                     centre,
                     // Over the ground, turned into the laser's axes.
-                    velocity: velocities
-                        .get(&(k, id))
-                        .map(|v| [c * v[0] + sn * v[1], -sn * v[0] + c * v[1]]),
+                    velocity: velocities.get(&(k, id)).map(|&v| to_laser.rotate_vector(v)),
                 })
                 .collect();
             leg_scans.add(

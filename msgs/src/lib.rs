@@ -175,6 +175,13 @@ impl Pose2 {
         [self.x + c * p[0] - s * p[1], self.y + s * p[0] + c * p[1]]
     }
 
+    /// Turns a vector (a velocity, a direction) from this pose's frame to the parent frame:
+    /// [`transform_point`](Self::transform_point) without the translation.
+    pub fn rotate_vector(&self, v: [f64; 2]) -> [f64; 2] {
+        let (s, c) = self.theta.sin_cos();
+        [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+    }
+
     /// Euclidean distance between the positions of two poses.
     pub fn distance(&self, other: &Pose2) -> f64 {
         (self.x - other.x).hypot(self.y - other.y)
@@ -385,6 +392,22 @@ mod tests {
         assert_eq!(pose_at(&traj, t(0.5), Outside::Clamp), Some(a));
         assert_eq!(pose_at(&traj, t(4.0), Outside::Clamp), Some(b));
         assert_eq!(pose_at(&[], t(4.0), Outside::Clamp), None);
+    }
+
+    #[test]
+    fn a_vector_turns_with_the_pose_and_ignores_its_position() {
+        let p = Pose2::new(5.0, -3.0, std::f64::consts::FRAC_PI_2);
+        let v = p.rotate_vector([1.0, 2.0]);
+        assert!(
+            (v[0] + 2.0).abs() < 1e-12 && (v[1] - 1.0).abs() < 1e-12,
+            "{v:?}"
+        );
+        // Turning there and back is the identity.
+        let w = p.inverse().rotate_vector(v);
+        assert!(
+            (w[0] - 1.0).abs() < 1e-12 && (w[1] - 2.0).abs() < 1e-12,
+            "{w:?}"
+        );
     }
 
     #[test]

@@ -461,17 +461,13 @@ impl Node for PeopleNode {
         // Published in the base's frame, for the driver.
         let base = laser.compose(&t.mount.inverse());
         let to_base = base.inverse();
-        let (c, s) = (base.theta.cos(), base.theta.sin());
         bus.publish_people(
             people
                 .iter()
                 .map(|p| TrackedPerson {
                     id: p.id,
                     position: to_base.transform_point(p.position),
-                    velocity: [
-                        c * p.velocity[0] + s * p.velocity[1],
-                        -s * p.velocity[0] + c * p.velocity[1],
-                    ],
+                    velocity: to_base.rotate_vector(p.velocity),
                 })
                 .collect(),
         );
@@ -697,7 +693,6 @@ impl Tracking {
         } = u;
         let to_laser = state.robot.compose(&self.mount).inverse();
         let t = self;
-        let (c, s) = (to_laser.theta.cos(), to_laser.theta.sin());
         let mut seen = Vec::new();
         let truth = state
             .people
@@ -715,10 +710,9 @@ impl Tracking {
             })
             .map(|p| {
                 let centre = to_laser.transform_point([p.pose.x, p.pose.y]);
-                let v = p.velocity;
                 seen.push(Seen {
                     centre,
-                    velocity: Some([c * v[0] - s * v[1], s * v[0] + c * v[1]]),
+                    velocity: Some(to_laser.rotate_vector(p.velocity)),
                 });
                 (p.id, centre)
             })
