@@ -20,7 +20,7 @@
 //! seconds, or whose position spreads beyond `max_std` (0.9 m, leg_tracker's), is dropped.
 //! Until then it is remembered (a planner keeps clear of a person hidden behind another), but
 //! reported as a person in view only while seen within `report_coast` (0.5 s): on the real
-//! annotated log, tracks coasting longer were two thirds of the false positives.
+//! annotated log, two thirds of the false positives were tracks coasting without a detection.
 
 use super::assignment::assign;
 use crate::config::{ConfigError, check_counts, check_ranges};
