@@ -83,6 +83,10 @@ enum Command {
         /// The bag's nav_msgs/Odometry topic, where it has several.
         #[arg(long, value_name = "TOPIC")]
         odom_topic: Option<String>,
+        /// The leg classifier for people tracking on an annotated log (a model written by
+        /// `futago train-legs`) [default: the shipped models/legs.json].
+        #[arg(long, value_name = "MODEL")]
+        legs_model: Option<std::path::PathBuf>,
     },
     /// Estimate a robot profile from a real robot's log (CARMEN or ROS 1 bag): its laser's and
     /// its odometry's error models against the stack's own SLAM of the log. Writes
@@ -780,6 +784,7 @@ fn real_main() -> Result<u8> {
             strict,
             scan_topic,
             odom_topic,
+            legs_model,
         } => {
             let slam = replay::slam_config(config.as_deref(), method.as_deref())?;
             let out = out.unwrap_or_else(|| replay::default_out(&log));
@@ -790,6 +795,7 @@ fn real_main() -> Result<u8> {
                     odom_topic,
                 },
                 force,
+                legs_model,
             };
             let s = replay::replay(&log, relations.as_deref(), slam, &out, &options)?;
             replay::print(&s, &log, &out);

@@ -87,6 +87,10 @@ pub struct ReplayOptions {
     pub read: carmen::ReadOptions,
     /// Replace the output folder even when it holds files futago did not write.
     pub force: bool,
+    /// The leg classifier that people tracking uses (a `futago train-legs` model file);
+    /// `None`: the shipped `models/legs.json`. Scoring a model trained in simulation on a
+    /// real annotated log is how its transfer is measured.
+    pub legs_model: Option<PathBuf>,
 }
 
 /// What a log held and lost, for the summary: messages by topic, the stamps read, the damage.
@@ -399,7 +403,7 @@ pub fn replay(
     let people = if log.people.is_empty() {
         None
     } else {
-        Some(track_people(&log, &robot)?)
+        Some(track_people(&log, &robot, o.legs_model.as_deref())?)
     };
     let wall = started.elapsed().as_secs_f64();
     let span = (log.scans[log.scans.len() - 1].scan.stamp - log.scans[0].scan.stamp).secs();
@@ -556,18 +560,26 @@ type ScanDetections = (
     Option<Vec<crate::ground_truth::detection::Detection>>,
 );
 
-/// Detects and tracks people in every scan of `log` (the shipped leg classifier and the
-/// default detectors and tracker, in the odometry frame: the log has no map), and scores the
-/// tracks against the log's annotations frame by frame in each scan's laser frame (CLEAR-MOT
-/// within [`MOT_GATE`]). The tracks are scored over every scan (the benchmark's protocol: a
+/// Detects and tracks people in every scan of `log` (the leg classifier `legs_model`, or
+/// the shipped one, and the default detectors and tracker, in the odometry frame: the log has
+/// no map), and scores the tracks against the log's annotations frame by frame in each scan's
+/// laser frame (CLEAR-MOT within [`MOT_GATE`]). The tracks are scored over every scan (the benchmark's protocol: a
 /// track where nobody is annotated is a false positive) and over the annotated scans alone;
 /// the detectors over the annotated scans (DROW's AP, as in simulation).
-fn track_people(log: &carmen::Log, robot: &[Pose2]) -> Result<PeopleReplay> {
+fn track_people(
+    log: &carmen::Log,
+    robot: &[Pose2],
+    legs_model: Option<&Path>,
+) -> Result<PeopleReplay> {
     use crate::ground_truth::leg_scans::Seen;
     use futago_robot::tracking::PeopleConfig;
     use futago_robot::tracking::laser_people::LaserPeople;
     let config = PeopleConfig::default();
-    let mut people = LaserPeople::new(config, crate::stack::people::default_model()?);
+    let model = match legs_model {
+        Some(path) => crate::stack::people::read_model(path)?,
+        None => crate::stack::people::default_model()?,
+    };
+    let mut people = LaserPeople::new(config, model);
     let mut frames = vec![crate::ground_truth::mot::Frame::default(); log.scans.len()];
     for m in &log.people {
         frames[m.scan].truth.push((m.id, m.position));

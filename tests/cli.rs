@@ -1873,6 +1873,64 @@ fn replay_of_an_annotated_people_log_scores_its_tracks() {
     assert!(by("standing") > 0 && by("along") > 0, "{moving}");
 }
 
+/// `replay --legs-model` scores a given leg classifier on a real annotated log (how a model
+/// trained in simulation is measured on real scans): the shipped model given as a file scores
+/// as the default does, a model whose every stump votes the other way scores otherwise, and a
+/// file that is no model is refused with its name.
+#[test]
+fn replay_scores_the_leg_model_it_is_given() {
+    let Some(files) = futago_msgs::datasets::require(
+        &root(),
+        "replay_scores_the_leg_model_it_is_given",
+        &["people/general_tracking_moving_1.bag"],
+    ) else {
+        return;
+    };
+    let bag = files[0].to_str().unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let run = |name: &str, model: Option<&Path>| {
+        let out = tmp.path().join(name);
+        let mut args = vec!["replay", bag, "--out", out.to_str().unwrap()];
+        if let Some(m) = model {
+            args.extend(["--legs-model", m.to_str().unwrap()]);
+        }
+        ok(&futago(&args));
+        summary(&out)["people"]["detection_on_annotated_frames"]["legs"].clone()
+    };
+    let shipped = std::fs::read_to_string(root().join("models/legs.json")).unwrap();
+    let copy = tmp.path().join("copy.json");
+    std::fs::write(&copy, &shipped).unwrap();
+    let default = run("default", None);
+    assert_eq!(run("copy", Some(&copy)), default);
+    // Every stump's vote reversed: segments rank the other way round.
+    let mut v: serde_json::Value = serde_json::from_str(&shipped).unwrap();
+    for stump in v["model"]["stumps"].as_array_mut().unwrap() {
+        let p = stump["polarity"].as_f64().unwrap();
+        stump["polarity"] = serde_json::json!(-p);
+    }
+    let flipped = tmp.path().join("flipped.json");
+    std::fs::write(&flipped, serde_json::to_string(&v).unwrap()).unwrap();
+    let other = run("flipped", Some(&flipped));
+    assert_ne!(
+        other["by_radius_m"]["0.5"]["ap"], default["by_radius_m"]["0.5"]["ap"],
+        "{other}"
+    );
+    let bad = tmp.path().join("bad.json");
+    std::fs::write(&bad, "[").unwrap();
+    let out = tmp.path().join("bad");
+    let o = futago(&[
+        "replay",
+        bag,
+        "--out",
+        out.to_str().unwrap(),
+        "--legs-model",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("bad.json"), "{e}");
+}
+
 /// `futago bench people` times detection and tracking over scans of walking people and the
 /// simulation among a crowd; it reports what it measured and refuses absurd sizes.
 #[test]

@@ -782,6 +782,13 @@ pub fn load_model(text: &str, name: &str) -> Result<AdaBoost> {
     Ok(model)
 }
 
+/// A model file written by `futago train-legs`; errors name the file.
+pub fn read_model(path: &std::path::Path) -> Result<AdaBoost> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("{}: cannot read the leg model: {e}", path.display()))?;
+    load_model(&text, &path.display().to_string())
+}
+
 /// The model shipped with futago (`models/legs.json`), trained by `futago train-legs
 /// scenarios/train-legs.toml`.
 pub fn default_model() -> Result<AdaBoost> {
