@@ -664,16 +664,9 @@ impl Crowd {
                 let w = &self.walkers[i];
                 let (body, feet) = self.body(i)?;
                 let leg = |side: f64, foot: [f64; 2]| {
-                    let h = self.hip(side);
-                    let hip = body.transform_point(h);
-                    // A leg of length hip_height whose foot is `run` (horizontal) from the hip
-                    // runs `run / √(L² − |run|²)` per metre down.
-                    let l = c.hip_height;
-                    let run = [foot[0] - h[0], foot[1] - h[1]];
-                    let len = norm(run[0], run[1]);
-                    let k = if len > 0.99 * l { 0.99 * l / len } else { 1.0 };
-                    let run = [run[0] * k, run[1] * k];
-                    let down = (l * l - (len * k).powi(2)).sqrt();
+                    let hip = body.transform_point(self.hip(side));
+                    // The axis runs `run / drop` per metre down.
+                    let (run, down) = self.leg_run(side, foot);
                     let per_metre = [run[0] / down, run[1] / down];
                     let (s, co) = body.theta.sin_cos();
                     let world = [
@@ -716,6 +709,19 @@ impl Crowd {
     /// hips' height.
     pub fn hip(&self, side: f64) -> [f64; 2] {
         [0.0, side * self.config.hip_width / 2.0]
+    }
+
+    /// A leg of length `hip_height` hung from the `side` hip towards `foot` (body frame, as
+    /// [`body`](Self::body) gives it): its horizontal run from the hip and its drop, m. A foot
+    /// out of reach is brought in until the leg lies no flatter than asin 0.99.
+    pub fn leg_run(&self, side: f64, foot: [f64; 2]) -> ([f64; 2], f64) {
+        let l = self.config.hip_height;
+        let h = self.hip(side);
+        let run = [foot[0] - h[0], foot[1] - h[1]];
+        let len = norm(run[0], run[1]);
+        let k = if len > 0.99 * l { 0.99 * l / len } else { 1.0 };
+        let down = (l * l - (len * k).powi(2)).sqrt();
+        ([run[0] * k, run[1] * k], down)
     }
 
     /// Advances the crowd from `t` by `dt` seconds.

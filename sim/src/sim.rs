@@ -787,20 +787,15 @@ fn person_poses(crowd: &Crowd, i: usize) -> [Pose; 3] {
     let yaw = Quat::from_rotation_z(body.theta as f32);
     let torso = Pose::from_parts(Vec3::new(body.x as f32, body.y as f32, 0.0), yaw);
     let leg = |side: f64, foot: [f64; 2]| {
-        let h = crowd.hip(side);
-        let hip = body.transform_point(h);
+        let hip = body.transform_point(crowd.hip(side));
         // The leg hangs from the hip towards its foot: the prism's axis (−z) turned onto the
-        // hip-to-foot direction in the body's frame, the length held at hip_height.
-        let l = c.hip_height;
-        let run = [foot[0] - h[0], foot[1] - h[1]];
-        let len = run[0].hypot(run[1]);
-        let k = if len > 0.99 * l { 0.99 * l / len } else { 1.0 };
+        // hip-to-foot direction in the body's frame.
+        let (run, down) = crowd.leg_run(side, foot);
         let turn = if run[1] == 0.0 {
             // Straight below the hip side to side: turned about the body's y alone.
-            Quat::from_rotation_y(-(run[0] / l).clamp(-1.0, 1.0).asin() as f32)
+            Quat::from_rotation_y(-(run[0] / c.hip_height).clamp(-1.0, 1.0).asin() as f32)
         } else {
-            let down = (l * l - (len * k).powi(2)).sqrt();
-            let to = Vec3::new((run[0] * k) as f32, (run[1] * k) as f32, -down as f32);
+            let to = Vec3::new(run[0] as f32, run[1] as f32, -down as f32);
             Quat::from_rotation_arc(Vec3::NEG_Z, to.normalize())
         };
         Pose::from_parts(
