@@ -7,6 +7,7 @@
 pub mod depth_people;
 pub mod features;
 pub mod floor;
+pub mod free_space;
 pub mod legs;
 pub mod motion;
 pub mod sift;

@@ -10,6 +10,7 @@ pub mod people;
 
 use crate::config::ConfigError;
 use crate::perception::depth_people::DepthPeopleConfig;
+use crate::perception::free_space::FreeSpaceConfig;
 use crate::perception::legs::LegConfig;
 use crate::perception::motion::MotionConfig;
 use exclusion::ExclusionConfig;
@@ -31,6 +32,9 @@ pub struct PeopleConfig {
     /// Cutting tracked people out of the scans and keyframes the maps and the localiser
     /// take (`people.exclusion`).
     pub exclusion: ExclusionConfig,
+    /// Without a map, where the floor has been seen: leg candidates elsewhere start no track
+    /// (`people.free_space`).
+    pub free_space: FreeSpaceConfig,
 }
 
 impl PeopleConfig {
@@ -40,6 +44,7 @@ impl PeopleConfig {
         self.motion.validate("people.motion")?;
         self.depth.validate("people.depth")?;
         self.tracker.validate("people.tracker")?;
-        self.exclusion.validate("people.exclusion")
+        self.exclusion.validate("people.exclusion")?;
+        self.free_space.validate("people.free_space")
     }
 }

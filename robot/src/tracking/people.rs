@@ -279,6 +279,11 @@ impl PeopleTracker {
     pub fn tracks(&self) -> usize {
         self.tracks.len()
     }
+
+    /// Where every track is now, tentative ones included.
+    pub fn positions(&self) -> Vec<[f64; 2]> {
+        self.tracks.iter().map(|tr| [tr.x[0], tr.x[1]]).collect()
+    }
 }
 
 /// A person candidate: where, and how sure (the mean confidence of the legs it rests on).

@@ -1,0 +1,233 @@
+//! Where the floor has been seen, without a map: an occupancy grid in the odometry frame built
+//! from the scans themselves, in which a person candidate counts only where beams have passed
+//! through before and nothing stood there since (Leigh et al., ICRA 2015: leg_tracker's local
+//! occupancy grid and its `in_free_space_threshold`). Furniture that looks like a leg is hit
+//! scan after scan and stays occupied; the floor where a person steps was seen empty.
+//!
+//! Each beam lowers the log-odds of the cells it crosses (`miss`) and raises its end cell's
+//! (`hit`), clamped to ±`clamp`. The returns near the people the tracker holds are left out,
+//! so that a person who stops does not become furniture. Cells are kept in a hash map keyed by
+//! their indices: only what the laser has seen takes memory, up to `max_cells`. Each beam is
+//! traced at steps of a cell.
+
+use futago_msgs::{LaserScan, Pose2};
+use rustc_hash::FxHashMap;
+use serde::{Deserialize, Serialize};
+
+use crate::config::{ConfigError, check_counts, check_ranges};
+
+/// The free-space grid's settings (`people.free_space`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FreeSpaceConfig {
+    /// Cell side, m.
+    pub resolution: f64,
+    /// Log-odds added to a beam's end cell, and to each cell it passes (negative).
+    pub hit: f64,
+    pub miss: f64,
+    /// The log-odds stay within ±clamp, so that a cell can change its mind.
+    pub clamp: f64,
+    /// A place is free when its cell's occupancy probability is below this
+    /// (leg_tracker's `in_free_space_threshold`, 0.06).
+    pub threshold: f64,
+    /// Returns within this distance of a held person are not counted as hits, m.
+    pub person_radius: f64,
+    /// Beams beyond this are not traced, m.
+    pub max_range: f64,
+    /// The grid keeps at most this many cells; past it, no new cells are made.
+    pub max_cells: usize,
+}
+
+impl Default for FreeSpaceConfig {
+    fn default() -> Self {
+        FreeSpaceConfig {
+            resolution: 0.1,
+            hit: 0.85,
+            miss: -0.4,
+            clamp: 5.0,
+            threshold: 0.06,
+            person_radius: 0.3,
+            max_range: 10.0,
+            max_cells: 4_000_000,
+        }
+    }
+}
+
+impl FreeSpaceConfig {
+    /// Checks every field; errors name `prefix.field`.
+    pub fn validate(&self, prefix: &str) -> Result<(), ConfigError> {
+        check_ranges(
+            prefix,
+            &[
+                ("resolution", self.resolution, 0.01, 1.0),
+                ("hit", self.hit, 0.0, 10.0),
+                ("miss", self.miss, -10.0, 0.0),
+                ("clamp", self.clamp, 0.1, 50.0),
+                ("threshold", self.threshold, 0.0, 1.0),
+                ("person_radius", self.person_radius, 0.0, 2.0),
+                ("max_range", self.max_range, 0.1, 100.0),
+            ],
+        )?;
+        check_counts(prefix, &[("max_cells", self.max_cells, 1, 100_000_000)])
+    }
+}
+
+/// The grid (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct FreeSpace {
+    config: FreeSpaceConfig,
+    cells: FxHashMap<(i64, i64), f32>,
+}
+
+impl FreeSpace {
+    pub fn new(config: FreeSpaceConfig) -> FreeSpace {
+        FreeSpace {
+            config,
+            cells: FxHashMap::default(),
+        }
+    }
+
+    fn cell(&self, p: [f64; 2]) -> (i64, i64) {
+        let r = self.config.resolution;
+        ((p[0] / r).floor() as i64, (p[1] / r).floor() as i64)
+    }
+
+    fn add(&mut self, cell: (i64, i64), v: f64) {
+        let clamp = self.config.clamp as f32;
+        let full = self.cells.len() >= self.config.max_cells;
+        match self.cells.get_mut(&cell) {
+            Some(l) => *l = (*l + v as f32).clamp(-clamp, clamp),
+            None if !full => {
+                self.cells.insert(cell, (v as f32).clamp(-clamp, clamp));
+            }
+            None => {}
+        }
+    }
+
+    /// Whether the place `p` (odometry frame) has been seen free: its cell's occupancy
+    /// probability is below the threshold. A cell never seen is not free.
+    pub fn is_free(&self, p: [f64; 2]) -> bool {
+        self.cells.get(&self.cell(p)).is_some_and(|&l| {
+            let odds = (l as f64).exp();
+            odds / (1.0 + odds) < self.config.threshold
+        })
+    }
+
+    /// Takes a scan from the laser pose `laser` (odometry frame); returns within
+    /// `person_radius` of any of `people` (odometry frame) are traced but not counted as hits.
+    pub fn update(&mut self, scan: &LaserScan, laser: &Pose2, people: &[[f64; 2]]) {
+        let c = self.config;
+        let origin = [laser.x, laser.y];
+        for i in 0..scan.ranges.len() {
+            let r = scan.ranges[i] as f64;
+            if !r.is_finite() || r < scan.range_min {
+                continue;
+            }
+            // A beam with no return (at or past its range limit) still saw its way clear.
+            let hit = r < scan.range_max && r <= c.max_range;
+            let reach = r.min(c.max_range).min(scan.range_max);
+            let a = laser.theta + scan.angle(i);
+            let (s, co) = a.sin_cos();
+            let end = [origin[0] + reach * co, origin[1] + reach * s];
+            let end_cell = self.cell(end);
+            // The cells the beam crosses before its end, by steps of a cell (a corner it
+            // clips may be missed: the beams beside it cross it).
+            let step = c.resolution;
+            let n = (reach / step).floor() as usize;
+            let mut last = None;
+            for k in 0..n {
+                let d = k as f64 * step;
+                let cell = self.cell([origin[0] + d * co, origin[1] + d * s]);
+                if cell == end_cell {
+                    break;
+                }
+                if last != Some(cell) {
+                    self.add(cell, c.miss);
+                    last = Some(cell);
+                }
+            }
+            let by_person = people
+                .iter()
+                .any(|q| (q[0] - end[0]).hypot(q[1] - end[1]) <= c.person_radius);
+            if hit && !by_person {
+                self.add(end_cell, c.hit);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use futago_msgs::Time;
+
+    /// A 1°-beam scan over ±60° from the origin facing +x: a wall at x = 4 and a post of
+    /// radius 5 cm at (2, 0.5).
+    fn scan(post: bool) -> LaserScan {
+        let inc = 1f64.to_radians();
+        let ranges = (0..121)
+            .map(|i| {
+                let a = -60f64.to_radians() + i as f64 * inc;
+                let (dx, dy) = (a.cos(), a.sin());
+                let mut r = 4.0 / dx;
+                if post {
+                    let (cx, cy) = (2.0, 0.5);
+                    let b = cx * dx + cy * dy;
+                    let disc = b * b - (cx * cx + cy * cy - 0.05 * 0.05);
+                    if disc >= 0.0 {
+                        r = r.min(b - disc.sqrt());
+                    }
+                }
+                r as f32
+            })
+            .collect();
+        LaserScan {
+            frame: "laser".into(),
+            stamp: Time::from_secs(0.0),
+            angle_min: -60f64.to_radians(),
+            angle_increment: inc,
+            time_increment: 0.0,
+            range_min: 0.05,
+            range_max: 10.0,
+            ranges,
+        }
+    }
+
+    #[test]
+    fn the_floor_seen_through_is_free_and_a_post_hit_every_scan_is_not() {
+        let mut f = FreeSpace::new(FreeSpaceConfig::default());
+        let laser = Pose2::new(0.0, 0.0, 0.0);
+        // Nothing seen yet: nowhere is free.
+        assert!(!f.is_free([2.0, 0.5]));
+        for _ in 0..10 {
+            f.update(&scan(true), &laser, &[]);
+        }
+        // The floor in front of the post and beside it was seen through ten times.
+        assert!(f.is_free([1.0, 0.25]));
+        assert!(f.is_free([2.0, -0.5]));
+        // The post's front (where its returns are) and the wall were hit every time; behind
+        // the wall was never seen.
+        assert!(!f.is_free([1.96, 0.5]));
+        assert!(!f.is_free([4.02, 0.0]));
+        assert!(!f.is_free([6.0, 0.0]));
+        // The post taken away: the floor where it stood is seen through and becomes free.
+        for _ in 0..20 {
+            f.update(&scan(false), &laser, &[]);
+        }
+        assert!(f.is_free([1.96, 0.5]));
+    }
+
+    #[test]
+    fn a_held_person_does_not_become_furniture() {
+        let mut f = FreeSpace::new(FreeSpaceConfig::default());
+        let laser = Pose2::new(0.0, 0.0, 0.0);
+        for _ in 0..10 {
+            f.update(&scan(false), &laser, &[]);
+        }
+        // Someone (the "post") stands there while the tracker holds them.
+        for _ in 0..50 {
+            f.update(&scan(true), &laser, &[[2.0, 0.5]]);
+        }
+        assert!(f.is_free([1.96, 0.5]));
+    }
+}
