@@ -1504,16 +1504,18 @@ mod tests {
         let cfg = *c.config();
         for (i, truth) in c.truth().iter().enumerate() {
             let (pose, feet) = c.body(i).expect("in the world");
-            // The truth's leg axes reach the floor at the feet, and the hips at hip height.
+            // The truth's leg axes run from the hips at hip height to the feet, which a leg of
+            // hip_height swung out lifts off the floor by hip_height − its drop.
             for (k, leg) in truth.legs.iter().enumerate() {
                 let side = [1.0, -1.0][k];
                 let hip = pose.transform_point(c.hip(side));
                 assert!(norm(leg.0[0] - hip[0], leg.0[1] - hip[1]) < 1e-12);
-                let at_floor = truth.legs_at(0.0)[k];
+                let (_, down) = c.leg_run(side, feet[k]);
+                let at_foot = truth.legs_at(cfg.hip_height - down)[k];
                 let foot = pose.transform_point(feet[k]);
                 assert!(
-                    norm(at_floor[0] - foot[0], at_floor[1] - foot[1]) < 1e-9,
-                    "{} leg {k}: {at_floor:?} against {foot:?}",
+                    norm(at_foot[0] - foot[0], at_foot[1] - foot[1]) < 1e-9,
+                    "{} leg {k}: {at_foot:?} against {foot:?}",
                     truth.name
                 );
                 let at_hips = truth.legs_at(cfg.hip_height)[k];
