@@ -177,36 +177,13 @@ impl FreeSpace {
 mod tests {
     use super::*;
 
-    /// A 1°-beam scan over ±60° from the origin facing +x: a wall at x = 4 and a post of
-    /// radius 5 cm at (2, 0.5).
+    /// The scan at `stamp` of a wall at x = 4 m and, where `post`, a post of radius 5 cm at
+    /// (2, 0.5): the leg detector's test scene (0.5° beams over ±90° from the origin).
     fn scan(post: bool, stamp: f64) -> LaserScan {
-        let inc = 1f64.to_radians();
-        let ranges = (0..121)
-            .map(|i| {
-                let a = -60f64.to_radians() + i as f64 * inc;
-                let (dx, dy) = (a.cos(), a.sin());
-                let mut r = 4.0 / dx;
-                if post {
-                    let (cx, cy) = (2.0, 0.5);
-                    let b = cx * dx + cy * dy;
-                    let disc = b * b - (cx * cx + cy * cy - 0.05 * 0.05);
-                    if disc >= 0.0 {
-                        r = r.min(b - disc.sqrt());
-                    }
-                }
-                r as f32
-            })
-            .collect();
-        LaserScan {
-            frame: "laser".into(),
-            stamp: Time::from_secs(stamp),
-            angle_min: -60f64.to_radians(),
-            angle_increment: inc,
-            time_increment: 0.0,
-            range_min: 0.05,
-            range_max: 10.0,
-            ranges,
-        }
+        let circles: &[([f64; 2], f64)] = if post { &[([2.0, 0.5], 0.05)] } else { &[] };
+        let mut s = crate::perception::legs::tests::scan(circles, 4.0);
+        s.stamp = Time::from_secs(stamp);
+        s
     }
 
     #[test]

@@ -236,47 +236,26 @@ mod tests {
         assert!(f[1..].iter().all(|q| q.confidence < 0.5));
     }
 
-    /// A 0.25° scan over ±60° from the origin of a wall at x = 6 m and, where given, a person's
-    /// two shins (radius 6 cm, 0.15 m apart side to side) centred at `person`.
+    /// The scan at `stamp` of a wall at x = 6 m and, where given, a person's two shins (radius
+    /// 6 cm, 0.15 m apart side to side) centred at `person`: the leg detector's test scene.
     fn scene(stamp: f64, person: Option<[f64; 2]>) -> LaserScan {
-        let inc = 0.25f64.to_radians();
-        let ranges = (0..481)
-            .map(|i| {
-                let a = -60f64.to_radians() + i as f64 * inc;
-                let (dx, dy) = (a.cos(), a.sin());
-                let mut r = 6.0 / dx;
-                if let Some(p) = person {
-                    for side in [-0.075, 0.075] {
-                        let (cx, cy) = (p[0], p[1] + side);
-                        let b = cx * dx + cy * dy;
-                        let disc = b * b - (cx * cx + cy * cy - 0.06 * 0.06);
-                        if disc >= 0.0 {
-                            r = r.min(b - disc.sqrt());
-                        }
-                    }
-                }
-                r as f32
-            })
+        let shins: Vec<([f64; 2], f64)> = person
+            .iter()
+            .flat_map(|p| [-0.075, 0.075].map(|side| ([p[0], p[1] + side], 0.06)))
             .collect();
-        LaserScan {
-            frame: "laser".into(),
-            stamp: Time::from_secs(stamp),
-            angle_min: -60f64.to_radians(),
-            angle_increment: inc,
-            time_increment: 0.0,
-            range_min: 0.02,
-            range_max: 30.0,
-            ranges,
-        }
+        let mut s = crate::perception::legs::tests::scan(&shins, 6.0);
+        s.stamp = Time::from_secs(stamp);
+        s
     }
 
     #[test]
     fn without_a_map_people_are_tracked_only_where_the_floor_was_seen() {
-        // Legs are what is narrower than 0.2 m; the wall is not.
+        // Legs are what is narrower than 0.35 m (a person's two shins together); the wall is
+        // not.
         let model = AdaBoost {
             stumps: vec![crate::perception::legs::Stump {
                 feature: 5,
-                threshold: 0.2,
+                threshold: 0.35,
                 polarity: -1.0,
                 alpha: 1.0,
             }],
