@@ -51,6 +51,10 @@ pub struct LocalizationNode {
     exclusion: ExclusionConfig,
     /// Beams cut out so far.
     beams_excluded: u64,
+    /// The particle set's size at each update: its sum and largest value (the filter's cost
+    /// grows with it, and KLD-sampling decides it).
+    particles_sum: u64,
+    particles_max: usize,
 }
 
 /// The localiser when the scenario has `[localization]`.
@@ -86,6 +90,8 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<LocalizationNode>> {
         summary: None,
         exclusion: s.spec.people.exclusion,
         beams_excluded: 0,
+        particles_sum: 0,
+        particles_max: 0,
     }))
 }
 
@@ -151,6 +157,8 @@ impl Node for LocalizationNode {
         let est = self.mcl.update(&at, scan, &self.mount);
         bus.publish_pose("localization", est.pose, at);
         self.updates += 1;
+        self.particles_sum += est.particles as u64;
+        self.particles_max = self.particles_max.max(est.particles);
         let now = bus.pose("localization").unwrap_or(est.pose);
         self.unscored = Some(now);
         self.track.push(bus.now, &now);
@@ -184,6 +192,8 @@ impl Node for LocalizationNode {
             "final_position_error_m": l.last().map(|e| e.1),
             "mean_heading_error_deg": l.iter().map(|e| e.2).sum::<f64>() / n * 180.0 / std::f64::consts::PI,
             "beams_excluded": self.beams_excluded,
+            "mean_particles": self.particles_sum as f64 / self.updates.max(1) as f64,
+            "max_particles": self.particles_max,
         });
         if !self.events.is_empty() {
             v["kidnappings"] =
