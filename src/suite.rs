@@ -118,24 +118,12 @@ impl Job {
     }
 }
 
-/// Runs the suite, with `overlays` laid over every scenario, and writes `out/suite.json` and
-/// `out/junit.xml` beside each run's folder; returns the suite summary. A scenario with
-/// `seeds` is one run per seed; shards split the runs, so a sweep may span machines.
-pub fn suite(
-    paths: &[PathBuf],
-    overlays: &[Overlay],
-    jobs: usize,
-    shard: Option<Shard>,
-    out: &Path,
-    force: bool,
-    isolate: Option<&Isolation>,
-) -> Result<Value> {
-    crate::output::check_folder(out, force)?;
-    let files = collect(paths)?;
-    // Check everything before anything runs.
+/// The runs of the scenario `files`, with `overlays` laid over each: one per seed of a sweep,
+/// every file loaded and checked.
+fn load_jobs(files: &[PathBuf], overlays: &[Overlay]) -> Result<Vec<Job>> {
     let mut runs = Vec::new();
     let mut stems = std::collections::BTreeSet::new();
-    for f in &files {
+    for f in files {
         let stem = f
             .file_stem()
             .map(|s| s.to_string_lossy().to_string())
@@ -176,6 +164,25 @@ pub fn suite(
             });
         }
     }
+    Ok(runs)
+}
+
+/// Runs the suite, with `overlays` laid over every scenario, and writes `out/suite.json` and
+/// `out/junit.xml` beside each run's folder; returns the suite summary. A scenario with
+/// `seeds` is one run per seed; shards split the runs, so a sweep may span machines.
+pub fn suite(
+    paths: &[PathBuf],
+    overlays: &[Overlay],
+    jobs: usize,
+    shard: Option<Shard>,
+    out: &Path,
+    force: bool,
+    isolate: Option<&Isolation>,
+) -> Result<Value> {
+    crate::output::check_folder(out, force)?;
+    let files = collect(paths)?;
+    // Check everything before anything runs.
+    let runs = load_jobs(&files, overlays)?;
     let runs: Vec<Job> = match shard {
         Some(s) => runs
             .into_iter()
