@@ -45,10 +45,16 @@ impl OccupancyGrid {
 
     /// The cell containing world point `(x, y)`, if inside the grid.
     pub fn cell_of(&self, x: f64, y: f64) -> Option<(usize, usize)> {
-        let i = ((x - self.origin[0]) / self.resolution).floor();
-        let j = ((y - self.origin[1]) / self.resolution).floor();
-        (i >= 0.0 && j >= 0.0 && (i as usize) < self.width && (j as usize) < self.height)
-            .then_some((i as usize, j as usize))
+        let i = (x - self.origin[0]) / self.resolution;
+        let j = (y - self.origin[1]) / self.resolution;
+        // Below zero (or NaN) is off the grid; at or above it, truncation is the floor. (The
+        // float `floor` is a call into the maths library on baseline x86-64, and this is the
+        // innermost step of every ray cast on a grid.)
+        if !(i >= 0.0 && j >= 0.0) {
+            return None;
+        }
+        let (i, j) = (i as usize, j as usize);
+        (i < self.width && j < self.height).then_some((i, j))
     }
 
     /// World coordinates of the centre of cell `(i, j)`.
@@ -134,5 +140,38 @@ mod tests {
         assert_eq!(g.cell_of(0.51, 2.0), None);
         assert_eq!(g.cell_center(1, 1), [-0.25, 2.75]);
         assert!(g.to_yaml("m.pgm").contains("origin: [-1, 2, 0.0]"));
+    }
+
+    /// The cell of a point is that of the floor of its grid coordinates, edges, signed zeros,
+    /// NaN and infinities included: points just below a cell's edge, on it, and off the grid
+    /// on every side.
+    #[test]
+    fn cells_are_the_floor_of_grid_coordinates() {
+        let g = OccupancyGrid::new(0.05, [-1.3, 2.7], 40, 30);
+        let by_floor = |x: f64, y: f64| {
+            let i = ((x - g.origin[0]) / g.resolution).floor();
+            let j = ((y - g.origin[1]) / g.resolution).floor();
+            (i >= 0.0 && j >= 0.0 && (i as usize) < g.width && (j as usize) < g.height)
+                .then_some((i as usize, j as usize))
+        };
+        let mut values = vec![f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -0.0, 0.0, 1e300];
+        for k in -60..=60 {
+            let edge = k as f64 * 0.05;
+            values.extend([edge, edge + 1e-12, edge - 1e-12, edge + 0.025]);
+        }
+        let (mut inside, mut outside) = (0, 0);
+        for &a in &values {
+            for &b in &values {
+                let (x, y) = (g.origin[0] + a, g.origin[1] + b);
+                let got = g.cell_of(x, y);
+                assert_eq!(got, by_floor(x, y), "({x}, {y})");
+                if got.is_some() {
+                    inside += 1;
+                } else {
+                    outside += 1;
+                }
+            }
+        }
+        assert!(inside > 1000 && outside > 1000, "{inside} {outside}");
     }
 }

@@ -205,6 +205,9 @@ impl MclMap {
         let n = (max / step) as usize;
         let (x0, y0) = (g.origin[0], g.origin[1]);
         let (x1, y1) = (x0 + g.width as f64 * step, y0 + g.height as f64 * step);
+        // Multiplications, not divisions, in the skip: its rounding cannot matter, as the
+        // margin below (a whole cell's diagonal where half would do) is far wider.
+        let per_step = 1.0 / step;
         let mut k = 1;
         while k <= n {
             let r = k as f64 * step;
@@ -215,10 +218,11 @@ impl MclMap {
             if g.get(i, j) >= OCCUPIED {
                 return r;
             }
-            let clear = self.distance[j * g.width + i] as f64 / CHAMFER_OVERESTIMATE
+            let clear = self.distance[j * g.width + i] as f64 * (1.0 / CHAMFER_OVERESTIMATE)
                 - step * std::f64::consts::SQRT_2;
             let edge = (px - x0).min(x1 - px).min(py - y0).min(y1 - py) - step;
-            let skip = (clear.min(edge) / step).floor();
+            // Whole points to skip (truncation is the floor here: at least one).
+            let skip = clear.min(edge) * per_step;
             k += if skip >= 1.0 { skip as usize } else { 1 };
         }
         max
