@@ -300,7 +300,8 @@ impl CameraRig {
             if wanting.is_empty() {
                 continue;
             }
-            let shot = cameras.capture(c, sim)?;
+            let rgb = wanting.iter().any(|&i| nodes[i].node.wants_rgb(&name));
+            let shot = cameras.capture(c, sim, rgb)?;
             let frame = CameraFrame {
                 frame: shot.frame,
                 on_base: shot.on_base,

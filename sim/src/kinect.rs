@@ -529,6 +529,9 @@ pub struct Kinect {
     pub spec: KinectSpec,
     rng: ChaCha8Rng,
     frames: u64,
+    /// The last capture's depth image before noise, with the stamp and base pose it was
+    /// rendered at, when it was rendered alone (the render [`Kinect::true_depth`] makes).
+    noiseless: Option<(Time, Pose, DepthImage)>,
 }
 
 impl Kinect {
@@ -537,6 +540,7 @@ impl Kinect {
             spec,
             rng,
             frames: 0,
+            noiseless: None,
         }
     }
 
@@ -560,15 +564,18 @@ impl Kinect {
         rgb: bool,
     ) -> Result<RgbdFrame, RenderError> {
         let camera = *base * self.spec.mount;
-        let (rgb, mut depth) = if rgb {
+        self.noiseless = None;
+        let (rgb, mut depth) = if rgb && self.spec.depth == self.spec.rgb {
             let (c, d) = renderer.render(&self.spec.rgb, &camera)?;
-            if self.spec.depth == self.spec.rgb {
-                (Some(c), d)
-            } else {
-                (Some(c), renderer.render_depth(&self.spec.depth, &camera)?)
-            }
+            (Some(c), d)
         } else {
-            (None, renderer.render_depth(&self.spec.depth, &camera)?)
+            let c = match rgb {
+                true => Some(renderer.render(&self.spec.rgb, &camera)?.0),
+                false => None,
+            };
+            let d = renderer.render_depth(&self.spec.depth, &camera)?;
+            self.noiseless = Some((stamp, *base, d.clone()));
+            (c, d)
         };
         self.spec.apply_noise(&mut depth, &mut self.rng);
         let mut rgb = rgb;
@@ -585,13 +592,23 @@ impl Kinect {
     }
 
     /// The depth image this camera would measure without noise (every pixel's true distance
-    /// along the optical axis), for scoring maps against the surfaces it saw. Draws nothing
-    /// from the noise stream, so it leaves the camera's measurements as they were.
+    /// along the optical axis) from `base` at `stamp`, with the scene's bodies posed for
+    /// `stamp` in `renderer`, for scoring maps against the surfaces it saw. Draws nothing
+    /// from the noise stream, so it leaves the camera's measurements as they were. Where the
+    /// last capture rendered this very image (the same stamp and pose, depth alone) before
+    /// adding noise, that image is returned instead of rendering it again: the same pixels.
     pub fn true_depth(
         &self,
         renderer: &mut Renderer,
         base: &Pose,
+        stamp: Time,
     ) -> Result<DepthImage, RenderError> {
+        if let Some((t, b, d)) = &self.noiseless
+            && *t == stamp
+            && b == base
+        {
+            return Ok(d.clone());
+        }
         renderer.render_depth(&self.spec.depth, &(*base * self.spec.mount))
     }
 

@@ -126,8 +126,9 @@ impl Cameras {
     }
 
     /// Renders the frame of camera `c` that is due now (poses the scene first, once a
-    /// step), with its noise; counts it and times it.
-    pub fn capture(&mut self, c: usize, sim: &Simulation) -> Result<Shot, RenderError> {
+    /// step), with its noise; counts it and times it. `rgb`: the colour image too (without
+    /// it the frame holds depth alone, and is cheaper: a depth render and its noise).
+    pub fn capture(&mut self, c: usize, sim: &Simulation, rgb: bool) -> Result<Shot, RenderError> {
         let Some(r) = self.renderer.as_mut() else {
             return Err(RenderError::Config(
                 "no renderer: the cameras were built without one".into(),
@@ -155,7 +156,7 @@ impl Cameras {
             cam.optical_pose(&(planar.inverse() * carrier))
         });
         cam.take();
-        let frame = cam.capture(r, &carrier, now, true)?;
+        let frame = cam.capture(r, &carrier, now, rgb)?;
         let optical = cam.optical_pose(&carrier);
         self.seconds += t0.elapsed().as_secs_f64();
         self.frames[c] += 1;
@@ -167,8 +168,8 @@ impl Cameras {
         })
     }
 
-    /// The depth camera `c` would measure without noise from `carrier` (a [`Shot`]'s), timed
-    /// with the rendering.
+    /// The depth camera `c` would measure without noise from `carrier` (a [`Shot`]'s, of the
+    /// frame just captured), timed with the rendering.
     pub fn true_depth(&mut self, c: usize, carrier: &Pose) -> Result<DepthImage, RenderError> {
         let Some(r) = self.renderer.as_mut() else {
             return Err(RenderError::Config(
@@ -176,7 +177,12 @@ impl Cameras {
             ));
         };
         let t0 = Instant::now();
-        let d = self.kinects[c].true_depth(r, carrier)?;
+        let Some(stamp) = self.posed else {
+            return Err(RenderError::Config(
+                "no frame was captured: the scene is not posed".into(),
+            ));
+        };
+        let d = self.kinects[c].true_depth(r, carrier, stamp)?;
         self.seconds += t0.elapsed().as_secs_f64();
         Ok(d)
     }

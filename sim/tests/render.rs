@@ -409,6 +409,47 @@ fn seed000_kinect_gives_qvga_depth_registered_to_vga_colour_within_its_range() {
     );
 }
 
+/// A frame captured with colour and one of depth alone measure the same scene: the true depth
+/// after either is the image a fresh depth render gives (the capture's own render before its
+/// noise, not a stale one), a depth-only frame holds no colour, and a true depth asked at
+/// another pose than the capture's is rendered from that pose.
+#[test]
+fn true_depth_after_a_capture_is_the_noiseless_render_of_that_view() {
+    use futago_sim::kinect::{Kinect, KinectConfig, KinectPreset, NoiseModel};
+    let world = box_room(6.0, 4.0, "");
+    let mut config = KinectConfig::preset(KinectPreset::Seed000);
+    config.noise.model = NoiseModel::Nguyen;
+    let spec = config.resolve(Path::new("t.toml"), "camera[0]").unwrap();
+    let mut r = Renderer::new(&futago_sim::sim::scene(
+        &world,
+        &CreateConfig::default(),
+        &futago_sim::Movers::default(),
+        Pose2::new(1.0, 2.0, 0.0),
+    ))
+    .unwrap();
+    let mut cam = Kinect::new(spec.clone(), futago_sim::noise::stream(1, "camera.kinect"));
+    // Facing the room's long diagonal, so the floor and walls lie within 1.2–3.5 m.
+    let pose = |x: f32, yaw: f32| {
+        Pose::from_parts(Vec3::new(x, 2.0, 0.0), glam::Quat::from_rotation_z(yaw))
+    };
+    let t = futago_msgs::Time::from_secs(1.0);
+    for (rgb, base) in [(true, pose(1.0, 0.3)), (false, pose(1.5, -0.4))] {
+        let f = cam.capture(&mut r, &base, t, rgb).unwrap();
+        assert_eq!(f.rgb.is_some(), rgb);
+        let truth = cam.true_depth(&mut r, &base, t).unwrap();
+        let fresh = r.render_depth(&spec.depth, &(base * spec.mount)).unwrap();
+        assert_eq!(truth.data, fresh.data, "rgb {rgb}");
+        // The noise changed the measured image, not the true one.
+        assert_ne!(f.depth.data, truth.data, "rgb {rgb}");
+        // Another pose: its own render.
+        let other = pose(2.0, 1.0);
+        let there = cam.true_depth(&mut r, &other, t).unwrap();
+        let fresh = r.render_depth(&spec.depth, &(other * spec.mount)).unwrap();
+        assert_eq!(there.data, fresh.data);
+        assert_ne!(there.data, truth.data);
+    }
+}
+
 /// Steps a robot standing at (1, 3) in an 8 m × 6 m room among `movers` three times by
 /// `steps`, renders the depth seen from `p` and checks it against ray casts of the colliders
 /// (99.5 % within 1 mm + 0.1 %), and that at least `min` pixels lie nearer than `near` m.

@@ -528,6 +528,11 @@ impl Node for CoverageNode {
         self.camera.as_ref().is_some_and(|c| c.name == camera) && bus.now >= self.next_frame
     }
 
+    /// It reads the depth image alone.
+    fn wants_rgb(&self, _camera: &str) -> bool {
+        false
+    }
+
     fn on_frame(
         &mut self,
         camera: &str,

@@ -435,6 +435,11 @@ impl Node for DepthLocalizationNode {
         true
     }
 
+    /// It reads the depth image alone.
+    fn wants_rgb(&self, _camera: &str) -> bool {
+        false
+    }
+
     fn on_frame(
         &mut self,
         camera: &str,

@@ -114,6 +114,15 @@ pub trait Node {
         false
     }
 
+    /// Whether the frames the node wants of camera `camera` must hold the colour image. A
+    /// camera renders colour only when a node that wants the frame says so: a depth-only frame
+    /// costs a small depth render and its noise instead of a colour render and a noise draw for
+    /// every colour sample. The camera's noise stream then draws the depth's noise alone, so a
+    /// scenario's depth noise depends on which frames its nodes take and in what form.
+    fn wants_rgb(&self, _camera: &str) -> bool {
+        true
+    }
+
     /// Whether the node takes camera frames for what they are (their pixels and true optical
     /// pose), so that a camera an agent carries, not the robot, suits it. Nodes that place
     /// frames by the robot's pose and the camera's mount on it do not.

@@ -384,6 +384,11 @@ impl Node for PeopleNode {
             .is_some_and(|d| d.camera == camera && bus.now >= d.next)
     }
 
+    /// It reads the depth image alone.
+    fn wants_rgb(&self, _camera: &str) -> bool {
+        false
+    }
+
     fn on_frame(
         &mut self,
         camera: &str,
