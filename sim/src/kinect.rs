@@ -331,17 +331,43 @@ fn normal(rng: &mut ChaCha8Rng) -> f64 {
     StandardNormal.sample(rng)
 }
 
+/// The rays of a depth image's pixels: `(u − cx) / fx` for each column and `(v − cy) / fy`
+/// for each row, so that back-projecting a pixel is two multiplications (the same values as
+/// [`Intrinsics::back_project`], which divides for every pixel).
+struct PixelRays {
+    x: Vec<f64>,
+    y: Vec<f64>,
+}
+
+impl PixelRays {
+    fn new(d: &DepthImage, intr: &Intrinsics) -> PixelRays {
+        PixelRays {
+            x: (0..d.width)
+                .map(|u| (u as f64 - intr.cx) / intr.fx)
+                .collect(),
+            y: (0..d.height)
+                .map(|v| (v as f64 - intr.cy) / intr.fy)
+                .collect(),
+        }
+    }
+
+    fn back_project(&self, u: usize, v: usize, z: f64) -> [f64; 3] {
+        [self.x[u] * z, self.y[v] * z, z]
+    }
+}
+
 /// Incidence angle (rad) at pixel (u, v) from the depth image's local surface normal.
-fn incidence(d: &DepthImage, intr: &Intrinsics, u: u32, v: u32) -> f64 {
+fn incidence(d: &DepthImage, rays: &PixelRays, u: u32, v: u32) -> f64 {
     let z = d.at(u, v) as f64;
-    let p = intr.back_project(u as f64, v as f64, z);
+    let p = rays.back_project(u as usize, v as usize, z);
     // Neighbours on the same surface: within 5 % in depth.
     let near = |uu: i64, vv: i64| -> Option<[f64; 3]> {
         if uu < 0 || vv < 0 || uu >= d.width as i64 || vv >= d.height as i64 {
             return None;
         }
         let zz = d.at(uu as u32, vv as u32) as f64;
-        (zz > 0.0 && (zz - z).abs() < 0.05 * z).then(|| intr.back_project(uu as f64, vv as f64, zz))
+        (zz > 0.0 && (zz - z).abs() < 0.05 * z)
+            .then(|| rays.back_project(uu as usize, vv as usize, zz))
     };
     let (u, v) = (u as i64, v as i64);
     let du = near(u + 1, v)
@@ -365,6 +391,23 @@ fn incidence(d: &DepthImage, intr: &Intrinsics, u: u32, v: u32) -> f64 {
     }
     let c = (n[0] * p[0] + n[1] * p[1] + n[2] * p[2]).abs() / (nn * pp);
     c.clamp(0.0, 1.0).acos()
+}
+
+/// `x.round() as i64` (half away from zero) without the maths library's call, which baseline
+/// x86-64 makes for `round`: truncation, then the fraction (exact below 2^52) decides.
+fn round_to_i64(x: f64) -> i64 {
+    if !(x.abs() < 4.5e15) {
+        return x.round() as i64;
+    }
+    let t = x as i64;
+    let f = x - t as f64;
+    if f >= 0.5 {
+        t + 1
+    } else if f <= -0.5 {
+        t - 1
+    } else {
+        t
+    }
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -391,6 +434,7 @@ const MAX_INCIDENCE: f64 = 1.48;
 
 fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng) {
     let src = depth.clone();
+    let rays = PixelRays::new(&src, intr);
     let (w, h) = (src.width as i64, src.height as i64);
     for v in 0..src.height {
         for u in 0..src.width {
@@ -401,10 +445,10 @@ fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng) {
             if src.data[i] <= 0.0 {
                 continue;
             }
-            let theta = incidence(&src, intr, u, v).min(MAX_INCIDENCE);
+            let theta = incidence(&src, &rays, u, v).min(MAX_INCIDENCE);
             let sl = nguyen_lateral_sigma(theta);
-            let su = (u as f64 + sl * n[0]).round() as i64;
-            let sv = (v as f64 + sl * n[1]).round() as i64;
+            let su = round_to_i64(u as f64 + sl * n[0]);
+            let sv = round_to_i64(v as f64 + sl * n[1]);
             let z = if su >= 0 && sv >= 0 && su < w && sv < h {
                 src.at(su as u32, sv as u32) as f64
             } else {
@@ -653,6 +697,43 @@ mod tests {
         let m = v.iter().sum::<f64>() / v.len() as f64;
         let s = (v.iter().map(|z| (z - m) * (z - m)).sum::<f64>() / v.len() as f64).sqrt();
         (m, s, v.len())
+    }
+
+    /// The noise model's shortcuts give what they stand for, bit for bit: each pixel's ray
+    /// times a depth is the intrinsics' back-projection, and the rounding is `f64::round`'s
+    /// (half away from zero) on halves, near-halves, negatives and huge values.
+    #[test]
+    fn pixel_rays_and_rounding_equal_their_definitions() {
+        let s = spec(NoiseModel::Nguyen);
+        let d = plane(1.0, s.depth.width, s.depth.height);
+        let rays = PixelRays::new(&d, &s.depth);
+        for v in 0..d.height {
+            for u in 0..d.width {
+                for z in [0.5, 1.37, 3.9] {
+                    assert_eq!(
+                        rays.back_project(u as usize, v as usize, z),
+                        s.depth.back_project(u as f64, v as f64, z),
+                        "({u}, {v}) at {z}"
+                    );
+                }
+            }
+        }
+        let mut xs = vec![
+            0.0,
+            -0.0,
+            1e17,
+            -1e17,
+            f64::NAN,
+            f64::INFINITY,
+            4.4e15 + 0.5,
+        ];
+        for k in -2000..2000 {
+            let x = k as f64 * 0.25;
+            xs.extend([x, x + 1e-9, x - 1e-9, 0.49999999999999994 + k as f64]);
+        }
+        for x in xs {
+            assert_eq!(round_to_i64(x), x.round() as i64, "{x}");
+        }
     }
 
     #[test]
