@@ -396,7 +396,7 @@ fn incidence(d: &DepthImage, rays: &PixelRays, u: u32, v: u32) -> f64 {
 /// `x.round() as i64` (half away from zero) without the maths library's call, which baseline
 /// x86-64 makes for `round`: truncation, then the fraction (exact below 2^52) decides.
 fn round_to_i64(x: f64) -> i64 {
-    if !(x.abs() < 4.5e15) {
+    if x.is_nan() || x.abs() >= 4.5e15 {
         return x.round() as i64;
     }
     let t = x as i64;

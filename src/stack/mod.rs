@@ -116,9 +116,9 @@ pub trait Node {
 
     /// Whether the frames the node wants of camera `camera` must hold the colour image. A
     /// camera renders colour only when a node that wants the frame says so: a depth-only frame
-    /// costs a small depth render and its noise instead of a colour render and a noise draw for
-    /// every colour sample. The camera's noise stream then draws the depth's noise alone, so a
-    /// scenario's depth noise depends on which frames its nodes take and in what form.
+    /// costs a depth render and its noise, without the colour render (and its noise draws
+    /// where `noise.rgb_sigma` is set, so that the camera's depth noise then depends on the
+    /// form of the frames its nodes take, as it depends on which frames they take).
     fn wants_rgb(&self, _camera: &str) -> bool {
         true
     }
