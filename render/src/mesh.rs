@@ -1,8 +1,9 @@
 //! Triangle meshes for rendering and export, and the generators of the world's primitives.
 //!
 //! A primitive's render mesh and its collider describe the same surface: boxes are exact
-//! cuboids and cylinders are prisms with the same vertices as their convex-hull collider, so
-//! a rendered depth image and a ray cast of the colliders agree.
+//! cuboids, cylinders are prisms with the same vertices as their convex-hull collider, and a
+//! capsule's vertices lie on the exact capsule, so a rendered depth image and a ray cast of
+//! the colliders agree.
 
 use glam::{Vec2, Vec3};
 
@@ -146,6 +147,63 @@ impl TriMesh {
         m
     }
 
+    /// A capsule along z centred at the origin: a cylinder of `radius` closed by two
+    /// hemispheres, `2·half_height` long from tip to tip (at least `2·radius`). Its vertices
+    /// lie on the capsule's surface: `segments` round the axis and `rings` latitudes per
+    /// hemisphere, so the exact capsule a physics engine casts rays against (parry's
+    /// `Capsule`) and this mesh agree at every vertex. The texture is stretched once round it
+    /// and once from bottom to top.
+    pub fn capsule(radius: f32, half_height: f32, segments: u32, rings: u32) -> TriMesh {
+        let mut m = TriMesh::default();
+        let (s, rings) = (segments.max(3) as usize, rings.max(1) as usize);
+        let centre = (half_height - radius).max(0.0);
+        // Latitudes from the bottom pole to the top one: the lower hemisphere's round its
+        // centre at −centre, then the upper's round +centre (both equators, so the
+        // cylinder between them is one band of quads).
+        let latitudes: Vec<(f32, f32)> = (0..=rings)
+            .map(|j| {
+                (
+                    -std::f32::consts::FRAC_PI_2 * (1.0 - j as f32 / rings as f32),
+                    -centre,
+                )
+            })
+            .chain((0..=rings).map(|j| {
+                (
+                    std::f32::consts::FRAC_PI_2 * j as f32 / rings as f32,
+                    centre,
+                )
+            }))
+            .collect();
+        let rows = latitudes.len();
+        for (r, &(phi, z0)) in latitudes.iter().enumerate() {
+            let (sp, cp) = phi.sin_cos();
+            for i in 0..=s {
+                let a = i as f32 / s as f32 * std::f32::consts::TAU;
+                let n = Vec3::new(cp * a.cos(), cp * a.sin(), sp);
+                m.positions.push(Vec3::new(0.0, 0.0, z0) + radius * n);
+                m.normals.push(n);
+                m.uvs.push(Vec2::new(
+                    i as f32 / s as f32,
+                    1.0 - r as f32 / (rows - 1) as f32,
+                ));
+            }
+        }
+        let at = |r: usize, i: usize| (r * (s + 1) + i) as u32;
+        for r in 0..rows - 1 {
+            for i in 0..s {
+                let (b0, b1, t0, t1) = (at(r, i), at(r, i + 1), at(r + 1, i), at(r + 1, i + 1));
+                // The poles' rows are one point: one triangle of each quad there.
+                if r > 0 {
+                    m.indices.push([b0, b1, t1]);
+                }
+                if r + 1 < rows - 1 {
+                    m.indices.push([b0, t1, t0]);
+                }
+            }
+        }
+        m
+    }
+
     /// Applies a rigid transform (and uniform scale) to positions and normals.
     pub fn transformed(&self, rotation: glam::Quat, translation: Vec3, scale: f32) -> TriMesh {
         TriMesh {
@@ -205,6 +263,61 @@ impl TriMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn capsule_vertices_lie_on_the_capsule_and_its_faces_point_out() {
+        let (r, h) = (0.05f32, 0.4f32);
+        let m = TriMesh::capsule(r, h, 16, 4);
+        // Every vertex is `r` from the axis segment z ∈ [−(h − r), h − r], its normal the
+        // unit vector from that segment to it.
+        for (p, n) in m.positions.iter().zip(&m.normals) {
+            let on_axis = Vec3::new(0.0, 0.0, p.z.clamp(-(h - r), h - r));
+            assert!(((*p - on_axis).length() - r).abs() < 1e-6, "{p}");
+            assert!((*n - (*p - on_axis) / r).length() < 1e-5, "{p} {n}");
+        }
+        let (lo, hi) = m
+            .positions
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(a, b), p| (a.min(p.z), b.max(p.z)));
+        assert!((lo + h).abs() < 1e-6 && (hi - h).abs() < 1e-6, "{lo} {hi}");
+        // No degenerate triangle, and each winds outwards (its normal along the vertices').
+        for t in &m.indices {
+            let (a, b, c) = m.corners(t);
+            let face = (b - a).cross(c - a);
+            assert!(face.length() > 1e-9, "{t:?}");
+            let out =
+                m.normals[t[0] as usize] + m.normals[t[1] as usize] + m.normals[t[2] as usize];
+            assert!(face.dot(out) > 0.0, "{t:?}");
+        }
+        // Closed: every edge is shared by two triangles, once each way (the seam's duplicated
+        // column and the poles' repeated points counted as one place).
+        let key = |i: u32| {
+            let p = m.positions[i as usize];
+            (
+                (p.x * 1e5).round() as i64,
+                (p.y * 1e5).round() as i64,
+                (p.z * 1e5).round() as i64,
+            )
+        };
+        let mut edges = std::collections::HashMap::new();
+        for t in &m.indices {
+            for k in 0..3 {
+                *edges.entry((key(t[k]), key(t[(k + 1) % 3]))).or_insert(0) += 1;
+            }
+        }
+        for (&(a, b), &n) in &edges {
+            assert_eq!(n, 1, "edge {a:?}→{b:?} used {n} times");
+            assert_eq!(edges.get(&(b, a)), Some(&1), "edge {a:?}→{b:?} has no twin");
+        }
+        // Its area tends to the capsule's, 2πr·(2h − 2r) + 4πr², from below.
+        let exact =
+            std::f32::consts::TAU * r * (2.0 * h - 2.0 * r) + 4.0 * std::f32::consts::PI * r * r;
+        assert!(
+            m.area() < exact && m.area() > 0.95 * exact,
+            "{} {exact}",
+            m.area()
+        );
+    }
 
     #[test]
     fn cuboid_is_closed_with_outward_normals_and_right_area() {
