@@ -26,14 +26,14 @@
 //! and the robot's to the robot) is pushed back out, and the velocity into it is dropped.
 //!
 //! **Body.** A person is three bodies that every laser, camera and the physics see: a torso
-//! with a head, and two legs (shins of radius 5 cm) hinged at the hip. The legs swing in
-//! opposite phase: a stride (two steps) takes `stride_period` (1 s), and a step is
-//! v·period/2 long, capped at `max_step` (0.8 m), so at 1.3 m/s the feet are up to 0.65 m
-//! apart. At rest the legs hang straight from hips `hip_width` apart; walking, the feet come
-//! in to `step_width` apart side to side, so that a walker seen from ahead or behind can show
-//! one leg before the other. By default `step_width` is the hips' width (legs straight below
-//! the hips), because the gait literature's narrower step trained a leg classifier that did
-//! worse on the real annotated log (README, "People as real lasers see them").
+//! with a head, and two legs (capsules of a shin's radius, 5 cm, from hip to floor) hinged at
+//! the hip. The legs swing in opposite phase: a stride (two steps) takes `stride_period` (1 s),
+//! and a step is v·period/2 long, capped at `max_step` (0.8 m), so at 1.3 m/s the feet are up
+//! to 0.65 m apart. At rest the legs hang straight from hips `hip_width` apart; walking, the
+//! feet come in to `step_width` apart side to side, so that a walker seen from ahead or behind
+//! can show one leg before the other. By default `step_width` is the hips' width (legs straight
+//! below the hips), because the gait literature's narrower step trained a leg classifier that
+//! did worse on the real annotated log (README, "People as real lasers see them").
 //!
 //! Everything is deterministic per seed: speeds not given and flow arrivals come from seeded
 //! streams.

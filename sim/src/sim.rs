@@ -806,8 +806,10 @@ fn person_poses(crowd: &Crowd, i: usize) -> [Pose; 3] {
     [torso, leg(1.0, feet[0]), leg(-1.0, feet[1])]
 }
 
-/// Sides of a person's prisms (torso, head, legs).
+/// Sides of a person's prisms (torso, head) and of their legs' render meshes.
 const PERSON_SEGMENTS: u32 = 16;
+/// Latitudes of each end of a leg's render mesh (a hemisphere of the leg's radius).
+const LEG_RINGS: u32 = 4;
 
 /// A prism's vertices stretched to an ellipse of half axes `a` (x) and `b` (y).
 fn elliptic_prism_vertices(a: f32, b: f32, half_height: f32) -> Vec<Vec3> {
@@ -818,8 +820,11 @@ fn elliptic_prism_vertices(a: f32, b: f32, half_height: f32) -> Vec<Vec3> {
 }
 
 /// The colliders of a person's three bodies, each as shapes and their offsets in the body's
-/// frame: the torso (an elliptic prism from hips to shoulders) and the head on it; each leg a
-/// prism hanging from the hip. The render meshes ([`person_parts`]) share the vertices.
+/// frame: the torso (an elliptic prism from hips to shoulders) and the head on it, whose
+/// render meshes ([`person_parts`]) share the vertices; each leg a capsule from the hip to
+/// the floor, whose render mesh has its vertices on the capsule. A capsule's bounding box and
+/// ray casts are exact formulas, where a prism's hull needs its 32 vertices and GJK: with 20
+/// people, the legs as capsules make the simulation 1.3 times as fast (`futago bench people`).
 fn person_colliders(c: &CrowdConfig) -> [(Vec<SharedShape>, Vec<Vec3>); 3] {
     let hull = |v: Vec<Vec3>| SharedShape::convex_hull(&v).expect("a prism has a hull");
     let th = ((c.shoulder_height - c.hip_height) / 2.0) as f32;
@@ -831,13 +836,10 @@ fn person_colliders(c: &CrowdConfig) -> [(Vec<SharedShape>, Vec<Vec3>); 3] {
     let hr = c.head_radius as f32;
     let head = hull(TriMesh::prism_vertices(hr, hr, PERSON_SEGMENTS));
     let lh = (c.hip_height / 2.0) as f32;
+    let r = c.leg_radius as f32;
     let leg = || {
         (
-            vec![hull(TriMesh::prism_vertices(
-                c.leg_radius as f32,
-                lh,
-                PERSON_SEGMENTS,
-            ))],
+            vec![SharedShape::capsule_z((lh - r).max(0.0), r)],
             vec![Vec3::new(0.0, 0.0, -lh)],
         )
     };
@@ -880,7 +882,7 @@ fn person_parts(crowd: &Crowd, i: usize) -> [(&'static str, Vec<(Material, TriMe
         1.0,
     );
     let lh = (c.hip_height / 2.0) as f32;
-    let leg = TriMesh::prism(c.leg_radius as f32, lh, PERSON_SEGMENTS, UvMap::Fit).transformed(
+    let leg = TriMesh::capsule(c.leg_radius as f32, lh, PERSON_SEGMENTS, LEG_RINGS).transformed(
         Quat::IDENTITY,
         Vec3::new(0.0, 0.0, -lh),
         1.0,
@@ -953,4 +955,59 @@ pub fn scene(world: &World, robot: &CreateConfig, movers: &Movers, start: Pose2)
         robot_parts(robot),
     );
     scene
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::people::PersonConfig;
+
+    #[test]
+    fn a_legs_render_mesh_lies_on_its_collider() {
+        // What a laser hits (the collider) and what a camera draws (the mesh) are one leg: every
+        // vertex of the mesh, in the leg body's frame, is on the collider's surface, and the
+        // leg reaches from the hip (the body's origin) down to the floor.
+        let c = CrowdConfig::default();
+        let person = PersonConfig {
+            name: "a".into(),
+            route: vec![[0.0, 0.0], [5.0, 0.0]],
+            mode: crate::agent::PathMode::BackAndForth,
+            speed: None,
+            start_time: 0.0,
+            heading_deg: 0.0,
+            yields: true,
+            shirt: [0.3, 0.3, 0.5],
+            trousers: [0.1, 0.1, 0.1],
+        };
+        let crowd = Crowd::new(&[person], &[], c, 1);
+        let colliders = person_colliders(&c);
+        let parts = person_parts(&crowd, 0);
+        for k in [1, 2] {
+            let (shapes, offsets) = &colliders[k];
+            assert_eq!(shapes.len(), 1);
+            let at = Pose::from_translation(offsets[0]);
+            let mesh = &parts[k].1[0].1;
+            let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+            for p in &mesh.positions {
+                let d = shapes[0].distance_to_point(&at, *p, false);
+                assert!(d.abs() < 1e-5, "vertex {p} is {d} m off the leg's collider");
+                lo = lo.min(p.z);
+                hi = hi.max(p.z);
+            }
+            assert!(
+                (lo + c.hip_height as f32).abs() < 1e-5 && hi.abs() < 1e-5,
+                "{lo} {hi}"
+            );
+            // The laser's cross-section of a hanging leg is a circle of the leg's radius.
+            let hit = shapes[0]
+                .cast_ray(
+                    &at,
+                    &Ray::new(Vec3::new(-1.0, 0.0, -0.6), Vec3::X),
+                    2.0,
+                    true,
+                )
+                .expect("a ray through the leg hits it");
+            assert!((hit - (1.0 - c.leg_radius as f32)).abs() < 1e-5, "{hit}");
+        }
+    }
 }

@@ -131,6 +131,7 @@ fn drive_past_a_standing_person(
     start: Pose2,
     speed: f64,
     seconds: f64,
+    mut each_step: impl FnMut(&Simulation),
 ) -> Simulation {
     let movers = Movers {
         people: vec![standing("bob", person, 0.0)],
@@ -143,6 +144,7 @@ fn drive_past_a_standing_person(
     });
     for _ in 0..(seconds * 200.0) as usize {
         s.step(command.take().as_ref());
+        each_step(&s);
     }
     s
 }
@@ -153,15 +155,34 @@ fn drive_past_a_standing_person(
 #[test]
 fn a_robot_that_drives_into_a_person_collides_with_a_person() {
     let world = box_room(6.0, 0.7, "");
-    let s =
-        drive_past_a_standing_person(&world, [4.0, 0.35], Pose2::new(1.0, 0.35, 0.0), 0.4, 20.0);
+    // Where the robot was when it first touched the person.
+    let mut first_touch = None;
+    let s = drive_past_a_standing_person(
+        &world,
+        [4.0, 0.35],
+        Pose2::new(1.0, 0.35, 0.0),
+        0.4,
+        20.0,
+        |s| {
+            if first_touch.is_none() && s.counters().person_contact_events > 0 {
+                first_touch = Some(s.robot_pose());
+            }
+        },
+    );
     let c = s.counters();
     assert!(c.person_contact_events >= 1, "{c:?}");
     assert!(c.person_contact_steps >= c.person_contact_events);
-    // The robot drove up the passage's middle, 0.18 m off its sides, and the person stopped
-    // it short of the end wall.
     assert!(c.bump_events >= 1, "{c:?}");
-    assert!(s.robot_pose().x < 6.0 - 0.17 - 0.2, "{:?}", s.robot_pose());
+    // The robot drove up the passage's middle, 0.18 m off its sides, and met the person short
+    // of the end wall: by then they had given way to within their radius (0.2 m) of it.
+    // (What follows depends on how the round bodies meet: the robot may be turned aside and
+    // the person slip back past it.)
+    let at = first_touch.expect("a contact");
+    assert!(at.x < 6.0 - 0.17 - 0.2, "{at:?}");
+    assert!(
+        (at.y - 0.35).abs() < 0.01 && at.theta.abs() < 0.01,
+        "{at:?}"
+    );
 }
 
 /// The contacts counted as people's are with people only: a robot pressed against a wall,
@@ -172,7 +193,7 @@ fn a_robot_that_drives_into_a_person_collides_with_a_person() {
 fn a_robot_that_drives_into_a_wall_touches_no_person() {
     let world = box_room(8.0, 6.0, "");
     let start = Pose2::new(1.0, 3.0, std::f64::consts::PI);
-    let s = drive_past_a_standing_person(&world, [6.0, 3.0], start, 0.2, 10.0);
+    let s = drive_past_a_standing_person(&world, [6.0, 3.0], start, 0.2, 10.0, |_| {});
     let c = s.counters();
     assert!(c.bump_events >= 1, "the robot reached the wall: {c:?}");
     assert_eq!(c.person_contact_events, 0, "{c:?}");
