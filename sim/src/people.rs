@@ -1250,14 +1250,15 @@ pub fn social_force(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn open(_: [f64; 2], _: f64) -> Option<[f64; 2]> {
         None
     }
 
-    fn person(name: &str, route: Vec<[f64; 2]>, speed: f64) -> PersonConfig {
+    /// A person who walks `route` once at `speed`, for tests.
+    pub(crate) fn person(name: &str, route: Vec<[f64; 2]>, speed: f64) -> PersonConfig {
         PersonConfig {
             name: name.into(),
             route,

@@ -960,7 +960,6 @@ pub fn scene(world: &World, robot: &CreateConfig, movers: &Movers, start: Pose2)
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::people::PersonConfig;
 
     #[test]
     fn a_legs_render_mesh_lies_on_its_collider() {
@@ -968,17 +967,7 @@ mod tests {
         // vertex of the mesh, in the leg body's frame, is on the collider's surface, and the
         // leg reaches from the hip (the body's origin) down to the floor.
         let c = CrowdConfig::default();
-        let person = PersonConfig {
-            name: "a".into(),
-            route: vec![[0.0, 0.0], [5.0, 0.0]],
-            mode: crate::agent::PathMode::BackAndForth,
-            speed: None,
-            start_time: 0.0,
-            heading_deg: 0.0,
-            yields: true,
-            shirt: [0.3, 0.3, 0.5],
-            trousers: [0.1, 0.1, 0.1],
-        };
+        let person = crate::people::tests::person("a", vec![[0.0, 0.0], [5.0, 0.0]], 1.2);
         let crowd = Crowd::new(&[person], &[], c, 1);
         let colliders = person_colliders(&c);
         let parts = person_parts(&crowd, 0);
