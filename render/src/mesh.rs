@@ -159,7 +159,8 @@ impl TriMesh {
         let centre = (half_height - radius).max(0.0);
         // Latitudes from the bottom pole to the top one: the lower hemisphere's round its
         // centre at −centre, then the upper's round +centre (both equators, so the
-        // cylinder between them is one band of quads).
+        // cylinder between them is one band of quads; a ball has one equator, not a band of
+        // zero height).
         let latitudes: Vec<(f32, f32)> = (0..=rings)
             .map(|j| {
                 (
@@ -167,7 +168,7 @@ impl TriMesh {
                     -centre,
                 )
             })
-            .chain((0..=rings).map(|j| {
+            .chain((usize::from(centre == 0.0)..=rings).map(|j| {
                 (
                     std::f32::consts::FRAC_PI_2 * j as f32 / rings as f32,
                     centre,
@@ -266,7 +267,13 @@ mod tests {
 
     #[test]
     fn capsule_vertices_lie_on_the_capsule_and_its_faces_point_out() {
-        let (r, h) = (0.05f32, 0.4f32);
+        // A shin, and a capsule as short as its radius allows: a ball.
+        for (r, h) in [(0.05f32, 0.4f32), (0.1, 0.1)] {
+            check_capsule(r, h);
+        }
+    }
+
+    fn check_capsule(r: f32, h: f32) {
         let m = TriMesh::capsule(r, h, 16, 4);
         // Every vertex is `r` from the axis segment z ∈ [−(h − r), h − r], its normal the
         // unit vector from that segment to it.
