@@ -266,7 +266,7 @@ impl CameraRig {
         }
         let renderer = if consumers.iter().any(|c| !c.is_empty()) {
             Some(
-                Renderer::new(&scene(&s.world, &s.spec.robot, &s.movers, s.start))
+                Renderer::new(&scene(&s.world, &s.spec.robot, &s.movers, s.start, seed))
                     .context("starting the camera renderer")?,
             )
         } else {

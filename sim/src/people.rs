@@ -6,7 +6,8 @@
 //!   or standing where a route of one point puts them;
 //! - `[[flow]]`: people arriving at `rate` per minute (exponential gaps, a Poisson stream) at
 //!   a place, walking to another and leaving there;
-//! - `[crowd]`: the motion model and the body, shared by all ([`CrowdConfig`]).
+//! - `[crowd]`: the motion model, the body about which each person's is drawn, and how far
+//!   bodies differ ([`CrowdConfig`]).
 //!
 //! **Motion.** Each person is a point of velocity **v** driven by three accelerations, as in
 //! pedsim (Gloor's pedestrian simulator, whose default parameters these are):
@@ -34,6 +35,15 @@
 //! can show one leg before the other. By default `step_width` is the hips' width (legs straight
 //! below the hips), because the gait literature's narrower step trained a leg classifier that
 //! did worse on the real annotated log (README, "People as real lasers see them").
+//!
+//! No two people are alike: each slot's body is drawn by the seed about the crowd's
+//! ([`Body::drawn`]): stature (5 % spread: men's stature has a standard deviation of 6.7 cm
+//! about 175.6 cm in the US Army's 1988 survey, and a crowd mixes men and women, who are
+//! about a tenth shorter), which scales the legs, the shoulders, the height and the longest
+//! step; the shin's radius (1 cm: calves and trousers of every girth); the hips' width (2 cm);
+//! and the stride's period (0.07 s). The last three spreads are futago's choice, not fitted.
+//! A flow's slot keeps its body for every arrival it holds, so a flow of `max` people shows
+//! `max` bodies (the cameras draw each slot's meshes once).
 //!
 //! Everything is deterministic per seed: speeds not given and flow arrivals come from seeded
 //! streams.
@@ -143,7 +153,8 @@ fn speed_std() -> f64 {
     0.2
 }
 
-/// The motion model and the body of every person (`[crowd]`).
+/// The motion model, the body about which each person's is drawn, and the spreads of the
+/// draws (`[crowd]`).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CrowdConfig {
@@ -211,18 +222,94 @@ pub struct CrowdConfig {
     /// Head radius, m (its top is at `height`).
     pub head_radius: f64,
     pub height: f64,
+    /// How people's bodies differ, drawn per person by the seed ([`Body::drawn`]): the
+    /// standard deviation of stature as a share of it (the legs' length, the shoulders, the
+    /// height and the longest step scale with it).
+    pub stature_spread: f64,
+    /// The standard deviation of the shin's radius, m (legs and trousers of every girth).
+    pub leg_radius_spread: f64,
+    /// The standard deviation of the hips' width, m (the walking step width moves with it).
+    pub hip_width_spread: f64,
+    /// The standard deviation of the stride's period, s (each person's own cadence).
+    pub stride_period_spread: f64,
 }
 
-/// How far a swinging foot stays from the robot's body, m: beyond the contact margins of the
-/// physics, so that a person who walks up to a standing robot never touches it.
-const FOOT_CLEARANCE: f64 = 0.02;
+/// One person's body and gait: the crowd's ([`CrowdConfig::body`]), or drawn from it per
+/// person ([`Body::drawn`]). The laser sees legs of this radius and spacing, the cameras
+/// and the physics these heights.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Body {
+    /// Shin radius, m.
+    pub leg_radius: f64,
+    /// The legs' length, m.
+    pub hip_height: f64,
+    /// Distance between the hip joints, m.
+    pub hip_width: f64,
+    /// Distance between the feet, side to side, while walking, m.
+    pub step_width: f64,
+    /// Time of a stride, s.
+    pub stride_period: f64,
+    /// The longest step, m.
+    pub max_step: f64,
+    /// Torso half-depth and half-width, m.
+    pub torso: [f64; 2],
+    pub shoulder_height: f64,
+    pub head_radius: f64,
+    pub height: f64,
+}
 
-impl CrowdConfig {
+/// A body's draws are kept within this many standard deviations of the crowd's body.
+const BODY_SPREAD_LIMIT: f64 = 2.5;
+
+impl Body {
+    /// A body drawn about the crowd's: stature, shin radius, hip width and stride period each
+    /// from a normal of `config`'s spread, cut at [`BODY_SPREAD_LIMIT`] standard deviations;
+    /// the hips no wider than leaves the legs at rest [`FOOT_CLEARANCE`] inside `radius`.
+    /// With every spread zero it is the crowd's body, and nothing is drawn from `rng`.
+    pub fn drawn(config: &CrowdConfig, rng: &mut ChaCha8Rng) -> Body {
+        let mean = config.body();
+        let spreads = [
+            config.stature_spread,
+            config.leg_radius_spread,
+            config.hip_width_spread,
+            config.stride_period_spread,
+        ];
+        if spreads.iter().all(|s| *s == 0.0) {
+            return mean;
+        }
+        let mut z = || {
+            let d: f64 = rand_distr::StandardNormal.sample(&mut *rng);
+            d.clamp(-BODY_SPREAD_LIMIT, BODY_SPREAD_LIMIT)
+        };
+        let stature = 1.0 + config.stature_spread * z();
+        let leg_radius = (mean.leg_radius + config.leg_radius_spread * z()).max(0.01);
+        // Legs hanging at rest stay within the body's radius, less the feet's clearance, so that
+        // a person kept `radius` from the robot never touches it: a wide-hipped person has
+        // no thicker legs than that leaves room for.
+        let widest = 2.0 * (config.radius - FOOT_CLEARANCE - leg_radius);
+        let hip_width =
+            (mean.hip_width + config.hip_width_spread * z()).clamp(0.0, widest.max(0.0));
+        let stride_period = (mean.stride_period + config.stride_period_spread * z()).max(0.2);
+        Body {
+            leg_radius,
+            hip_height: mean.hip_height * stature,
+            hip_width,
+            step_width: (mean.step_width + hip_width - mean.hip_width).max(0.0),
+            stride_period,
+            max_step: mean.max_step * stature,
+            shoulder_height: mean.shoulder_height * stature,
+            height: (mean.height * stature)
+                .max(mean.shoulder_height * stature + 2.0 * mean.head_radius),
+            ..mean
+        }
+    }
+
     /// The longest step a person whose centre is `gap` from the robot's edge can take with
     /// both feet [`FOOT_CLEARANCE`] clear of it, wherever the robot lies: a foot swings half a
     /// step along the heading at most `hip_width / 2` (or `step_width / 2`, the wider) to the
-    /// side, and is `leg_radius` thick. People shorten their steps beside an obstacle rather than kick it (a body kept
-    /// `radius` from the robot still leaves room for steps of 0.2 m with the defaults).
+    /// side, and is `leg_radius` thick. People shorten their steps beside an obstacle rather
+    /// than kick it (a body kept `radius` from the robot still leaves room for steps of 0.2 m
+    /// with the defaults).
     pub fn step_clear_of(&self, gap: f64) -> f64 {
         let reach = gap - self.leg_radius - FOOT_CLEARANCE;
         let hip = self.hip_width.max(self.step_width) / 2.0;
@@ -230,6 +317,28 @@ impl CrowdConfig {
             return 0.0;
         }
         (2.0 * (reach * reach - hip * hip).sqrt()).min(self.max_step)
+    }
+}
+
+/// How far a swinging foot stays from the robot's body, m: beyond the contact margins of the
+/// physics, so that a person who walks up to a standing robot never touches it.
+const FOOT_CLEARANCE: f64 = 0.02;
+
+impl CrowdConfig {
+    /// The crowd's own body, about which each person's is drawn.
+    pub fn body(&self) -> Body {
+        Body {
+            leg_radius: self.leg_radius,
+            hip_height: self.hip_height,
+            hip_width: self.hip_width,
+            step_width: self.step_width,
+            stride_period: self.stride_period,
+            max_step: self.max_step,
+            torso: self.torso,
+            shoulder_height: self.shoulder_height,
+            head_radius: self.head_radius,
+            height: self.height,
+        }
     }
 }
 
@@ -263,6 +372,10 @@ impl Default for CrowdConfig {
             shoulder_height: 1.45,
             head_radius: 0.1,
             height: 1.72,
+            stature_spread: 0.05,
+            leg_radius_spread: 0.01,
+            hip_width_spread: 0.02,
+            stride_period_spread: 0.07,
         }
     }
 }
@@ -407,6 +520,22 @@ impl CrowdConfig {
             ("torso[0]", self.torso[0], 0.02, 0.6, "m"),
             ("torso[1]", self.torso[1], 0.02, 0.6, "m"),
             ("head_radius", self.head_radius, 0.02, 0.3, "m"),
+            (
+                "stature_spread",
+                self.stature_spread,
+                0.0,
+                0.1,
+                "(a share of stature)",
+            ),
+            ("leg_radius_spread", self.leg_radius_spread, 0.0, 0.03, "m"),
+            ("hip_width_spread", self.hip_width_spread, 0.0, 0.1, "m"),
+            (
+                "stride_period_spread",
+                self.stride_period_spread,
+                0.0,
+                0.5,
+                "s",
+            ),
         ] {
             check_range(file, &k(name), v, lo, hi, unit)?;
         }
@@ -469,6 +598,8 @@ struct Walker {
     walk_to_stop: f64,
     shirt: [f64; 3],
     trousers: [f64; 3],
+    /// The body and gait, drawn for the slot by the seed.
+    body: Body,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -582,6 +713,10 @@ impl Crowd {
                 walk_to_stop: f64::INFINITY,
                 shirt: p.shirt,
                 trousers: p.trousers,
+                body: Body::drawn(
+                    &config,
+                    &mut stream(seed, &format!("people.{}.body", p.name)),
+                ),
             });
         }
         let mut arrivals = Vec::new();
@@ -609,6 +744,10 @@ impl Crowd {
                     walk_to_stop: f64::INFINITY,
                     shirt: shirt_of(f, k),
                     trousers: trousers(),
+                    body: Body::drawn(
+                        &config,
+                        &mut stream(seed, &format!("people.flow.{}.{k}.body", flow.name)),
+                    ),
                 });
             }
             let mut rng = stream(seed, &format!("people.flow.{}", flow.name));
@@ -646,6 +785,12 @@ impl Crowd {
         self.walkers[i].active
     }
 
+    /// Slot `i`'s body and gait, drawn for it by the seed (every person a flow brings into
+    /// the slot has it).
+    pub fn body_of(&self, i: usize) -> &Body {
+        &self.walkers[i].body
+    }
+
     /// The colours of slot `i`'s clothes: torso, legs.
     pub fn colours(&self, i: usize) -> ([f64; 3], [f64; 3]) {
         (self.walkers[i].shirt, self.walkers[i].trousers)
@@ -658,15 +803,14 @@ impl Crowd {
 
     /// Every person in the world now, by slot.
     pub fn truth(&self) -> Vec<PersonTruth> {
-        let c = &self.config;
         (0..self.walkers.len())
             .filter_map(|i| {
                 let w = &self.walkers[i];
                 let (body, feet) = self.body(i)?;
                 let leg = |side: f64, foot: [f64; 2]| {
-                    let hip = body.transform_point(self.hip(side));
+                    let hip = body.transform_point(self.hip(i, side));
                     // The axis runs `run / drop` per metre down.
-                    let (run, down) = self.leg_run(side, foot);
+                    let (run, down) = self.leg_run(i, side, foot);
                     let per_metre = [run[0] / down, run[1] / down];
                     let (s, co) = body.theta.sin_cos();
                     let world = [
@@ -681,7 +825,7 @@ impl Crowd {
                     pose: body,
                     velocity: w.v,
                     legs: [leg(1.0, feet[0]), leg(-1.0, feet[1])],
-                    hip_height: c.hip_height,
+                    hip_height: w.body.hip_height,
                 })
             })
             .collect()
@@ -694,7 +838,7 @@ impl Crowd {
         if !w.active {
             return None;
         }
-        let c = &self.config;
+        let c = &w.body;
         let swing = 0.5 * w.step * (std::f64::consts::TAU * w.phase).sin();
         // The feet come in from the hips' spacing at rest to the step width as the step grows.
         let walking = (w.step / (0.5 * c.max_step)).min(1.0);
@@ -705,18 +849,18 @@ impl Crowd {
         ))
     }
 
-    /// The left (`side` = 1) or right (−1) hip joint's position in the body frame, at the
-    /// hips' height.
-    pub fn hip(&self, side: f64) -> [f64; 2] {
-        [0.0, side * self.config.hip_width / 2.0]
+    /// Slot `i`'s left (`side` = 1) or right (−1) hip joint's position in the body frame, at
+    /// the hips' height.
+    pub fn hip(&self, i: usize, side: f64) -> [f64; 2] {
+        [0.0, side * self.walkers[i].body.hip_width / 2.0]
     }
 
-    /// A leg of length `hip_height` hung from the `side` hip towards `foot` (body frame, as
+    /// Slot `i`'s leg of length `hip_height` hung from the `side` hip towards `foot` (body frame, as
     /// [`body`](Self::body) gives it): its horizontal run from the hip and its drop, m. A foot
     /// out of reach is brought in until the leg lies no flatter than asin 0.99.
-    pub fn leg_run(&self, side: f64, foot: [f64; 2]) -> ([f64; 2], f64) {
-        let l = self.config.hip_height;
-        let h = self.hip(side);
+    pub fn leg_run(&self, i: usize, side: f64, foot: [f64; 2]) -> ([f64; 2], f64) {
+        let l = self.walkers[i].body.hip_height;
+        let h = self.hip(i, side);
         let run = [foot[0] - h[0], foot[1] - h[1]];
         let len = norm(run[0], run[1]);
         let k = if len > 0.99 * l { 0.99 * l / len } else { 1.0 };
@@ -799,11 +943,12 @@ impl Crowd {
             }
             // The gait: steps grow with speed up to max_step, and shorten beside the robot so
             // that no foot touches it; the phase advances a stride per two steps walked.
+            let b = &w.body;
             let longest = match around.robot {
-                Some((rp, _, rr)) => c.step_clear_of(norm(p[0] - rp[0], p[1] - rp[1]) - rr),
-                None => c.max_step,
+                Some((rp, _, rr)) => b.step_clear_of(norm(p[0] - rp[0], p[1] - rp[1]) - rr),
+                None => b.max_step,
             };
-            w.step = (speed * c.stride_period / 2.0).min(longest);
+            w.step = (speed * b.stride_period / 2.0).min(longest);
             if w.step > 1e-6 {
                 w.phase = (w.phase + speed * dt / (2.0 * w.step)).fract();
             }
@@ -1360,8 +1505,141 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn steps_shorten_beside_the_robot_so_that_no_foot_reaches_it() {
+    fn bodies_are_drawn_per_person_by_the_seed() {
+        let flow = FlowConfig {
+            name: "f".into(),
+            from: [0.0, 0.0],
+            to: [10.0, 0.0],
+            via: vec![],
+            rate: 10.0,
+            spread: 0.5,
+            from_end: None,
+            to_end: None,
+            start_time: 0.0,
+            end_time: 100.0,
+            max: 6,
+            speed: 1.2,
+            speed_std: 0.2,
+        };
+        let people = [
+            person("a", vec![[0.0, 0.0]], 1.0),
+            person("b", vec![[0.0, 2.0]], 1.0),
+        ];
         let c = CrowdConfig::default();
+        let bodies = |seed: u64, c: CrowdConfig| {
+            let crowd = Crowd::new(&people, std::slice::from_ref(&flow), c, seed);
+            (0..crowd.slots())
+                .map(|i| *crowd.body_of(i))
+                .collect::<Vec<Body>>()
+        };
+        let one = bodies(1, c);
+        assert_eq!(one.len(), 8);
+        // The same seed draws the same bodies; another seed others; every slot its own.
+        assert_eq!(one, bodies(1, c));
+        assert!(one.iter().zip(bodies(2, c)).all(|(a, b)| *a != b));
+        for (i, a) in one.iter().enumerate() {
+            assert!(one[i + 1..].iter().all(|b| a != b), "slot {i}");
+            // Stature scales the legs, the shoulders, the height and the step together;
+            // each draw stays within 2.5 standard deviations.
+            let s = a.hip_height / c.hip_height;
+            assert!((s - 1.0).abs() <= 2.5 * c.stature_spread + 1e-12, "{s}");
+            for (v, mean) in [
+                (a.shoulder_height, c.shoulder_height),
+                (a.height, c.height),
+                (a.max_step, c.max_step),
+            ] {
+                assert!((v / mean - s).abs() < 1e-12);
+            }
+            assert!((a.leg_radius - c.leg_radius).abs() <= 2.5 * c.leg_radius_spread + 1e-12);
+            assert!((a.hip_width - c.hip_width).abs() <= 2.5 * c.hip_width_spread + 1e-12);
+            // Legs at rest within the body's radius, less the feet's clearance.
+            assert!(a.hip_width / 2.0 + a.leg_radius <= c.radius - FOOT_CLEARANCE + 1e-12);
+            // With the default step width (the hips'), the legs stay straight below the hips.
+            assert!((a.step_width - a.hip_width).abs() < 1e-12);
+            let p = a.stride_period - c.stride_period;
+            assert!(p.abs() <= 2.5 * c.stride_period_spread + 1e-12);
+            assert_eq!((a.torso, a.head_radius), (c.torso, c.head_radius));
+        }
+        // No spread: everyone has the crowd's body.
+        let same = CrowdConfig {
+            stature_spread: 0.0,
+            leg_radius_spread: 0.0,
+            hip_width_spread: 0.0,
+            stride_period_spread: 0.0,
+            ..c
+        };
+        assert!(bodies(1, same).iter().all(|b| *b == c.body()));
+    }
+
+    #[test]
+    fn a_bodys_draws_have_the_spreads_asked_for() {
+        // A normal cut at 2.5 standard deviations keeps 0.986 of its spread; 4,000 draws
+        // estimate a standard deviation within 2.2 % (1/√(2n)) at one sigma, so 6 % is about
+        // three sigma. A wide body radius keeps the hips' bound out of the way here.
+        let c = CrowdConfig {
+            radius: 0.3,
+            ..CrowdConfig::default()
+        };
+        let mut rng = stream(7, "test.bodies");
+        let draws: Vec<Body> = (0..4000).map(|_| Body::drawn(&c, &mut rng)).collect();
+        // With the default radius, the widest hips and thickest legs meet the bound (about
+        // one body in 60 would reach past it), and none goes beyond.
+        let d = CrowdConfig::default();
+        let edge = d.radius - FOOT_CLEARANCE;
+        let reach: Vec<f64> = (0..4000)
+            .map(|_| {
+                let b = Body::drawn(&d, &mut rng);
+                b.hip_width / 2.0 + b.leg_radius
+            })
+            .collect();
+        assert!(reach.iter().all(|r| *r <= edge + 1e-12));
+        let bound = reach.iter().filter(|r| (*r - edge).abs() < 1e-12).count();
+        assert!((20..=120).contains(&bound), "{bound} bodies at the bound");
+        let spread = |f: &dyn Fn(&Body) -> f64| {
+            let n = draws.len() as f64;
+            let m = draws.iter().map(f).sum::<f64>() / n;
+            let v = draws.iter().map(|b| (f(b) - m).powi(2)).sum::<f64>() / (n - 1.0);
+            (m, v.sqrt())
+        };
+        for (name, (mean, sd), want_mean, want_sd) in [
+            (
+                "stature",
+                spread(&|b| b.hip_height / c.hip_height),
+                1.0,
+                c.stature_spread,
+            ),
+            (
+                "leg radius",
+                spread(&|b| b.leg_radius),
+                c.leg_radius,
+                c.leg_radius_spread,
+            ),
+            (
+                "hip width",
+                spread(&|b| b.hip_width),
+                c.hip_width,
+                c.hip_width_spread,
+            ),
+            (
+                "stride period",
+                spread(&|b| b.stride_period),
+                c.stride_period,
+                c.stride_period_spread,
+            ),
+        ] {
+            assert!(
+                (sd / (0.986 * want_sd) - 1.0).abs() < 0.06,
+                "{name}: sd {sd}"
+            );
+            // The mean within four standard errors.
+            let se = want_sd / (draws.len() as f64).sqrt();
+            assert!((mean - want_mean).abs() < 4.0 * se, "{name}: mean {mean}");
+        }
+    }
+
+    #[test]
+    fn steps_shorten_beside_the_robot_so_that_no_foot_reaches_it() {
+        let c = CrowdConfig::default().body();
         // Far off, the longest step; at the body's radius (0.2 m from the robot's edge) a
         // foot may swing s with √(s² + 0.1²) + 0.05 + 0.02 ≤ 0.2: s = 0.0831, a step twice it.
         assert_eq!(c.step_clear_of(5.0), c.max_step);
@@ -1458,8 +1736,11 @@ pub(crate) mod tests {
             nearest_obstacle: &open,
         };
         run(&mut c, 10.0, &around, |_| {});
-        // At 1.3 m/s a step is 1.3 · 1 s / 2 = 0.65 m: the feet are up to that far apart,
-        // and a full stride (one swing period) takes 1 s.
+        // At 1.3 m/s a step is 1.3 · T / 2 for the person's own stride period T (the crowd's
+        // 1 s, drawn per person: 0.65 m at 1 s): the feet are up to that far apart, and a full
+        // stride (one swing period) takes T.
+        let b = *c.body_of(0);
+        assert_ne!(b.stride_period, cfg.stride_period);
         let mut widest: f64 = 0.0;
         let mut crossings = 0;
         let mut last = c.body(0).unwrap().1[0][0];
@@ -1473,12 +1754,20 @@ pub(crate) mod tests {
             }
             last = f[0][0];
         });
-        assert!((widest - 0.65).abs() < 0.01, "{widest}");
-        assert_eq!(crossings, 4, "four strides in 4 s");
+        assert!(
+            (widest - 1.3 * b.stride_period / 2.0).abs() < 0.01,
+            "{widest}"
+        );
+        let strides = 4.0 / b.stride_period;
+        assert!(
+            (crossings as f64 - strides).abs() <= 1.0,
+            "{crossings} crossings, {strides} strides in 4 s"
+        );
         // Walking, the feet are the step width apart side to side (the left on the left),
         // not the hips' width.
+        assert!((b.step_width - b.hip_width - (cfg.step_width - cfg.hip_width)).abs() < 1e-12);
         assert!(
-            sideways.iter().all(|w| (w - cfg.step_width).abs() < 1e-9),
+            sideways.iter().all(|w| (w - b.step_width).abs() < 1e-9),
             "{sideways:?}"
         );
     }
@@ -1502,16 +1791,16 @@ pub(crate) mod tests {
             nearest_obstacle: &open,
         };
         run(&mut c, 3.3, &around, |_| {});
-        let cfg = *c.config();
         for (i, truth) in c.truth().iter().enumerate() {
+            let cfg = *c.body_of(i);
             let (pose, feet) = c.body(i).expect("in the world");
             // The truth's leg axes run from the hips at hip height to the feet, which a leg of
             // hip_height swung out lifts off the floor by hip_height − its drop.
             for (k, leg) in truth.legs.iter().enumerate() {
                 let side = [1.0, -1.0][k];
-                let hip = pose.transform_point(c.hip(side));
+                let hip = pose.transform_point(c.hip(i, side));
                 assert!(norm(leg.0[0] - hip[0], leg.0[1] - hip[1]) < 1e-12);
-                let (_, down) = c.leg_run(side, feet[k]);
+                let (_, down) = c.leg_run(i, side, feet[k]);
                 let at_foot = truth.legs_at(cfg.hip_height - down)[k];
                 let foot = pose.transform_point(feet[k]);
                 assert!(

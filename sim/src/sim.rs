@@ -12,7 +12,7 @@ use crate::joint::{Joint, JointConfig};
 use crate::lidar::{BeamHit, Lidar, LidarConfig};
 use crate::noise::stream;
 use crate::people::{
-    Crowd, CrowdConfig, FlowConfig, PARKED_Z, PersonConfig, PersonTruth, Surroundings,
+    Body, Crowd, CrowdConfig, FlowConfig, PARKED_Z, PersonConfig, PersonTruth, Surroundings,
 };
 use crate::render::Scene;
 use crate::world::mesh::{TriMesh, UvMap};
@@ -271,7 +271,7 @@ impl Simulation {
         for i in 0..crowd.slots() {
             let poses = person_poses(&crowd, i);
             let mut handles = [RigidBodyHandle::invalid(); 3];
-            for (k, (shape, offset)) in person_colliders(&movers.crowd).into_iter().enumerate() {
+            for (k, (shape, offset)) in person_colliders(crowd.body_of(i)).into_iter().enumerate() {
                 let body = RigidBodyBuilder::kinematic_position_based()
                     .pose(poses[k])
                     .build();
@@ -779,7 +779,7 @@ pub fn robot_parts(robot: &CreateConfig) -> Vec<(Material, TriMesh)> {
 /// Slot `i`'s three body poses: torso (on the floor, facing the heading), left and right leg
 /// (hinged at the hip, swung by the gait); all parked below the floor for an empty slot.
 fn person_poses(crowd: &Crowd, i: usize) -> [Pose; 3] {
-    let c = crowd.config();
+    let c = crowd.body_of(i);
     let Some((body, feet)) = crowd.body(i) else {
         let parked = Pose::from_translation(Vec3::new(0.0, 0.0, PARKED_Z as f32));
         return [parked; 3];
@@ -787,10 +787,10 @@ fn person_poses(crowd: &Crowd, i: usize) -> [Pose; 3] {
     let yaw = Quat::from_rotation_z(body.theta as f32);
     let torso = Pose::from_parts(Vec3::new(body.x as f32, body.y as f32, 0.0), yaw);
     let leg = |side: f64, foot: [f64; 2]| {
-        let hip = body.transform_point(crowd.hip(side));
+        let hip = body.transform_point(crowd.hip(i, side));
         // The leg hangs from the hip towards its foot: the prism's axis (−z) turned onto the
         // hip-to-foot direction in the body's frame.
-        let (run, down) = crowd.leg_run(side, foot);
+        let (run, down) = crowd.leg_run(i, side, foot);
         let turn = if run[1] == 0.0 {
             // Straight below the hip side to side: turned about the body's y alone.
             Quat::from_rotation_y(-(run[0] / c.hip_height).clamp(-1.0, 1.0).asin() as f32)
@@ -806,8 +806,13 @@ fn person_poses(crowd: &Crowd, i: usize) -> [Pose; 3] {
     [torso, leg(1.0, feet[0]), leg(-1.0, feet[1])]
 }
 
-/// Sides of a person's prisms (torso, head) and of their legs' render meshes.
+/// Sides of a person's prisms (torso, head).
 const PERSON_SEGMENTS: u32 = 16;
+/// Sides of a leg's render mesh, whose vertices lie on its capsule collider: a side's middle
+/// lies r·(1 − cos(π/24)) = 0.9 % of the radius inside the capsule (0.6 mm for the widest
+/// drawn shins, 7.5 cm), so that the cameras' depth agrees with the lasers' rays at the
+/// legs' edges as well.
+const LEG_SEGMENTS: u32 = 24;
 /// Latitudes of each end of a leg's render mesh (a hemisphere of the leg's radius).
 const LEG_RINGS: u32 = 4;
 
@@ -825,7 +830,7 @@ fn elliptic_prism_vertices(a: f32, b: f32, half_height: f32) -> Vec<Vec3> {
 /// the floor, whose render mesh has its vertices on the capsule. A capsule's bounding box and
 /// ray casts are exact formulas, where a prism's hull needs its 32 vertices and GJK: with 20
 /// people, the legs as capsules make the simulation 1.3 times as fast (`futago bench people`).
-fn person_colliders(c: &CrowdConfig) -> [(Vec<SharedShape>, Vec<Vec3>); 3] {
+fn person_colliders(c: &Body) -> [(Vec<SharedShape>, Vec<Vec3>); 3] {
     let hull = |v: Vec<Vec3>| SharedShape::convex_hull(&v).expect("a prism has a hull");
     let th = ((c.shoulder_height - c.hip_height) / 2.0) as f32;
     let torso = hull(elliptic_prism_vertices(
@@ -858,7 +863,7 @@ fn person_colliders(c: &CrowdConfig) -> [(Vec<SharedShape>, Vec<Vec3>); 3] {
 
 /// Slot `i`'s render meshes, body by body (torso with head, left leg, right leg), each named.
 fn person_parts(crowd: &Crowd, i: usize) -> [(&'static str, Vec<(Material, TriMesh)>); 3] {
-    let c = crowd.config();
+    let c = crowd.body_of(i);
     let (shirt, trousers) = crowd.colours(i);
     let material = |name: &str, color: [f64; 3]| Material {
         name: format!("person.{i}.{name}"),
@@ -882,7 +887,7 @@ fn person_parts(crowd: &Crowd, i: usize) -> [(&'static str, Vec<(Material, TriMe
         1.0,
     );
     let lh = (c.hip_height / 2.0) as f32;
-    let leg = TriMesh::capsule(c.leg_radius as f32, lh, PERSON_SEGMENTS, LEG_RINGS).transformed(
+    let leg = TriMesh::capsule(c.leg_radius as f32, lh, LEG_SEGMENTS, LEG_RINGS).transformed(
         Quat::IDENTITY,
         Vec3::new(0.0, 0.0, -lh),
         1.0,
@@ -927,8 +932,15 @@ pub fn agent_parts(a: &AgentConfig) -> Vec<(Material, TriMesh)> {
 }
 
 /// What a camera sees: the world's objects in order, the agents, each person's three
-/// bodies, then the robot (posed by [`Simulation::scene_poses`]).
-pub fn scene(world: &World, robot: &CreateConfig, movers: &Movers, start: Pose2) -> Scene {
+/// bodies (drawn by `seed`, as the simulation of that seed draws them), then the robot
+/// (posed by [`Simulation::scene_poses`]).
+pub fn scene(
+    world: &World,
+    robot: &CreateConfig,
+    movers: &Movers,
+    start: Pose2,
+    seed: u64,
+) -> Scene {
     let mut scene = world.scene();
     for a in &movers.agents {
         scene.add_body(
@@ -937,9 +949,9 @@ pub fn scene(world: &World, robot: &CreateConfig, movers: &Movers, start: Pose2)
             agent_parts(a),
         );
     }
-    // The crowd at time zero, as the simulation builds it (the seed only draws speeds and
-    // arrivals, not what a body looks like or where it starts).
-    let crowd = Crowd::new(&movers.people, &movers.flows, movers.crowd, 0);
+    // The crowd at time zero, as the simulation of this seed builds it: the seed draws each
+    // slot's body, and where people stand at time zero does not depend on it.
+    let crowd = Crowd::new(&movers.people, &movers.flows, movers.crowd, seed);
     for i in 0..crowd.slots() {
         let poses = person_poses(&crowd, i);
         for (k, (part, mesh)) in person_parts(&crowd, i).into_iter().enumerate() {
@@ -966,9 +978,11 @@ mod tests {
         // What a laser hits (the collider) and what a camera draws (the mesh) are one leg: every
         // vertex of the mesh, in the leg body's frame, is on the collider's surface, and the
         // leg reaches from the hip (the body's origin) down to the floor.
-        let c = CrowdConfig::default();
         let person = crate::people::tests::person("a", vec![[0.0, 0.0], [5.0, 0.0]], 1.2);
-        let crowd = Crowd::new(&[person], &[], c, 1);
+        let crowd = Crowd::new(&[person], &[], CrowdConfig::default(), 1);
+        // The body the seed drew for this person, not the crowd's.
+        let c = *crowd.body_of(0);
+        assert_ne!(c, CrowdConfig::default().body());
         let colliders = person_colliders(&c);
         let parts = person_parts(&crowd, 0);
         for k in [1, 2] {

@@ -67,7 +67,8 @@ fn a_laser_at_shin_height_sees_a_standing_person_as_two_legs() {
         start,
         1,
     );
-    let c = CrowdConfig::default();
+    // The body the seed drew for this person.
+    let c = *s.crowd().body_of(0);
     for _ in 0..5 {
         let (scan, what) = next_scan_and_hits(&mut s);
         let people = s.people();
@@ -95,7 +96,7 @@ fn a_laser_at_shin_height_sees_a_standing_person_as_two_legs() {
                 .collect();
             match hits.first() {
                 Some(&(k, t)) => {
-                    // A 16-sided prism lies within 2 % of the leg's radius inside its circle.
+                    // The capsule's cross-section is the leg's circle.
                     assert!(
                         (r as f64 - t).abs() < 0.002,
                         "beam {i}: {r} m, the leg's circle at {t} m"
@@ -334,7 +335,8 @@ fn the_truth_says_where_a_walkers_legs_cross_the_scan_plane() {
         start,
         1,
     );
-    let c = CrowdConfig::default();
+    // The body the seed drew for this person.
+    let c = *s.crowd().body_of(0);
     let mut compared = 0;
     for _ in 0..40 {
         let scan = next_scan(&mut s);

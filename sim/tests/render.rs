@@ -370,6 +370,7 @@ fn seed000_kinect_gives_qvga_depth_registered_to_vga_colour_within_its_range() {
         &robot,
         &futago_sim::Movers::default(),
         Pose2::new(1.0, 2.0, 0.0),
+        1,
     ))
     .unwrap();
     let mut cam = Kinect::new(spec.clone(), futago_sim::noise::stream(1, "camera.kinect"));
@@ -425,6 +426,7 @@ fn true_depth_after_a_capture_is_the_noiseless_render_of_that_view() {
         &CreateConfig::default(),
         &futago_sim::Movers::default(),
         Pose2::new(1.0, 2.0, 0.0),
+        1,
     ))
     .unwrap();
     let mut cam = Kinect::new(spec.clone(), futago_sim::noise::stream(1, "camera.kinect"));
@@ -470,6 +472,8 @@ fn cameras_see_movers(movers: &futago_sim::Movers, p: Pose, steps: usize, near: 
         &CreateConfig::default(),
         movers,
         start,
+        // The simulation's seed: each person's body is drawn by it.
+        1,
     ))
     .unwrap();
     let intr = kinect(160, 120);
