@@ -268,6 +268,8 @@ pub struct NavStats {
     /// Route points passed, and those given up as unreachable.
     pub route_points_passed: usize,
     pub route_points_skipped: usize,
+    /// Plans of a route that found no path from the pose (the robot spun, and tried again).
+    pub failed_plans: usize,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -293,6 +295,9 @@ pub struct Navigator {
     mode: Mode,
     map: Option<OccupancyGrid>,
     last_plan: Option<Time>,
+    /// When a route's plan last found no path: the robot spins, and plans again only
+    /// [`SPIN_REPLAN_PERIOD`] later.
+    route_failed: Option<Time>,
     exhausted: Vec<[f64; 2]>,
     /// Where bumpers found obstacles the map does not hold (low, thin, glass); exploration
     /// plans round them.
@@ -324,6 +329,7 @@ impl Navigator {
             mode: Mode::Driving,
             map: None,
             last_plan: None,
+            route_failed: None,
             exhausted: Vec::new(),
             bump_marks: Vec::new(),
             detoured: Vec::new(),
@@ -458,12 +464,23 @@ impl Navigator {
         {
             self.follower = None;
         }
-        if self.follower.is_none() && !self.plan(now, &input.pose) {
+        // While the robot spins after a route found no path, it plans again every
+        // SPIN_REPLAN_PERIOD, not at every control tick: each failed plan searches the whole
+        // reachable grid for each of the next route points.
+        let spinning = matches!(self.task, Task::Route(_))
+            && self
+                .route_failed
+                .is_some_and(|t| (now - t).secs() < SPIN_REPLAN_PERIOD);
+        if self.follower.is_none() && (spinning || !self.plan(now, &input.pose)) {
             // No path reaches the route's next points from the pose the robot believes it
             // has (one inside a wall's margin): the estimate is likely off. Standing gives
             // the localiser nothing new (MCL takes scans only as the robot moves), so the
             // robot turns in place, as Nav2's spin recovery does, and plans again as it turns.
             if matches!(self.task, Task::Route(_)) && !matches!(self.mode, Mode::Done) {
+                if !spinning {
+                    self.route_failed = Some(now);
+                    self.stats.failed_plans += 1;
+                }
                 return DriveCommand::Drive {
                     velocity: self.config.turn_speed,
                     radius: Radius::InPlaceCcw,
@@ -471,6 +488,7 @@ impl Navigator {
             }
             return DriveCommand::STOP;
         }
+        self.route_failed = None;
         let Some(f) = self.follower.as_mut() else {
             return DriveCommand::STOP;
         };
@@ -759,6 +777,11 @@ impl Navigator {
     }
 }
 
+/// How often a robot spinning because its route found no path plans again, s: a turn of about
+/// 0.45 rad at the navigator's turning speed (0.93 rad/s), against every control tick
+/// (15 ms) before, when a robot that could not get out spun out the run planning 67 times a
+/// second (`hall-scan3d-random`, seed 3: 25 minutes instead of half of one).
+const SPIN_REPLAN_PERIOD: f64 = 0.5;
 /// Bumps on the way to one route point after which it is given up.
 const ROUTE_BUMP_LIMIT: usize = 3;
 /// How many route points ahead a route driver tries when the next cannot be reached.
@@ -962,6 +985,9 @@ mod tests {
             assert!(v.abs() < 1e-9 && w > 0.0, "{cmd:?}");
         }
         assert_eq!(nav.stats().route_points_skipped, 0);
+        // Spinning for 2 s, it planned again every 0.5 s (at 0, 0.5, 1 and 1.5 s), not at
+        // every tick.
+        assert_eq!(nav.stats().failed_plans, 4);
         let mut pose = Pose2::new(1.0, 1.2, 0.0);
         for k in 40..4000 {
             let (v, w) = unicycle(&nav.update(&plain_input(k, dt, pose)));
