@@ -6,8 +6,9 @@
 //!   the physics;
 //! - `people.collisions_driving`: those of them the robot drove into: begun while the robot
 //!   itself closed on the nearest person at more than 0.05 m/s (its own velocity towards
-//!   them, over the last ground-truth tick). The rest are people walking into a robot that
-//!   stood or drew back, which the stack cannot prevent;
+//!   them, over the last ground-truth tick);
+//! - `people.collisions_by_people`: the rest, people walking into a robot that stood, crept or
+//!   drew back, which the stack cannot prevent and the crowd's walk-round should;
 //! - `people.min_clearance_m`: the smallest gap between the robot's body and a person's (centre
 //!   distance less the robot's radius and the person's, `crowd.radius`);
 //! - `people.time_within_0.45m_s`, `people.time_within_1.2m_s`: time with a person's body
@@ -57,6 +58,7 @@ use futago_robot::perception::depth_people::{DepthPeople, DepthPeopleConfig};
 use futago_robot::perception::legs::{AdaBoost, LegConfig, Segment, segments};
 use futago_robot::tracking::laser_people::{Detections, LaserPeople};
 use futago_robot::tracking::people::{Candidate, TrackedPerson};
+use futago_sim::people::PersonTruth;
 use serde_json::{Value, json};
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -73,6 +75,7 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
     [
         "people.collisions",
         "people.collisions_driving",
+        "people.collisions_by_people",
         "people.min_clearance_m",
         "people.time_within_0.45m_s",
         "people.time_within_1.2m_s",
@@ -513,19 +516,9 @@ impl Node for PeopleNode {
         use std::fmt::Write as _;
         let r = truth.robot;
         if truth.person_collisions > self.collisions {
-            // Who began it: the robot's own speed towards the nearest person.
             let last = self.last_pose.unwrap_or(r);
-            let v = [(r.x - last.x) / self.period, (r.y - last.y) / self.period];
-            let nearest = truth
-                .people
-                .iter()
-                .min_by(|a, b| a.pose.distance(&r).total_cmp(&b.pose.distance(&r)));
-            if let Some(p) = nearest {
-                let d = p.pose.distance(&r).max(1e-9);
-                let closing = (v[0] * (p.pose.x - r.x) + v[1] * (p.pose.y - r.y)) / d;
-                if closing > DRIVING_AT {
-                    self.collisions_driving += truth.person_collisions - self.collisions;
-                }
+            if robot_drove_in(last, r, self.period, &truth.people) {
+                self.collisions_driving += truth.person_collisions - self.collisions;
             }
         }
         self.collisions = truth.person_collisions;
@@ -582,6 +575,7 @@ impl Node for PeopleNode {
             "people": self.seen.len(),
             "collisions": self.collisions,
             "collisions_driving": self.collisions_driving,
+            "collisions_by_people": self.collisions_by_people(),
             "min_clearance_m": self.clearance(),
             "time_within_0.45m_s": self.within[0],
             "time_within_1.2m_s": self.within[1],
@@ -653,6 +647,10 @@ impl Node for PeopleNode {
         }
         m.insert("people.collisions", self.collisions as f64);
         m.insert("people.collisions_driving", self.collisions_driving as f64);
+        m.insert(
+            "people.collisions_by_people",
+            self.collisions_by_people() as f64,
+        );
         m.insert("people.min_clearance_m", self.clearance());
         m.insert("people.time_within_0.45m_s", self.within[0]);
         m.insert("people.time_within_1.2m_s", self.within[1]);
@@ -765,6 +763,12 @@ impl Tracking {
 }
 
 impl PeopleNode {
+    /// The contacts people began: those the robot did not drive into. (The last steps' contacts,
+    /// counted only by `finish`, are never classed as driving.)
+    fn collisions_by_people(&self) -> u64 {
+        self.collisions.saturating_sub(self.collisions_driving)
+    }
+
     /// The smallest gap seen; a run that never had anyone in the world reports 1000 m (a
     /// finite stand-in that any `min` gate passes and JSON can hold).
     fn clearance(&self) -> f64 {
@@ -805,3 +809,54 @@ pub const MODULE: super::Plain = super::Plain {
     metric_names,
     build: |s, _, out| super::boxed(node(s, out)),
 };
+
+/// Whether the robot, at `last` one tick of `period` s ago and at `now`, drove into the
+/// person nearest it: its own speed towards them exceeds [`DRIVING_AT`].
+fn robot_drove_in(last: Pose2, now: Pose2, period: f64, people: &[PersonTruth]) -> bool {
+    let v = [(now.x - last.x) / period, (now.y - last.y) / period];
+    people
+        .iter()
+        .min_by(|a, b| a.pose.distance(&now).total_cmp(&b.pose.distance(&now)))
+        .is_some_and(|p| {
+            let d = p.pose.distance(&now).max(1e-9);
+            (v[0] * (p.pose.x - now.x) + v[1] * (p.pose.y - now.y)) / d > DRIVING_AT
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(x: f64, y: f64) -> PersonTruth {
+        PersonTruth {
+            id: 0,
+            name: "p".into(),
+            pose: Pose2::new(x, y, 0.0),
+            velocity: [0.0; 2],
+            legs: [([x, y + 0.1], [0.0; 2]), ([x, y - 0.1], [0.0; 2])],
+            hip_height: 0.85,
+        }
+    }
+
+    #[test]
+    fn a_contact_is_the_robots_when_it_closed_on_the_nearest_person() {
+        let dt = 0.02;
+        let people = [at(1.0, 0.0), at(-3.0, 0.0)];
+        let from = Pose2::new(0.0, 0.0, 0.0);
+        // The robot's velocity (m/s) over the tick, and who is in the world.
+        let drove = |vx: f64, vy: f64, people: &[PersonTruth]| {
+            robot_drove_in(from, Pose2::new(vx * dt, vy * dt, 0.0), dt, people)
+        };
+        // 0.3 m/s towards the nearest person (east): the robot drove in.
+        assert!(drove(0.3, 0.0, &people));
+        // Standing, backing away (towards the far person), or passing square to the near one
+        // at 0.3 m/s: people began it.
+        assert!(!drove(0.0, 0.0, &people));
+        assert!(!drove(-0.3, 0.0, &people));
+        assert!(!drove(0.0, 0.3, &people));
+        // Creeping at 0.04 m/s, under the 0.05 m/s that counts as driving.
+        assert!(!drove(0.04, 0.0, &people));
+        // Nobody in the world.
+        assert!(!drove(0.3, 0.0, &[]));
+    }
+}
