@@ -464,31 +464,11 @@ impl Navigator {
         {
             self.follower = None;
         }
-        // While the robot spins after a route found no path, it plans again every
-        // SPIN_REPLAN_PERIOD, not at every control tick: each failed plan searches the whole
-        // reachable grid for each of the next route points.
-        let spinning = matches!(self.task, Task::Route(_))
-            && self
-                .route_failed
-                .is_some_and(|t| (now - t).secs() < SPIN_REPLAN_PERIOD);
-        if self.follower.is_none() && (spinning || !self.plan(now, &input.pose)) {
-            // No path reaches the route's next points from the pose the robot believes it
-            // has (one inside a wall's margin): the estimate is likely off. Standing gives
-            // the localiser nothing new (MCL takes scans only as the robot moves), so the
-            // robot turns in place, as Nav2's spin recovery does, and plans again as it turns.
-            if matches!(self.task, Task::Route(_)) && !matches!(self.mode, Mode::Done) {
-                if !spinning {
-                    self.route_failed = Some(now);
-                    self.stats.failed_plans += 1;
-                }
-                return DriveCommand::Drive {
-                    velocity: self.config.turn_speed,
-                    radius: Radius::InPlaceCcw,
-                };
-            }
-            return DriveCommand::STOP;
+        if self.follower.is_none()
+            && let Some(cmd) = self.plan_or_recover(now, &input.pose)
+        {
+            return cmd;
         }
-        self.route_failed = None;
         let Some(f) = self.follower.as_mut() else {
             return DriveCommand::STOP;
         };
@@ -670,6 +650,36 @@ impl Navigator {
             }
             let w = pose.transform_point(p);
             !map.is_some_and(|m| mapped_obstacle_near(m, w, MAP_MATCH_CELLS))
+        })
+    }
+
+    /// Plans a path when the robot has none to follow; gives the command to give instead when
+    /// there is no path. No path reaches the route's next points from the pose the robot
+    /// believes it has (one inside a wall's margin): the estimate is likely off. Standing gives
+    /// the localiser nothing new (MCL takes scans only as the robot moves), so the robot turns
+    /// in place, as Nav2's spin recovery does, and plans again as it turns: every
+    /// [`SPIN_REPLAN_PERIOD`], not at every control tick, since each failed plan searches the
+    /// whole reachable grid for each of the next route points.
+    fn plan_or_recover(&mut self, now: Time, pose: &Pose2) -> Option<DriveCommand> {
+        let route = matches!(self.task, Task::Route(_));
+        let spinning = route
+            && self
+                .route_failed
+                .is_some_and(|t| (now - t).secs() < SPIN_REPLAN_PERIOD);
+        if !spinning && self.plan(now, pose) {
+            self.route_failed = None;
+            return None;
+        }
+        if !route || matches!(self.mode, Mode::Done) {
+            return Some(DriveCommand::STOP);
+        }
+        if !spinning {
+            self.route_failed = Some(now);
+            self.stats.failed_plans += 1;
+        }
+        Some(DriveCommand::Drive {
+            velocity: self.config.turn_speed,
+            radius: Radius::InPlaceCcw,
         })
     }
 
