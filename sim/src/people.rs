@@ -855,9 +855,9 @@ impl Crowd {
         [0.0, side * self.walkers[i].body.hip_width / 2.0]
     }
 
-    /// Slot `i`'s leg of length `hip_height` hung from the `side` hip towards `foot` (body frame, as
-    /// [`body`](Self::body) gives it): its horizontal run from the hip and its drop, m. A foot
-    /// out of reach is brought in until the leg lies no flatter than asin 0.99.
+    /// Slot `i`'s leg of length `hip_height` hung from the `side` hip towards `foot` (body
+    /// frame, as [`body`](Self::body) gives it): its horizontal run from the hip and its drop,
+    /// m. A foot out of reach is brought in until the leg lies no flatter than asin 0.99.
     pub fn leg_run(&self, i: usize, side: f64, foot: [f64; 2]) -> ([f64; 2], f64) {
         let l = self.walkers[i].body.hip_height;
         let h = self.hip(i, side);

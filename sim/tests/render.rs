@@ -538,3 +538,58 @@ fn cameras_see_people_where_the_lasers_do() {
     // Low enough to see the legs and the torsos.
     cameras_see_movers(&movers, cam(1.2, 3.0, 0.6, 0.0, 0.0), 150, 4.2, 200);
 }
+
+/// The cameras' scene draws each person with the body the simulation of the same seed drew
+/// for them: a leg's mesh has that leg's radius, and another seed gives another leg.
+#[test]
+fn the_scene_draws_the_bodies_its_seed_draws() {
+    let world = box_room(6.0, 4.0, "");
+    let movers = futago_sim::Movers {
+        people: vec![futago_sim::people::PersonConfig {
+            name: "ann".into(),
+            route: vec![[3.0, 2.0]],
+            mode: futago_sim::agent::PathMode::Once,
+            speed: None,
+            start_time: 0.0,
+            heading_deg: 0.0,
+            yields: true,
+            shirt: [0.2, 0.3, 0.6],
+            trousers: [0.1, 0.1, 0.15],
+        }],
+        ..Default::default()
+    };
+    let start = Pose2::new(1.0, 2.0, 0.0);
+    // The leg mesh's radius: its vertices' largest distance from the leg's axis (z).
+    let leg_radius = |seed: u64| {
+        let scene = futago_sim::sim::scene(&world, &CreateConfig::default(), &movers, start, seed);
+        let leg = scene
+            .bodies
+            .iter()
+            .find(|b| b.name == "person.0.leg_l")
+            .expect("the person's left leg is in the scene");
+        leg.parts[0]
+            .mesh
+            .positions
+            .iter()
+            .map(|p| p.x.hypot(p.y) as f64)
+            .fold(0.0, f64::max)
+    };
+    for seed in [7, 8] {
+        let s = futago_sim::Simulation::new(
+            &world,
+            &futago_sim::PhysicsConfig::default(),
+            &CreateConfig::default(),
+            &[],
+            &movers,
+            start,
+            seed,
+        );
+        let want = s.crowd().body_of(0).leg_radius;
+        let got = leg_radius(seed);
+        assert!(
+            (got - want).abs() < 1e-6,
+            "seed {seed}: {got} against {want}"
+        );
+    }
+    assert!((leg_radius(7) - leg_radius(8)).abs() > 1e-4);
+}
