@@ -822,8 +822,19 @@ pub const GATE_FAILED: i32 = 3;
 /// a driver would: fault injection for the tests of `futago suite --isolate`.
 pub const CRASH_ENV: &str = "FUTAGO_CRASH_RUN";
 
+/// With [`CRASH_ENV`], the file whose creation makes the crash happen once only: the first run
+/// of the scenario creates it and aborts, later ones find it and go on (an intermittent crash,
+/// for the tests of the suite's retry).
+pub const CRASH_ONCE_ENV: &str = "FUTAGO_CRASH_ONCE";
+
 fn crash_if_asked(name: &str) {
     if std::env::var_os(CRASH_ENV).is_some_and(|v| v == name) {
+        if let Some(flag) = std::env::var_os(CRASH_ONCE_ENV) {
+            // `create_new` fails when the file exists: the crash has happened already.
+            if std::fs::File::create_new(&flag).is_err() {
+                return;
+            }
+        }
         eprintln!("futago: {CRASH_ENV}={name}: aborting, as asked");
         std::process::abort();
     }

@@ -82,6 +82,9 @@ struct Entry {
     sweep: Option<(String, u64)>,
     /// The run's summary, or the error that stopped it.
     result: Result<Value, String>,
+    /// The crashes of its earlier tries, when it was isolated and retried (see
+    /// [`CRASH_RETRIES`]).
+    crashes: Vec<String>,
     /// The scenario's gates against other scenarios' runs (`[[gate]] scenario = …`).
     versus: Vec<crate::ground_truth::Gate>,
 }
@@ -239,8 +242,9 @@ pub fn suite(
             force,
         };
         let name = job.name();
+        let mut crashes = Vec::new();
         let result = match (&isolation, &job.work) {
-            (Some(i), _) => run_child(job, i, &out.join(&name), force),
+            (Some(i), _) => run_isolated(job, i, &out.join(&name), force, &name, &mut crashes),
             (None, Work::Scenario(s)) => run::run(s, &opts, &out.join(&name))
                 .map(|(summary, _)| summary)
                 .map_err(|e| format!("{e:#}")),
@@ -255,6 +259,7 @@ pub fn suite(
             name,
             sweep: job.seed.map(|k| (job.stem.clone(), k)),
             result,
+            crashes,
             versus: match &job.work {
                 Work::Scenario(s) => s
                     .spec
@@ -302,10 +307,68 @@ pub struct Isolation {
     pub overlay_args: Vec<String>,
 }
 
-/// Runs `job` as a child `futago run` into `dir`; its summary, or what stopped it (its
-/// error, or the signal that killed it).
-fn run_child(job: &Job, iso: &Isolation, dir: &Path, force: bool) -> Result<Value, String> {
-    let exe = std::env::current_exe().map_err(|e| format!("finding the futago program: {e}"))?;
+/// How many times an isolated run that crashed (was killed by a signal) is run again. A run is
+/// deterministic for its seed, so a retry that completes writes exactly what the first try
+/// would have: the retry costs time, never correctness. Crashes seen so far came from the GPU
+/// driver, intermittently (a SIGSEGV in one of 51 runs of CI's suite, not reproduced in a
+/// local suite of the same build).
+pub const CRASH_RETRIES: usize = 1;
+
+/// Runs `job` in a child process ([`run_child`]); a crash is retried [`CRASH_RETRIES`] times,
+/// each crash reported on stderr and pushed to `crashes`, and the last is the run's error.
+fn run_isolated(
+    job: &Job,
+    iso: &Isolation,
+    dir: &Path,
+    force: bool,
+    name: &str,
+    seen: &mut Vec<String>,
+) -> Result<Value, String> {
+    let mut crashes = 0;
+    loop {
+        match run_child(job, iso, dir, force) {
+            Child::Ended(r) => {
+                if crashes > 0 && r.is_ok() {
+                    eprintln!(
+                        "futago: run {name} completed on try {} after crashing",
+                        crashes + 1
+                    );
+                }
+                return r;
+            }
+            Child::Crashed(what) => {
+                crashes += 1;
+                seen.push(what.clone());
+                if crashes > CRASH_RETRIES {
+                    return Err(format!(
+                        "the run crashed ({what}){}; nothing of it was written, the suite's other runs are kept",
+                        if crashes > 1 {
+                            format!(", on each of {crashes} tries")
+                        } else {
+                            String::new()
+                        }
+                    ));
+                }
+                eprintln!("futago: run {name} crashed ({what}); running it again");
+            }
+        }
+    }
+}
+
+/// How a child run ended: by itself (its summary or its error), or killed by a signal.
+enum Child {
+    Ended(Result<Value, String>),
+    /// The signal, named (`signal 11, SIGSEGV, core dumped`).
+    Crashed(String),
+}
+
+/// Runs `job` as a child `futago run` into `dir`: its summary, its error, or the signal that
+/// killed it. What a killed child half wrote (its `.NAME.partial-PID` folder) is removed.
+fn run_child(job: &Job, iso: &Isolation, dir: &Path, force: bool) -> Child {
+    let exe = match std::env::current_exe() {
+        Ok(e) => e,
+        Err(e) => return Child::Ended(Err(format!("finding the futago program: {e}"))),
+    };
     let mut cmd = std::process::Command::new(exe);
     cmd.arg("run")
         .arg(&job.file)
@@ -319,27 +382,47 @@ fn run_child(job: &Job, iso: &Isolation, dir: &Path, force: bool) -> Result<Valu
     if force {
         cmd.arg("--force");
     }
-    let o = cmd
+    let child = cmd
         .stdin(std::process::Stdio::null())
-        .output()
-        .map_err(|e| format!("starting a child futago: {e}"))?;
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn();
+    let (pid, o) = match child {
+        Ok(c) => (c.id(), c.wait_with_output()),
+        Err(e) => return Child::Ended(Err(format!("starting a child futago: {e}"))),
+    };
+    let o = match o {
+        Ok(o) => o,
+        Err(e) => return Child::Ended(Err(format!("waiting for a child futago: {e}"))),
+    };
     let stderr = String::from_utf8_lossy(&o.stderr);
     match o.status.code() {
         // 3: the run wrote its results and a gate failed, which the suite scores itself.
         Some(0) | Some(run::GATE_FAILED) => {
             let p = dir.join("summary.json");
-            let text =
-                std::fs::read_to_string(&p).map_err(|e| format!("reading {}: {e}", p.display()))?;
-            serde_json::from_str(&text).map_err(|e| format!("reading {}: {e}", p.display()))
+            Child::Ended(
+                std::fs::read_to_string(&p)
+                    .map_err(|e| format!("reading {}: {e}", p.display()))
+                    .and_then(|text| {
+                        serde_json::from_str(&text)
+                            .map_err(|e| format!("reading {}: {e}", p.display()))
+                    }),
+            )
         }
-        Some(c) => Err(stderr
+        Some(c) => Child::Ended(Err(stderr
             .lines()
             .filter_map(|l| l.strip_prefix("futago: error: "))
             .next_back()
             .map(str::to_string)
-            .unwrap_or_else(|| format!("the run exited with status {c}: {}", stderr.trim()))),
+            .unwrap_or_else(|| {
+                format!("the run exited with status {c}: {}", stderr.trim())
+            }))),
         None => {
             use std::os::unix::process::ExitStatusExt;
+            if let (Some(parent), Some(name)) = (dir.parent(), dir.file_name()) {
+                let partial = parent.join(format!(".{}.partial-{pid}", name.to_string_lossy()));
+                let _ = std::fs::remove_dir_all(partial);
+            }
             let sig = o.status.signal().unwrap_or(0);
             let name = match sig {
                 4 => "SIGILL",
@@ -350,8 +433,8 @@ fn run_child(job: &Job, iso: &Isolation, dir: &Path, force: bool) -> Result<Valu
                 11 => "SIGSEGV",
                 _ => "a signal",
             };
-            Err(format!(
-                "the run crashed (signal {sig}, {name}{}); nothing of it was written, the suite's other runs are kept",
+            Child::Crashed(format!(
+                "signal {sig}, {name}{}",
                 if o.status.core_dumped() {
                     ", core dumped"
                 } else {
@@ -413,6 +496,7 @@ fn summarise(entries: &[Entry], shard: Option<Shard>, jobs: usize, wall: f64) ->
                     _ => "failed",
                 },
                 "error": e.result.as_ref().err(),
+                "crashes": e.crashes,
                 "gates": g,
                 "metrics": e.result.as_ref().ok().map(|s| s["metrics"].clone()),
                 "sim_time_s": e.result.as_ref().ok().map(|s| s["sim_time_s"].clone()),
@@ -791,6 +875,7 @@ mod tests {
             name: format!("{file}/seed-{seed}"),
             sweep: Some((file.into(), seed)),
             result: Ok(json!({ "gates": [], "metrics": { "scan3d.views_to_95": views } })),
+            crashes: Vec::new(),
             versus: if versus {
                 vec![crate::ground_truth::Gate {
                     metric: "scan3d.views_to_95".into(),
@@ -844,6 +929,7 @@ mod tests {
                           "message": "ok" }
                     ]
                 })),
+                crashes: Vec::new(),
                 versus: Vec::new(),
             },
             Entry {
@@ -851,6 +937,7 @@ mod tests {
                 name: "b".into(),
                 sweep: None,
                 result: Err("GPU <lost> & gone".into()),
+                crashes: Vec::new(),
                 versus: Vec::new(),
             },
         ];

@@ -8,10 +8,19 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 fn futago(args: &[&str], crash: Option<&str>) -> Output {
+    futago_crashing_once(args, crash, None)
+}
+
+/// `futago ARGS`, with the run of scenario `crash` aborting: every time, or only the first
+/// time when `once` names the flag file that records the crash.
+fn futago_crashing_once(args: &[&str], crash: Option<&str>, once: Option<&Path>) -> Output {
     let mut c = Command::new(env!("CARGO_BIN_EXE_futago"));
     c.args(args).current_dir(env!("CARGO_MANIFEST_DIR"));
     if let Some(name) = crash {
         c.env("FUTAGO_CRASH_RUN", name);
+    }
+    if let Some(flag) = once {
+        c.env("FUTAGO_CRASH_ONCE", flag);
     }
     c.output().expect("futago runs")
 }
@@ -79,6 +88,25 @@ fn a_crashed_run_is_that_runs_error_and_the_others_are_kept() {
             .contains("crashed (signal 6, SIGABRT"),
         "{b}"
     );
+    // It crashed on its try and on its retry, and neither left a half-written folder.
+    assert!(
+        b["error"].as_str().unwrap().contains("on each of 2 tries"),
+        "{b}"
+    );
+    assert_eq!(
+        String::from_utf8_lossy(&o.stderr)
+            .matches("run b crashed")
+            .count(),
+        1,
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let left: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.contains(".partial"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
     for n in ["a", "c"] {
         let r = by_name(n);
         assert_eq!(r["status"], "passed", "{r}");
@@ -118,4 +146,65 @@ fn a_crashed_run_is_that_runs_error_and_the_others_are_kept() {
     assert_eq!(suite_json(&out2)["errors"], 1);
     assert_eq!(suite_json(&out2)["passed"], 2);
     assert!(!out2.join(".suite-running").exists());
+}
+
+#[test]
+fn a_run_that_crashes_once_is_run_again_and_its_results_are_those_of_a_clean_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    scenarios(&dir);
+    let run = |out: &Path, once: Option<&Path>| {
+        futago_crashing_once(
+            &[
+                "suite",
+                dir.to_str().unwrap(),
+                "--jobs",
+                "2",
+                "--isolate",
+                "--set",
+                "duration=1.0",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            once.map(|_| "b"),
+            once,
+        )
+    };
+    let flag = tmp.path().join("crashed-once");
+    let out = tmp.path().join("out");
+    let o = run(&out, Some(&flag));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(flag.exists(), "the first try did not crash: {err}");
+    assert!(
+        err.contains("run b crashed (signal 6, SIGABRT") && err.contains("running it again"),
+        "{err}"
+    );
+    assert!(err.contains("run b completed on try 2"), "{err}");
+    let s = suite_json(&out);
+    assert_eq!(s["passed"], 3);
+    let b = s["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["scenario"] == "b")
+        .unwrap();
+    let crashes = b["crashes"].as_array().unwrap();
+    assert_eq!(crashes.len(), 1, "{b}");
+    assert!(
+        crashes[0]
+            .as_str()
+            .unwrap()
+            .starts_with("signal 6, SIGABRT"),
+        "{b}"
+    );
+    // The retry's files are byte for byte those of a suite in which nothing crashed.
+    let clean = tmp.path().join("clean");
+    let o = run(&clean, None);
+    assert_eq!(o.status.code(), Some(0));
+    for f in ["groundtruth.txt", "odometry.txt", "scans.clf"] {
+        let a = std::fs::read(out.join("b").join(f)).unwrap();
+        let c = std::fs::read(clean.join("b").join(f)).unwrap();
+        assert!(a == c, "b/{f} differs after the retry");
+    }
 }
