@@ -98,6 +98,17 @@ fn parse_bag(s: &Seed, _: &mut Worlds) {
     let _ = rosbag::read_with(&s.bytes, &carmen::ReadOptions::default());
 }
 
+/// An MCAP file of ROS 2 messages (its records, chunks and CDR payloads), strictly and
+/// salvaging.
+fn parse_mcap(s: &Seed, _: &mut Worlds) {
+    let strict = carmen::ReadOptions {
+        strict: true,
+        ..Default::default()
+    };
+    let _ = futago_msgs::rosbag2::read_mcap(&s.bytes, &strict);
+    let _ = futago_msgs::rosbag2::read_mcap(&s.bytes, &carmen::ReadOptions::default());
+}
+
 fn parse_tum(s: &Seed, _: &mut Worlds) {
     let t = text(&s.bytes);
     let _ = tum::parse(&t);
@@ -326,6 +337,12 @@ pub fn targets(root: &Path) -> Result<Vec<Target>> {
                 ),
             ],
             parse: parse_bag,
+        },
+        Target {
+            name: "mcap",
+            text: false,
+            seeds: vec![made("fuzz.mcap", futago_msgs::rosbag2::example_mcap())],
+            parse: parse_mcap,
         },
         Target {
             name: "map_yaml",

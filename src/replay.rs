@@ -12,10 +12,14 @@ use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Reads a log by its extension: CARMEN (`.clf`, `.log`, `.carmen`) or ROS 1 bag (`.bag`),
-/// with the reader's options: salvage of a damaged log unless `o.strict`, and the bag's
-/// topics.
+/// Reads a log by its extension: CARMEN (`.clf`, `.log`, `.carmen`), ROS 1 bag (`.bag`), or
+/// ROS 2 bag (a rosbag2 folder with its `metadata.yaml`, an `.mcap` file, or a `.db3` file in
+/// its folder), with the reader's options: salvage of a damaged log unless `o.strict`, and the
+/// bag's topics.
 pub fn read_log_with(path: &Path, o: &carmen::ReadOptions) -> Result<carmen::Log> {
+    if path.is_dir() {
+        return futago_msgs::rosbag2::read_folder(path, o).map_err(anyhow::Error::msg);
+    }
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
@@ -48,8 +52,9 @@ pub fn read_log_with(path: &Path, o: &carmen::ReadOptions) -> Result<carmen::Log
             futago_msgs::rosbag::read_with(&bytes, o)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
         }
+        "mcap" | "db3" => futago_msgs::rosbag2::read_path(path, o).map_err(anyhow::Error::msg),
         _ => bail!(
-            "{}: unknown log format `.{ext}`; expected a CARMEN log (.clf, .log, .carmen) or a ROS 1 bag (.bag)",
+            "{}: unknown log format `.{ext}`; expected a CARMEN log (.clf, .log, .carmen), a ROS 1 bag (.bag), or a ROS 2 bag (a rosbag2 folder, .mcap, .db3)",
             path.display()
         ),
     }

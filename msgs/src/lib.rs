@@ -17,6 +17,7 @@ pub mod pedestrians;
 pub mod ply;
 pub mod profile;
 pub mod rosbag;
+pub mod rosbag2;
 pub mod tum;
 
 use serde::{Deserialize, Serialize};

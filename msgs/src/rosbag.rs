@@ -115,37 +115,37 @@ fn field_u32(f: &HashMap<String, Vec<u8>>, name: &str) -> Result<u32, String> {
 
 /// What a bag holds of interest, before pairing scans with odometry.
 #[derive(Default)]
-struct Raw {
+pub(crate) struct Raw {
     /// Connection id → (topic, message type).
-    conns: HashMap<u32, (String, String)>,
+    pub(crate) conns: HashMap<u32, (String, String)>,
     /// Each scan with its connection and its header's `seq`.
-    scans: Vec<(u32, u32, LaserScan)>,
+    pub(crate) scans: Vec<(u32, u32, LaserScan)>,
     /// Annotated people: how many scans (of any topic) came before each in the file, its id
     /// and position.
-    people: Vec<(usize, u32, [f64; 2])>,
+    pub(crate) people: Vec<(usize, u32, [f64; 2])>,
     /// Each odometry message's connection, header `seq`, stamp, pose and child frame.
-    odometry: Vec<(u32, u32, Time, Pose2, String)>,
+    pub(crate) odometry: Vec<(u32, u32, Time, Pose2, String)>,
     /// tf: child frame → (parent frame, transform), the last one seen.
-    tf: HashMap<String, (String, Transform)>,
-    skipped: std::collections::BTreeMap<String, usize>,
+    pub(crate) tf: HashMap<String, (String, Transform)>,
+    pub(crate) skipped: std::collections::BTreeMap<String, usize>,
     /// Messages read, by topic.
-    messages: std::collections::BTreeMap<String, usize>,
+    pub(crate) messages: std::collections::BTreeMap<String, usize>,
     /// Salvaging: what was lost, and the last stamp read (for the gaps).
-    salvage: bool,
-    damage: Damage,
-    last_stamp: Option<Time>,
+    pub(crate) salvage: bool,
+    pub(crate) damage: Damage,
+    pub(crate) last_stamp: Option<Time>,
     /// Salvaging: messages on connections not (yet) defined, with their offset: the
     /// definition may come later (a bag repeats them after its chunks), or have been lost.
-    pending: Vec<(usize, u32, Vec<u8>)>,
+    pub(crate) pending: Vec<(usize, u32, Vec<u8>)>,
 }
 
 impl Raw {
-    fn stamp(&mut self, t: Time) {
+    pub(crate) fn stamp(&mut self, t: Time) {
         self.last_stamp = Some(t);
         self.damage.stamp_read(t);
     }
 
-    fn lose(&mut self, at: usize, what: String, bytes: usize) {
+    pub(crate) fn lose(&mut self, at: usize, what: String, bytes: usize) {
         self.damage.lose(
             at as u64,
             format!("byte {at}: {what}"),
@@ -196,9 +196,9 @@ impl Raw {
 
 /// A tf transform: translation and unit quaternion `[x, y, z, w]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Transform {
-    t: [f64; 3],
-    q: [f64; 4],
+pub(crate) struct Transform {
+    pub(crate) t: [f64; 3],
+    pub(crate) q: [f64; 4],
 }
 
 impl Transform {
@@ -256,30 +256,49 @@ fn tf_message(data: &[u8]) -> Result<Vec<(String, String, Transform)>, String> {
         for x in &mut v {
             *x = c.f64("transform")?;
         }
-        let norm = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]).sqrt();
-        if !(v.iter().all(|x| x.is_finite()) && (norm - 1.0).abs() < 1e-3)
-            || v[..3].iter().any(|x| x.abs() > crate::MAX_COORDINATE)
-        {
-            return Err(format!(
-                "transform {parent} → {child}: expected a finite translation within ±{} m and a unit quaternion, found {v:?}",
-                crate::MAX_COORDINATE
-            ));
-        }
-        out.push((
-            parent,
-            child,
-            Transform {
-                t: [v[0], v[1], v[2]],
-                q: [v[3], v[4], v[5], v[6]],
-            },
-        ));
+        let t = checked_transform(&parent, &child, v)?;
+        out.push((parent, child, t));
     }
     Ok(out)
 }
 
+/// The transform `parent → child` of translation and quaternion `v`, checked: finite, within
+/// the coordinate bound, and a unit quaternion.
+pub(crate) fn checked_transform(
+    parent: &str,
+    child: &str,
+    v: [f64; 7],
+) -> Result<Transform, String> {
+    let norm = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]).sqrt();
+    if !(v.iter().all(|x| x.is_finite()) && (norm - 1.0).abs() < 1e-3)
+        || v[..3].iter().any(|x| x.abs() > crate::MAX_COORDINATE)
+    {
+        return Err(format!(
+            "transform {parent} → {child}: expected a finite translation within ±{} m and a unit quaternion, found {v:?}",
+            crate::MAX_COORDINATE
+        ));
+    }
+    Ok(Transform {
+        t: [v[0], v[1], v[2]],
+        q: [v[3], v[4], v[5], v[6]],
+    })
+}
+
+/// A logged range as futago reads it: itself below `range_max`, NaN kept, anything else
+/// (beyond range, infinite) no return.
+pub(crate) fn range_as_read(r: f32, range_max: f64) -> f32 {
+    if r.is_finite() && (r as f64) < range_max {
+        r
+    } else if r.is_nan() {
+        f32::NAN
+    } else {
+        f32::INFINITY
+    }
+}
+
 /// A frame's name as tf2 knows it: without the leading `/` that ROS 1 tf allowed
 /// (`/base_link` and `base_link` are one frame).
-fn frame_name(s: String) -> String {
+pub(crate) fn frame_name(s: String) -> String {
     match s.strip_prefix('/') {
         Some(rest) => rest.to_string(),
         None => s,
@@ -324,13 +343,7 @@ fn laser_scan(data: &[u8]) -> Result<(u32, LaserScan), String> {
     let mut ranges = Vec::with_capacity(n);
     for _ in 0..n {
         let r = c.f32("range")?;
-        ranges.push(if r.is_finite() && (r as f64) < range_max {
-            r
-        } else if r.is_nan() {
-            f32::NAN
-        } else {
-            f32::INFINITY
-        });
+        ranges.push(range_as_read(r, range_max));
     }
     Ok((
         seq,
@@ -793,6 +806,12 @@ pub fn read_with(bytes: &[u8], o: &ReadOptions) -> Result<Log, BagError> {
     records(&bytes[MAGIC.len()..], MAGIC.len(), &mut raw, false, false)?;
     // Messages whose connection was defined after them (or never, its record lost).
     raw.settle_pending();
+    assemble(raw, o)
+}
+
+/// The log of what a bag held (`raw`, ROS 1 or ROS 2): the chosen scan and odometry streams in
+/// the order they were taken, each scan with the odometry at its stamp and its laser's mount.
+pub(crate) fn assemble(mut raw: Raw, o: &ReadOptions) -> Result<Log, BagError> {
     let topic_of = |conn: u32| {
         raw.conns
             .get(&conn)

@@ -124,3 +124,42 @@ material = "plaster"
 center = [5.2, 0.8]
 size = [0.8, 0.5, 0.6]
 "#;
+
+/// The environment variable naming the Python interpreter that has the independent ROS 2
+/// tools (`rosbags`, `mcap`, `mcap-ros2-support`); `python3` when unset.
+pub const PYTHON_ENV: &str = "FUTAGO_PYTHON";
+
+/// With `FUTAGO_REQUIRE_PYTHON=1` a test whose Python tools are missing fails instead of
+/// skipping (CI sets it, having installed them).
+pub const REQUIRE_PYTHON_ENV: &str = "FUTAGO_REQUIRE_PYTHON";
+
+/// The Python interpreter that imports every module of `modules`, or `None` (the skip printed)
+/// when there is none, for the test `test`.
+pub fn python_with(test: &str, modules: &[&str]) -> Option<PathBuf> {
+    let python = std::env::var_os(PYTHON_ENV)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("python3"));
+    let script = modules
+        .iter()
+        .map(|m| format!("import {m}"))
+        .collect::<Vec<_>>()
+        .join("; ");
+    let found = Command::new(&python)
+        .args(["-c", &script])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if found {
+        return Some(python);
+    }
+    let line = format!(
+        "skipped {test}: needs {} importing {} (pip install {} in a virtual environment, and set {PYTHON_ENV} to its python)",
+        python.display(),
+        modules.join(", "),
+        modules.join(" ")
+    );
+    if std::env::var(REQUIRE_PYTHON_ENV).is_ok_and(|v| v == "1") {
+        panic!("{line} ({REQUIRE_PYTHON_ENV}=1 makes this a failure)");
+    }
+    println!("{line}");
+    None
+}
