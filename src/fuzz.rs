@@ -674,7 +674,7 @@ mod tests {
     #[test]
     fn every_target_has_seeds_that_parse() {
         let targets = targets(&root()).unwrap();
-        assert_eq!(targets.len(), 12);
+        assert_eq!(targets.len(), 13);
         for t in &targets {
             assert!(!t.seeds.is_empty(), "{}", t.name);
         }
@@ -697,6 +697,18 @@ mod tests {
             let bag = rosbag::example_mounted(c, [0.0, 0.0, 0.0, 1.0]);
             assert_eq!(rosbag::read(&bag).unwrap().scans.len(), 1);
         }
+        let mcap = futago_msgs::rosbag2::example_mcap();
+        let strict = carmen::ReadOptions {
+            strict: true,
+            ..Default::default()
+        };
+        assert_eq!(
+            futago_msgs::rosbag2::read_mcap(&mcap, &strict)
+                .unwrap()
+                .scans
+                .len(),
+            1
+        );
         let text = String::from_utf8(landmarks_seed(&root()).unwrap()).unwrap();
         let f = futago_msgs::landmarks::LandmarkFile::parse(Path::new("l.json"), &text).unwrap();
         assert_eq!(f.landmarks.len(), 20);
