@@ -752,8 +752,9 @@ pub fn evaluate(s: &Scenario, opts: &RunOptions) -> Result<Scored> {
 
 /// Runs a scenario and writes its results into `out` (created or replaced whole).
 pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcome)> {
-    crash_if_asked(&s.spec.name);
     write_atomically(out, opts.force, "run", |tmp| {
+        // Injected here, the crash leaves a half-written folder behind, as a real one would.
+        crash_if_asked(&s.spec.name);
         let scored = simulate_scored(s, opts, Some(tmp))?;
         let relations = &scored.relations;
         let outcome = &scored.outcome;

@@ -88,7 +88,8 @@ fn a_crashed_run_is_that_runs_error_and_the_others_are_kept() {
             .contains("crashed (signal 6, SIGABRT"),
         "{b}"
     );
-    // It crashed on its try and on its retry, and neither left a half-written folder.
+    // It crashed on its try and on its retry (each after creating its temporary folder), and
+    // neither left that folder behind.
     assert!(
         b["error"].as_str().unwrap().contains("on each of 2 tries"),
         "{b}"
