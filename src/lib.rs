@@ -43,6 +43,7 @@ pub mod cmaes;
 #[cfg(test)]
 mod config_walk;
 pub mod crowd;
+pub mod export;
 pub mod folds;
 pub mod fuzz;
 pub mod legs_train;

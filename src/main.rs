@@ -48,7 +48,21 @@ enum Command {
         #[arg(long, short)]
         quiet: bool,
     },
-    /// Run the robot stack's SLAM on a real robot's log (CARMEN or ROS 1 bag) and score it against
+    /// Write a finished run's folder as a ROS 2 bag: an MCAP file (scans, odometry, tf, ground
+    /// truth, its map, /clock) with rosbag2's metadata.yaml, for ros2 bag play and Foxglove.
+    Export {
+        /// The folder `futago run` wrote.
+        run: PathBuf,
+        /// Where the bag goes [default: RUN.ros2 beside the run folder].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Replace the output even when it holds files futago did not write (never `/`, the
+        /// home folder, the current folder or its parents, or a folder with a `.git`).
+        #[arg(long)]
+        force: bool,
+    },
+    /// Run the robot stack's SLAM on a real robot's log (CARMEN, ROS 1 bag, or ROS 2 bag: a
+    /// rosbag2 folder, .mcap or .db3) and score it against
     /// ground-truth relations (Kümmerle et al. 2009): writes trajectory.txt, odometry.txt (TUM),
     /// map.pgm/map.yaml and summary.json.
     Replay {
@@ -203,7 +217,7 @@ enum Command {
         #[command(flatten)]
         overlays: OverlayArgs,
     },
-    /// Fuzz every parser (scenario, overlay, world, glTF, CARMEN, ROS bag, TUM, relations, landmark map) with
+    /// Fuzz every parser (scenario, overlay, world, glTF, CARMEN, ROS bag, MCAP, TUM, relations, landmark map) with
     /// mutated inputs from the project's own files; exits 1 if any input makes one panic, and
     /// writes those inputs to OUT/.
     Fuzz {
@@ -774,6 +788,7 @@ fn real_main() -> Result<u8> {
             let out = out.unwrap_or_else(|| PathBuf::from("out/suite"));
             suite::print(&suite::merge(&shards, &out, force)?, &out)
         }
+        Command::Export { run, out, force } => futago::export::command(&run, out, force)?,
         Command::Replay {
             log,
             relations,

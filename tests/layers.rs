@@ -19,6 +19,7 @@ const LAYERS: &[(&str, &[&str])] = &[
             "cmaes",
             "parallel",
             "run",
+            "export",
             "world_cmd",
             "replay",
             "legs_train",

@@ -16,6 +16,7 @@ pub mod map_server;
 pub mod pedestrians;
 pub mod ply;
 pub mod profile;
+pub mod ros2msg;
 pub mod rosbag;
 pub mod rosbag2;
 pub mod tum;

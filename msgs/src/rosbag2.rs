@@ -618,6 +618,11 @@ impl<'a> Cdr<'a> {
     }
 }
 
+/// A `sensor_msgs/msg/LaserScan`'s CDR payload decoded, ranges as futago reads them.
+pub fn decode_laser_scan(body: &[u8]) -> Result<LaserScan, String> {
+    laser_scan(body)
+}
+
 fn laser_scan(body: &[u8]) -> Result<LaserScan, String> {
     let mut c = Cdr::new(body)?;
     let (stamp, frame) = c.header()?;
@@ -742,6 +747,12 @@ impl CdrWriter {
         self.u32(s.len() as u32 + 1);
         self.buf.extend(s.as_bytes());
         self.buf.push(0);
+        self
+    }
+
+    /// An `int8[]`/`uint8[]` sequence's elements (its length written before).
+    pub fn bytes(&mut self, b: &[u8]) -> &mut Self {
+        self.buf.extend_from_slice(b);
         self
     }
 

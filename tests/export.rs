@@ -1,0 +1,172 @@
+//! `futago export`: a finished run as a ROS 2 bag (MCAP with rosbag2's metadata.yaml), read
+//! back by futago's own ROS 2 reader and, where Python has them, by the independent readers
+//! `mcap` with `mcap-ros2-support` (decoding every message by the schemas the file carries)
+//! and `rosbags` (reading the folder as a rosbag2 bag and deserialising by its own definitions).
+
+mod common;
+use common::{futago, ok, python_with, root};
+use std::path::Path;
+
+/// Runs `scenario` for `seconds` into `dir/run` and exports it to `dir/bag`.
+fn run_and_export(dir: &Path, scenario: &str, seconds: &str) -> (std::path::PathBuf, String) {
+    let run = dir.join("run");
+    let o = futago(&[
+        "run",
+        root().join(scenario).to_str().unwrap(),
+        "--duration",
+        seconds,
+        "-q",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    // Cut short, a run may fail its gates (exit 3); its files are written all the same.
+    assert!(
+        matches!(o.status.code(), Some(0) | Some(3)),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let bag = dir.join("bag");
+    let o = futago(&[
+        "export",
+        run.to_str().unwrap(),
+        "--out",
+        bag.to_str().unwrap(),
+    ]);
+    ok(&o);
+    (run, String::from_utf8_lossy(&o.stdout).to_string())
+}
+
+#[test]
+fn an_exported_run_reads_back_as_the_run_it_was() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (run, printed) = run_and_export(tmp.path(), "scenarios/hall-two-lasers.toml", "2");
+    let bag = tmp.path().join("bag");
+    assert!(bag.join("metadata.yaml").is_file());
+    assert!(
+        printed.contains("/scan ") && printed.contains("/scan_rear "),
+        "{printed}"
+    );
+    let text = std::fs::read_to_string(run.join("scans.clf")).unwrap();
+    let clf = futago_msgs::carmen::read(&text).unwrap();
+    let back = futago::replay::read_log_with(
+        &bag,
+        &futago_msgs::carmen::ReadOptions {
+            strict: true,
+            scan_topic: Some("/scan".into()),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let front: Vec<_> = clf
+        .scans
+        .iter()
+        .filter(|s| s.scan.frame == "front")
+        .collect();
+    assert_eq!(back.scans.len(), front.len());
+    assert!(!front.is_empty());
+    for (a, b) in front.iter().zip(&back.scans) {
+        assert_eq!(a.scan.stamp, b.scan.stamp);
+        assert_eq!(a.scan.frame, b.scan.frame);
+        assert_eq!(a.scan.ranges.len(), b.scan.ranges.len());
+        for (r, s) in a.scan.ranges.iter().zip(&b.scan.ranges) {
+            assert!(r == s || (r.is_nan() && s.is_nan()), "{r} {s}");
+        }
+        // The mount on /tf_static, as the log gave it.
+        assert!((a.mount.x - b.mount.x).abs() < 1e-9 && (a.mount.y - b.mount.y).abs() < 1e-9);
+        assert!((a.mount.theta - b.mount.theta).abs() < 1e-9);
+        // The odometry at the scan, interpolated from /odom as from the log's ODOM records,
+        // which sample the same odometry.
+        assert!(
+            (a.odometry.x - b.odometry.x).abs() < 1e-3,
+            "{:?} {:?}",
+            a.odometry,
+            b.odometry
+        );
+        assert!((a.odometry.y - b.odometry.y).abs() < 1e-3);
+    }
+    // Exported twice, the same bytes.
+    let again = tmp.path().join("again");
+    ok(&futago(&[
+        "export",
+        run.to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+    ]));
+    assert!(
+        std::fs::read(bag.join("bag.mcap")).unwrap()
+            == std::fs::read(again.join("again.mcap")).unwrap()
+    );
+    // Not a run folder: an error that says so.
+    let o = futago(&[
+        "export",
+        tmp.path().to_str().unwrap(),
+        "--out",
+        tmp.path().join("x").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not a run folder"));
+}
+
+/// Decodes every message of the bag with Python's `mcap` + `mcap-ros2-support` and with
+/// `rosbags`; prints `topic count` lines from each.
+const READERS: &str = r#"
+import sys, collections
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+bag = sys.argv[1]
+counts = collections.Counter()
+with open(bag + "/" + bag.rstrip("/").split("/")[-1] + ".mcap", "rb") as f:
+    reader = make_reader(f, decoder_factories=[DecoderFactory()])
+    assert reader.get_header().profile == "ros2", reader.get_header().profile
+    for schema, channel, message, ros in reader.iter_decoded_messages():
+        counts[channel.topic] += 1
+        if channel.topic == "/scan":
+            assert ros.header.frame_id == "front" and len(ros.ranges) > 0
+        if channel.topic == "/map":
+            assert len(ros.data) == ros.info.width * ros.info.height > 0
+for t, n in sorted(counts.items()):
+    print("mcap", t, n)
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
+store = get_typestore(Stores.ROS2_HUMBLE)
+counts = collections.Counter()
+with Reader(bag) as reader:
+    for conn, stamp, raw in reader.messages():
+        msg = store.deserialize_cdr(raw, conn.msgtype)
+        counts[conn.topic] += 1
+        if conn.topic == "/tf_static":
+            assert conn.ext.offered_qos_profiles[0].durability.value == 1, conn.ext
+for t, n in sorted(counts.items()):
+    print("rosbags", t, n)
+"#;
+
+#[test]
+fn independent_readers_decode_every_message_of_an_export() {
+    let test = "independent_readers_decode_every_message_of_an_export";
+    let Some(python) = python_with(test, &["rosbags", "mcap", "mcap_ros2"]) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, printed) = run_and_export(tmp.path(), "scenarios/office-explore.toml", "4");
+    assert!(printed.contains("/map 1"), "{printed}");
+    let o = std::process::Command::new(python)
+        .args(["-c", READERS, tmp.path().join("bag").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // Both readers count what futago says it wrote, topic by topic.
+    for item in printed.trim().split(": ").nth(1).unwrap().split(", ") {
+        let (topic, n) = item.rsplit_once(' ').unwrap();
+        for reader in ["mcap", "rosbags"] {
+            assert!(
+                out.contains(&format!("{reader} {topic} {n}\n")),
+                "{reader} {topic} {n}: {out}"
+            );
+        }
+    }
+}
