@@ -170,3 +170,117 @@ fn independent_readers_decode_every_message_of_an_export() {
         }
     }
 }
+
+/// The same values serialised by `rosbags` (its ROS 2 Humble definitions, the official ones):
+/// prints each type's CDR bytes in hex, one `TYPE HEX` line each.
+const ROSBAGS_SERIALISES: &str = r#"
+import numpy as np
+from rosbags.typesys import Stores, get_typestore
+ts = get_typestore(Stores.ROS2_HUMBLE)
+T = ts.types
+def time(ns): return T['builtin_interfaces/msg/Time'](sec=ns // 10**9, nanosec=ns % 10**9)
+def header(ns, frame): return T['std_msgs/msg/Header'](stamp=time(ns), frame_id=frame)
+def point(x, y, z): return T['geometry_msgs/msg/Point'](x=x, y=y, z=z)
+def vec(x, y, z): return T['geometry_msgs/msg/Vector3'](x=x, y=y, z=z)
+def quat(x, y, z, w): return T['geometry_msgs/msg/Quaternion'](x=x, y=y, z=z, w=w)
+import math
+def planar(x, y, yaw): return (x, y, 0.0, 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+def pose(p): return T['geometry_msgs/msg/Pose'](position=point(*p[:3]), orientation=quat(*p[3:]))
+t = 12_000_000_005
+msgs = {
+  'rosgraph_msgs/msg/Clock': T['rosgraph_msgs/msg/Clock'](clock=time(t)),
+  'sensor_msgs/msg/LaserScan': T['sensor_msgs/msg/LaserScan'](
+      header=header(t, 'front'), angle_min=-0.5, angle_max=0.0, angle_increment=0.25,
+      time_increment=0.001, scan_time=0.003, range_min=0.1, range_max=10.0,
+      ranges=np.array([1.0, np.inf, 2.5], dtype=np.float32),
+      intensities=np.array([], dtype=np.float32)),
+  'nav_msgs/msg/Odometry': T['nav_msgs/msg/Odometry'](
+      header=header(t, 'odom'), child_frame_id='base_link',
+      pose=T['geometry_msgs/msg/PoseWithCovariance'](pose=pose(planar(1.0, 2.0, 0.3)),
+          covariance=np.zeros(36)),
+      twist=T['geometry_msgs/msg/TwistWithCovariance'](
+          twist=T['geometry_msgs/msg/Twist'](linear=vec(0, 0, 0), angular=vec(0, 0, 0)),
+          covariance=np.zeros(36))),
+  'tf2_msgs/msg/TFMessage': T['tf2_msgs/msg/TFMessage'](transforms=[
+      T['geometry_msgs/msg/TransformStamped'](header=header(t, p), child_frame_id=c,
+          transform=T['geometry_msgs/msg/Transform'](translation=vec(*q[:3]), rotation=quat(*q[3:])))
+      for p, c, q in [('base_link', 'front', planar(0.13, 0.0, 0.0)),
+                      ('base_link', 'rear', planar(-0.1, 0.02, math.pi))]]),
+  'geometry_msgs/msg/PoseStamped': T['geometry_msgs/msg/PoseStamped'](
+      header=header(t, 'world'), pose=pose(planar(-3.5, 0.25, -1.0))),
+  'nav_msgs/msg/OccupancyGrid': T['nav_msgs/msg/OccupancyGrid'](
+      header=header(t, 'map'),
+      info=T['nav_msgs/msg/MapMetaData'](map_load_time=time(t), resolution=0.05, width=3,
+          height=2, origin=pose(planar(-1.0, 2.0, 0.0))),
+      data=np.array([-1, 0, 100, 50, 0, -1], dtype=np.int8)),
+}
+for name, m in msgs.items():
+    print(name, bytes(ts.serialize_cdr(m, name)).hex())
+"#;
+
+#[test]
+fn every_message_type_futago_writes_serialises_as_rosbags_serialises_it() {
+    use futago_msgs::ros2msg::{self, Pose};
+    use futago_msgs::{LaserScan, Time};
+    let test = "every_message_type_futago_writes_serialises_as_rosbags_serialises_it";
+    let Some(python) = python_with(test, &["rosbags", "numpy"]) else {
+        return;
+    };
+    let t = Time(12_000_000_005);
+    let scan = LaserScan {
+        frame: "front".into(),
+        stamp: t,
+        angle_min: -0.5,
+        angle_increment: 0.25,
+        time_increment: 0.001,
+        range_min: 0.1,
+        range_max: 10.0,
+        ranges: vec![1.0, f32::INFINITY, 2.5],
+    };
+    let mut grid = futago_msgs::grid::OccupancyGrid::new(0.05, [-1.0, 2.0], 3, 2);
+    grid.cells = vec![-1, 0, 100, 50, 0, -1];
+    let ours = [
+        ("rosgraph_msgs/msg/Clock", ros2msg::clock(t)),
+        ("sensor_msgs/msg/LaserScan", ros2msg::laser_scan(&scan)),
+        (
+            "nav_msgs/msg/Odometry",
+            ros2msg::odometry(t, "odom", "base_link", &Pose::planar(1.0, 2.0, 0.3)),
+        ),
+        (
+            "tf2_msgs/msg/TFMessage",
+            ros2msg::tf(
+                t,
+                &[
+                    ("base_link", "front", Pose::planar(0.13, 0.0, 0.0)),
+                    (
+                        "base_link",
+                        "rear",
+                        Pose::planar(-0.1, 0.02, std::f64::consts::PI),
+                    ),
+                ],
+            ),
+        ),
+        (
+            "geometry_msgs/msg/PoseStamped",
+            ros2msg::pose_stamped(t, "world", &Pose::planar(-3.5, 0.25, -1.0)),
+        ),
+        (
+            "nav_msgs/msg/OccupancyGrid",
+            ros2msg::occupancy_grid(t, "map", &grid),
+        ),
+    ];
+    let o = std::process::Command::new(python)
+        .args(["-c", ROSBAGS_SERIALISES])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for (ty, bytes) in ours {
+        let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+        let theirs = out
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("{ty} ")))
+            .unwrap_or_else(|| panic!("rosbags printed no {ty}: {out}"));
+        assert_eq!(hex, theirs, "{ty}: futago's bytes, then rosbags'");
+    }
+}
