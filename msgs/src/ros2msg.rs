@@ -128,17 +128,8 @@ pub fn laser_scan(scan: &LaserScan) -> Vec<u8> {
     let mut w = CdrWriter::default();
     w.header(scan.stamp, &scan.frame);
     let n = scan.ranges.len();
-    let angle_max = scan.angle_min + scan.angle_increment * n.saturating_sub(1) as f64;
-    for v in [
-        scan.angle_min,
-        angle_max,
-        scan.angle_increment,
-        scan.time_increment,
-        scan.time_increment * n as f64,
-        scan.range_min,
-        scan.range_max,
-    ] {
-        w.f32(v as f32);
+    for v in crate::rosbag::writer::scan_fields(scan) {
+        w.f32(v);
     }
     w.u32(n as u32);
     for r in &scan.ranges {

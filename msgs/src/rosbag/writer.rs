@@ -151,12 +151,13 @@ fn stamp_bytes(seq: u32, stamp: Time, frame: &str) -> Vec<u8> {
     m
 }
 
-/// A `sensor_msgs/LaserScan` numbered `seq` (no intensities).
-pub fn laser_scan_message(seq: u32, scan: &LaserScan) -> Vec<u8> {
-    let mut m = stamp_bytes(seq, scan.stamp, &scan.frame);
+/// A `sensor_msgs/LaserScan`'s seven numbers after its header, as ROS 1 and ROS 2 both lay them
+/// out: `angle_min`, `angle_max` (the last beam's angle), `angle_increment`, `time_increment`,
+/// `scan_time` (one beam's time for each beam), `range_min` and `range_max`.
+pub(crate) fn scan_fields(scan: &LaserScan) -> [f32; 7] {
     let n = scan.ranges.len();
     let angle_max = scan.angle_min + scan.angle_increment * n.saturating_sub(1) as f64;
-    for v in [
+    [
         scan.angle_min,
         angle_max,
         scan.angle_increment,
@@ -164,8 +165,16 @@ pub fn laser_scan_message(seq: u32, scan: &LaserScan) -> Vec<u8> {
         scan.time_increment * n as f64,
         scan.range_min,
         scan.range_max,
-    ] {
-        m.extend((v as f32).to_le_bytes());
+    ]
+    .map(|v| v as f32)
+}
+
+/// A `sensor_msgs/LaserScan` numbered `seq` (no intensities).
+pub fn laser_scan_message(seq: u32, scan: &LaserScan) -> Vec<u8> {
+    let mut m = stamp_bytes(seq, scan.stamp, &scan.frame);
+    let n = scan.ranges.len();
+    for v in scan_fields(scan) {
+        m.extend(v.to_le_bytes());
     }
     m.extend((n as u32).to_le_bytes());
     for r in &scan.ranges {
