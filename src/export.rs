@@ -178,10 +178,7 @@ pub fn export(run: &Path, out: &Path, force: bool) -> Result<Exported> {
         .collect();
     messages.push((start, topic("/tf_static"), ros2msg::tf(start, &statics)));
     for o in &odometry {
-        let p = Pose {
-            position: o.pose.translation,
-            orientation: o.pose.rotation,
-        };
+        let p = Pose::from(&o.pose);
         messages.push((
             o.stamp,
             topic("/odom"),
@@ -194,10 +191,7 @@ pub fn export(run: &Path, out: &Path, force: bool) -> Result<Exported> {
         ));
     }
     for g in &truth {
-        let p = Pose {
-            position: g.pose.translation,
-            orientation: g.pose.rotation,
-        };
+        let p = Pose::from(&g.pose);
         messages.push((
             g.stamp,
             topic("/ground_truth/pose"),

@@ -158,6 +158,15 @@ impl Pose {
     }
 }
 
+impl From<&crate::Pose3> for Pose {
+    fn from(p: &crate::Pose3) -> Pose {
+        Pose {
+            position: p.translation,
+            orientation: p.rotation,
+        }
+    }
+}
+
 fn pose(w: &mut CdrWriter, p: &Pose) {
     for v in p.position.iter().chain(&p.orientation) {
         w.f64(*v);

@@ -374,13 +374,25 @@ fn person(data: &[u8]) -> Result<(u32, [f64; 2]), String> {
         c.f64(what)?;
     }
     let id = c.u32("id")?;
+    Ok((id, checked_position("position", x, y)?))
+}
+
+/// A logged planar position `(x, y)`, checked against the coordinate bound; `what` names it in
+/// the error.
+pub(crate) fn checked_position(what: &str, x: f64, y: f64) -> Result<[f64; 2], String> {
     if crate::bounded_coordinate(x).is_none() || crate::bounded_coordinate(y).is_none() {
         return Err(format!(
-            "position ({x}, {y}) is beyond ±{} m",
+            "{what} ({x}, {y}) is beyond ±{} m of the origin",
             crate::MAX_COORDINATE
         ));
     }
-    Ok((id, [x, y]))
+    Ok([x, y])
+}
+
+/// The yaw of a general unit quaternion `[x, y, z, w]`: the z-axis rotation of the body's x
+/// axis.
+pub(crate) fn yaw_of(q: [f64; 4]) -> f64 {
+    (2.0 * (q[3] * q[2] + q[0] * q[1])).atan2(1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]))
 }
 
 fn odometry(data: &[u8]) -> Result<(u32, Time, Pose2, String), String> {
@@ -390,12 +402,7 @@ fn odometry(data: &[u8]) -> Result<(u32, Time, Pose2, String), String> {
     c.string("header frame_id")?;
     let child = frame_name(c.string("child_frame_id")?);
     let (x, y) = (c.f64("position x")?, c.f64("position y")?);
-    if crate::bounded_coordinate(x).is_none() || crate::bounded_coordinate(y).is_none() {
-        return Err(format!(
-            "odometry position ({x}, {y}) is beyond ±{} m of the origin",
-            crate::MAX_COORDINATE
-        ));
-    }
+    checked_position("odometry position", x, y)?;
     c.f64("position z")?;
     let q = [
         c.f64("orientation x")?,
@@ -403,9 +410,7 @@ fn odometry(data: &[u8]) -> Result<(u32, Time, Pose2, String), String> {
         c.f64("orientation z")?,
         c.f64("orientation w")?,
     ];
-    // Yaw of a general quaternion (z-axis rotation of the body's x axis).
-    let yaw = (2.0 * (q[3] * q[2] + q[0] * q[1])).atan2(1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]));
-    Ok((seq, stamp, Pose2::new(x, y, yaw), child))
+    Ok((seq, stamp, Pose2::new(x, y, yaw_of(q)), child))
 }
 
 /// A compressed chunk's contents, decompressed no further than the header's `size` (a

@@ -14,7 +14,7 @@
 //! `ruzstd` (both pure Rust).
 
 use crate::carmen::{Log, ReadOptions};
-use crate::rosbag::{BagError, Raw, Transform, assemble, frame_name};
+use crate::rosbag::{BagError, Raw, Transform, assemble, checked_position, frame_name, yaw_of};
 use crate::{LaserScan, Pose2, Time};
 use std::collections::HashMap;
 use std::io::Read;
@@ -213,7 +213,7 @@ fn ros1_name(ty: &str) -> String {
     }
 }
 
-/// The channels an MCAP walk has met: id → (topic, type, message encoding).
+/// The channels an MCAP walk has met: id → (topic, type in ROS 1 spelling, message encoding).
 #[derive(Default)]
 struct Channels {
     schemas: HashMap<u16, String>,
@@ -320,9 +320,9 @@ fn record(
             seen.schemas.insert(header.id, header.name);
         }
         mcap::records::Record::Channel(c) => {
-            let ty = seen.schemas.get(&c.schema_id).cloned().unwrap_or_default();
+            let ty = ros1_name(seen.schemas.get(&c.schema_id).map_or("", String::as_str));
             raw.conns
-                .insert(u32::from(c.id), (c.topic.clone(), ros1_name(&ty)));
+                .insert(u32::from(c.id), (c.topic.clone(), ty.clone()));
             seen.channels
                 .insert(c.id, (c.topic, ty, c.message_encoding));
         }
@@ -340,13 +340,13 @@ fn record(
                 return Ok(());
             }
             let body = if zstd_messages {
-                unzstd(&data, MAX_CHUNK).map_err(|e| format!("{MESSAGE_ERROR}{topic}: {e}"))?
+                std::borrow::Cow::Owned(
+                    unzstd(&data, MAX_CHUNK).map_err(|e| format!("{MESSAGE_ERROR}{topic}: {e}"))?,
+                )
             } else {
-                data.into_owned()
+                data
             };
-            let ty = ros1_name(ty);
-            let topic = topic.clone();
-            message(raw, u32::from(header.channel_id), &topic, &ty, &body)
+            message(raw, u32::from(header.channel_id), topic, ty, &body)
                 .map_err(|e| format!("{MESSAGE_ERROR}{topic} ({ty}): {e}"))?;
         }
         _ => {}
@@ -658,14 +658,8 @@ fn odometry(body: &[u8]) -> Result<(Time, Pose2, String), String> {
     let (stamp, _) = c.header()?;
     let child = frame_name(c.string("child_frame_id")?);
     let [x, y, _z, qx, qy, qz, qw] = c.doubles::<7>("pose")?;
-    if crate::bounded_coordinate(x).is_none() || crate::bounded_coordinate(y).is_none() {
-        return Err(format!(
-            "odometry position ({x}, {y}) is beyond ±{} m of the origin",
-            crate::MAX_COORDINATE
-        ));
-    }
-    let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
-    Ok((stamp, Pose2::new(x, y, yaw), child))
+    checked_position("odometry position", x, y)?;
+    Ok((stamp, Pose2::new(x, y, yaw_of([qx, qy, qz, qw])), child))
 }
 
 fn tf_message(body: &[u8]) -> Result<Vec<(String, String, Transform)>, String> {
@@ -691,13 +685,7 @@ fn person(body: &[u8]) -> Result<(u32, [f64; 2]), String> {
     let mut c = Cdr::new(body)?;
     let [x, y, ..] = c.doubles::<7>("pose")?;
     let id = c.u32("id")?;
-    if crate::bounded_coordinate(x).is_none() || crate::bounded_coordinate(y).is_none() {
-        return Err(format!(
-            "position ({x}, {y}) is beyond ±{} m",
-            crate::MAX_COORDINATE
-        ));
-    }
-    Ok((id, [x, y]))
+    Ok((id, checked_position("position", x, y)?))
 }
 
 /// Writes CDR (XCDR1, little-endian): the encapsulation header `00 01 00 00`, then fields
