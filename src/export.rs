@@ -13,70 +13,21 @@
 use crate::run::write_atomically;
 use anyhow::{Context, Result, bail};
 use futago_msgs::ros2msg::{self, Pose};
+use futago_msgs::rosbag2::writer::BagWriter;
 use futago_msgs::{Time, carmen, tum};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// One topic of the export.
-struct Topic {
-    name: &'static str,
-    ty: &'static str,
-    /// Latched (`/tf_static`, `/map`): durability transient local, so a late subscriber gets it.
-    latched: bool,
-}
-
-const TOPICS: &[Topic] = &[
-    Topic {
-        name: "/clock",
-        ty: "rosgraph_msgs/msg/Clock",
-        latched: false,
-    },
-    Topic {
-        name: "/tf_static",
-        ty: "tf2_msgs/msg/TFMessage",
-        latched: true,
-    },
-    Topic {
-        name: "/tf",
-        ty: "tf2_msgs/msg/TFMessage",
-        latched: false,
-    },
-    Topic {
-        name: "/odom",
-        ty: "nav_msgs/msg/Odometry",
-        latched: false,
-    },
-    Topic {
-        name: "/scan",
-        ty: "sensor_msgs/msg/LaserScan",
-        latched: false,
-    },
-    Topic {
-        name: "/scan_rear",
-        ty: "sensor_msgs/msg/LaserScan",
-        latched: false,
-    },
-    Topic {
-        name: "/ground_truth/pose",
-        ty: "geometry_msgs/msg/PoseStamped",
-        latched: false,
-    },
-    Topic {
-        name: "/map",
-        ty: "nav_msgs/msg/OccupancyGrid",
-        latched: true,
-    },
+/// The export's topics in the order they are declared: name, type, latched.
+const TOPICS: &[(&str, &str, bool)] = &[
+    ("/tf_static", "tf2_msgs/msg/TFMessage", true),
+    ("/tf", "tf2_msgs/msg/TFMessage", false),
+    ("/odom", "nav_msgs/msg/Odometry", false),
+    ("/scan", "sensor_msgs/msg/LaserScan", false),
+    ("/scan_rear", "sensor_msgs/msg/LaserScan", false),
+    ("/ground_truth/pose", "geometry_msgs/msg/PoseStamped", false),
+    ("/map", "nav_msgs/msg/OccupancyGrid", true),
 ];
-
-/// rosbag2's QoS profile of a topic, as the YAML string it keeps in a channel's metadata and
-/// in `metadata.yaml`: reliable, keep last; transient local when latched, else volatile.
-fn qos(latched: bool) -> String {
-    format!(
-        "- history: 1\n  depth: {}\n  reliability: 1\n  durability: {}\n  deadline:\n    sec: 0\n    nsec: 0\n  lifespan:\n    sec: 0\n    nsec: 0\n  liveliness: 1\n  liveliness_lease_duration:\n    sec: 0\n    nsec: 0\n  avoid_ros_namespace_conventions: false\n",
-        if latched { 1 } else { 10 },
-        if latched { 1 } else { 2 }
-    )
-}
 
 /// What an export wrote: messages by topic.
 pub struct Exported {
@@ -149,7 +100,7 @@ pub fn export(run: &Path, out: &Path, force: bool) -> Result<Exported> {
 
     // Every message, with its topic's index and its log time; sorted, then written.
     let mut messages: Vec<(Time, usize, Vec<u8>)> = Vec::new();
-    let topic = |name: &str| TOPICS.iter().position(|t| t.name == name).expect("a topic");
+    let topic = |name: &str| TOPICS.iter().position(|t| t.0 == name).expect("a topic");
     let start = log
         .scans
         .first()
@@ -182,7 +133,7 @@ pub fn export(run: &Path, out: &Path, force: bool) -> Result<Exported> {
         messages.push((
             o.stamp,
             topic("/odom"),
-            ros2msg::odometry(o.stamp, "odom", "base_link", &p),
+            ros2msg::odometry(o.stamp, "odom", "base_link", &p, [0.0; 2]),
         ));
         messages.push((
             o.stamp,
@@ -202,97 +153,26 @@ pub fn export(run: &Path, out: &Path, force: bool) -> Result<Exported> {
         let end = messages.iter().map(|m| m.0).max().unwrap_or(start);
         messages.push((end, topic("/map"), ros2msg::occupancy_grid(end, "map", g)));
     }
-    let stamps: std::collections::BTreeSet<Time> = messages.iter().map(|m| m.0).collect();
-    for t in stamps {
-        messages.push((t, topic("/clock"), ros2msg::clock(t)));
-    }
-    // By time, /clock first at each, then in the topics' order, then as made.
+    // By time, then in the topics' order, then as made.
     messages.sort_by_key(|m| (m.0, m.1));
 
     let name = out
         .file_name()
         .map(|n| n.to_string_lossy().to_string())
-        .unwrap_or_else(|| "run".into());
-    let file_name = format!("{name}.mcap");
+        .unwrap_or_else(|| "bag".into());
     let counts = write_atomically(out, force, "export", |tmp| {
-        let path = tmp.join(&file_name);
-        let counts = write_mcap(&path, &messages)?;
-        let end = messages.last().map_or(start, |m| m.0);
-        std::fs::write(
-            tmp.join("metadata.yaml"),
-            metadata(&file_name, start, end, &counts),
-        )
-        .context("writing metadata.yaml")?;
-        Ok(counts)
+        let mut bag = BagWriter::create(tmp, &name)?;
+        let ids: Vec<usize> = TOPICS
+            .iter()
+            .map(|(name, ty, latched)| bag.topic(name, ty, *latched))
+            .collect();
+        for (t, k, data) in &messages {
+            bag.write(ids[*k], *t, data)?;
+        }
+        Ok(bag.finish()?)
     })?;
     Ok(Exported {
-        file: out.join(&file_name),
-        messages: TOPICS
-            .iter()
-            .zip(counts)
-            .filter(|(_, n)| *n > 0)
-            .map(|(t, n)| (t.name.to_string(), n))
-            .collect(),
+        file: out.join(format!("{name}.mcap")),
+        messages: counts.into_iter().collect(),
     })
-}
-
-/// Writes `messages` (log time, topic index, CDR payload; in order) to the MCAP file `path`:
-/// each topic's schema and channel at its first message. Returns the count by topic.
-fn write_mcap(path: &Path, messages: &[(Time, usize, Vec<u8>)]) -> Result<Vec<usize>> {
-    let f = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut w = mcap::WriteOptions::new()
-        .profile("ros2")
-        .create(std::io::BufWriter::new(f))
-        .with_context(|| format!("writing {}", path.display()))?;
-    let mut channels = vec![None; TOPICS.len()];
-    let mut counts = vec![0usize; TOPICS.len()];
-    for (t, k, data) in messages {
-        let ch = match channels[*k] {
-            Some(c) => c,
-            None => {
-                let tp = &TOPICS[*k];
-                let schema = ros2msg::schema(tp.ty).expect("every topic's type is defined");
-                let sid = w.add_schema(tp.ty, "ros2msg", schema.as_bytes())?;
-                let meta = BTreeMap::from([("offered_qos_profiles".to_string(), qos(tp.latched))]);
-                let c = w.add_channel(sid, tp.name, "cdr", &meta)?;
-                channels[*k] = Some(c);
-                c
-            }
-        };
-        let ns = t.nanos().max(0) as u64;
-        w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: ch,
-                sequence: counts[*k] as u32,
-                log_time: ns,
-                publish_time: ns,
-            },
-            data,
-        )?;
-        counts[*k] += 1;
-    }
-    w.finish()?;
-    Ok(counts)
-}
-
-/// rosbag2's `metadata.yaml` (version 5) for one MCAP file of `counts` messages by topic.
-fn metadata(file: &str, start: Time, end: Time, counts: &[usize]) -> String {
-    let total: usize = counts.iter().sum();
-    let duration = (end.nanos() - start.nanos()).max(0);
-    let mut topics = String::new();
-    for (t, n) in TOPICS.iter().zip(counts) {
-        if *n == 0 {
-            continue;
-        }
-        let q = qos(t.latched).replace('\n', "\\n");
-        topics += &format!(
-            "    - topic_metadata:\n        name: {}\n        type: {}\n        serialization_format: cdr\n        offered_qos_profiles: \"{q}\"\n      message_count: {n}\n",
-            t.name, t.ty
-        );
-    }
-    format!(
-        "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n  duration:\n    nanoseconds: {duration}\n  starting_time:\n    nanoseconds_since_epoch: {}\n  message_count: {total}\n  topics_with_message_count:\n{topics}  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n    - {file}\n  files:\n    - path: {file}\n      starting_time:\n        nanoseconds_since_epoch: {}\n      duration:\n        nanoseconds: {duration}\n      message_count: {total}\n",
-        start.nanos(),
-        start.nanos()
-    )
 }

@@ -109,6 +109,17 @@ fn parse_mcap(s: &Seed, _: &mut Worlds) {
     let _ = futago_msgs::rosbag2::read_mcap(&s.bytes, &carmen::ReadOptions::default());
 }
 
+/// A rosbag2 SQLite3 file (SQLite's pages, the topics and messages tables, their CDR
+/// payloads), strictly and salvaging.
+fn parse_db3(s: &Seed, _: &mut Worlds) {
+    let strict = carmen::ReadOptions {
+        strict: true,
+        ..Default::default()
+    };
+    let _ = futago_msgs::rosbag2::read_db3(&s.bytes, &strict);
+    let _ = futago_msgs::rosbag2::read_db3(&s.bytes, &carmen::ReadOptions::default());
+}
+
 fn parse_tum(s: &Seed, _: &mut Worlds) {
     let t = text(&s.bytes);
     let _ = tum::parse(&t);
@@ -343,6 +354,12 @@ pub fn targets(root: &Path) -> Result<Vec<Target>> {
             text: false,
             seeds: vec![made("fuzz.mcap", futago_msgs::rosbag2::example_mcap())],
             parse: parse_mcap,
+        },
+        Target {
+            name: "db3",
+            text: false,
+            seeds: vec![made("fuzz.db3", futago_msgs::rosbag2::example_db3())],
+            parse: parse_db3,
         },
         Target {
             name: "map_yaml",
@@ -674,7 +691,7 @@ mod tests {
     #[test]
     fn every_target_has_seeds_that_parse() {
         let targets = targets(&root()).unwrap();
-        assert_eq!(targets.len(), 13);
+        assert_eq!(targets.len(), 14);
         for t in &targets {
             assert!(!t.seeds.is_empty(), "{}", t.name);
         }
@@ -709,6 +726,9 @@ mod tests {
                 .len(),
             1
         );
+        let db3 = futago_msgs::rosbag2::example_db3();
+        let log = futago_msgs::rosbag2::read_db3(&db3, &strict).unwrap();
+        assert_eq!(log.scans.len(), 1);
         let text = String::from_utf8(landmarks_seed(&root()).unwrap()).unwrap();
         let f = futago_msgs::landmarks::LandmarkFile::parse(Path::new("l.json"), &text).unwrap();
         assert_eq!(f.landmarks.len(), 20);

@@ -264,7 +264,11 @@ impl CameraRig {
                 }
             }
         }
-        let renderer = if consumers.iter().any(|c| !c.is_empty()) {
+        let renderer = if consumers
+            .iter()
+            .flatten()
+            .any(|&i| !nodes[i].node.passive_frames())
+        {
             Some(
                 Renderer::new(&scene(&s.world, &s.spec.robot, &s.movers, s.start, seed))
                     .context("starting the camera renderer")?,
@@ -297,10 +301,15 @@ impl CameraRig {
                 .copied()
                 .filter(|&i| nodes[i].node.wants_frame(&name, bus))
                 .collect();
-            if wanting.is_empty() {
+            // Only nodes that act on frames make the camera render, and choose its form.
+            let active = |i: &&usize| !nodes[**i].node.passive_frames();
+            if !wanting.iter().any(|i| active(&i)) {
                 continue;
             }
-            let rgb = wanting.iter().any(|&i| nodes[i].node.wants_rgb(&name));
+            let rgb = wanting
+                .iter()
+                .filter(active)
+                .any(|&i| nodes[i].node.wants_rgb(&name));
             let shot = cameras.capture(c, sim, rgb)?;
             let frame = CameraFrame {
                 frame: shot.frame,

@@ -382,6 +382,8 @@ pub struct OutputConfig {
     pub carmen: bool,
     /// Write each camera's stream as a TUM RGB-D sequence in a folder named after it.
     pub rgbd_dataset: bool,
+    /// Write the run as a ROS 2 bag in `ros2/` (MCAP; see [`crate::stack::bag`]).
+    pub mcap: bool,
 }
 
 impl Default for OutputConfig {
@@ -390,6 +392,7 @@ impl Default for OutputConfig {
             groundtruth_rate: 50.0,
             carmen: true,
             rgbd_dataset: false,
+            mcap: false,
         }
     }
 }

@@ -199,7 +199,7 @@ msgs = {
       pose=T['geometry_msgs/msg/PoseWithCovariance'](pose=pose(planar(1.0, 2.0, 0.3)),
           covariance=np.zeros(36)),
       twist=T['geometry_msgs/msg/TwistWithCovariance'](
-          twist=T['geometry_msgs/msg/Twist'](linear=vec(0, 0, 0), angular=vec(0, 0, 0)),
+          twist=T['geometry_msgs/msg/Twist'](linear=vec(0.25, 0, 0), angular=vec(0, 0, -0.5)),
           covariance=np.zeros(36))),
   'tf2_msgs/msg/TFMessage': T['tf2_msgs/msg/TFMessage'](transforms=[
       T['geometry_msgs/msg/TransformStamped'](header=header(t, p), child_frame_id=c,
@@ -213,13 +213,47 @@ msgs = {
       info=T['nav_msgs/msg/MapMetaData'](map_load_time=time(t), resolution=0.05, width=3,
           height=2, origin=pose(planar(-1.0, 2.0, 0.0))),
       data=np.array([-1, 0, 100, 50, 0, -1], dtype=np.int8)),
+  'sensor_msgs/msg/Image rgb8': T['sensor_msgs/msg/Image'](
+      header=header(t, 'kinect_optical_frame'), height=2, width=3, encoding='rgb8',
+      is_bigendian=0, step=9, data=np.arange(18, dtype=np.uint8)),
+  'sensor_msgs/msg/Image 32FC1': T['sensor_msgs/msg/Image'](
+      header=header(t, 'kinect_optical_frame'), height=1, width=3, encoding='32FC1',
+      is_bigendian=0, step=12,
+      data=np.frombuffer(np.array([1.5, np.nan, 0.25], dtype='<f4').tobytes(), dtype=np.uint8)),
+  'sensor_msgs/msg/CameraInfo': T['sensor_msgs/msg/CameraInfo'](
+      header=header(t, 'kinect_optical_frame'), height=480, width=640,
+      distortion_model='plumb_bob', d=np.zeros(5),
+      k=np.array([525.0, 0, 319.5, 0, 526.0, 239.5, 0, 0, 1]),
+      r=np.array([1.0, 0, 0, 0, 1, 0, 0, 0, 1]),
+      p=np.array([525.0, 0, 319.5, 0, 0, 526.0, 239.5, 0, 0, 0, 1, 0]),
+      binning_x=0, binning_y=0,
+      roi=T['sensor_msgs/msg/RegionOfInterest'](x_offset=0, y_offset=0, height=0, width=0,
+          do_rectify=False)),
+  'visualization_msgs/msg/MarkerArray': T['visualization_msgs/msg/MarkerArray'](markers=[
+      T['visualization_msgs/msg/Marker'](
+          header=header(t, 'world'), ns='people', id=i, type=ty, action=action,
+          pose=pose(p), scale=vec(*sc),
+          color=T['std_msgs/msg/ColorRGBA'](r=c[0], g=c[1], b=c[2], a=c[3]),
+          lifetime=T['builtin_interfaces/msg/Duration'](sec=0, nanosec=0),
+          frame_locked=False, points=[], colors=[], texture_resource='',
+          texture=T['sensor_msgs/msg/CompressedImage'](header=header(0, ''), format='',
+              data=np.array([], dtype=np.uint8)),
+          uv_coordinates=[], text='', mesh_resource='',
+          mesh_file=T['visualization_msgs/msg/MeshFile'](filename='',
+              data=np.array([], dtype=np.uint8)),
+          mesh_use_embedded_materials=False)
+      for i, ty, action, p, sc, c in [
+          (0, 0, 3, planar(0, 0, 0), (0, 0, 0), (0, 0, 0, 0)),
+          (7, 3, 0, (1.0, -2.0, 0.85, 0.0, 0.0, math.sin(0.35), math.cos(0.35)),
+              (0.45, 0.45, 1.7), (1.0, 0.5, 0.0, 0.75))]]),
 }
 for name, m in msgs.items():
-    print(name, bytes(ts.serialize_cdr(m, name)).hex())
+    print(name, bytes(ts.serialize_cdr(m, name.split()[0])).hex())
 "#;
 
 #[test]
 fn every_message_type_futago_writes_serialises_as_rosbags_serialises_it() {
+    use futago_msgs::camera::{DepthImage, Intrinsics, RgbImage};
     use futago_msgs::ros2msg::{self, Pose};
     use futago_msgs::{LaserScan, Time};
     let test = "every_message_type_futago_writes_serialises_as_rosbags_serialises_it";
@@ -244,7 +278,13 @@ fn every_message_type_futago_writes_serialises_as_rosbags_serialises_it() {
         ("sensor_msgs/msg/LaserScan", ros2msg::laser_scan(&scan)),
         (
             "nav_msgs/msg/Odometry",
-            ros2msg::odometry(t, "odom", "base_link", &Pose::planar(1.0, 2.0, 0.3)),
+            ros2msg::odometry(
+                t,
+                "odom",
+                "base_link",
+                &Pose::planar(1.0, 2.0, 0.3),
+                [0.25, -0.5],
+            ),
         ),
         (
             "tf2_msgs/msg/TFMessage",
@@ -268,6 +308,64 @@ fn every_message_type_futago_writes_serialises_as_rosbags_serialises_it() {
             "nav_msgs/msg/OccupancyGrid",
             ros2msg::occupancy_grid(t, "map", &grid),
         ),
+        (
+            "sensor_msgs/msg/Image rgb8",
+            ros2msg::image_rgb8(
+                t,
+                "kinect_optical_frame",
+                &RgbImage {
+                    width: 3,
+                    height: 2,
+                    data: (0..18).collect(),
+                },
+            ),
+        ),
+        (
+            // futago's "no reading" (0) is REP 118's NaN.
+            "sensor_msgs/msg/Image 32FC1",
+            ros2msg::image_depth(
+                t,
+                "kinect_optical_frame",
+                &DepthImage {
+                    width: 3,
+                    height: 1,
+                    data: vec![1.5, 0.0, 0.25],
+                },
+            ),
+        ),
+        (
+            "sensor_msgs/msg/CameraInfo",
+            ros2msg::camera_info(
+                t,
+                "kinect_optical_frame",
+                &Intrinsics {
+                    width: 640,
+                    height: 480,
+                    fx: 525.0,
+                    fy: 526.0,
+                    cx: 319.5,
+                    cy: 239.5,
+                },
+            ),
+        ),
+        (
+            "visualization_msgs/msg/MarkerArray",
+            ros2msg::marker_array(
+                t,
+                "world",
+                "people",
+                &[ros2msg::Marker {
+                    id: 7,
+                    shape: ros2msg::CYLINDER,
+                    pose: Pose {
+                        position: [1.0, -2.0, 0.85],
+                        orientation: [0.0, 0.0, 0.35f64.sin(), 0.35f64.cos()],
+                    },
+                    scale: [0.45, 0.45, 1.7],
+                    color: [1.0, 0.5, 0.0, 0.75],
+                }],
+            ),
+        ),
     ];
     let o = std::process::Command::new(python)
         .args(["-c", ROSBAGS_SERIALISES])
@@ -282,5 +380,86 @@ fn every_message_type_futago_writes_serialises_as_rosbags_serialises_it() {
             .find_map(|l| l.strip_prefix(&format!("{ty} ")))
             .unwrap_or_else(|| panic!("rosbags printed no {ty}: {out}"));
         assert_eq!(hex, theirs, "{ty}: futago's bytes, then rosbags'");
+    }
+}
+
+/// Rewrites the MCAP file `argv[1]` as `argv[2]` with Python's `mcap` writer, its chunks lz4
+/// compressed, message for message; prints the chunks' count and compressions.
+const REWRITE_LZ4: &str = r#"
+import sys
+from mcap.reader import make_reader
+from mcap.writer import Writer, CompressionType
+src, dst = sys.argv[1], sys.argv[2]
+with open(src, "rb") as f, open(dst, "wb") as g:
+    w = Writer(g, compression=CompressionType.LZ4, chunk_size=16 * 1024)
+    w.start(profile="ros2", library="futago test")
+    schemas, channels = {}, {}
+    for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+        if schema.id not in schemas:
+            schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+        if channel.id not in channels:
+            channels[channel.id] = w.register_channel(
+                channel.topic, channel.message_encoding, schemas[schema.id], channel.metadata)
+        w.add_message(channels[channel.id], message.log_time, message.data,
+                      message.publish_time, message.sequence)
+    w.finish()
+with open(dst, "rb") as g:
+    s = make_reader(g).get_summary()
+    print("chunks", len(s.chunk_indexes), " ".join(sorted({c.compression for c in s.chunk_indexes})))
+"#;
+
+#[test]
+fn an_mcap_file_with_lz4_chunks_reads_as_the_same_file_uncompressed() {
+    let test = "an_mcap_file_with_lz4_chunks_reads_as_the_same_file_uncompressed";
+    let Some(python) = python_with(test, &["mcap", "lz4"]) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    run_and_export(tmp.path(), "scenarios/hall-two-lasers.toml", "2");
+    let plain = tmp.path().join("bag").join("bag.mcap");
+    let lz4 = tmp.path().join("lz4.mcap");
+    let o = std::process::Command::new(python)
+        .args([
+            "-c",
+            REWRITE_LZ4,
+            plain.to_str().unwrap(),
+            lz4.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let printed = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Several chunks, every one lz4.
+    let (count, kinds) = printed
+        .trim()
+        .strip_prefix("chunks ")
+        .and_then(|r| r.split_once(' '))
+        .unwrap();
+    assert!(
+        count.parse::<usize>().unwrap() > 2 && kinds == "lz4",
+        "{printed}"
+    );
+    let read = |p: &Path| {
+        futago::replay::read_log_with(
+            p,
+            &futago_msgs::carmen::ReadOptions {
+                strict: true,
+                scan_topic: Some("/scan_rear".into()),
+                ..Default::default()
+            },
+        )
+        .unwrap()
+    };
+    let (a, b) = (read(&plain), read(&lz4));
+    assert!(!a.scans.is_empty());
+    assert_eq!(a.scans.len(), b.scans.len());
+    for (x, y) in a.scans.iter().zip(&b.scans) {
+        assert_eq!(x.scan.stamp, y.scan.stamp);
+        assert_eq!(x.scan.frame, y.scan.frame);
+        assert_eq!(x.odometry, y.odometry);
+        assert_eq!(x.mount, y.mount);
+        for (r, s) in x.scan.ranges.iter().zip(&y.scan.ranges) {
+            assert!(r.to_bits() == s.to_bits(), "{r} {s}");
+        }
     }
 }

@@ -1,9 +1,11 @@
 //! ROS 2 messages as futago writes them: their `ros2msg` definitions (field types and names
 //! in order, as the official `.msg` files of `builtin_interfaces`, `std_msgs`,
-//! `geometry_msgs`, `sensor_msgs`, `nav_msgs`, `tf2_msgs` and `rosgraph_msgs` give them; the
-//! comments and default values left out) with their dependencies, as an MCAP schema carries
-//! them, and their CDR encodings ([`CdrWriter`]).
+//! `geometry_msgs`, `sensor_msgs`, `nav_msgs`, `tf2_msgs`, `visualization_msgs` and
+//! `rosgraph_msgs` of ROS 2 Humble give them, with their constants; the comments and default
+//! values left out) with their dependencies, as an MCAP schema carries them, and their CDR
+//! encodings ([`CdrWriter`]).
 
+use crate::camera::{DepthImage, Intrinsics, RgbImage};
 use crate::grid::OccupancyGrid;
 use crate::rosbag2::CdrWriter;
 use crate::{LaserScan, Time};
@@ -73,6 +75,53 @@ const DEFINITIONS: &[(&str, &str)] = &[
     (
         "nav_msgs/OccupancyGrid",
         "std_msgs/Header header\nnav_msgs/MapMetaData info\nint8[] data\n",
+    ),
+    (
+        "sensor_msgs/Image",
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\n\
+         uint32 step\nuint8[] data\n",
+    ),
+    (
+        "sensor_msgs/RegionOfInterest",
+        "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n",
+    ),
+    (
+        "sensor_msgs/CameraInfo",
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\n\
+         float64[] d\nfloat64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\n\
+         uint32 binning_y\nsensor_msgs/RegionOfInterest roi\n",
+    ),
+    (
+        "sensor_msgs/CompressedImage",
+        "std_msgs/Header header\nstring format\nuint8[] data\n",
+    ),
+    (
+        "std_msgs/ColorRGBA",
+        "float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n",
+    ),
+    ("builtin_interfaces/Duration", "int32 sec\nuint32 nanosec\n"),
+    ("visualization_msgs/UVCoordinate", "float32 u\nfloat32 v\n"),
+    (
+        "visualization_msgs/MeshFile",
+        "string filename\nuint8[] data\n",
+    ),
+    (
+        "visualization_msgs/Marker",
+        "int32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\nint32 LINE_STRIP=4\n\
+         int32 LINE_LIST=5\nint32 CUBE_LIST=6\nint32 SPHERE_LIST=7\nint32 POINTS=8\n\
+         int32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\nint32 TRIANGLE_LIST=11\nint32 ADD=0\n\
+         int32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\n\
+         std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\n\
+         geometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\n\
+         builtin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\n\
+         std_msgs/ColorRGBA[] colors\nstring texture_resource\n\
+         sensor_msgs/CompressedImage texture\nvisualization_msgs/UVCoordinate[] uv_coordinates\n\
+         string text\nstring mesh_resource\nvisualization_msgs/MeshFile mesh_file\n\
+         bool mesh_use_embedded_materials\n",
+    ),
+    (
+        "visualization_msgs/MarkerArray",
+        "visualization_msgs/Marker[] markers\n",
     ),
 ];
 
@@ -159,10 +208,17 @@ impl Pose {
 }
 
 impl From<&crate::Pose3> for Pose {
+    /// The pose, its quaternion normalised (one from single precision, or read from a file's
+    /// decimals, is off unit length by more than tf2 and Foxglove expect of a rotation).
     fn from(p: &crate::Pose3) -> Pose {
+        let n = p.rotation.iter().map(|v| v * v).sum::<f64>().sqrt();
         Pose {
             position: p.translation,
-            orientation: p.rotation,
+            orientation: if n > 0.0 {
+                p.rotation.map(|v| v / n)
+            } else {
+                [0.0, 0.0, 0.0, 1.0]
+            },
         }
     }
 }
@@ -173,13 +229,20 @@ fn pose(w: &mut CdrWriter, p: &Pose) {
     }
 }
 
-/// A `nav_msgs/msg/Odometry` of `child` in `frame` at `t`: the pose, zero twist, and the
-/// covariances left zero (unknown).
-pub fn odometry(t: Time, frame: &str, child: &str, p: &Pose) -> Vec<u8> {
+/// A `nav_msgs/msg/Odometry` of `child` in `frame` at `t`: the pose, the planar twist
+/// `[v, ω]` in `child`'s frame (forward m/s, turn rad/s), and the covariances left zero
+/// (unknown).
+pub fn odometry(t: Time, frame: &str, child: &str, p: &Pose, twist: [f64; 2]) -> Vec<u8> {
     let mut w = CdrWriter::default();
     w.header(t, frame).string(child);
     pose(&mut w, p);
-    for _ in 0..36 + 6 + 36 {
+    for _ in 0..36 {
+        w.f64(0.0);
+    }
+    for v in [twist[0], 0.0, 0.0, 0.0, 0.0, twist[1]] {
+        w.f64(v);
+    }
+    for _ in 0..36 {
         w.f64(0.0);
     }
     w.into_bytes()
@@ -215,6 +278,118 @@ pub fn occupancy_grid(t: Time, frame: &str, g: &OccupancyGrid) -> Vec<u8> {
     pose(&mut w, &Pose::planar(g.origin[0], g.origin[1], 0.0));
     w.u32(g.cells.len() as u32);
     w.bytes(&g.cells.iter().map(|&c| c as u8).collect::<Vec<_>>());
+    w.into_bytes()
+}
+
+/// A `sensor_msgs/msg/Image` of `image` (`rgb8`), stamped `t` in `frame`.
+pub fn image_rgb8(t: Time, frame: &str, image: &RgbImage) -> Vec<u8> {
+    let mut w = CdrWriter::with_capacity(64 + frame.len() + image.data.len());
+    w.header(t, frame)
+        .u32(image.height)
+        .u32(image.width)
+        .string("rgb8")
+        .u8(0)
+        .u32(3 * image.width)
+        .u32(image.data.len() as u32)
+        .bytes(&image.data);
+    w.into_bytes()
+}
+
+/// A `sensor_msgs/msg/Image` of `depth` as REP 118 asks: `32FC1`, metres along the optical
+/// axis, little-endian; pixels without a reading (0 in futago's images) are NaN.
+pub fn image_depth(t: Time, frame: &str, depth: &DepthImage) -> Vec<u8> {
+    let mut w = CdrWriter::with_capacity(64 + frame.len() + 4 * depth.data.len());
+    w.header(t, frame)
+        .u32(depth.height)
+        .u32(depth.width)
+        .string("32FC1")
+        .u8(0)
+        .u32(4 * depth.width)
+        .u32(4 * depth.data.len() as u32);
+    let mut bytes = Vec::with_capacity(4 * depth.data.len());
+    for &d in &depth.data {
+        let v = if d > 0.0 { d } else { f32::NAN };
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    w.bytes(&bytes);
+    w.into_bytes()
+}
+
+/// A `sensor_msgs/msg/CameraInfo` of a pinhole camera without distortion (`plumb_bob`, all
+/// five coefficients zero): `K` from `k`, `R` the identity, `P = [K | 0]`.
+pub fn camera_info(t: Time, frame: &str, k: &Intrinsics) -> Vec<u8> {
+    let mut w = CdrWriter::default();
+    w.header(t, frame)
+        .u32(k.height)
+        .u32(k.width)
+        .string("plumb_bob")
+        .u32(5);
+    let km = [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0];
+    let r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    let p = [
+        k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0, 1.0, 0.0,
+    ];
+    for v in [0.0; 5].iter().chain(&km).chain(&r).chain(&p) {
+        w.f64(*v);
+    }
+    // Binning, then a zero region of interest (the whole image).
+    w.u32(0).u32(0).u32(0).u32(0).u32(0).u32(0).u8(0);
+    w.into_bytes()
+}
+
+/// One `visualization_msgs/msg/Marker` of a [`marker_array`]: a shape at a pose.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Marker {
+    /// Its id within the array's namespace.
+    pub id: i32,
+    /// `Marker.CYLINDER` (3), `Marker.ARROW` (0), …
+    pub shape: i32,
+    pub pose: Pose,
+    /// Size along its axes, m.
+    pub scale: [f64; 3],
+    /// Red, green, blue, alpha in [0, 1].
+    pub color: [f32; 4],
+}
+
+/// `Marker.CYLINDER`.
+pub const CYLINDER: i32 = 3;
+
+/// A `visualization_msgs/msg/MarkerArray` in `frame` at `t`, in namespace `ns`: a
+/// `DELETEALL` first (so a marker of something gone does not linger), then each of `markers`
+/// added, for ever (lifetime zero).
+pub fn marker_array(t: Time, frame: &str, ns: &str, markers: &[Marker]) -> Vec<u8> {
+    const ADD: i32 = 0;
+    const DELETEALL: i32 = 3;
+    let mut w = CdrWriter::default();
+    w.u32(markers.len() as u32 + 1);
+    let clear = Marker {
+        id: 0,
+        shape: 0,
+        pose: Pose::planar(0.0, 0.0, 0.0),
+        scale: [0.0; 3],
+        color: [0.0; 4],
+    };
+    for (m, action) in std::iter::once((&clear, DELETEALL)).chain(markers.iter().map(|m| (m, ADD)))
+    {
+        w.header(t, frame)
+            .string(ns)
+            .i32(m.id)
+            .i32(m.shape)
+            .i32(action);
+        pose(&mut w, &m.pose);
+        for v in m.scale {
+            w.f64(v);
+        }
+        for c in m.color {
+            w.f32(c);
+        }
+        // Lifetime zero, not frame-locked, no points, colours, texture or mesh.
+        w.i32(0).u32(0).u8(0).u32(0).u32(0).string("");
+        w.header(Time::ZERO, "").string("").u32(0);
+        w.u32(0).string("").string("");
+        w.string("").u32(0);
+        w.u8(0);
+    }
     w.into_bytes()
 }
 

@@ -20,6 +20,8 @@ use std::collections::HashMap;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
+pub mod writer;
+
 /// Reads a ROS 2 bag at `path`: a rosbag2 folder (with `metadata.yaml`), an MCAP file, or a
 /// `.db3` file whose folder holds the metadata.
 pub fn read_path(path: &Path, o: &ReadOptions) -> Result<Log, String> {
@@ -704,6 +706,13 @@ impl Default for CdrWriter {
 }
 
 impl CdrWriter {
+    /// A writer with room for `n` bytes (an image's payload) before it grows.
+    pub fn with_capacity(n: usize) -> CdrWriter {
+        let mut buf = Vec::with_capacity(n + 4);
+        buf.extend([0, 1, 0, 0]);
+        CdrWriter { buf }
+    }
+
     fn align(&mut self, n: usize) {
         while !(self.buf.len() - 4).is_multiple_of(n) {
             self.buf.push(0);
@@ -718,6 +727,12 @@ impl CdrWriter {
 
     pub fn i32(&mut self, v: i32) -> &mut Self {
         self.u32(v as u32)
+    }
+
+    /// A `uint8`, `int8` or `bool` (one byte, no alignment).
+    pub fn u8(&mut self, v: u8) -> &mut Self {
+        self.buf.push(v);
+        self
     }
 
     pub fn f32(&mut self, v: f32) -> &mut Self {
@@ -757,6 +772,49 @@ impl CdrWriter {
     }
 }
 
+/// The example bags' messages (topic, type, log time, CDR): the laser mounted 0.22 m ahead
+/// of `base_link` on `/tf_static`, odometry at 1 s (x = 0) and 3 s (x = 1 m), a scan of three
+/// beams at 2 s, and a message of a type the reader skips.
+fn example_messages() -> Vec<(&'static str, &'static str, Time, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut m = CdrWriter::default();
+    m.u32(1).header(Time(0), "base_link").string("laser");
+    for v in [0.22, 0.0, 0.1, 0.0, 0.0, 0.0, 1.0] {
+        m.f64(v);
+    }
+    out.push((
+        "/tf_static",
+        "tf2_msgs/msg/TFMessage",
+        Time(0),
+        m.into_bytes(),
+    ));
+    for (s, x) in [(1, 0.0), (3, 1.0)] {
+        let t = Time(s * 1_000_000_000);
+        let mut m = CdrWriter::default();
+        m.header(t, "odom").string("base_link");
+        for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
+            m.f64(v);
+        }
+        for _ in 0..36 + 6 + 36 {
+            m.f64(0.0);
+        }
+        out.push(("/odom", "nav_msgs/msg/Odometry", t, m.into_bytes()));
+    }
+    let t = Time(2_000_000_000);
+    let mut m = CdrWriter::default();
+    m.header(t, "laser");
+    for v in [-0.5f32, 0.5, 0.5, 0.0, 0.1, 0.05, 20.0] {
+        m.f32(v);
+    }
+    m.u32(3).f32(1.0).f32(2.0).f32(3.0).u32(0);
+    out.push(("/scan", "sensor_msgs/msg/LaserScan", t, m.into_bytes()));
+    let mut m = CdrWriter::default();
+    m.string("hello");
+    out.push(("/chatter", "std_msgs/msg/String", t, m.into_bytes()));
+    out.sort_by_key(|m| m.2);
+    out
+}
+
 /// A small MCAP file of ROS 2 messages, written with the `mcap` crate: the laser mounted
 /// 0.22 m ahead of `base_link` on `/tf_static`, odometry at 1 s (x = 0) and 3 s (x = 1 m), a
 /// scan of three beams at 2 s, and a message of a type the reader skips. The fuzzer's seed,
@@ -765,16 +823,19 @@ pub fn example_mcap() -> Vec<u8> {
     let mut out = std::io::Cursor::new(Vec::new());
     {
         let mut w = mcap::Writer::new(&mut out).expect("an in-memory MCAP writer");
-        let channel = |w: &mut mcap::Writer<_>, ty: &str, topic: &str| {
-            let schema = w.add_schema(ty, "ros2msg", b"").expect("schema");
-            w.add_channel(schema, topic, "cdr", &Default::default())
-                .expect("channel")
-        };
-        let tf = channel(&mut w, "tf2_msgs/msg/TFMessage", "/tf_static");
-        let odom = channel(&mut w, "nav_msgs/msg/Odometry", "/odom");
-        let scan = channel(&mut w, "sensor_msgs/msg/LaserScan", "/scan");
-        let other = channel(&mut w, "std_msgs/msg/String", "/chatter");
-        let put = |w: &mut mcap::Writer<_>, ch: u16, t: Time, data: Vec<u8>| {
+        let mut channels: HashMap<&str, u16> = HashMap::new();
+        for (topic, ty, t, data) in example_messages() {
+            let ch = match channels.get(topic) {
+                Some(&c) => c,
+                None => {
+                    let schema = w.add_schema(ty, "ros2msg", b"").expect("schema");
+                    let c = w
+                        .add_channel(schema, topic, "cdr", &Default::default())
+                        .expect("channel");
+                    channels.insert(topic, c);
+                    c
+                }
+            };
             let header = mcap::records::MessageHeader {
                 channel_id: ch,
                 sequence: 0,
@@ -782,39 +843,60 @@ pub fn example_mcap() -> Vec<u8> {
                 publish_time: t.nanos() as u64,
             };
             w.write_to_known_channel(&header, &data).expect("message");
-        };
-        let mut m = CdrWriter::default();
-        m.u32(1).header(Time(0), "base_link").string("laser");
-        for v in [0.22, 0.0, 0.1, 0.0, 0.0, 0.0, 1.0] {
-            m.f64(v);
         }
-        put(&mut w, tf, Time(0), m.into_bytes());
-        for (s, x) in [(1, 0.0), (3, 1.0)] {
-            let t = Time(s * 1_000_000_000);
-            let mut m = CdrWriter::default();
-            m.header(t, "odom").string("base_link");
-            for v in [x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
-                m.f64(v);
-            }
-            for _ in 0..36 + 6 + 36 {
-                m.f64(0.0);
-            }
-            put(&mut w, odom, t, m.into_bytes());
-        }
-        let t = Time(2_000_000_000);
-        let mut m = CdrWriter::default();
-        m.header(t, "laser");
-        for v in [-0.5f32, 0.5, 0.5, 0.0, 0.1, 0.05, 20.0] {
-            m.f32(v);
-        }
-        m.u32(3).f32(1.0).f32(2.0).f32(3.0).u32(0);
-        put(&mut w, scan, t, m.into_bytes());
-        let mut m = CdrWriter::default();
-        m.string("hello");
-        put(&mut w, other, t, m.into_bytes());
         w.finish().expect("finished");
     }
     out.into_inner()
+}
+
+/// The same messages as [`example_mcap`] in a rosbag2 SQLite3 database (its `topics` and
+/// `messages` tables as rosbag2 creates them): the `db3` fuzzer's seed.
+pub fn example_db3() -> Vec<u8> {
+    let tmp = tempfile_for(&[]).expect("a temporary file");
+    std::fs::remove_file(tmp.path()).expect("an empty name");
+    {
+        let db = rusqlite::Connection::open(tmp.path()).expect("a new database");
+        db.execute_batch(
+            "CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT NOT NULL, \
+             serialization_format TEXT NOT NULL, offered_qos_profiles TEXT NOT NULL);\
+             CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, \
+             timestamp INTEGER NOT NULL, data BLOB NOT NULL);",
+        )
+        .expect("the tables");
+        let mut ids: Vec<&str> = Vec::new();
+        for (topic, ty, t, data) in example_messages() {
+            let id = match ids.iter().position(|n| *n == topic) {
+                Some(i) => i + 1,
+                None => {
+                    ids.push(topic);
+                    db.execute(
+                        "INSERT INTO topics VALUES (?1, ?2, ?3, 'cdr', '')",
+                        rusqlite::params![ids.len() as i64, topic, ty],
+                    )
+                    .expect("a topic");
+                    ids.len()
+                }
+            };
+            db.execute(
+                "INSERT INTO messages(topic_id, timestamp, data) VALUES (?1, ?2, ?3)",
+                rusqlite::params![id as i64, t.nanos(), data],
+            )
+            .expect("a message");
+        }
+    }
+    std::fs::read(tmp.path()).expect("the database's bytes")
+}
+
+/// Reads the bytes of an uncompressed rosbag2 SQLite3 file (as a lone `.db3` in a folder
+/// whose `metadata.yaml` says storage `sqlite3`, no compression).
+pub fn read_db3(bytes: &[u8], o: &ReadOptions) -> Result<Log, String> {
+    let tmp = tempfile_for(bytes)?;
+    let mut raw = Raw {
+        salvage: !o.strict,
+        ..Default::default()
+    };
+    sqlite_records(tmp.path(), bytes, &mut raw, Compression::None)?;
+    assemble(raw, o).map_err(|e| e.to_string())
 }
 
 #[cfg(test)]
@@ -928,6 +1010,28 @@ mod tests {
         let body = cdr(&[U32(u32::MAX)]);
         let e = tf_message(&body).unwrap_err();
         assert!(e.contains("elements in"), "{e}");
+    }
+
+    #[test]
+    fn the_example_db3_reads_as_the_example_mcap_and_damage_is_an_error() {
+        let strict = ReadOptions {
+            strict: true,
+            ..Default::default()
+        };
+        let bytes = example_db3();
+        let a = read_db3(&bytes, &strict).unwrap();
+        let b = read_mcap(&example_mcap(), &strict).unwrap();
+        assert_eq!(a.scans.len(), 1);
+        assert_eq!(a.scans[0].scan.ranges, b.scans[0].scan.ranges);
+        assert_eq!(a.scans[0].odometry, b.scans[0].odometry);
+        assert_eq!(a.scans[0].mount, b.scans[0].mount);
+        assert_eq!(a.skipped, b.skipped);
+        // Cut short anywhere, or not SQLite at all: an error, never a panic.
+        for k in (0..bytes.len()).step_by(bytes.len() / 16) {
+            assert!(read_db3(&bytes[..k], &strict).is_err(), "cut at {k}");
+        }
+        let e = read_db3(b"not a database", &strict).unwrap_err();
+        assert!(e.contains("SQLite") || e.contains("database"), "{e}");
     }
 
     #[test]

@@ -37,6 +37,7 @@
 //! its node and its `Module` ([`StackModule`], [`ModuleConfig`]: its table, nodes and metric
 //! names), and one line in [`MODULES`]; the loader and the loop do not change.
 
+pub mod bag;
 pub mod bus;
 pub mod coverage;
 pub mod depth_localization;
@@ -121,6 +122,13 @@ pub trait Node {
     /// form of the frames its nodes take, as it depends on which frames they take).
     fn wants_rgb(&self, _camera: &str) -> bool {
         true
+    }
+
+    /// Whether the node takes only the frames rendered for other nodes: a recorder that must
+    /// change neither which frames are rendered, nor their form, nor (through the cameras'
+    /// noise streams) what the other nodes see. Its wants alone render nothing.
+    fn passive_frames(&self) -> bool {
+        false
     }
 
     /// Whether the node takes camera frames for what they are (their pixels and true optical
@@ -286,7 +294,8 @@ pub(crate) fn boxed<N: Node + 'static>(n: Result<Option<N>>) -> Nodes {
 /// phase: the recorders of the run's files (when it writes them), the people's truth and
 /// safety scores, the coverage planner and scorer, the driver, the localiser, the depth-camera
 /// localiser, SLAM, the RGB-D mapper, the stop-and-scan 3D mapper, seed 001's visual landmark
-/// mapper and monocular localiser. A new module is its own file and one line here; the
+/// mapper and monocular localiser; last, the run's ROS 2 bag (after the nodes whose final
+/// maps it records). A new module is its own file and one line here; the
 /// loader, the loop and the metric checks read this table.
 pub static MODULES: &[&dyn StackModule] = &[
     &record::MODULE,
@@ -300,6 +309,7 @@ pub static MODULES: &[&dyn StackModule] = &[
     &scan3d::Module,
     &visual_map::Module,
     &visual_localization::Module,
+    &bag::MODULE,
 ];
 
 /// The configurations of `modules`, for the loader.
