@@ -28,6 +28,7 @@ pub mod scenario;
 pub mod ground_truth;
 pub mod relations;
 
+pub mod dds;
 pub mod output;
 pub mod parallel;
 pub mod picture;
@@ -49,6 +50,7 @@ pub mod fuzz;
 pub mod legs_train;
 pub mod replay;
 pub mod run;
+pub mod serve;
 pub mod suite;
 pub mod tune;
 pub mod twin;

@@ -1,8 +1,8 @@
 //! The `futago` command: runs scenarios, exports worlds' ground truth and measures speed.
 
 use futago::{
-    bench, calibrate, crowd, folds, fuzz, legs_train, overlay, replay, run, stack, suite, tune,
-    twin, world_cmd,
+    bench, calibrate, crowd, folds, fuzz, legs_train, overlay, replay, run, serve, stack, suite,
+    tune, twin, world_cmd,
 };
 
 use anyhow::{Result, bail};
@@ -25,29 +25,11 @@ struct Cli {
 enum Command {
     /// Run a scenario and write its results: groundtruth.txt and odometry.txt (TUM), scans.clf
     /// (CARMEN log) and summary.json.
-    Run {
-        /// Scenario file (TOML).
-        scenario: PathBuf,
-        /// Output folder, created or replaced whole when futago wrote it [default:
-        /// out/<scenario name>].
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Replace the output even when it holds files futago did not write (never `/`, the
-        /// home folder, the current folder or its parents, or a folder with a `.git`).
-        #[arg(long)]
-        force: bool,
-        /// Seed of every noise source (overrides the scenario's).
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Simulated seconds (overrides the scenario's duration).
-        #[arg(long)]
-        duration: Option<f64>,
-        #[command(flatten)]
-        overlays: OverlayArgs,
-        /// No progress bar.
-        #[arg(long, short)]
-        quiet: bool,
-    },
+    Run(RunArgs),
+    /// Serve a scenario over ROS 2 (DDS): publish the robot's sensors, tf and /clock, and
+    /// take /cmd_vel from the user's own stack in lock-step (the simulation waits for the
+    /// command of each control tick); then score the run as `futago run` does.
+    Serve(ServeArgs),
     /// Write a finished run's folder as a ROS 2 bag: an MCAP file (scans, odometry, tf, ground
     /// truth, its map, /clock) with rosbag2's metadata.yaml, for ros2 bag play and Foxglove.
     Export {
@@ -696,31 +678,101 @@ fn resolve_jobs(jobs: Option<usize>) -> Result<usize> {
 }
 
 /// Runs the command line's command; gives the exit status (1: a run failed; 3: a gate did).
+/// A scenario run's arguments (`futago run`, `futago serve`).
+#[derive(clap::Args)]
+struct RunArgs {
+    /// Scenario file (TOML).
+    scenario: PathBuf,
+    /// Output folder, created or replaced whole when futago wrote it [default:
+    /// out/<scenario name>].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Replace the output even when it holds files futago did not write (never `/`, the
+    /// home folder, the current folder or its parents, or a folder with a `.git`).
+    #[arg(long)]
+    force: bool,
+    /// Seed of every noise source (overrides the scenario's).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Simulated seconds (overrides the scenario's duration).
+    #[arg(long)]
+    duration: Option<f64>,
+    #[command(flatten)]
+    overlays: OverlayArgs,
+    /// No progress bar.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+impl RunArgs {
+    fn options(&self) -> run::RunOptions {
+        run::RunOptions {
+            seed: self.seed,
+            duration: self.duration,
+            progress: !self.quiet,
+            report: true,
+            force: self.force,
+        }
+    }
+}
+
+/// `futago serve`'s arguments: a run's (its scenario's `[controller]` replaced by the link),
+/// and the link's.
+#[derive(clap::Args)]
+struct ServeArgs {
+    #[command(flatten)]
+    run: RunArgs,
+    /// DDS domain id [default: ROS_DOMAIN_ID, else 0].
+    #[arg(long)]
+    domain: Option<i32>,
+    /// Real seconds to wait for each tick's command before going on without it (the run is
+    /// then marked as not deterministic).
+    #[arg(long, default_value_t = 10.0)]
+    timeout: f64,
+    /// Real seconds to wait for the controller to match before the first tick.
+    #[arg(long, default_value_t = 60.0)]
+    wait: f64,
+    /// Take geometry_msgs/TwistStamped on /cmd_vel (stamped with the tick's /clock) instead of
+    /// Twist.
+    #[arg(long)]
+    stamped: bool,
+    /// Simulated seconds between the ticks that wait for a command [default: every tick,
+    /// 15 ms]; for a controller on its own timer (Nav2's controller_frequency 20 Hz: 0.05).
+    #[arg(long)]
+    period: Option<f64>,
+}
+
+/// `futago serve`: its options, then [`serve::command`].
+fn serve_main(a: ServeArgs) -> Result<i32> {
+    let opts = a.run.options();
+    let serve = serve::ServeOptions {
+        domain: a.domain,
+        timeout: a.timeout,
+        wait: a.wait,
+        stamped: a.stamped,
+        period: a.period,
+    };
+    let r = a.run;
+    serve::command(&r.scenario, &r.overlays.load()?, r.out, &opts, &serve)
+}
+
 fn real_main() -> Result<u8> {
     let status = match Cli::parse().command {
-        Command::Run {
-            scenario,
-            out,
-            seed,
-            duration,
-            overlays,
-            quiet,
-            force,
-        } => {
-            if twin::scenario::is_twin_file(&scenario) {
-                let options = !overlays.args().is_empty() || seed.is_some() || duration.is_some();
-                twin::scenario::command(&scenario, options, out, force, resolve_jobs(None)?)?
+        Command::Run(a) => {
+            if twin::scenario::is_twin_file(&a.scenario) {
+                let options =
+                    !a.overlays.args().is_empty() || a.seed.is_some() || a.duration.is_some();
+                twin::scenario::command(&a.scenario, options, a.out, a.force, resolve_jobs(None)?)?
             } else {
-                let opts = run::RunOptions {
-                    seed,
-                    duration,
-                    progress: !quiet,
-                    report: true,
-                    force,
-                };
-                run::command(&scenario, &overlays.load()?, out, &opts)?
+                run::command(
+                    &a.scenario,
+                    &a.overlays.load()?,
+                    a.out.clone(),
+                    &a.options(),
+                )?
             }
         }
+        Command::Serve(a) => serve_main(a)?,
         Command::Suite {
             paths,
             jobs,

@@ -169,18 +169,18 @@ impl Routes {
     }
 }
 
-/// Runs the scenario's closed loop; with `out`, the recorders write into it. Returns the
-/// outcome and the finished nodes (for their scorers).
-fn simulate(
-    s: &Scenario,
-    opts: &RunOptions,
-    out: Option<&Path>,
-) -> Result<(Outcome, Vec<Box<dyn Node>>)> {
-    simulate_with(s, opts, out, Vec::new())
-}
-
-/// Checks that every consumed estimate or map has a publisher.
+/// Checks that some node drives the robot (publishes `cmd_vel`) and that every consumed
+/// estimate or map has a publisher.
 fn check_publishers(nodes: &[Scheduled], streams: &[stack::Streams]) -> Result<()> {
+    if !streams
+        .iter()
+        .any(|s| s.publishes.iter().any(|t| t == "cmd_vel"))
+    {
+        bail!(
+            "nothing drives the robot: the scenario's controller is `external`, whose commands \
+             come over ROS 2; run it with `futago serve`"
+        );
+    }
     for (n, st) in nodes.iter().zip(streams) {
         for t in &st.consumes {
             let derived = t.starts_with("pose/") || t.starts_with("map/");
@@ -729,8 +729,13 @@ impl Scored {
 /// Runs a scenario and scores it from memory: the nodes' trajectories, maps and detections
 /// against the simulator's truth; with `out`, the recorders and nodes also write their files
 /// there (nothing is read back).
-fn simulate_scored(s: &Scenario, opts: &RunOptions, out: Option<&Path>) -> Result<Scored> {
-    let (outcome, nodes) = simulate(s, opts, out)?;
+fn simulate_scored(
+    s: &Scenario,
+    opts: &RunOptions,
+    out: Option<&Path>,
+    extra: Vec<Box<dyn Node>>,
+) -> Result<Scored> {
+    let (outcome, nodes) = simulate_with(s, opts, out, extra)?;
     // The truth as groundtruth.txt holds it, as every trajectory is scored.
     let poses: Vec<tum::Stamped> = outcome.truth.iter().map(tum::as_written).collect();
     let relations = crate::ground_truth::sample_relations(&poses);
@@ -756,15 +761,25 @@ fn simulate_scored(s: &Scenario, opts: &RunOptions, out: Option<&Path>) -> Resul
 /// Runs a scenario and scores it without writing anything: for a search or a check that
 /// needs a run's metrics and gates, not its files.
 pub fn evaluate(s: &Scenario, opts: &RunOptions) -> Result<Scored> {
-    simulate_scored(s, opts, None)
+    simulate_scored(s, opts, None, Vec::new())
 }
 
 /// Runs a scenario and writes its results into `out` (created or replaced whole).
 pub fn run(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcome)> {
+    run_with(s, opts, out, Vec::new())
+}
+
+/// [`run`] with `extra` nodes after the stack's (`futago serve`'s ROS 2 link).
+pub fn run_with(
+    s: &Scenario,
+    opts: &RunOptions,
+    out: &Path,
+    extra: Vec<Box<dyn Node>>,
+) -> Result<(Value, Outcome)> {
     write_atomically(out, opts.force, "run", |tmp| {
         // Injected here, the crash leaves a half-written folder behind, as a real one would.
         crash_if_asked(&s.spec.name);
-        let scored = simulate_scored(s, opts, Some(tmp))?;
+        let scored = simulate_scored(s, opts, Some(tmp), extra)?;
         let relations = &scored.relations;
         let outcome = &scored.outcome;
         std::fs::write(
@@ -852,7 +867,7 @@ fn crash_if_asked(name: &str) {
 
 /// Runs without writing anything (for benchmarks).
 pub fn run_in_memory(s: &Scenario, opts: &RunOptions) -> Result<Outcome> {
-    simulate(s, opts, None).map(|(o, _)| o)
+    simulate_with(s, opts, None, Vec::new()).map(|(o, _)| o)
 }
 
 /// Creates `out` whole or not at all: `fill` writes into a temporary folder beside it, which
@@ -970,6 +985,12 @@ pub fn command(
     let s = crate::stack::load_with(scenario, overlays)?;
     let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
     let (summary, o) = run(&s, opts, &out)?;
+    Ok(print_result(&s, &summary, &o, &out))
+}
+
+/// Prints a run's one-line result and its failed gates; gives the exit status: 0, or
+/// [`GATE_FAILED`] when a gate failed.
+pub fn print_result(s: &Scenario, summary: &Value, o: &Outcome, out: &Path) -> i32 {
     let rtf = summary["performance"]["real_time_factor"]
         .as_f64()
         .unwrap_or(0.0);
@@ -996,7 +1017,7 @@ pub fn command(
             r["message"].as_str().unwrap_or("")
         );
     }
-    Ok(if failed.is_empty() { 0 } else { GATE_FAILED })
+    if failed.is_empty() { 0 } else { GATE_FAILED }
 }
 
 #[cfg(test)]

@@ -600,11 +600,24 @@ impl Scenario {
         overlays: &[Overlay],
         modules: &[&'static dyn ModuleConfig],
     ) -> Result<Scenario, SpecError> {
+        Scenario::load_replacing(path, overlays, &toml::Table::new(), modules)
+    }
+
+    /// [`Scenario::load_with`], with the top-level tables of `replaced` put in place of the
+    /// scenario's own after the overlays (which merge key by key): `futago serve` replaces
+    /// `[controller]` whole by an external one.
+    pub fn load_replacing(
+        path: &Path,
+        overlays: &[Overlay],
+        replaced: &toml::Table,
+        modules: &[&'static dyn ModuleConfig],
+    ) -> Result<Scenario, SpecError> {
         let mut config: toml::Table = load_toml(path)?;
         for o in overlays {
             o.apply(&mut config);
         }
-        let spec: ScenarioSpec = if overlays.is_empty() {
+        config.extend(replaced.clone());
+        let spec: ScenarioSpec = if overlays.is_empty() && replaced.is_empty() {
             // Parsed again from the text so that errors carry line numbers.
             load_toml(path)?
         } else {

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 const LAYERS: &[(&str, &[&str])] = &[
     ("scenario schema", &["gate", "overlay", "scenario"]),
     ("scoring", &["relations", "ground_truth"]),
-    ("formats", &["picture", "rgbd", "output"]),
+    ("formats", &["picture", "rgbd", "output", "dds"]),
     ("bus, nodes and modules", &["stack"]),
     ("reports", &["report"]),
     (
@@ -19,6 +19,7 @@ const LAYERS: &[(&str, &[&str])] = &[
             "cmaes",
             "parallel",
             "run",
+            "serve",
             "export",
             "world_cmd",
             "replay",

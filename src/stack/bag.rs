@@ -110,14 +110,7 @@ impl BagRecorder {
                 (c.name.clone(), t)
             })
             .collect();
-        let mounts = s
-            .lidars
-            .iter()
-            .map(|(c, _)| {
-                let parent = c.joint.clone().unwrap_or_else(|| BASE.into());
-                (parent, c.name.clone(), mount(c.xyz, c.rpy_deg))
-            })
-            .collect();
+        let mounts = laser_mounts(s);
         let cameras = s
             .cameras
             .iter()
@@ -190,7 +183,7 @@ impl BagRecorder {
 }
 
 /// A mount (`xyz`, m; roll, pitch, yaw, degrees, about fixed x, y, z) as a pose.
-fn mount(xyz: [f64; 3], rpy_deg: [f64; 3]) -> Pose {
+pub fn mount(xyz: [f64; 3], rpy_deg: [f64; 3]) -> Pose {
     let [r, p, y] = rpy_deg.map(f64::to_radians);
     let q = DQuat::from_euler(EulerRot::ZYX, y, p, r);
     Pose {
@@ -201,7 +194,7 @@ fn mount(xyz: [f64; 3], rpy_deg: [f64; 3]) -> Pose {
 
 /// A joint's frame on the base at angle `angle` (rad): turned about its axis through its
 /// origin, as [`futago_sim::joint::Joint::transform`] moves the sensors on it.
-fn joint_pose(j: &JointConfig, angle: f64) -> Pose {
+pub fn joint_pose(j: &JointConfig, angle: f64) -> Pose {
     let axis = DVec3::from(j.axis).normalize_or(DVec3::Z);
     let q = DQuat::from_axis_angle(axis, angle);
     let o = DVec3::from(j.origin);
@@ -210,6 +203,49 @@ fn joint_pose(j: &JointConfig, angle: f64) -> Pose {
         position: t.to_array(),
         orientation: [q.x, q.y, q.z, q.w],
     }
+}
+
+/// Transforms for `/tf`: parent frame, child frame, the child's pose in the parent.
+pub type Transforms<'a> = Vec<(&'a str, &'a str, Pose)>;
+
+/// Each laser's mount, for `/tf_static`: its parent frame (`base_link`, or the frame of the
+/// joint it rides), its frame (its name), and its pose there.
+pub fn laser_mounts(s: &Scenario) -> Vec<(String, String, Pose)> {
+    s.lidars
+        .iter()
+        .map(|(c, _)| {
+            let parent = c.joint.clone().unwrap_or_else(|| BASE.into());
+            (parent, c.name.clone(), mount(c.xyz, c.rpy_deg))
+        })
+        .collect()
+}
+
+/// Owned transforms, borrowed for a message.
+pub fn borrowed(t: &[(String, String, Pose)]) -> Transforms<'_> {
+    t.iter()
+        .map(|(p, c, m)| (p.as_str(), c.as_str(), *m))
+        .collect()
+}
+
+/// What the robot knows of itself at an odometry report, as ROS 2 publishes it: its
+/// odometry pose (`odom → base_link`), the wheels' twist `[v, ω]` in `base_link`, and the
+/// transforms for `/tf`: `odom → base_link` and each joint's frame on `base_link` from its
+/// encoder angle.
+pub fn odometry_frames<'a>(
+    bus: &'a Bus,
+    joints: &[JointConfig],
+    wheel_base: f64,
+) -> (Pose, [f64; 2], Transforms<'a>) {
+    let odom = planar(&bus.odometry);
+    let (l, r) = bus.wheel_speeds;
+    let twist = [(l + r) / 2.0, (r - l) / wheel_base];
+    let mut tf: Vec<(&str, &str, Pose)> = vec![(ODOM, BASE, odom)];
+    for (name, angle) in &bus.joints {
+        if let Some(j) = joints.iter().find(|j| &j.name == name) {
+            tf.push((BASE, name.as_str(), joint_pose(j, *angle)));
+        }
+    }
+    (odom, twist, tf)
 }
 
 fn planar(p: &Pose2) -> Pose {
@@ -232,11 +268,7 @@ impl Node for BagRecorder {
     }
 
     fn start(&mut self, bus: &mut Bus) -> Result<()> {
-        let statics: Vec<(&str, &str, Pose)> = self
-            .mounts
-            .iter()
-            .map(|(p, c, m)| (p.as_str(), c.as_str(), *m))
-            .collect();
+        let statics = borrowed(&self.mounts);
         if !statics.is_empty() {
             let msg = ros2msg::tf(bus.now, &statics);
             self.write(self.tf_static, bus.now, &msg)?;
@@ -273,17 +305,9 @@ impl Node for BagRecorder {
 
     fn on_odometry(&mut self, _o: &Odometry, bus: &mut Bus) -> Result<()> {
         let t = bus.now;
-        let odom = planar(&bus.odometry);
-        let (l, r) = bus.wheel_speeds;
-        let twist = [(l + r) / 2.0, (r - l) / self.wheel_base];
+        let (odom, twist, mut tf) = odometry_frames(bus, &self.joints, self.wheel_base);
         let msg = ros2msg::odometry(t, ODOM, BASE, &odom, twist);
         self.write(self.odom, t, &msg)?;
-        let mut tf: Vec<(&str, &str, Pose)> = vec![(ODOM, BASE, odom)];
-        for (name, angle) in &bus.joints {
-            if let Some(j) = self.joints.iter().find(|j| &j.name == name) {
-                tf.push((BASE, name.as_str(), joint_pose(j, *angle)));
-            }
-        }
         if let Some(est) = Self::map_source(bus).and_then(|s| bus.pose(s)) {
             tf.push((MAP, ODOM, planar(&est.compose(&bus.odometry.inverse()))));
         }

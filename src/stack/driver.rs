@@ -379,11 +379,14 @@ pub enum ControllerConfig {
     Coverage(CoverConfig),
     /// Drive the routes a stack node publishes ([`futago_robot::navigation::RouteConfig`]).
     Route(RouteConfig),
+    /// Commands from outside the stack: a user's ROS 2 stack over `futago serve`'s link
+    /// ([`crate::serve`]); no driver node runs.
+    External,
 }
 
 impl ControllerConfig {
     /// The `type` names, in declaration order.
-    pub const TYPES: [&'static str; 7] = [
+    pub const TYPES: [&'static str; 8] = [
         "idle",
         "segments",
         "waypoints",
@@ -391,6 +394,7 @@ impl ControllerConfig {
         "explore",
         "coverage",
         "route",
+        "external",
     ];
 
     /// Checks values a controller cannot run with; returns `(key, expectation)` on error.
@@ -398,7 +402,8 @@ impl ControllerConfig {
         match self {
             ControllerConfig::Idle
             | ControllerConfig::Explore(_)
-            | ControllerConfig::Coverage(_) => Ok(()),
+            | ControllerConfig::Coverage(_)
+            | ControllerConfig::External => Ok(()),
             ControllerConfig::Route(r) => {
                 if r.topic.is_empty() || r.topic.contains(char::is_whitespace) {
                     Err((
@@ -424,7 +429,8 @@ impl ControllerConfig {
             ControllerConfig::Navigate(_)
             | ControllerConfig::Explore(_)
             | ControllerConfig::Coverage(_)
-            | ControllerConfig::Route(_) => None,
+            | ControllerConfig::Route(_)
+            | ControllerConfig::External => None,
         }
     }
 }
@@ -475,6 +481,15 @@ pub fn controller_config(path: &Path, table: &toml::Table) -> Result<ControllerC
                 "unknown field: an idle controller takes no parameters",
             )),
         },
+        "external" => match rest.keys().next() {
+            None => Ok(ControllerConfig::External),
+            Some(k) => Err(SpecError::new(
+                path,
+                format!("controller.{k}"),
+                "unknown field: an external controller (commands over `futago serve`'s ROS 2 \
+                 link) takes no parameters",
+            )),
+        },
         "segments" => Ok(ControllerConfig::Segments(typed(path, rest)?)),
         "waypoints" => Ok(ControllerConfig::Waypoints(typed(path, rest)?)),
         "navigate" => Ok(ControllerConfig::Navigate(typed(path, rest)?)),
@@ -496,7 +511,7 @@ impl ControllerConfig {
     /// The `[controller]` table with every key, defaults included.
     pub fn table(&self) -> toml::Table {
         let typed = match self {
-            ControllerConfig::Idle => Ok(toml::Table::new()),
+            ControllerConfig::Idle | ControllerConfig::External => Ok(toml::Table::new()),
             ControllerConfig::Segments(c) => toml::Table::try_from(c),
             ControllerConfig::Waypoints(c) => toml::Table::try_from(c),
             ControllerConfig::Navigate(c) => toml::Table::try_from(c),
@@ -514,6 +529,7 @@ impl ControllerConfig {
             ControllerConfig::Explore(_) => names[4],
             ControllerConfig::Coverage(_) => names[5],
             ControllerConfig::Route(_) => names[6],
+            ControllerConfig::External => names[7],
         };
         t.insert("type".into(), toml::Value::String(ty.into()));
         t
@@ -630,7 +646,12 @@ impl ModuleConfig for Module {
 }
 
 impl super::StackModule for Module {
+    /// The driver, but for an `external` controller, whose commands a node from outside the
+    /// stack publishes (`futago serve`'s link).
     fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> super::Nodes {
+        if controller(s) == &ControllerConfig::External {
+            return Ok(Vec::new());
+        }
         Ok(vec![Box::new(DriverNode::new(s)?) as Box<dyn Node>])
     }
 }

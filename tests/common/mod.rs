@@ -163,3 +163,39 @@ pub fn python_with(test: &str, modules: &[&str]) -> Option<PathBuf> {
     println!("{line}");
     None
 }
+
+/// With `FUTAGO_REQUIRE_DDS=1` a test of the DDS link on a machine where UDP multicast does
+/// not loop back fails instead of skipping.
+pub const REQUIRE_DDS_ENV: &str = "FUTAGO_REQUIRE_DDS";
+
+/// Whether this machine delivers UDP multicast back to itself, as DDS discovery (SPDP to
+/// 239.255.0.1) needs between two participants on it; prints the skip for `test` when not.
+pub fn multicast_with(test: &str) -> bool {
+    use std::net::{Ipv4Addr, UdpSocket};
+    let group = Ipv4Addr::new(239, 255, 0, 1);
+    let loops = (|| -> std::io::Result<bool> {
+        let rx = UdpSocket::bind((Ipv4Addr::UNSPECIFIED, 0))?;
+        rx.join_multicast_v4(&group, &Ipv4Addr::UNSPECIFIED)?;
+        rx.set_read_timeout(Some(std::time::Duration::from_secs(2)))?;
+        let port = rx.local_addr()?.port();
+        let tx = UdpSocket::bind((Ipv4Addr::UNSPECIFIED, 0))?;
+        tx.set_multicast_loop_v4(true)?;
+        tx.send_to(b"futago", (group, port))?;
+        let mut buf = [0u8; 16];
+        let (n, _) = rx.recv_from(&mut buf)?;
+        Ok(&buf[..n] == b"futago")
+    })()
+    .unwrap_or(false);
+    if loops {
+        return true;
+    }
+    let line = format!(
+        "skipped {test}: needs UDP multicast that loops back on this machine (DDS discovery sends \
+         to 239.255.0.1)"
+    );
+    if std::env::var(REQUIRE_DDS_ENV).is_ok_and(|v| v == "1") {
+        panic!("{line} ({REQUIRE_DDS_ENV}=1 makes this a failure)");
+    }
+    println!("{line}");
+    false
+}

@@ -154,7 +154,7 @@ fn stamp_bytes(seq: u32, stamp: Time, frame: &str) -> Vec<u8> {
 /// A `sensor_msgs/LaserScan`'s seven numbers after its header, as ROS 1 and ROS 2 both lay them
 /// out: `angle_min`, `angle_max` (the last beam's angle), `angle_increment`, `time_increment`,
 /// `scan_time` (one beam's time for each beam), `range_min` and `range_max`.
-pub(crate) fn scan_fields(scan: &LaserScan) -> [f32; 7] {
+pub fn scan_fields(scan: &LaserScan) -> [f32; 7] {
     let n = scan.ranges.len();
     let angle_max = scan.angle_min + scan.angle_increment * n.saturating_sub(1) as f64;
     [

@@ -1,0 +1,323 @@
+//! ROS 2 messages as DDS types for `futago serve`'s live link (`dust_dds`, pure Rust): each
+//! a struct with the official `.msg` file's fields in order and of its types, under the name
+//! ROS 2's middleware gives the type on the wire (`sensor_msgs::msg::dds_::LaserScan_`), so
+//! that a ROS 2 node on any DDS (Cyclone, Fast DDS) matches it. Encoded as plain CDR
+//! (XCDR1), as ROS 2 exchanges them.
+
+use dust_dds::infrastructure::type_support::DdsType;
+use futago_msgs::ros2msg;
+
+/// A type's name on the wire: `pkg::msg::dds_::Type_`.
+pub trait RosType {
+    /// The ROS 2 name, `pkg/msg/Type`.
+    const ROS: &'static str;
+
+    /// The DDS type name ROS 2's middleware registers for [`RosType::ROS`].
+    fn dds_name() -> String {
+        let mut parts = Self::ROS.split('/');
+        let (pkg, kind, name) = (
+            parts.next().unwrap_or(""),
+            parts.next().unwrap_or("msg"),
+            parts.next().unwrap_or(""),
+        );
+        format!("{pkg}::{kind}::dds_::{name}_")
+    }
+}
+
+/// `builtin_interfaces/Time`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
+pub struct Time {
+    pub sec: i32,
+    pub nanosec: u32,
+}
+
+impl From<futago_msgs::Time> for Time {
+    fn from(t: futago_msgs::Time) -> Time {
+        let ns = t.nanos();
+        Time {
+            sec: ns.div_euclid(1_000_000_000) as i32,
+            nanosec: ns.rem_euclid(1_000_000_000) as u32,
+        }
+    }
+}
+
+impl From<Time> for futago_msgs::Time {
+    fn from(t: Time) -> futago_msgs::Time {
+        futago_msgs::Time(i64::from(t.sec) * 1_000_000_000 + i64::from(t.nanosec))
+    }
+}
+
+/// `std_msgs/Header`.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct Header {
+    pub stamp: Time,
+    pub frame_id: String,
+}
+
+impl Header {
+    pub fn new(t: futago_msgs::Time, frame: &str) -> Header {
+        Header {
+            stamp: t.into(),
+            frame_id: frame.to_string(),
+        }
+    }
+}
+
+/// `rosgraph_msgs/Clock`.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct Clock {
+    pub clock: Time,
+}
+
+impl RosType for Clock {
+    const ROS: &'static str = "rosgraph_msgs/msg/Clock";
+}
+
+/// `geometry_msgs/Vector3` (and `Point`, the same fields).
+#[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
+pub struct Vector3 {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+}
+
+/// `geometry_msgs/Quaternion`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
+pub struct Quaternion {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    pub w: f64,
+}
+
+/// `geometry_msgs/Pose`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
+pub struct Pose {
+    pub position: Vector3,
+    pub orientation: Quaternion,
+}
+
+impl From<&ros2msg::Pose> for Pose {
+    fn from(p: &ros2msg::Pose) -> Pose {
+        let [x, y, z] = p.position;
+        let [qx, qy, qz, qw] = p.orientation;
+        Pose {
+            position: Vector3 { x, y, z },
+            orientation: Quaternion {
+                x: qx,
+                y: qy,
+                z: qz,
+                w: qw,
+            },
+        }
+    }
+}
+
+/// One element of a `float64[36]` covariance. `dust_dds` serialises fixed arrays of
+/// structures but not of numbers; an array of one-number structures is the same bytes in CDR
+/// (each element a `float64` aligned to 8, nothing between them).
+#[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
+pub struct Float64 {
+    pub value: f64,
+}
+
+/// A `float64[36]` of zeros: a covariance not known.
+pub const UNKNOWN_COVARIANCE: [Float64; 36] = [Float64 { value: 0.0 }; 36];
+
+/// `geometry_msgs/PoseWithCovariance`.
+#[derive(Debug, Clone, PartialEq, DdsType)]
+pub struct PoseWithCovariance {
+    pub pose: Pose,
+    pub covariance: [Float64; 36],
+}
+
+/// `geometry_msgs/Twist`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
+pub struct Twist {
+    pub linear: Vector3,
+    pub angular: Vector3,
+}
+
+impl RosType for Twist {
+    const ROS: &'static str = "geometry_msgs/msg/Twist";
+}
+
+/// `geometry_msgs/TwistStamped`.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct TwistStamped {
+    pub header: Header,
+    pub twist: Twist,
+}
+
+impl RosType for TwistStamped {
+    const ROS: &'static str = "geometry_msgs/msg/TwistStamped";
+}
+
+/// `geometry_msgs/TwistWithCovariance`.
+#[derive(Debug, Clone, PartialEq, DdsType)]
+pub struct TwistWithCovariance {
+    pub twist: Twist,
+    pub covariance: [Float64; 36],
+}
+
+/// `nav_msgs/Odometry`.
+#[derive(Debug, Clone, PartialEq, DdsType)]
+pub struct Odometry {
+    pub header: Header,
+    pub child_frame_id: String,
+    pub pose: PoseWithCovariance,
+    pub twist: TwistWithCovariance,
+}
+
+impl RosType for Odometry {
+    const ROS: &'static str = "nav_msgs/msg/Odometry";
+}
+
+impl Odometry {
+    /// `child` in `frame` at `t`: the pose, the planar twist `[v, ω]` in `child`'s frame, the
+    /// covariances zero (unknown), as the bag's odometry ([`ros2msg::odometry`]).
+    pub fn new(
+        t: futago_msgs::Time,
+        frame: &str,
+        child: &str,
+        p: &ros2msg::Pose,
+        twist: [f64; 2],
+    ) -> Odometry {
+        Odometry {
+            header: Header::new(t, frame),
+            child_frame_id: child.to_string(),
+            pose: PoseWithCovariance {
+                pose: p.into(),
+                covariance: UNKNOWN_COVARIANCE,
+            },
+            twist: TwistWithCovariance {
+                twist: Twist {
+                    linear: Vector3 {
+                        x: twist[0],
+                        ..Vector3::default()
+                    },
+                    angular: Vector3 {
+                        z: twist[1],
+                        ..Vector3::default()
+                    },
+                },
+                covariance: UNKNOWN_COVARIANCE,
+            },
+        }
+    }
+}
+
+/// `geometry_msgs/Transform`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
+pub struct Transform {
+    pub translation: Vector3,
+    pub rotation: Quaternion,
+}
+
+/// `geometry_msgs/TransformStamped`.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct TransformStamped {
+    pub header: Header,
+    pub child_frame_id: String,
+    pub transform: Transform,
+}
+
+/// `tf2_msgs/TFMessage`.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct TfMessage {
+    pub transforms: Vec<TransformStamped>,
+}
+
+impl RosType for TfMessage {
+    const ROS: &'static str = "tf2_msgs/msg/TFMessage";
+}
+
+impl TfMessage {
+    /// `(parent, child, pose of child in parent)` at `t`, as [`ros2msg::tf`] writes them.
+    pub fn new(t: futago_msgs::Time, transforms: &[(&str, &str, ros2msg::Pose)]) -> TfMessage {
+        TfMessage {
+            transforms: transforms
+                .iter()
+                .map(|(parent, child, p)| {
+                    let p = Pose::from(p);
+                    TransformStamped {
+                        header: Header::new(t, parent),
+                        child_frame_id: child.to_string(),
+                        transform: Transform {
+                            translation: p.position,
+                            rotation: p.orientation,
+                        },
+                    }
+                })
+                .collect(),
+        }
+    }
+}
+
+/// `sensor_msgs/LaserScan`.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct LaserScan {
+    pub header: Header,
+    pub angle_min: f32,
+    pub angle_max: f32,
+    pub angle_increment: f32,
+    pub time_increment: f32,
+    pub scan_time: f32,
+    pub range_min: f32,
+    pub range_max: f32,
+    pub ranges: Vec<f32>,
+    pub intensities: Vec<f32>,
+}
+
+impl RosType for LaserScan {
+    const ROS: &'static str = "sensor_msgs/msg/LaserScan";
+}
+
+impl From<&futago_msgs::LaserScan> for LaserScan {
+    /// The same numbers as the bag's scans ([`ros2msg::laser_scan`]).
+    fn from(s: &futago_msgs::LaserScan) -> LaserScan {
+        let [
+            angle_min,
+            angle_max,
+            angle_increment,
+            time_increment,
+            scan_time,
+            range_min,
+            range_max,
+        ] = futago_msgs::rosbag::writer::scan_fields(s);
+        LaserScan {
+            header: Header::new(s.stamp, &s.frame),
+            angle_min,
+            angle_max,
+            angle_increment,
+            time_increment,
+            scan_time,
+            range_min,
+            range_max,
+            ranges: s.ranges.clone(),
+            intensities: Vec::new(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_type_is_named_as_ros_2_names_it_on_the_wire() {
+        assert_eq!(LaserScan::dds_name(), "sensor_msgs::msg::dds_::LaserScan_");
+        assert_eq!(Clock::dds_name(), "rosgraph_msgs::msg::dds_::Clock_");
+        assert_eq!(TfMessage::dds_name(), "tf2_msgs::msg::dds_::TFMessage_");
+    }
+
+    #[test]
+    fn a_time_goes_to_seconds_and_nanoseconds_and_back() {
+        for ns in [0, 1, 999_999_999, 1_000_000_000, 12_000_000_005, -1] {
+            let t = futago_msgs::Time(ns);
+            let d = Time::from(t);
+            assert!(d.nanosec < 1_000_000_000);
+            assert_eq!(futago_msgs::Time::from(d), t);
+        }
+    }
+}

@@ -1,0 +1,555 @@
+//! `futago serve SCENARIO`: the twin as a ROS 2 participant over DDS, so that a user's own
+//! ROS 2 stack drives the simulated robot in lock-step and is scored as the built-in one is.
+//!
+//! The scenario's `[controller]` is replaced by an `external` one: no driver node runs, and
+//! the link node ([`Link`]) publishes what the robot senses and takes its commands:
+//!
+//! - published: `/clock` (`rosgraph_msgs/Clock`), `/odom` (`nav_msgs/Odometry`, with the
+//!   wheels' twist), `/tf` (`odom → base_link`, each joint's frame from its encoder angle),
+//!   `/tf_static` (each laser's mount; transient local), and each laser's scans on `/scan`
+//!   (the first) or `/scan_NAME`, all as the bag of a run names them ([`crate::stack::bag`]);
+//! - taken: `/cmd_vel`, `geometry_msgs/Twist` or, with `--stamped`, `TwistStamped`.
+//!
+//! **Lock-step.** At every control tick (each report of the Create's sensor stream, 15 ms of
+//! simulated time) the link publishes that tick's sensor messages, then `/clock` = the tick's
+//! time t_k, and waits for the controller's command for that tick before the simulation goes
+//! on: a `TwistStamped` stamped t_k (older stamps are discarded), or the next `Twist` (one
+//! per `/clock`, in order). So what the controller computes from what it received up to t_k
+//! is applied at t_k, whatever the load of the machine, and a run is the same twice. If no
+//! command comes within `--timeout` seconds of real time, the robot keeps its last command,
+//! the run goes on, and its summary says it was not deterministic (`serve.late`). Before the
+//! first tick the link waits (`--wait`) until the controller's `/cmd_vel` publisher and a
+//! `/clock` subscriber have matched, and then a second more, for the controller's side of
+//! the match.
+//!
+//! DDS is `dust_dds` (pure Rust, RTPS over UDP): no ROS installation is needed, and ROS 2
+//! nodes on Cyclone DDS or Fast DDS in the same domain (`--domain`, or `ROS_DOMAIN_ID`) see
+//! the topics. Discovery is the standard one (SPDP by multicast).
+
+use crate::dds::{self, RosType};
+use crate::run::{RunOptions, print_result, run_with};
+use crate::scenario::Scenario;
+use crate::stack::bag::{borrowed, laser_mounts, odometry_frames};
+use crate::stack::{Bus, Node, Report, Streams};
+use anyhow::{Context, Result, bail};
+use dust_dds::domain::domain_participant::DomainParticipant;
+use dust_dds::domain::domain_participant_factory::DomainParticipantFactory;
+use dust_dds::infrastructure::qos::{DataReaderQos, DataWriterQos, QosKind};
+use dust_dds::infrastructure::qos_policy::{
+    DurabilityQosPolicy, DurabilityQosPolicyKind, HistoryQosPolicy, HistoryQosPolicyKind,
+    ReliabilityQosPolicy, ReliabilityQosPolicyKind,
+};
+use dust_dds::infrastructure::sample_info::{ANY_INSTANCE_STATE, ANY_SAMPLE_STATE, ANY_VIEW_STATE};
+use dust_dds::infrastructure::status::{NO_STATUS, StatusKind};
+use dust_dds::infrastructure::time::{Duration as DdsDuration, DurationKind};
+use dust_dds::infrastructure::type_support::TypeSupport;
+use dust_dds::listener::NO_LISTENER;
+use dust_dds::publication::data_writer::DataWriter;
+use dust_dds::publication::publisher::Publisher;
+use dust_dds::subscription::data_reader::DataReader;
+use dust_dds::topic_definition::topic_description::TopicDescription;
+use dust_dds::wait_set::{Condition, WaitSet};
+use futago_msgs::ros2msg::Pose;
+use futago_msgs::{DriveCommand, LaserScan, Odometry, Time};
+use futago_sim::joint::JointConfig;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// How long the link waits after matching before the first `/clock`, real time.
+const SETTLE: Duration = Duration::from_secs(1);
+
+/// How `futago serve` links.
+#[derive(Debug, Clone)]
+pub struct ServeOptions {
+    /// The DDS domain; `None`: `ROS_DOMAIN_ID`, else 0.
+    pub domain: Option<i32>,
+    /// Real seconds to wait for a tick's command before going on without it.
+    pub timeout: f64,
+    /// Real seconds to wait for the controller to match before the first tick.
+    pub wait: f64,
+    /// Take `geometry_msgs/TwistStamped` on `/cmd_vel` instead of `Twist`.
+    pub stamped: bool,
+    /// Simulated seconds between the ticks that wait for a command (`None`: every tick): the
+    /// period of a controller that runs on its own timer, such as Nav2's controller server.
+    pub period: Option<f64>,
+}
+
+impl Default for ServeOptions {
+    fn default() -> Self {
+        ServeOptions {
+            domain: None,
+            timeout: 10.0,
+            wait: 60.0,
+            stamped: false,
+            period: None,
+        }
+    }
+}
+
+/// A DDS error as an error naming what was being done.
+fn dds<T>(what: &str, r: dust_dds::infrastructure::error::DdsResult<T>) -> Result<T> {
+    r.map_err(|e| anyhow::anyhow!("DDS: {what}: {e:?}"))
+}
+
+/// Reliable, keep last `depth`; transient local when `latched`.
+fn writer_qos(depth: u32, latched: bool) -> DataWriterQos {
+    DataWriterQos {
+        reliability: ReliabilityQosPolicy {
+            kind: ReliabilityQosPolicyKind::Reliable,
+            max_blocking_time: DurationKind::Finite(DdsDuration::new(1, 0)),
+        },
+        history: HistoryQosPolicy {
+            kind: HistoryQosPolicyKind::KeepLast(depth),
+        },
+        durability: DurabilityQosPolicy {
+            kind: if latched {
+                DurabilityQosPolicyKind::TransientLocal
+            } else {
+                DurabilityQosPolicyKind::Volatile
+            },
+        },
+        ..Default::default()
+    }
+}
+
+/// The link's DDS entities.
+struct Dds {
+    participant: DomainParticipant,
+    clock: DataWriter<dds::Clock>,
+    tf: DataWriter<dds::TfMessage>,
+    tf_static: DataWriter<dds::TfMessage>,
+    odom: DataWriter<dds::Odometry>,
+    /// Each laser's name and its scans' writer.
+    scans: Vec<(String, DataWriter<dds::LaserScan>)>,
+    command: CommandReader,
+    waitset: WaitSet,
+}
+
+/// `/cmd_vel`'s reader, of the type the controller publishes.
+enum CommandReader {
+    Twist(DataReader<dds::Twist>),
+    Stamped(DataReader<dds::TwistStamped>),
+}
+
+/// ROS 2 topic `topic` (`/scan`) of type `T`: DDS topic `rt/scan`.
+fn topic<T: TypeSupport + RosType + Send + 'static>(
+    participant: &DomainParticipant,
+    topic: &str,
+) -> Result<TopicDescription> {
+    dds(
+        &format!("creating topic {topic}"),
+        participant.create_topic::<T>(
+            &format!("rt{topic}"),
+            &T::dds_name(),
+            QosKind::Default,
+            NO_LISTENER,
+            NO_STATUS,
+        ),
+    )
+}
+
+fn writer<T: TypeSupport + RosType + Send + 'static>(
+    participant: &DomainParticipant,
+    publisher: &Publisher,
+    name: &str,
+    qos: DataWriterQos,
+) -> Result<DataWriter<T>> {
+    let t = topic::<T>(participant, name)?;
+    let topic = name;
+    dds(
+        &format!("creating the writer of {topic}"),
+        publisher.create_datawriter::<T>(&t, QosKind::Specific(qos), NO_LISTENER, NO_STATUS),
+    )
+}
+
+fn reader<T: TypeSupport + RosType + Send + 'static>(
+    participant: &DomainParticipant,
+    name: &str,
+) -> Result<DataReader<T>> {
+    let t = topic::<T>(participant, name)?;
+    let topic = name;
+    let subscriber = dds(
+        "creating a subscriber",
+        participant.create_subscriber(QosKind::Default, NO_LISTENER, NO_STATUS),
+    )?;
+    let qos = DataReaderQos {
+        reliability: ReliabilityQosPolicy {
+            kind: ReliabilityQosPolicyKind::Reliable,
+            max_blocking_time: DurationKind::Finite(DdsDuration::new(1, 0)),
+        },
+        history: HistoryQosPolicy {
+            kind: HistoryQosPolicyKind::KeepLast(100),
+        },
+        ..Default::default()
+    };
+    dds(
+        &format!("creating the reader of {topic}"),
+        subscriber.create_datareader::<T>(&t, QosKind::Specific(qos), NO_LISTENER, NO_STATUS),
+    )
+}
+
+impl Dds {
+    /// The participant on `domain` and its topics for scenario `s`; `/cmd_vel` as
+    /// `TwistStamped` when `stamped`.
+    fn new(s: &Scenario, domain: i32, stamped: bool) -> Result<Dds> {
+        let factory = DomainParticipantFactory::get_instance();
+        let participant = dds(
+            "creating the participant",
+            factory.create_participant(domain, QosKind::Default, NO_LISTENER, NO_STATUS),
+        )?;
+        let publisher = dds(
+            "creating a publisher",
+            participant.create_publisher(QosKind::Default, NO_LISTENER, NO_STATUS),
+        )?;
+        let p = &participant;
+        let scans = s
+            .lidars
+            .iter()
+            .enumerate()
+            .map(|(i, (c, _))| {
+                let topic = crate::stack::bag::scan_topic(i, &c.name);
+                Ok((
+                    c.name.clone(),
+                    writer(p, &publisher, &topic, writer_qos(10, false))?,
+                ))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let command = if stamped {
+            CommandReader::Stamped(reader(p, "/cmd_vel")?)
+        } else {
+            CommandReader::Twist(reader(p, "/cmd_vel")?)
+        };
+        let condition = match &command {
+            CommandReader::Twist(r) => r.get_statuscondition(),
+            CommandReader::Stamped(r) => r.get_statuscondition(),
+        };
+        dds(
+            "watching /cmd_vel",
+            condition.set_enabled_statuses(&[StatusKind::DataAvailable]),
+        )?;
+        let mut waitset = WaitSet::new();
+        dds(
+            "watching /cmd_vel",
+            waitset.attach_condition(Condition::StatusCondition(condition)),
+        )?;
+        Ok(Dds {
+            clock: writer(p, &publisher, "/clock", writer_qos(10, false))?,
+            tf: writer(p, &publisher, "/tf", writer_qos(100, false))?,
+            tf_static: writer(p, &publisher, "/tf_static", writer_qos(1, true))?,
+            odom: writer(p, &publisher, "/odom", writer_qos(10, false))?,
+            scans,
+            command,
+            waitset,
+            participant,
+        })
+    }
+
+    /// Waits until the controller's `/cmd_vel` publisher and a `/clock` subscriber have
+    /// matched, at most `wait` real seconds.
+    fn wait_for_controller(&self, wait: f64) -> Result<f64> {
+        let start = Instant::now();
+        loop {
+            let commands = match &self.command {
+                CommandReader::Twist(r) => r.get_subscription_matched_status(),
+                CommandReader::Stamped(r) => r.get_subscription_matched_status(),
+            }
+            .map(|m| m.current_count)
+            .unwrap_or(0);
+            let clocks = self
+                .clock
+                .get_publication_matched_status()
+                .map(|m| m.current_count)
+                .unwrap_or(0);
+            if commands > 0 && clocks > 0 {
+                // Matching is seen here when this side has matched; the controller's side
+                // completes its half of the same exchange within milliseconds. Until it has,
+                // a /clock would be lost to it.
+                std::thread::sleep(SETTLE);
+                return Ok(start.elapsed().as_secs_f64());
+            }
+            if start.elapsed().as_secs_f64() > wait {
+                bail!(
+                    "no controller matched within {wait} s: {} /cmd_vel publisher(s), {} /clock \
+                     subscriber(s) (DDS domain {}); start the stack that drives the robot, on the \
+                     same domain",
+                    commands,
+                    clocks,
+                    self.participant.get_domain_id()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// The commands that arrived, oldest first, as `(stamp, linear x, angular z)`; the stamp
+    /// is `None` for a plain `Twist`.
+    fn take_commands(&self) -> Vec<(Option<Time>, f64, f64)> {
+        match &self.command {
+            CommandReader::Twist(r) => r
+                .take(100, ANY_SAMPLE_STATE, ANY_VIEW_STATE, ANY_INSTANCE_STATE)
+                .unwrap_or_default()
+                .into_iter()
+                .filter_map(|s| s.data)
+                .map(|t| (None, t.linear.x, t.angular.z))
+                .collect(),
+            CommandReader::Stamped(r) => r
+                .take(100, ANY_SAMPLE_STATE, ANY_VIEW_STATE, ANY_INSTANCE_STATE)
+                .unwrap_or_default()
+                .into_iter()
+                .filter_map(|s| s.data)
+                .map(|t| {
+                    (
+                        Some(Time::from(t.header.stamp)),
+                        t.twist.linear.x,
+                        t.twist.angular.z,
+                    )
+                })
+                .collect(),
+        }
+    }
+}
+
+/// The link node: publishes the robot's sensors and the clock, and takes the controller's
+/// command at every control tick (see the module's notes).
+pub struct Link {
+    dds: Dds,
+    timeout: Duration,
+    wheel_base: f64,
+    joints: Vec<JointConfig>,
+    /// Each laser's mount: parent frame, frame, pose.
+    mounts: Vec<(String, String, Pose)>,
+    /// Commands taken and not yet applied: stamp (`TwistStamped`), forward speed, turn rate.
+    queued: std::collections::VecDeque<(Option<Time>, f64, f64)>,
+    /// Simulated time between the ticks that wait for a command (`None`: every tick).
+    period: Option<futago_msgs::Duration>,
+    /// The next tick that waits for a command.
+    next_due: Time,
+    last: Option<DriveCommand>,
+    ticks: u64,
+    /// Ticks that waited for a command, and those whose command came too late.
+    waits: u64,
+    late: u64,
+    discarded: u64,
+    matched_after: f64,
+}
+
+impl Link {
+    fn write<T: TypeSupport + Send + 'static>(w: &DataWriter<T>, what: &str, m: T) -> Result<()> {
+        dds(&format!("publishing {what}"), w.write(m, None))
+    }
+
+    /// The command for the tick at `now`, waiting for it at most the timeout: the next plain
+    /// `Twist`, or the `TwistStamped` stamped `now` (older ones are discarded; later ones kept
+    /// for their tick). A controller on its own timer of the link's `--period` stamps its
+    /// command with the `/clock` that fired it, which is the tick the link waits at.
+    fn command_for(&mut self, now: Time) -> Option<(f64, f64)> {
+        let deadline = Instant::now() + self.timeout;
+        loop {
+            self.queued.extend(self.dds.take_commands());
+            let before = self.queued.len();
+            self.queued
+                .retain(|(stamp, ..)| stamp.is_none_or(|t| t >= now));
+            self.discarded += (before - self.queued.len()) as u64;
+            if let Some(i) = self
+                .queued
+                .iter()
+                .position(|(stamp, ..)| stamp.is_none_or(|t| t == now))
+            {
+                let (_, v, w) = self.queued.remove(i).expect("an index found");
+                return Some((v, w));
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return None;
+            }
+            let step = left.min(Duration::from_millis(100));
+            let _ = self
+                .dds
+                .waitset
+                .wait(DdsDuration::new(step.as_secs() as i32, step.subsec_nanos()));
+        }
+    }
+}
+
+impl Node for Link {
+    fn name(&self) -> &'static str {
+        "serve.link"
+    }
+
+    fn streams(&self) -> Streams {
+        let mut consumes = vec!["odometry".to_string()];
+        consumes.extend(self.dds.scans.iter().map(|(n, _)| format!("scan/{n}")));
+        Streams {
+            consumes,
+            publishes: vec!["cmd_vel".into()],
+            ..Streams::default()
+        }
+    }
+
+    fn start(&mut self, bus: &mut Bus) -> Result<()> {
+        let statics = borrowed(&self.mounts);
+        Self::write(
+            &self.dds.tf_static,
+            "/tf_static",
+            dds::TfMessage::new(bus.now, &statics),
+        )
+    }
+
+    fn on_odometry(&mut self, _o: &Odometry, bus: &mut Bus) -> Result<()> {
+        let (odom, twist, tf) = odometry_frames(bus, &self.joints, self.wheel_base);
+        Self::write(
+            &self.dds.odom,
+            "/odom",
+            dds::Odometry::new(bus.now, "odom", "base_link", &odom, twist),
+        )?;
+        Self::write(&self.dds.tf, "/tf", dds::TfMessage::new(bus.now, &tf))
+    }
+
+    fn on_scan(&mut self, laser: &str, scan: &LaserScan, _bus: &mut Bus) -> Result<()> {
+        if let Some((_, w)) = self.dds.scans.iter().find(|(n, _)| n == laser) {
+            Self::write(w, laser, dds::LaserScan::from(scan))?;
+        }
+        Ok(())
+    }
+
+    fn on_control(&mut self, bus: &mut Bus) -> Result<()> {
+        let now = bus.now;
+        Self::write(&self.dds.clock, "/clock", dds::Clock { clock: now.into() })?;
+        self.ticks += 1;
+        if now < self.next_due {
+            return Ok(());
+        }
+        self.next_due = match self.period {
+            Some(p) => self.next_due + p,
+            None => now,
+        };
+        let command = self.command_for(now);
+        self.waits += 1;
+        let Some((v, w)) = command else {
+            self.late += 1;
+            return Ok(());
+        };
+        let half = w * self.wheel_base / 2.0;
+        let cmd = DriveCommand::DriveDirect {
+            left: v - half,
+            right: v + half,
+        };
+        if self.last != Some(cmd) {
+            self.last = Some(cmd);
+            bus.command = Some(cmd);
+        }
+        Ok(())
+    }
+
+    /// The link drives to the scenario's end.
+    fn finished(&self) -> bool {
+        false
+    }
+
+    fn finish(&mut self, _bus: &mut Bus, _out: Option<&Path>) -> Result<Report> {
+        let mut performance = serde_json::Map::new();
+        performance.insert(
+            "matched_after_s".into(),
+            serde_json::json!(self.matched_after),
+        );
+        Ok(Report {
+            summary: vec![(
+                "serve".into(),
+                serde_json::json!({
+                    "ticks": self.ticks,
+                    "commands_awaited": self.waits,
+                    "late": self.late,
+                    "discarded": self.discarded,
+                    "deterministic": self.late == 0,
+                }),
+            )],
+            performance,
+            ..Report::default()
+        })
+    }
+}
+
+/// `futago serve`: loads the scenario with an external controller, links, waits for the
+/// controller, runs in lock-step and scores as `futago run` does.
+pub fn command(
+    scenario: &Path,
+    overlays: &[crate::overlay::Overlay],
+    out: Option<PathBuf>,
+    opts: &RunOptions,
+    serve: &ServeOptions,
+) -> Result<i32> {
+    for (name, v) in [
+        ("--timeout", Some(serve.timeout)),
+        ("--wait", Some(serve.wait)),
+        ("--period", serve.period),
+    ] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0 && v <= 86_400.0)
+        {
+            bail!("{name}: expected a positive number of seconds up to a day, found {v}");
+        }
+    }
+    let domain = match serve.domain {
+        Some(d) => d,
+        None => match std::env::var("ROS_DOMAIN_ID") {
+            Ok(v) => v.trim().parse().map_err(|_| {
+                anyhow::anyhow!("ROS_DOMAIN_ID: expected a domain id from 0 to 232, found `{v}`")
+            })?,
+            Err(_) => 0,
+        },
+    };
+    if !(0..=232).contains(&domain) {
+        bail!(
+            "--domain (or ROS_DOMAIN_ID): expected a DDS domain id from 0 to 232, found {domain}"
+        );
+    }
+    let external = toml::Table::from_iter([(
+        "controller".to_string(),
+        toml::Value::Table(toml::Table::from_iter([(
+            "type".to_string(),
+            toml::Value::String("external".into()),
+        )])),
+    )]);
+    let s = Scenario::load_replacing(
+        scenario,
+        overlays,
+        &external,
+        &crate::stack::configs(crate::stack::MODULES),
+    )?;
+    let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
+    let link = Dds::new(&s, domain, serve.stamped).context("starting the ROS 2 link")?;
+    eprintln!(
+        "futago serve: {} on DDS domain {domain}; waiting for a controller (/cmd_vel {}, /clock)",
+        s.spec.name,
+        if serve.stamped {
+            "TwistStamped"
+        } else {
+            "Twist"
+        }
+    );
+    let matched_after = link.wait_for_controller(serve.wait)?;
+    let node = Link {
+        dds: link,
+        timeout: Duration::from_secs_f64(serve.timeout),
+        wheel_base: s.spec.robot.wheel_base,
+        joints: s.movers.joints.clone(),
+        mounts: laser_mounts(&s),
+        queued: Default::default(),
+        period: serve.period.map(futago_msgs::Duration::from_secs),
+        next_due: Time::ZERO,
+        waits: 0,
+        last: None,
+        ticks: 0,
+        late: 0,
+        discarded: 0,
+        matched_after,
+    };
+    let (summary, o) = run_with(&s, opts, &out, vec![Box::new(node)])?;
+    if summary["serve"]["deterministic"] == false {
+        eprintln!(
+            "futago serve: {} of {} commands came later than --timeout: this run is not deterministic",
+            summary["serve"]["late"], summary["serve"]["ticks"]
+        );
+    }
+    Ok(print_result(&s, &summary, &o, &out))
+}

@@ -1,0 +1,446 @@
+//! `futago serve`: the twin driven over DDS by a controller outside it, in lock-step.
+//!
+//! The first test's controller is a second DDS participant here (dust_dds, with futago's ROS 2
+//! types) that drives the robot round a square by its odometry; the second's is Python's
+//! `cyclonedds` (an independent DDS), which answers each `/clock` and counts the scans.
+
+mod common;
+use common::{multicast_with, python_with, root};
+use dust_dds::domain::domain_participant_factory::DomainParticipantFactory;
+use dust_dds::infrastructure::qos::{DataReaderQos, DataWriterQos, QosKind};
+use dust_dds::infrastructure::qos_policy::{
+    HistoryQosPolicy, HistoryQosPolicyKind, ReliabilityQosPolicy, ReliabilityQosPolicyKind,
+};
+use dust_dds::infrastructure::sample_info::{ANY_INSTANCE_STATE, ANY_SAMPLE_STATE, ANY_VIEW_STATE};
+use dust_dds::infrastructure::status::NO_STATUS;
+use dust_dds::infrastructure::time::{Duration as DdsDuration, DurationKind};
+use dust_dds::listener::NO_LISTENER;
+use futago::dds::{self, RosType};
+use futago_msgs::Time;
+use std::collections::{BTreeMap, VecDeque};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The start of a `nav_msgs/Odometry`, up to its pose: what the controller reads. (dust_dds
+/// reads no fixed arrays of numbers, such as the covariances after it; CDR is read in order,
+/// so the rest of the message is left unread.)
+#[derive(Debug, Clone, Default, dust_dds::infrastructure::type_support::DdsType)]
+struct OdometryStart {
+    header: dds::Header,
+    child_frame_id: String,
+    pose: dds::Pose,
+}
+
+/// A DDS domain of this test process's own, so that tests run side by side do not meet.
+fn domain(offset: i32) -> i32 {
+    offset + (std::process::id() % 50) as i32
+}
+
+fn serve(scenario: &str, out: &Path, domain: i32, extra: &[&str]) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_futago"))
+        .args([
+            "serve",
+            root().join(scenario).to_str().unwrap(),
+            "-q",
+            "--domain",
+            &domain.to_string(),
+            "--out",
+            out.to_str().unwrap(),
+            "--wait",
+            "60",
+            "--timeout",
+            "30",
+        ])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// DDS topic `name` of type `T`, named `ty` on the wire.
+fn topic<T: dust_dds::infrastructure::type_support::TypeSupport + Send + 'static>(
+    p: &dust_dds::domain::domain_participant::DomainParticipant,
+    name: &str,
+    ty: &str,
+) -> dust_dds::topic_definition::topic_description::TopicDescription {
+    p.create_topic::<T>(name, ty, QosKind::Default, NO_LISTENER, NO_STATUS)
+        .unwrap()
+}
+
+/// What the finished `child` wrote on stderr.
+fn stderr_of(child: &mut Child) -> String {
+    use std::io::Read;
+    let mut err = String::new();
+    if let Some(mut e) = child.stderr.take() {
+        e.read_to_string(&mut err).unwrap();
+    }
+    err
+}
+
+fn reliable() -> ReliabilityQosPolicy {
+    ReliabilityQosPolicy {
+        kind: ReliabilityQosPolicyKind::Reliable,
+        max_blocking_time: DurationKind::Finite(DdsDuration::new(1, 0)),
+    }
+}
+
+fn keep(n: u32) -> HistoryQosPolicy {
+    HistoryQosPolicy {
+        kind: HistoryQosPolicyKind::KeepLast(n),
+    }
+}
+
+/// Side of the square, m; forward and turning speeds.
+const SIDE: f64 = 0.5;
+const SPEED: f64 = 0.2;
+const TURN: f64 = 0.6;
+
+/// The square's plan: drive a side, turn a quarter, four times, then stand.
+struct Square {
+    leg: usize,
+    turning: bool,
+    /// The odometry pose where the current leg began: x, y, yaw.
+    from: Option<[f64; 3]>,
+}
+
+impl Square {
+    /// The command `[v, ω]` at odometry pose `p`.
+    fn command(&mut self, p: [f64; 3]) -> [f64; 2] {
+        if self.leg == 4 {
+            return [0.0, 0.0];
+        }
+        let from = *self.from.get_or_insert(p);
+        if !self.turning {
+            if (p[0] - from[0]).hypot(p[1] - from[1]) < SIDE {
+                return [SPEED, 0.0];
+            }
+            self.turning = true;
+            self.from = Some(p);
+        }
+        let turned = (p[2] - from[2] + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        if turned < std::f64::consts::FRAC_PI_2 {
+            return [0.0, TURN];
+        }
+        self.leg += 1;
+        self.turning = false;
+        self.from = Some(p);
+        self.command(p)
+    }
+}
+
+fn yaw(q: &dds::Quaternion) -> f64 {
+    (2.0 * (q.w * q.z + q.x * q.y)).atan2(1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+}
+
+/// Drives the served robot round a square by its odometry until `child` exits: for each
+/// `/clock` t_k, the command from the odometry stamped t_k (standing at t = 0),
+/// published as a `TwistStamped` stamped t_k. Returns the child's status and stderr.
+fn drive_square(domain: i32, mut child: Child) -> (std::process::ExitStatus, String) {
+    let factory = DomainParticipantFactory::get_instance();
+    let p = factory
+        .create_participant(domain, QosKind::Default, NO_LISTENER, NO_STATUS)
+        .unwrap();
+    let sub = p
+        .create_subscriber(QosKind::Default, NO_LISTENER, NO_STATUS)
+        .unwrap();
+    let publ = p
+        .create_publisher(QosKind::Default, NO_LISTENER, NO_STATUS)
+        .unwrap();
+    let rq = DataReaderQos {
+        reliability: reliable(),
+        history: keep(1000),
+        ..Default::default()
+    };
+    let clock_t = topic::<dds::Clock>(&p, "rt/clock", &dds::Clock::dds_name());
+    let odom_t = topic::<OdometryStart>(&p, "rt/odom", &dds::Odometry::dds_name());
+    let cmd_t = topic::<dds::TwistStamped>(&p, "rt/cmd_vel", &dds::TwistStamped::dds_name());
+    let clocks = sub
+        .create_datareader::<dds::Clock>(
+            &clock_t,
+            QosKind::Specific(rq.clone()),
+            NO_LISTENER,
+            NO_STATUS,
+        )
+        .unwrap();
+    let odoms = sub
+        .create_datareader::<OdometryStart>(&odom_t, QosKind::Specific(rq), NO_LISTENER, NO_STATUS)
+        .unwrap();
+    let cmd = publ
+        .create_datawriter::<dds::TwistStamped>(
+            &cmd_t,
+            QosKind::Specific(DataWriterQos {
+                reliability: reliable(),
+                history: keep(100),
+                ..Default::default()
+            }),
+            NO_LISTENER,
+            NO_STATUS,
+        )
+        .unwrap();
+    let mut ticks: VecDeque<Time> = VecDeque::new();
+    let mut poses: BTreeMap<Time, [f64; 3]> = BTreeMap::new();
+    let mut square = Square {
+        leg: 0,
+        turning: false,
+        from: None,
+    };
+    let started = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return (status, stderr_of(&mut child));
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(300),
+            "the served run took too long"
+        );
+        if std::env::var("SERVE_DEBUG").is_ok() {
+            eprintln!(
+                "{:?} ticks {} poses {} leg {}",
+                started.elapsed(),
+                ticks.len(),
+                poses.len(),
+                square.leg
+            );
+        }
+        for s in clocks
+            .take(1000, ANY_SAMPLE_STATE, ANY_VIEW_STATE, ANY_INSTANCE_STATE)
+            .unwrap_or_default()
+        {
+            if let Some(c) = s.data {
+                ticks.push_back(c.clock.into());
+            }
+        }
+        for s in odoms
+            .take(1000, ANY_SAMPLE_STATE, ANY_VIEW_STATE, ANY_INSTANCE_STATE)
+            .unwrap_or_default()
+        {
+            if let Some(o) = s.data {
+                let q = &o.pose.orientation;
+                let at = &o.pose.position;
+                poses.insert(o.header.stamp.into(), [at.x, at.y, yaw(q)]);
+            }
+        }
+        let mut acted = false;
+        while let Some(&t) = ticks.front() {
+            // The odometry of this tick, published before its /clock; none at t = 0, where
+            // the robot stands still until its first report.
+            let command = if t == Time::ZERO {
+                [0.0; 2]
+            } else if let Some(p) = poses.get(&t) {
+                square.command(*p)
+            } else {
+                break;
+            };
+            ticks.pop_front();
+            let [v, w] = command;
+            let mut twist = dds::Twist::default();
+            (twist.linear.x, twist.angular.z) = (v, w);
+            let m = dds::TwistStamped {
+                header: dds::Header::new(t, "base_link"),
+                twist,
+            };
+            cmd.write(m, None).unwrap();
+            acted = true;
+        }
+        if !acted {
+            std::thread::sleep(Duration::from_micros(200));
+        }
+    }
+}
+
+#[test]
+fn a_controller_over_dds_drives_a_square_by_odometry_and_the_run_is_the_same_twice() {
+    if !multicast_with(
+        "a_controller_over_dds_drives_a_square_by_odometry_and_the_run_is_the_same_twice",
+    ) {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let d = domain(20);
+    let mut files = Vec::new();
+    // Twice waiting at every tick; then waiting every third tick (45 ms), as for a controller
+    // on its own timer, which this one is not: it answers every /clock, and the link takes
+    // the command stamped with the tick it waits at.
+    for k in 0..3 {
+        let out = tmp.path().join(format!("run{k}"));
+        let mut args = vec!["--stamped", "--duration", "26"];
+        if k == 2 {
+            args.extend(["--period", "0.045"]);
+        }
+        let child = serve("scenarios/office-tour.toml", &out, d, &args);
+        let (status, err) = drive_square(d, child);
+        assert_eq!(status.code(), Some(0), "{err}");
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        assert_eq!(
+            summary["serve"]["deterministic"], true,
+            "{}",
+            summary["serve"]
+        );
+        assert_eq!(summary["serve"]["late"], 0);
+        // A tick at each of the Create's reports (every 15 ms) in 26 s, and one at time zero.
+        let reports = (26.0f64 / 0.015).floor() as u64;
+        assert_eq!(
+            summary["serve"]["ticks"],
+            1 + reports,
+            "{}",
+            summary["serve"]
+        );
+        let awaited = if k == 2 { 1 + reports / 3 } else { 1 + reports };
+        assert_eq!(
+            summary["serve"]["commands_awaited"], awaited,
+            "{}",
+            summary["serve"]
+        );
+        // The true path: a square of 0.5 m sides, back where it began.
+        let text = std::fs::read_to_string(out.join("groundtruth.txt")).unwrap();
+        let truth = futago_msgs::tum::parse(&text).unwrap();
+        let start = truth[0].pose.translation;
+        let end = truth.last().unwrap().pose.translation;
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for s in &truth {
+            for i in 0..2 {
+                lo[i] = lo[i].min(s.pose.translation[i]);
+                hi[i] = hi[i].max(s.pose.translation[i]);
+            }
+        }
+        for i in 0..2 {
+            assert!(
+                (hi[i] - lo[i] - SIDE).abs() < 0.1,
+                "the path spans {:?} to {:?}",
+                lo,
+                hi
+            );
+        }
+        let back = (end[0] - start[0]).hypot(end[1] - start[1]);
+        assert!(
+            back < 0.1,
+            "ended {back} m from the start: {:?}",
+            truth
+                .iter()
+                .step_by(50)
+                .map(|s| (s.stamp.secs(), s.pose.translation[0], s.pose.translation[1]))
+                .collect::<Vec<_>>()
+        );
+        files.push(
+            ["groundtruth.txt", "odometry.txt", "scans.clf"]
+                .map(|f| std::fs::read(out.join(f)).unwrap()),
+        );
+    }
+    assert!(files[0] == files[1], "two runs over the link differ");
+}
+
+/// A controller on Cyclone DDS: answers each /clock with one `Twist` (0.1 m/s, 0.2 rad/s)
+/// until the run has ended, and counts the scans; prints `clocks N scans N beams N frames F`.
+const CYCLONE_CONTROLLER: &str = r#"
+import sys, time
+from dataclasses import dataclass
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.topic import Topic
+from cyclonedds.sub import DataReader
+from cyclonedds.pub import DataWriter
+from cyclonedds.core import Qos, Policy
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import int32, uint32, float32, float64, sequence
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: int32
+    nanosec: uint32
+@dataclass
+class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+    clock: Time
+@dataclass
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time
+    frame_id: str
+@dataclass
+class LaserScan(IdlStruct, typename="sensor_msgs::msg::dds_::LaserScan_"):
+    header: Header
+    angle_min: float32
+    angle_max: float32
+    angle_increment: float32
+    time_increment: float32
+    scan_time: float32
+    range_min: float32
+    range_max: float32
+    ranges: sequence[float32]
+    intensities: sequence[float32]
+@dataclass
+class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
+    x: float64
+    y: float64
+    z: float64
+@dataclass
+class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
+    linear: Vector3
+    angular: Vector3
+
+dp = DomainParticipant(int(sys.argv[1]))
+q = Qos(Policy.Reliability.Reliable(max_blocking_time=1000000000), Policy.History.KeepLast(100))
+clock = DataReader(dp, Topic(dp, "rt/clock", Clock, qos=q), qos=q)
+scan = DataReader(dp, Topic(dp, "rt/scan", LaserScan, qos=q), qos=q)
+cmd = DataWriter(dp, Topic(dp, "rt/cmd_vel", Twist, qos=q), qos=q)
+clocks = scans = beams = 0
+frames = set()
+deadline = time.time() + float(sys.argv[2])
+last = None
+# Until the run has ended: no /clock for 3 s after the first.
+while time.time() < deadline and (last is None or time.time() - last < 3):
+    got = clock.take(N=100)
+    for c in got:
+        clocks += 1
+        last = time.time()
+        cmd.write(Twist(linear=Vector3(0.1, 0.0, 0.0), angular=Vector3(0.0, 0.0, 0.2)))
+    for s in scan.take(N=100):
+        scans += 1
+        beams = len(s.ranges)
+        frames.add(s.header.frame_id)
+    if not got:
+        time.sleep(0.0005)
+print("clocks", clocks, "scans", scans, "beams", beams, "frames", ",".join(sorted(frames)))
+"#;
+
+#[test]
+fn a_cyclone_dds_controller_receives_clock_and_scans_and_drives_the_twin() {
+    let test = "a_cyclone_dds_controller_receives_clock_and_scans_and_drives_the_twin";
+    let Some(python) = python_with(test, &["cyclonedds"]) else {
+        return;
+    };
+    if !multicast_with(test) {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let d = domain(120);
+    let mut child = serve("scenarios/office-tour.toml", &out, d, &["--duration", "3"]);
+    let o = Command::new(python)
+        .args(["-c", CYCLONE_CONTROLLER, &d.to_string(), "25"])
+        .output()
+        .unwrap();
+    let status = child.wait().unwrap();
+    let err = stderr_of(&mut child);
+    assert_eq!(status.code(), Some(0), "{err}");
+    let printed = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Every tick's /clock and every scan, as the run counted them.
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let ticks = summary["serve"]["ticks"].as_u64().unwrap();
+    let scans = summary["lidar"][0]["scans"].as_u64().unwrap();
+    assert_eq!(summary["serve"]["late"], 0, "{printed}");
+    assert!(
+        printed.starts_with(&format!("clocks {ticks} scans {scans} ")),
+        "{printed} against {ticks} ticks and {scans} scans"
+    );
+    assert!(printed.contains("frames front"), "{printed}");
+    // It drove as commanded: 0.1 m/s for 3 s.
+    let d = summary["robot"]["distance_travelled_m"]
+        .as_f64()
+        .unwrap_or(-1.0);
+    assert!((d - 0.3).abs() < 0.02, "{d}: {summary}");
+}
