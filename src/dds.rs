@@ -5,6 +5,7 @@
 //! (XCDR1), as ROS 2 exchanges them.
 
 use dust_dds::infrastructure::type_support::DdsType;
+use futago_msgs::camera::{DepthImage, Intrinsics, RgbImage};
 use futago_msgs::ros2msg;
 
 /// A type's name on the wire: `pkg::msg::dds_::Type_`.
@@ -296,6 +297,101 @@ impl From<&futago_msgs::LaserScan> for LaserScan {
             range_max,
             ranges: s.ranges.clone(),
             intensities: Vec::new(),
+        }
+    }
+}
+
+/// `sensor_msgs/Image`.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct Image {
+    pub header: Header,
+    pub height: u32,
+    pub width: u32,
+    pub encoding: String,
+    pub is_bigendian: u8,
+    pub step: u32,
+    pub data: Vec<u8>,
+}
+
+impl RosType for Image {
+    const ROS: &'static str = "sensor_msgs/msg/Image";
+}
+
+impl Image {
+    /// A colour image, `rgb8`, as the bag writes it ([`ros2msg::image_rgb8`]).
+    pub fn rgb8(t: futago_msgs::Time, frame: &str, image: &RgbImage) -> Image {
+        Image {
+            header: Header::new(t, frame),
+            height: image.height,
+            width: image.width,
+            encoding: "rgb8".into(),
+            is_bigendian: 0,
+            step: 3 * image.width,
+            data: image.data.clone(),
+        }
+    }
+
+    /// A depth image, `32FC1` (REP 118), as the bag writes it ([`ros2msg::image_depth`]).
+    pub fn depth(t: futago_msgs::Time, frame: &str, depth: &DepthImage) -> Image {
+        Image {
+            header: Header::new(t, frame),
+            height: depth.height,
+            width: depth.width,
+            encoding: "32FC1".into(),
+            is_bigendian: 0,
+            step: 4 * depth.width,
+            data: ros2msg::depth_32fc1(depth),
+        }
+    }
+}
+
+/// `sensor_msgs/RegionOfInterest`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
+pub struct RegionOfInterest {
+    pub x_offset: u32,
+    pub y_offset: u32,
+    pub height: u32,
+    pub width: u32,
+    pub do_rectify: bool,
+}
+
+/// `sensor_msgs/CameraInfo`; its fixed arrays as [`Float64`] structures.
+#[derive(Debug, Clone, PartialEq, DdsType)]
+pub struct CameraInfo {
+    pub header: Header,
+    pub height: u32,
+    pub width: u32,
+    pub distortion_model: String,
+    pub d: Vec<f64>,
+    pub k: [Float64; 9],
+    pub r: [Float64; 9],
+    pub p: [Float64; 12],
+    pub binning_x: u32,
+    pub binning_y: u32,
+    pub roi: RegionOfInterest,
+}
+
+impl RosType for CameraInfo {
+    const ROS: &'static str = "sensor_msgs/msg/CameraInfo";
+}
+
+impl CameraInfo {
+    /// A pinhole camera without distortion, as the bag writes it ([`ros2msg::camera_info`]).
+    pub fn pinhole(t: futago_msgs::Time, frame: &str, k: &Intrinsics) -> CameraInfo {
+        let (km, r, p) = ros2msg::pinhole(k);
+        let wrap = |v: f64| Float64 { value: v };
+        CameraInfo {
+            header: Header::new(t, frame),
+            height: k.height,
+            width: k.width,
+            distortion_model: "plumb_bob".into(),
+            d: vec![0.0; 5],
+            k: km.map(wrap),
+            r: r.map(wrap),
+            p: p.map(wrap),
+            binning_x: 0,
+            binning_y: 0,
+            roi: RegionOfInterest::default(),
         }
     }
 }

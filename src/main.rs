@@ -740,6 +740,10 @@ struct ServeArgs {
     /// 15 ms]; for a controller on its own timer (Nav2's controller_frequency 20 Hz: 0.05).
     #[arg(long)]
     period: Option<f64>,
+    /// Most frames a second each camera publishes [default: every frame the scenario's stack
+    /// renders; cameras render only for it].
+    #[arg(long)]
+    camera_rate: Option<f64>,
 }
 
 /// `futago serve`: its options, then [`serve::command`].
@@ -751,6 +755,7 @@ fn serve_main(a: ServeArgs) -> Result<i32> {
         wait: a.wait,
         stamped: a.stamped,
         period: a.period,
+        camera_rate: a.camera_rate,
     };
     let r = a.run;
     serve::command(&r.scenario, &r.overlays.load()?, r.out, &opts, &serve)

@@ -8,6 +8,10 @@
 //!   wheels' twist), `/tf` (`odom → base_link`, each joint's frame from its encoder angle),
 //!   `/tf_static` (each laser's mount; transient local), and each laser's scans on `/scan`
 //!   (the first) or `/scan_NAME`, all as the bag of a run names them ([`crate::stack::bag`]);
+//! - published, for each camera: `/NAME/{rgb,depth}/image_raw` (`rgb8`; `32FC1` metres, NaN
+//!   without a reading) and `/NAME/{rgb,depth}/camera_info`, with the optical frame on `/tf`:
+//!   the frames the scenario's own nodes render (the link never makes a camera render), at
+//!   most `--camera-rate` a second;
 //! - taken: `/cmd_vel`, `geometry_msgs/Twist` or, with `--stamped`, `TwistStamped`.
 //!
 //! **Lock-step.** At every control tick (each report of the Create's sensor stream, 15 ms of
@@ -29,8 +33,8 @@
 use crate::dds::{self, RosType};
 use crate::run::{RunOptions, print_result, run_with};
 use crate::scenario::Scenario;
-use crate::stack::bag::{borrowed, laser_mounts, odometry_frames};
-use crate::stack::{Bus, Node, Report, Streams};
+use crate::stack::bag::{borrowed, laser_mounts, odometry_frames, optical_parent};
+use crate::stack::{Bus, CameraFrame, FrameTruth, Node, Report, Streams};
 use anyhow::{Context, Result, bail};
 use dust_dds::domain::domain_participant::DomainParticipant;
 use dust_dds::domain::domain_participant_factory::DomainParticipantFactory;
@@ -72,6 +76,9 @@ pub struct ServeOptions {
     /// Simulated seconds between the ticks that wait for a command (`None`: every tick): the
     /// period of a controller that runs on its own timer, such as Nav2's controller server.
     pub period: Option<f64>,
+    /// Most camera frames a second each camera publishes (`None`: every frame the stack
+    /// renders).
+    pub camera_rate: Option<f64>,
 }
 
 impl Default for ServeOptions {
@@ -82,6 +89,7 @@ impl Default for ServeOptions {
             wait: 60.0,
             stamped: false,
             period: None,
+            camera_rate: None,
         }
     }
 }
@@ -121,8 +129,23 @@ struct Dds {
     odom: DataWriter<dds::Odometry>,
     /// Each laser's name and its scans' writer.
     scans: Vec<(String, DataWriter<dds::LaserScan>)>,
+    cameras: Vec<CameraWriters>,
     command: CommandReader,
     waitset: WaitSet,
+}
+
+/// A camera's writers: `/NAME/rgb/image_raw`, `/NAME/rgb/camera_info`,
+/// `/NAME/depth/image_raw`, `/NAME/depth/camera_info`, as the bag names them.
+struct CameraWriters {
+    name: String,
+    frame: String,
+    rgb: DataWriter<dds::Image>,
+    rgb_info: DataWriter<dds::CameraInfo>,
+    depth: DataWriter<dds::Image>,
+    depth_info: DataWriter<dds::CameraInfo>,
+    /// When a frame was last published, and how many were.
+    last: Option<Time>,
+    published: u64,
 }
 
 /// `/cmd_vel`'s reader, of the type the controller publishes.
@@ -214,6 +237,24 @@ impl Dds {
                 ))
             })
             .collect::<Result<Vec<_>>>()?;
+        let cameras = s
+            .cameras
+            .iter()
+            .map(|c| {
+                let n = &c.name;
+                let q = || writer_qos(2, false);
+                Ok(CameraWriters {
+                    name: n.clone(),
+                    frame: format!("{n}_optical_frame"),
+                    rgb: writer(p, &publisher, &format!("/{n}/rgb/image_raw"), q())?,
+                    rgb_info: writer(p, &publisher, &format!("/{n}/rgb/camera_info"), q())?,
+                    depth: writer(p, &publisher, &format!("/{n}/depth/image_raw"), q())?,
+                    depth_info: writer(p, &publisher, &format!("/{n}/depth/camera_info"), q())?,
+                    last: None,
+                    published: 0,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
         let command = if stamped {
             CommandReader::Stamped(reader(p, "/cmd_vel")?)
         } else {
@@ -238,6 +279,7 @@ impl Dds {
             tf_static: writer(p, &publisher, "/tf_static", writer_qos(1, true))?,
             odom: writer(p, &publisher, "/odom", writer_qos(10, false))?,
             scans,
+            cameras,
             command,
             waitset,
             participant,
@@ -322,6 +364,8 @@ pub struct Link {
     queued: std::collections::VecDeque<(Option<Time>, f64, f64)>,
     /// Simulated time between the ticks that wait for a command (`None`: every tick).
     period: Option<futago_msgs::Duration>,
+    /// Least simulated time between two published frames of a camera.
+    camera_gap: Option<futago_msgs::Duration>,
     /// The next tick that waits for a command.
     next_due: Time,
     last: Option<DriveCommand>,
@@ -379,6 +423,12 @@ impl Node for Link {
     fn streams(&self) -> Streams {
         let mut consumes = vec!["odometry".to_string()];
         consumes.extend(self.dds.scans.iter().map(|(n, _)| format!("scan/{n}")));
+        consumes.extend(
+            self.dds
+                .cameras
+                .iter()
+                .map(|c| format!("camera/{}", c.name)),
+        );
         Streams {
             consumes,
             publishes: vec!["cmd_vel".into()],
@@ -410,6 +460,55 @@ impl Node for Link {
             Self::write(w, laser, dds::LaserScan::from(scan))?;
         }
         Ok(())
+    }
+
+    fn wants_frame(&self, camera: &str, _bus: &Bus) -> bool {
+        self.dds.cameras.iter().any(|c| c.name == camera)
+    }
+
+    /// The link publishes the frames the stack renders for itself, and never makes a camera
+    /// render (as the bag, [`crate::stack::bag`]).
+    fn passive_frames(&self) -> bool {
+        true
+    }
+
+    fn takes_carried_cameras(&self) -> bool {
+        true
+    }
+
+    fn on_frame(
+        &mut self,
+        camera: &str,
+        frame: &CameraFrame,
+        truth: &mut dyn FrameTruth,
+        _bus: &mut Bus,
+    ) -> Result<()> {
+        let gap = self.camera_gap;
+        let Some(c) = self.dds.cameras.iter_mut().find(|c| c.name == camera) else {
+            return Ok(());
+        };
+        let f = &frame.frame;
+        if let (Some(last), Some(gap)) = (c.last, gap)
+            && f.stamp - last < gap
+        {
+            return Ok(());
+        }
+        c.last = Some(f.stamp);
+        c.published += 1;
+        let (parent, on) = optical_parent(frame, &*truth);
+        let tf = dds::TfMessage::new(f.stamp, &[(parent, c.frame.as_str(), on)]);
+        Self::write(&self.dds.tf, "/tf", tf)?;
+        let info = |k| dds::CameraInfo::pinhole(f.stamp, &c.frame, k);
+        if let Some(image) = &f.rgb {
+            Self::write(&c.rgb, camera, dds::Image::rgb8(f.stamp, &c.frame, image))?;
+            Self::write(&c.rgb_info, camera, info(&f.rgb_intrinsics))?;
+        }
+        Self::write(
+            &c.depth,
+            camera,
+            dds::Image::depth(f.stamp, &c.frame, &f.depth),
+        )?;
+        Self::write(&c.depth_info, camera, info(&f.depth_intrinsics))
     }
 
     fn on_control(&mut self, bus: &mut Bus) -> Result<()> {
@@ -461,6 +560,12 @@ impl Node for Link {
                     "late": self.late,
                     "discarded": self.discarded,
                     "deterministic": self.late == 0,
+                    "camera_frames": self
+                        .dds
+                        .cameras
+                        .iter()
+                        .map(|c| (c.name.clone(), serde_json::json!(c.published)))
+                        .collect::<serde_json::Map<_, _>>(),
                 }),
             )],
             performance,
@@ -482,6 +587,7 @@ pub fn command(
         ("--timeout", Some(serve.timeout)),
         ("--wait", Some(serve.wait)),
         ("--period", serve.period),
+        ("--camera-rate", serve.camera_rate),
     ] {
         if let Some(v) = v
             && !(v.is_finite() && v > 0.0 && v <= 86_400.0)
@@ -536,6 +642,9 @@ pub fn command(
         mounts: laser_mounts(&s),
         queued: Default::default(),
         period: serve.period.map(futago_msgs::Duration::from_secs),
+        camera_gap: serve
+            .camera_rate
+            .map(|r| futago_msgs::Duration::from_secs(1.0 / r)),
         next_due: Time::ZERO,
         waits: 0,
         last: None,

@@ -306,13 +306,30 @@ pub fn image_depth(t: Time, frame: &str, depth: &DepthImage) -> Vec<u8> {
         .u8(0)
         .u32(4 * depth.width)
         .u32(4 * depth.data.len() as u32);
+    w.bytes(&depth_32fc1(depth));
+    w.into_bytes()
+}
+
+/// A depth image's pixels as `32FC1` data: little-endian metres, NaN without a reading.
+pub fn depth_32fc1(depth: &DepthImage) -> Vec<u8> {
     let mut bytes = Vec::with_capacity(4 * depth.data.len());
     for &d in &depth.data {
         let v = if d > 0.0 { d } else { f32::NAN };
         bytes.extend_from_slice(&v.to_le_bytes());
     }
-    w.bytes(&bytes);
-    w.into_bytes()
+    bytes
+}
+
+/// A pinhole camera's `CameraInfo` matrices without distortion: `K`, `R` (the identity) and
+/// `P = [K | 0]`, row-major.
+pub fn pinhole(k: &Intrinsics) -> ([f64; 9], [f64; 9], [f64; 12]) {
+    (
+        [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        [
+            k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0, 1.0, 0.0,
+        ],
+    )
 }
 
 /// A `sensor_msgs/msg/CameraInfo` of a pinhole camera without distortion (`plumb_bob`, all
@@ -324,11 +341,7 @@ pub fn camera_info(t: Time, frame: &str, k: &Intrinsics) -> Vec<u8> {
         .u32(k.width)
         .string("plumb_bob")
         .u32(5);
-    let km = [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0];
-    let r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
-    let p = [
-        k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0, 1.0, 0.0,
-    ];
+    let (km, r, p) = pinhole(k);
     for v in [0.0; 5].iter().chain(&km).chain(&r).chain(&p) {
         w.f64(*v);
     }

@@ -28,7 +28,7 @@ use anyhow::{Context, Result};
 use futago_msgs::camera::Intrinsics;
 use futago_msgs::ros2msg::{self, Marker, Pose};
 use futago_msgs::rosbag2::writer::BagWriter;
-use futago_msgs::{LaserScan, Odometry, Pose2, Pose3, Time};
+use futago_msgs::{LaserScan, Odometry, Pose2, Time};
 use futago_sim::joint::JointConfig;
 use glam::{DQuat, DVec3, EulerRot};
 use std::path::Path;
@@ -248,6 +248,15 @@ pub fn odometry_frames<'a>(
     (odom, twist, tf)
 }
 
+/// Where a frame's optical frame is, for `/tf`: on `base_link` as the robot's kinematics place
+/// it (mount, joint, sway), or on `world` for a camera an agent carries.
+pub fn optical_parent(frame: &CameraFrame, truth: &dyn FrameTruth) -> (&'static str, Pose) {
+    match &frame.on_base {
+        Some(p) => (BASE, Pose::from(p)),
+        None => (WORLD, Pose::from(&truth.optical())),
+    }
+}
+
 fn planar(p: &Pose2) -> Pose {
     Pose::planar(p.x, p.y, p.theta)
 }
@@ -349,11 +358,8 @@ impl Node for BagRecorder {
         let (now, f) = (bus.now, &frame.frame);
         let cam = &self.cameras[c];
         let (optical, [rgb, rgb_info, depth, depth_info]) = (cam.frame.clone(), cam.topics);
-        let (parent, on): (&str, Pose3) = match &frame.on_base {
-            Some(p) => (BASE, *p),
-            None => (WORLD, truth.optical()),
-        };
-        let msg = ros2msg::tf(f.stamp, &[(parent, optical.as_str(), Pose::from(&on))]);
+        let (parent, on) = optical_parent(frame, &*truth);
+        let msg = ros2msg::tf(f.stamp, &[(parent, optical.as_str(), on)]);
         self.write(self.tf, now, &msg)?;
         let info = |k: &Intrinsics| ros2msg::camera_info(f.stamp, &optical, k);
         if let Some(image) = &f.rgb {
