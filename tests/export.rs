@@ -4,27 +4,13 @@
 //! and `rosbags` (reading the folder as a rosbag2 bag and deserialising by its own definitions).
 
 mod common;
-use common::{futago, ok, python_with, root};
+use common::{futago, ok, python_with, run_cut_short};
 use std::path::Path;
 
 /// Runs `scenario` for `seconds` into `dir/run` and exports it to `dir/bag`.
 fn run_and_export(dir: &Path, scenario: &str, seconds: &str) -> (std::path::PathBuf, String) {
     let run = dir.join("run");
-    let o = futago(&[
-        "run",
-        root().join(scenario).to_str().unwrap(),
-        "--duration",
-        seconds,
-        "-q",
-        "--out",
-        run.to_str().unwrap(),
-    ]);
-    // Cut short, a run may fail its gates (exit 3); its files are written all the same.
-    assert!(
-        matches!(o.status.code(), Some(0) | Some(3)),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    run_cut_short(scenario, seconds, &run, &[]);
     let bag = dir.join("bag");
     let o = futago(&[
         "export",

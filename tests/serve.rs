@@ -423,6 +423,30 @@ print("clocks", clocks, "scans", scans, "beams", beams, "frames", ",".join(sorte
       "images", images, "sizes", ",".join(f"{w}x{h}" for w, h in sorted(sizes)))
 "#;
 
+/// Serves `scenario` on `domain` with `args`, driven by [`CYCLONE_CONTROLLER`] in `python`;
+/// both must succeed. Returns the run's summary and what the controller printed.
+fn serve_to_cyclone(
+    python: &Path,
+    scenario: &str,
+    domain: i32,
+    args: &[&str],
+) -> (serde_json::Value, String) {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let mut child = serve(scenario, &out, domain, args);
+    let o = Command::new(python)
+        .args(["-c", CYCLONE_CONTROLLER, &domain.to_string(), "60"])
+        .output()
+        .unwrap();
+    let status = child.wait().unwrap();
+    let err = stderr_of(&mut child);
+    assert_eq!(status.code(), Some(0), "{err}");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    (summary, String::from_utf8_lossy(&o.stdout).into_owned())
+}
+
 #[test]
 fn a_cyclone_dds_controller_receives_clock_and_scans_and_drives_the_twin() {
     let test = "a_cyclone_dds_controller_receives_clock_and_scans_and_drives_the_twin";
@@ -432,22 +456,13 @@ fn a_cyclone_dds_controller_receives_clock_and_scans_and_drives_the_twin() {
     if !multicast_with(test) {
         return;
     }
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("run");
-    let d = domain(120);
-    let mut child = serve("scenarios/office-tour.toml", &out, d, &["--duration", "3"]);
-    let o = Command::new(python)
-        .args(["-c", CYCLONE_CONTROLLER, &d.to_string(), "25"])
-        .output()
-        .unwrap();
-    let status = child.wait().unwrap();
-    let err = stderr_of(&mut child);
-    assert_eq!(status.code(), Some(0), "{err}");
-    let printed = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (summary, printed) = serve_to_cyclone(
+        &python,
+        "scenarios/office-tour.toml",
+        domain(120),
+        &["--duration", "3"],
+    );
     // Every tick's /clock and every scan, as the run counted them.
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let ticks = summary["serve"]["ticks"].as_u64().unwrap();
     let scans = summary["lidar"][0]["scans"].as_u64().unwrap();
     assert_eq!(summary["serve"]["late"], 0, "{printed}");
@@ -473,27 +488,13 @@ fn a_cyclone_dds_subscriber_receives_the_depth_images_the_stack_renders_at_the_r
     if !multicast_with(test) {
         return;
     }
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("run");
-    let d = domain(170);
     // lab-kinect's dataset recorder takes every frame at 30 Hz; the link sends 10 a second.
-    let mut child = serve(
+    let (summary, printed) = serve_to_cyclone(
+        &python,
         "scenarios/lab-kinect.toml",
-        &out,
-        d,
+        domain(170),
         &["--duration", "1.5", "--camera-rate", "10"],
     );
-    let o = Command::new(python)
-        .args(["-c", CYCLONE_CONTROLLER, &d.to_string(), "60"])
-        .output()
-        .unwrap();
-    let status = child.wait().unwrap();
-    let err = stderr_of(&mut child);
-    assert_eq!(status.code(), Some(0), "{err}");
-    let printed = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let sent = summary["serve"]["camera_frames"]["kinect"]
         .as_u64()
         .unwrap();

@@ -199,3 +199,26 @@ pub fn multicast_with(test: &str) -> bool {
     println!("{line}");
     false
 }
+
+/// Runs `scenario` (relative to the repository) for `seconds` into `out`, with `args` after
+/// the usual ones. Cut short, a run may fail its gates (exit 3); its files are written all
+/// the same, so that passes too.
+pub fn run_cut_short(scenario: &str, seconds: &str, out: &Path, args: &[&str]) {
+    let scenario = root().join(scenario);
+    let mut all = vec![
+        "run",
+        scenario.to_str().unwrap(),
+        "--duration",
+        seconds,
+        "-q",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    all.extend(args);
+    let o = futago(&all);
+    assert!(
+        matches!(o.status.code(), Some(0) | Some(3)),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
