@@ -726,7 +726,8 @@ struct ServeArgs {
     #[arg(long)]
     domain: Option<i32>,
     /// Real seconds to wait for each tick's command before going on without it (the run is
-    /// then marked as not deterministic).
+    /// then marked as not deterministic), and for subscribers to acknowledge what the link
+    /// publishes before failing.
     #[arg(long, default_value_t = 10.0)]
     timeout: f64,
     /// Real seconds to wait for the controller to match before the first tick.

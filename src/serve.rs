@@ -26,6 +26,14 @@
 //! `/clock` subscriber have matched, and then a second more, for the controller's side of
 //! the match.
 //!
+//! Every topic is reliable, so lock-step also covers what the link publishes: a write waits
+//! for reliable subscribers to acknowledge (at most `--timeout`), so a slow subscriber slows
+//! the run rather than miss messages, and one that acknowledges nothing for that long fails
+//! it. Camera images are large: one 640×480 depth image is 1.2 MB, sent as about 900 UDP
+//! datagrams. A subscriber whose UDP receive buffer cannot hold such a burst loses fragments;
+//! ROS 2's DDS tuning guide has Linux's `net.core.rmem_max` raised on its machine (Cyclone DDS
+//! asks for 1 MiB, and gets at most that limit, 208 KiB by default).
+//!
 //! DDS is `dust_dds` (pure Rust, RTPS over UDP): no ROS installation is needed, and ROS 2
 //! nodes on Cyclone DDS or Fast DDS in the same domain (`--domain`, or `ROS_DOMAIN_ID`) see
 //! the topics. Discovery is the standard one (SPDP by multicast).
@@ -38,6 +46,7 @@ use crate::stack::{Bus, CameraFrame, FrameTruth, Node, Report, Streams};
 use anyhow::{Context, Result, bail};
 use dust_dds::domain::domain_participant::DomainParticipant;
 use dust_dds::domain::domain_participant_factory::DomainParticipantFactory;
+use dust_dds::infrastructure::error::DdsError;
 use dust_dds::infrastructure::qos::{DataReaderQos, DataWriterQos, QosKind};
 use dust_dds::infrastructure::qos_policy::{
     DurabilityQosPolicy, DurabilityQosPolicyKind, HistoryQosPolicy, HistoryQosPolicyKind,
@@ -67,7 +76,8 @@ const SETTLE: Duration = Duration::from_secs(1);
 pub struct ServeOptions {
     /// The DDS domain; `None`: `ROS_DOMAIN_ID`, else 0.
     pub domain: Option<i32>,
-    /// Real seconds to wait for a tick's command before going on without it.
+    /// Real seconds to wait for a tick's command before going on without it, and for a
+    /// reliable subscriber to acknowledge what the link published before it fails.
     pub timeout: f64,
     /// Real seconds to wait for the controller to match before the first tick.
     pub wait: f64,
@@ -99,12 +109,18 @@ fn dds<T>(what: &str, r: dust_dds::infrastructure::error::DdsResult<T>) -> Resul
     r.map_err(|e| anyhow::anyhow!("DDS: {what}: {e:?}"))
 }
 
-/// Reliable, keep last `depth`; transient local when `latched`.
-fn writer_qos(depth: u32, latched: bool) -> DataWriterQos {
+/// Reliable, keep last `depth`; transient local when `latched`. A write waits at most
+/// `patience` for reliable subscribers to acknowledge the oldest of the `depth` samples kept
+/// (`dust_dds` blocks there rather than overwrite it): lock-step, a slow subscriber slows the
+/// run rather than lose messages.
+fn writer_qos(depth: u32, latched: bool, patience: Duration) -> DataWriterQos {
     DataWriterQos {
         reliability: ReliabilityQosPolicy {
             kind: ReliabilityQosPolicyKind::Reliable,
-            max_blocking_time: DurationKind::Finite(DdsDuration::new(1, 0)),
+            max_blocking_time: DurationKind::Finite(DdsDuration::new(
+                patience.as_secs().min(i32::MAX as u64) as i32,
+                patience.subsec_nanos(),
+            )),
         },
         history: HistoryQosPolicy {
             kind: HistoryQosPolicyKind::KeepLast(depth),
@@ -214,7 +230,7 @@ fn reader<T: TypeSupport + RosType + Send + 'static>(
 impl Dds {
     /// The participant on `domain` and its topics for scenario `s`; `/cmd_vel` as
     /// `TwistStamped` when `stamped`.
-    fn new(s: &Scenario, domain: i32, stamped: bool) -> Result<Dds> {
+    fn new(s: &Scenario, domain: i32, stamped: bool, patience: Duration) -> Result<Dds> {
         let factory = DomainParticipantFactory::get_instance();
         let participant = dds(
             "creating the participant",
@@ -233,7 +249,7 @@ impl Dds {
                 let topic = crate::stack::bag::scan_topic(i, &c.name);
                 Ok((
                     c.name.clone(),
-                    writer(p, &publisher, &topic, writer_qos(10, false))?,
+                    writer(p, &publisher, &topic, writer_qos(10, false, patience))?,
                 ))
             })
             .collect::<Result<Vec<_>>>()?;
@@ -242,7 +258,7 @@ impl Dds {
             .iter()
             .map(|c| {
                 let n = &c.name;
-                let q = || writer_qos(2, false);
+                let q = || writer_qos(2, false, patience);
                 Ok(CameraWriters {
                     name: n.clone(),
                     frame: format!("{n}_optical_frame"),
@@ -274,10 +290,10 @@ impl Dds {
             waitset.attach_condition(Condition::StatusCondition(condition)),
         )?;
         Ok(Dds {
-            clock: writer(p, &publisher, "/clock", writer_qos(10, false))?,
-            tf: writer(p, &publisher, "/tf", writer_qos(100, false))?,
-            tf_static: writer(p, &publisher, "/tf_static", writer_qos(1, true))?,
-            odom: writer(p, &publisher, "/odom", writer_qos(10, false))?,
+            clock: writer(p, &publisher, "/clock", writer_qos(10, false, patience))?,
+            tf: writer(p, &publisher, "/tf", writer_qos(100, false, patience))?,
+            tf_static: writer(p, &publisher, "/tf_static", writer_qos(1, true, patience))?,
+            odom: writer(p, &publisher, "/odom", writer_qos(10, false, patience))?,
             scans,
             cameras,
             command,
@@ -379,7 +395,18 @@ pub struct Link {
 
 impl Link {
     fn write<T: TypeSupport + Send + 'static>(w: &DataWriter<T>, what: &str, m: T) -> Result<()> {
-        dds(&format!("publishing {what}"), w.write(m, None))
+        match w.write(m, None) {
+            Err(DdsError::Timeout) => {
+                bail!(
+                    "DDS: publishing {what}: a reliable subscriber acknowledged nothing \
+                     within --timeout. It stopped taking messages, or it loses them: large \
+                     ones (camera images) are lost to a small UDP receive buffer on its machine; \
+                     raise net.core.rmem_max there (ROS 2's DDS tuning guide), or lower \
+                     --camera-rate"
+                )
+            }
+            r => dds(&format!("publishing {what}"), r),
+        }
     }
 
     /// The command for the tick at `now`, waiting for it at most the timeout: the next plain
@@ -623,7 +650,8 @@ pub fn command(
         &crate::stack::configs(crate::stack::MODULES),
     )?;
     let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
-    let link = Dds::new(&s, domain, serve.stamped).context("starting the ROS 2 link")?;
+    let patience = Duration::from_secs_f64(serve.timeout);
+    let link = Dds::new(&s, domain, serve.stamped, patience).context("starting the ROS 2 link")?;
     eprintln!(
         "futago serve: {} on DDS domain {domain}; waiting for a controller (/cmd_vel {}, /clock)",
         s.spec.name,
@@ -636,7 +664,7 @@ pub fn command(
     let matched_after = link.wait_for_controller(serve.wait)?;
     let node = Link {
         dds: link,
-        timeout: Duration::from_secs_f64(serve.timeout),
+        timeout: patience,
         wheel_base: s.spec.robot.wheel_base,
         joints: s.movers.joints.clone(),
         mounts: laser_mounts(&s),

@@ -200,6 +200,29 @@ pub fn multicast_with(test: &str) -> bool {
     false
 }
 
+/// Whether a UDP socket here may have a receive buffer of `bytes`: Linux caps what a program
+/// asks for at `net.core.rmem_max`, 208 KiB by default, which loses the fragments of a large
+/// DDS sample (a camera image) sent in one burst. ROS 2's DDS tuning guide raises it; `.ci/run`
+/// does. Otherwise `test` is skipped, or fails under `FUTAGO_REQUIRE_DDS=1`.
+pub fn udp_receive_buffer_with(test: &str, bytes: u64) -> bool {
+    let Ok(max) = std::fs::read_to_string("/proc/sys/net/core/rmem_max") else {
+        return true;
+    };
+    let max: u64 = max.trim().parse().unwrap_or(0);
+    if max >= bytes {
+        return true;
+    }
+    let line = format!(
+        "skipped {test}: needs UDP receive buffers of {bytes} bytes, and net.core.rmem_max is \
+         {max} (sysctl -w net.core.rmem_max={bytes})"
+    );
+    if std::env::var(REQUIRE_DDS_ENV).is_ok_and(|v| v == "1") {
+        panic!("{line} ({REQUIRE_DDS_ENV}=1 makes this a failure)");
+    }
+    println!("{line}");
+    false
+}
+
 /// Runs `scenario` (relative to the repository) for `seconds` into `out`, with `args` after
 /// the usual ones. Cut short, a run may fail its gates (exit 3); its files are written all
 /// the same, so that passes too.
