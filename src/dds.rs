@@ -132,6 +132,97 @@ pub struct PoseWithCovariance {
     pub covariance: [Float64; 36],
 }
 
+/// `geometry_msgs/PoseWithCovarianceStamped`: a pose estimate, as AMCL (`/amcl_pose`) and
+/// slam_toolbox (`/pose`) publish theirs.
+#[derive(Debug, Clone, PartialEq, DdsType)]
+pub struct PoseWithCovarianceStamped {
+    pub header: Header,
+    pub pose: PoseWithCovariance,
+}
+
+impl RosType for PoseWithCovarianceStamped {
+    const ROS: &'static str = "geometry_msgs/msg/PoseWithCovarianceStamped";
+}
+
+/// The start of a `geometry_msgs/PoseWithCovarianceStamped`, up to its pose: what the link
+/// reads of a user's estimate. `dust_dds` reads no fixed arrays of numbers, such as the
+/// covariance after it; CDR is read in order, so the rest is left unread.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct PoseEstimate {
+    pub header: Header,
+    pub pose: Pose,
+}
+
+impl RosType for PoseEstimate {
+    const ROS: &'static str = PoseWithCovarianceStamped::ROS;
+}
+
+/// `nav_msgs/MapMetaData`.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct MapMetaData {
+    pub map_load_time: Time,
+    /// Cell side, m.
+    pub resolution: f32,
+    pub width: u32,
+    pub height: u32,
+    /// The pose of cell (0, 0)'s corner in the map's frame.
+    pub origin: Pose,
+}
+
+/// `nav_msgs/OccupancyGrid`: row-major from the row at the origin, −1 unknown, 0 … 100
+/// occupancy, as futago's own grids.
+#[derive(Debug, Clone, Default, PartialEq, DdsType)]
+pub struct OccupancyGrid {
+    pub header: Header,
+    pub info: MapMetaData,
+    pub data: Vec<i8>,
+}
+
+impl RosType for OccupancyGrid {
+    const ROS: &'static str = "nav_msgs/msg/OccupancyGrid";
+}
+
+impl OccupancyGrid {
+    /// As futago's grid; `Err` names what does not fit: cells that are not `width × height`,
+    /// a resolution that is not positive, or an origin turned about z (futago's grids are
+    /// aligned with the world's axes).
+    pub fn to_grid(&self) -> Result<futago_msgs::grid::OccupancyGrid, String> {
+        let i = &self.info;
+        let (w, h) = (i.width as usize, i.height as usize);
+        if w.checked_mul(h) != Some(self.data.len()) {
+            return Err(format!("{} cells for a {w} × {h} map", self.data.len()));
+        }
+        let r = f64::from(i.resolution);
+        if !(r.is_finite() && r > 0.0) {
+            return Err(format!(
+                "resolution {r}: expected a positive cell side in metres"
+            ));
+        }
+        let q = &i.origin.orientation;
+        let yaw = (2.0 * (q.w * q.z + q.x * q.y)).atan2(1.0 - 2.0 * (q.y * q.y + q.z * q.z));
+        if !yaw.is_finite() || yaw.abs() > 1e-6 {
+            return Err(format!(
+                "origin turned by {yaw} rad about z: expected a map aligned with its frame"
+            ));
+        }
+        let o = &i.origin.position;
+        if !(o.x.is_finite() && o.y.is_finite()) {
+            return Err("origin not finite".into());
+        }
+        Ok(futago_msgs::grid::OccupancyGrid {
+            resolution: r,
+            origin: [o.x, o.y],
+            width: w,
+            height: h,
+            cells: self
+                .data
+                .iter()
+                .map(|&c| if (0..=100).contains(&c) { c } else { -1 })
+                .collect(),
+        })
+    }
+}
+
 /// `geometry_msgs/Twist`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
 pub struct Twist {
@@ -405,6 +496,52 @@ mod tests {
         assert_eq!(LaserScan::dds_name(), "sensor_msgs::msg::dds_::LaserScan_");
         assert_eq!(Clock::dds_name(), "rosgraph_msgs::msg::dds_::Clock_");
         assert_eq!(TfMessage::dds_name(), "tf2_msgs::msg::dds_::TFMessage_");
+    }
+
+    #[test]
+    fn a_ros_map_becomes_futagos_grid_and_one_that_does_not_fit_says_why() {
+        let mut m = OccupancyGrid {
+            info: MapMetaData {
+                resolution: 0.5,
+                width: 3,
+                height: 2,
+                origin: Pose {
+                    position: Vector3 {
+                        x: -1.0,
+                        y: 2.0,
+                        z: 0.0,
+                    },
+                    orientation: Quaternion {
+                        w: 1.0,
+                        ..Quaternion::default()
+                    },
+                },
+                ..MapMetaData::default()
+            },
+            data: vec![0, 100, -1, 50, 0, 101],
+            ..OccupancyGrid::default()
+        };
+        let g = m.to_grid().unwrap();
+        assert_eq!(
+            (g.width, g.height, g.resolution, g.origin),
+            (3, 2, 0.5, [-1.0, 2.0])
+        );
+        // Rows from the origin's, as ROS has them; a value beyond 100 is unknown.
+        assert_eq!(g.cells, vec![0, 100, -1, 50, 0, -1]);
+        assert_eq!(g.get(1, 0), 100);
+        m.data.pop();
+        assert!(m.to_grid().unwrap_err().contains("5 cells for a 3 × 2 map"));
+        m.data.push(0);
+        m.info.origin.orientation = Quaternion {
+            z: (0.25f64).sin(),
+            w: (0.25f64).cos(),
+            ..Quaternion::default()
+        };
+        assert!(m.to_grid().unwrap_err().contains("turned by 0.5"));
+        m.info.origin.orientation.z = 0.0;
+        m.info.origin.orientation.w = 1.0;
+        m.info.resolution = 0.0;
+        assert!(m.to_grid().unwrap_err().contains("resolution 0"));
     }
 
     #[test]

@@ -745,6 +745,14 @@ struct ServeArgs {
     /// renders; cameras render only for it].
     #[arg(long)]
     camera_rate: Option<f64>,
+    /// The topic of your stack's pose estimate (geometry_msgs/PoseWithCovarianceStamped in the
+    /// map frame, as AMCL's /amcl_pose), scored against the truth as `external.*`.
+    #[arg(long)]
+    pose_topic: Option<String>,
+    /// The topic of your stack's map (nav_msgs/OccupancyGrid, as /map): its newest is scored
+    /// as `external.map.*`.
+    #[arg(long)]
+    map_topic: Option<String>,
 }
 
 /// `futago serve`: its options, then [`serve::command`].
@@ -757,6 +765,8 @@ fn serve_main(a: ServeArgs) -> Result<i32> {
         stamped: a.stamped,
         period: a.period,
         camera_rate: a.camera_rate,
+        pose_topic: a.pose_topic,
+        map_topic: a.map_topic,
     };
     let r = a.run;
     serve::command(&r.scenario, &r.overlays.load()?, r.out, &opts, &serve)

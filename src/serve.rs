@@ -39,10 +39,11 @@
 //! the topics. Discovery is the standard one (SPDP by multicast).
 
 use crate::dds::{self, RosType};
+use crate::ground_truth::Metrics;
 use crate::run::{RunOptions, print_result, run_with};
 use crate::scenario::Scenario;
 use crate::stack::bag::{borrowed, laser_mounts, odometry_frames, optical_parent};
-use crate::stack::{Bus, CameraFrame, FrameTruth, Node, Report, Streams};
+use crate::stack::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Trajectory, Truth};
 use anyhow::{Context, Result, bail};
 use dust_dds::domain::domain_participant::DomainParticipant;
 use dust_dds::domain::domain_participant_factory::DomainParticipantFactory;
@@ -62,8 +63,9 @@ use dust_dds::publication::publisher::Publisher;
 use dust_dds::subscription::data_reader::DataReader;
 use dust_dds::topic_definition::topic_description::TopicDescription;
 use dust_dds::wait_set::{Condition, WaitSet};
+use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::ros2msg::Pose;
-use futago_msgs::{DriveCommand, LaserScan, Odometry, Time};
+use futago_msgs::{DriveCommand, LaserScan, Odometry, Pose2, Time};
 use futago_sim::joint::JointConfig;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -89,6 +91,12 @@ pub struct ServeOptions {
     /// Most camera frames a second each camera publishes (`None`: every frame the stack
     /// renders).
     pub camera_rate: Option<f64>,
+    /// The topic of the user's pose estimate (`geometry_msgs/PoseWithCovarianceStamped`, as
+    /// AMCL's `/amcl_pose`), scored as the trajectory `external`.
+    pub pose_topic: Option<String>,
+    /// The topic of the user's map (`nav_msgs/OccupancyGrid`, as `/map`): its last one is
+    /// scored as `external.map`.
+    pub map_topic: Option<String>,
 }
 
 impl Default for ServeOptions {
@@ -100,8 +108,24 @@ impl Default for ServeOptions {
             stamped: false,
             period: None,
             camera_rate: None,
+            pose_topic: None,
+            map_topic: None,
         }
     }
+}
+
+/// Whether `t` is an absolute ROS 2 topic name: `/` then tokens of letters, digits and `_`,
+/// not starting with a digit, separated by single `/`.
+fn is_topic(t: &str) -> bool {
+    let Some(rest) = t.strip_prefix('/') else {
+        return false;
+    };
+    !rest.is_empty()
+        && rest.split('/').all(|token| {
+            !token.is_empty()
+                && !token.starts_with(|c: char| c.is_ascii_digit())
+                && token.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        })
 }
 
 /// A DDS error as an error naming what was being done.
@@ -148,6 +172,9 @@ struct Dds {
     cameras: Vec<CameraWriters>,
     command: CommandReader,
     waitset: WaitSet,
+    /// The user's pose estimates and maps, where asked for.
+    pose: Option<DataReader<dds::PoseEstimate>>,
+    map: Option<DataReader<dds::OccupancyGrid>>,
 }
 
 /// A camera's writers: `/NAME/rgb/image_raw`, `/NAME/rgb/camera_info`,
@@ -204,6 +231,7 @@ fn writer<T: TypeSupport + RosType + Send + 'static>(
 fn reader<T: TypeSupport + RosType + Send + 'static>(
     participant: &DomainParticipant,
     name: &str,
+    depth: u32,
 ) -> Result<DataReader<T>> {
     let t = topic::<T>(participant, name)?;
     let topic = name;
@@ -217,7 +245,7 @@ fn reader<T: TypeSupport + RosType + Send + 'static>(
             max_blocking_time: DurationKind::Finite(DdsDuration::new(1, 0)),
         },
         history: HistoryQosPolicy {
-            kind: HistoryQosPolicyKind::KeepLast(100),
+            kind: HistoryQosPolicyKind::KeepLast(depth),
         },
         ..Default::default()
     };
@@ -230,7 +258,8 @@ fn reader<T: TypeSupport + RosType + Send + 'static>(
 impl Dds {
     /// The participant on `domain` and its topics for scenario `s`; `/cmd_vel` as
     /// `TwistStamped` when `stamped`.
-    fn new(s: &Scenario, domain: i32, stamped: bool, patience: Duration) -> Result<Dds> {
+    fn new(s: &Scenario, domain: i32, serve: &ServeOptions, patience: Duration) -> Result<Dds> {
+        let stamped = serve.stamped;
         let factory = DomainParticipantFactory::get_instance();
         let participant = dds(
             "creating the participant",
@@ -272,9 +301,9 @@ impl Dds {
             })
             .collect::<Result<Vec<_>>>()?;
         let command = if stamped {
-            CommandReader::Stamped(reader(p, "/cmd_vel")?)
+            CommandReader::Stamped(reader(p, "/cmd_vel", 100)?)
         } else {
-            CommandReader::Twist(reader(p, "/cmd_vel")?)
+            CommandReader::Twist(reader(p, "/cmd_vel", 100)?)
         };
         let condition = match &command {
             CommandReader::Twist(r) => r.get_statuscondition(),
@@ -298,6 +327,14 @@ impl Dds {
             cameras,
             command,
             waitset,
+            pose: match &serve.pose_topic {
+                Some(t) => Some(reader(p, t, 1000)?),
+                None => None,
+            },
+            map: match &serve.map_topic {
+                Some(t) => Some(reader(p, t, 1)?),
+                None => None,
+            },
             participant,
         })
     }
@@ -337,6 +374,39 @@ impl Dds {
             }
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// The pose estimates that arrived on the user's pose topic, as `(stamp, pose)`.
+    fn take_poses(&self) -> Vec<(Time, Pose2)> {
+        let Some(r) = &self.pose else {
+            return Vec::new();
+        };
+        r.take(1000, ANY_SAMPLE_STATE, ANY_VIEW_STATE, ANY_INSTANCE_STATE)
+            .unwrap_or_default()
+            .into_iter()
+            .filter_map(|s| s.data)
+            .filter_map(|e| {
+                let p = &e.pose;
+                let q = &p.orientation;
+                let yaw =
+                    (2.0 * (q.w * q.z + q.x * q.y)).atan2(1.0 - 2.0 * (q.y * q.y + q.z * q.z));
+                let pose = Pose2::new(p.position.x, p.position.y, yaw);
+                // A pose that is not finite is no estimate.
+                (pose.x.is_finite() && pose.y.is_finite() && pose.theta.is_finite())
+                    .then(|| (Time::from(e.header.stamp), pose))
+            })
+            .collect()
+    }
+
+    /// The newest map that arrived on the user's map topic, if any.
+    fn take_map(&self) -> Option<dds::OccupancyGrid> {
+        self.map
+            .as_ref()?
+            .take(1, ANY_SAMPLE_STATE, ANY_VIEW_STATE, ANY_INSTANCE_STATE)
+            .unwrap_or_default()
+            .into_iter()
+            .filter_map(|s| s.data)
+            .next_back()
     }
 
     /// The commands that arrived, oldest first, as `(stamp, linear x, angular z)`; the stamp
@@ -391,9 +461,70 @@ pub struct Link {
     late: u64,
     discarded: u64,
     matched_after: f64,
+    estimates: Estimates,
 }
 
+/// What the user's stack estimated, taken from its topics as the run goes: its poses (the
+/// trajectory `external`) and its newest map, scored as futago's own SLAM's are.
+struct Estimates {
+    pose_topic: Option<String>,
+    map_topic: Option<String>,
+    /// Poses by stamp; a later one of the same stamp replaces it.
+    poses: std::collections::BTreeMap<Time, Pose2>,
+    track: Trajectory,
+    map: Option<OccupancyGrid>,
+    maps: u64,
+    /// The height of the band of the world the map is scored against: the first laser's.
+    height: f64,
+}
+
+/// The metrics of the user's trajectory (`external.*`), declared so that gates may name them.
+struct ExternalTrajectory;
+
+impl crate::scenario::ModuleConfig for ExternalTrajectory {
+    fn metric_names(
+        &self,
+        _spec: &crate::scenario::ScenarioSpec,
+        _own: Option<&(dyn std::any::Any + Send + Sync)>,
+    ) -> Vec<String> {
+        crate::ground_truth::trajectory_metric_names("external")
+    }
+}
+
+/// The metrics of the user's map (`external.map.*`), declared so that gates may name them.
+struct ExternalMap;
+
+impl crate::scenario::ModuleConfig for ExternalMap {
+    fn metric_names(
+        &self,
+        _spec: &crate::scenario::ScenarioSpec,
+        _own: Option<&(dyn std::any::Any + Send + Sync)>,
+    ) -> Vec<String> {
+        crate::ground_truth::map_metric_names("external.map")
+    }
+}
+
+/// The files the user's estimates are written to in the run's folder (TUM; map_server).
+const EXTERNAL_TRAJECTORY_FILE: &str = "external.txt";
+const EXTERNAL_MAP_STEM: &str = "external_map";
+
 impl Link {
+    /// Takes what the user's stack published on its pose and map topics since the last call.
+    fn take_estimates(&mut self) -> Result<()> {
+        for (t, p) in self.dds.take_poses() {
+            self.estimates.poses.insert(t, p);
+        }
+        if let Some(m) = self.dds.take_map() {
+            let topic = self.estimates.map_topic.as_deref().unwrap_or_default();
+            let grid = m
+                .to_grid()
+                .map_err(|e| anyhow::anyhow!("the map on {topic}: {e}"))?;
+            self.estimates.map = Some(grid);
+            self.estimates.maps += 1;
+        }
+        Ok(())
+    }
+
     fn write<T: TypeSupport + Send + 'static>(w: &DataWriter<T>, what: &str, m: T) -> Result<()> {
         match w.write(m, None) {
             Err(DdsError::Timeout) => {
@@ -542,6 +673,7 @@ impl Node for Link {
         let now = bus.now;
         Self::write(&self.dds.clock, "/clock", dds::Clock { clock: now.into() })?;
         self.ticks += 1;
+        self.take_estimates()?;
         if now < self.next_due {
             return Ok(());
         }
@@ -572,7 +704,37 @@ impl Node for Link {
         false
     }
 
-    fn finish(&mut self, _bus: &mut Bus, _out: Option<&Path>) -> Result<Report> {
+    fn finish(&mut self, _bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
+        let e = &self.estimates;
+        if e.pose_topic.is_some() || e.map_topic.is_some() {
+            // What the stack published in answer to the last /clock.
+            std::thread::sleep(SETTLE);
+            self.take_estimates()?;
+        }
+        let e = &mut self.estimates;
+        let mut track = Trajectory::new("external");
+        for (t, p) in &e.poses {
+            track.push(*t, p);
+        }
+        let mut files = Vec::new();
+        if let Some(dir) = out {
+            if let Some(topic) = &e.pose_topic {
+                let header = format!(
+                    "# the pose estimates of the stack futago serve linked to, from {topic}\n# timestamp tx ty tz qx qy qz qw\n"
+                );
+                track.write(dir, EXTERNAL_TRAJECTORY_FILE, &header)?;
+                files.push(EXTERNAL_TRAJECTORY_FILE.to_string());
+            }
+            if let Some(map) = &e.map {
+                map.write_map_server(dir, EXTERNAL_MAP_STEM)
+                    .with_context(|| format!("writing {EXTERNAL_MAP_STEM}.pgm and .yaml"))?;
+                files.extend([
+                    format!("{EXTERNAL_MAP_STEM}.pgm"),
+                    format!("{EXTERNAL_MAP_STEM}.yaml"),
+                ]);
+            }
+        }
+        e.track = track;
         let mut performance = serde_json::Map::new();
         performance.insert(
             "matched_after_s".into(),
@@ -593,11 +755,39 @@ impl Node for Link {
                         .iter()
                         .map(|c| (c.name.clone(), serde_json::json!(c.published)))
                         .collect::<serde_json::Map<_, _>>(),
+                    "poses": e.pose_topic.as_ref().map(|_| e.track.poses.len()),
+                    "maps": e.map_topic.as_ref().map(|_| e.maps),
                 }),
             )],
+            files,
+            map: e.map.clone(),
+            trajectories: if e.track.poses.is_empty() {
+                Vec::new()
+            } else {
+                vec![e.track.clone()]
+            },
             performance,
             ..Report::default()
         })
+    }
+
+    /// The user's trajectory and map against the truth, as futago's SLAM is scored:
+    /// `external.ate.*`, `external.rpe_1m.*`, `external.map.*`.
+    fn score(&self, truth: &Truth) -> Result<Metrics> {
+        let e = &self.estimates;
+        let mut m = if e.track.poses.is_empty() {
+            Metrics::default()
+        } else {
+            crate::ground_truth::score_trajectory(truth, "external", &e.track.poses)
+        };
+        if let Some(map) = &e.map {
+            let world = truth.world_map(map.resolution, e.height)?;
+            let s = truth.scenario.start;
+            let score = crate::ground_truth::map::score(map, &world, [s.x, s.y])
+                .map_err(|e| anyhow::anyhow!("scoring the map from the linked stack: {e}"))?;
+            m.insert_map("external.map", &score);
+        }
+        Ok(m)
     }
 }
 
@@ -622,6 +812,19 @@ pub fn command(
             bail!("{name}: expected a positive number of seconds up to a day, found {v}");
         }
     }
+    for (name, t) in [
+        ("--pose-topic", &serve.pose_topic),
+        ("--map-topic", &serve.map_topic),
+    ] {
+        if let Some(t) = t
+            && !is_topic(t)
+        {
+            bail!(
+                "{name}: expected an absolute ROS 2 topic name such as /amcl_pose (letters, \
+                 digits, _ and /), found `{t}`"
+            );
+        }
+    }
     let domain = match serve.domain {
         Some(d) => d,
         None => match std::env::var("ROS_DOMAIN_ID") {
@@ -643,15 +846,27 @@ pub fn command(
             toml::Value::String("external".into()),
         )])),
     )]);
-    let s = Scenario::load_replacing(
-        scenario,
-        overlays,
-        &external,
-        &crate::stack::configs(crate::stack::MODULES),
-    )?;
+    // The user's estimates' metrics, for the scenario's gates to name.
+    let mut modules = crate::stack::configs(crate::stack::MODULES);
+    if serve.pose_topic.is_some() {
+        modules.push(&ExternalTrajectory);
+    }
+    if serve.map_topic.is_some() {
+        modules.push(&ExternalMap);
+    }
+    let s = Scenario::load_replacing(scenario, overlays, &external, &modules)?;
     let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
     let patience = Duration::from_secs_f64(serve.timeout);
-    let link = Dds::new(&s, domain, serve.stamped, patience).context("starting the ROS 2 link")?;
+    let height = match (s.lidars.first(), &serve.map_topic) {
+        (Some((c, _)), _) => c.xyz[2],
+        (None, Some(_)) => bail!(
+            "--map-topic: a map is scored against the world's band at its laser's height, and \
+             {} has no laser",
+            s.spec.name
+        ),
+        (None, None) => 0.0,
+    };
+    let link = Dds::new(&s, domain, serve, patience).context("starting the ROS 2 link")?;
     eprintln!(
         "futago serve: {} on DDS domain {domain}; waiting for a controller (/cmd_vel {}, /clock)",
         s.spec.name,
@@ -680,6 +895,15 @@ pub fn command(
         late: 0,
         discarded: 0,
         matched_after,
+        estimates: Estimates {
+            pose_topic: serve.pose_topic.clone(),
+            map_topic: serve.map_topic.clone(),
+            poses: Default::default(),
+            track: Trajectory::new("external"),
+            map: None,
+            maps: 0,
+            height,
+        },
     };
     let (summary, o) = run_with(&s, opts, &out, vec![Box::new(node)])?;
     if summary["serve"]["deterministic"] == false {
@@ -689,4 +913,28 @@ pub fn command(
         );
     }
     Ok(print_result(&s, &summary, &o, &out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_topic;
+
+    #[test]
+    fn a_topic_is_an_absolute_ros_2_name() {
+        for t in ["/amcl_pose", "/map", "/robot_1/pose"] {
+            assert!(is_topic(t), "{t}");
+        }
+        for t in [
+            "amcl_pose",
+            "/",
+            "/map/",
+            "//map",
+            "/1map",
+            "/a-b",
+            "/a b",
+            "",
+        ] {
+            assert!(!is_topic(t), "{t}");
+        }
+    }
 }

@@ -432,10 +432,35 @@ fn serve_to_cyclone(
     args: &[&str],
 ) -> (serde_json::Value, String) {
     let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("run");
+    let (summary, printed, _) = serve_to_script(
+        python,
+        CYCLONE_CONTROLLER,
+        &[],
+        scenario,
+        domain,
+        args,
+        tmp.path(),
+    );
+    (summary, printed)
+}
+
+/// Serves `scenario` on `domain` with `args` into `dir/run`, driven by `script` in `python`
+/// (given the domain, a deadline in seconds and `script_args`); both must succeed. Returns
+/// the run's summary, what the script printed and the run's folder.
+fn serve_to_script(
+    python: &Path,
+    script: &str,
+    script_args: &[&str],
+    scenario: &str,
+    domain: i32,
+    args: &[&str],
+    dir: &Path,
+) -> (serde_json::Value, String, std::path::PathBuf) {
+    let out = dir.join("run");
     let mut child = serve(scenario, &out, domain, args);
     let o = Command::new(python)
-        .args(["-c", CYCLONE_CONTROLLER, &domain.to_string(), "60"])
+        .args(["-c", script, &domain.to_string(), "60"])
+        .args(script_args)
         .output()
         .unwrap();
     let status = child.wait().unwrap();
@@ -444,7 +469,11 @@ fn serve_to_cyclone(
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    (summary, String::from_utf8_lossy(&o.stdout).into_owned())
+    (
+        summary,
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        out,
+    )
 }
 
 #[test]
@@ -520,4 +549,248 @@ fn a_cyclone_dds_subscriber_receives_the_depth_images_the_stack_renders_at_the_r
         "{printed} against {sent} sent: {}",
         summary["camera"]
     );
+}
+
+/// A stack on Cyclone DDS that drives as [`CYCLONE_CONTROLLER`] does, publishes as its pose
+/// estimate (`/amcl_pose`, `PoseWithCovarianceStamped`) each `/odom` pose moved `DX` metres
+/// along the world's x, with the odometry's stamp, and as its map (`/map`,
+/// `OccupancyGrid`) the map_server map given (PGM + YAML, turned into ROS's rows from the
+/// bottom), every 50 clocks; prints `poses N maps N`. Arguments: domain, deadline, DX, the
+/// map's YAML file.
+const CYCLONE_STACK: &str = r##"
+import sys, time, os
+from dataclasses import dataclass
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.topic import Topic
+from cyclonedds.sub import DataReader
+from cyclonedds.pub import DataWriter
+from cyclonedds.core import Qos, Policy
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import int8, int32, uint32, float32, float64, sequence, array
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: int32
+    nanosec: uint32
+@dataclass
+class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+    clock: Time
+@dataclass
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time
+    frame_id: str
+@dataclass
+class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
+    x: float64
+    y: float64
+    z: float64
+@dataclass
+class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+    x: float64
+    y: float64
+    z: float64
+@dataclass
+class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+    x: float64
+    y: float64
+    z: float64
+    w: float64
+@dataclass
+class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+    position: Point
+    orientation: Quaternion
+@dataclass
+class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
+    pose: Pose
+    covariance: array[float64, 36]
+@dataclass
+class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
+    linear: Vector3
+    angular: Vector3
+@dataclass
+class TwistWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
+    twist: Twist
+    covariance: array[float64, 36]
+@dataclass
+class Odometry(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
+    header: Header
+    child_frame_id: str
+    pose: PoseWithCovariance
+    twist: TwistWithCovariance
+@dataclass
+class PoseWithCovarianceStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"):
+    header: Header
+    pose: PoseWithCovariance
+@dataclass
+class MapMetaData(IdlStruct, typename="nav_msgs::msg::dds_::MapMetaData_"):
+    map_load_time: Time
+    resolution: float32
+    width: uint32
+    height: uint32
+    origin: Pose
+@dataclass
+class OccupancyGrid(IdlStruct, typename="nav_msgs::msg::dds_::OccupancyGrid_"):
+    header: Header
+    info: MapMetaData
+    data: sequence[int8]
+
+def read_map(yaml_path):
+    meta = {}
+    for line in open(yaml_path):
+        if ":" in line and not line.startswith("#"):
+            k, v = line.split(":", 1)
+            meta[k.strip()] = v.strip()
+    raw = open(os.path.join(os.path.dirname(yaml_path), meta["image"]), "rb").read()
+    fields, i = [], 0
+    while len(fields) < 4:
+        while raw[i:i + 1].isspace() or raw[i:i + 1] == b"#":
+            if raw[i:i + 1] == b"#":
+                i = raw.index(b"\n", i)
+            i += 1
+        j = i
+        while not raw[j:j + 1].isspace():
+            j += 1
+        fields.append(raw[i:j])
+        i = j
+    assert fields[0] == b"P5" and fields[3] == b"255"
+    w, h = int(fields[1]), int(fields[2])
+    pixels = raw[i + 1:i + 1 + w * h]
+    occ, free = float(meta["occupied_thresh"]), float(meta["free_thresh"])
+    cells = []
+    for row in range(h - 1, -1, -1):
+        for v in pixels[row * w:(row + 1) * w]:
+            p = (255 - v) / 255.0
+            cells.append(100 if p > occ else 0 if p < free else -1)
+    ox, oy = [float(x) for x in meta["origin"].strip("[]").split(",")[:2]]
+    origin = Pose(Point(ox, oy, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0))
+    return MapMetaData(Time(0, 0), float(meta["resolution"]), w, h, origin), cells
+
+dp = DomainParticipant(int(sys.argv[1]))
+dx = float(sys.argv[3])
+info, cells = read_map(sys.argv[4])
+q = Qos(Policy.Reliability.Reliable(max_blocking_time=1000000000), Policy.History.KeepLast(100))
+clock = DataReader(dp, Topic(dp, "rt/clock", Clock, qos=q), qos=q)
+odom = DataReader(dp, Topic(dp, "rt/odom", Odometry, qos=q), qos=q)
+cmd = DataWriter(dp, Topic(dp, "rt/cmd_vel", Twist, qos=q), qos=q)
+pose = DataWriter(dp, Topic(dp, "rt/amcl_pose", PoseWithCovarianceStamped, qos=q), qos=q)
+grid = DataWriter(dp, Topic(dp, "rt/map", OccupancyGrid, qos=q), qos=q)
+deadline = time.time() + float(sys.argv[2])
+last = None
+clocks = poses = maps = 0
+while time.time() < deadline and (last is None or time.time() - last < 3):
+    got = clock.take(N=100)
+    for c in got:
+        clocks += 1
+        last = time.time()
+        if clocks % 50 == 1:
+            grid.write(OccupancyGrid(Header(c.clock, "map"), info, cells))
+            maps += 1
+        cmd.write(Twist(linear=Vector3(0.1, 0.0, 0.0), angular=Vector3(0.0, 0.0, 0.2)))
+    for o in odom.take(N=100):
+        p = o.pose.pose
+        moved = Pose(Point(p.position.x + dx, p.position.y, p.position.z), p.orientation)
+        pose.write(PoseWithCovarianceStamped(Header(o.header.stamp, "map"),
+                                             PoseWithCovariance(moved, [0.0] * 36)))
+        poses += 1
+    if not got:
+        time.sleep(0.0005)
+print("poses", poses, "maps", maps)
+"##;
+
+#[test]
+fn a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth() {
+    let test = "a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth";
+    let Some(python) = python_with(test, &["cyclonedds"]) else {
+        return;
+    };
+    if !multicast_with(test) {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    // The truth's own map of the world at the laser's height (0.2 m), as map_server has it.
+    let maps = tmp.path().join("map");
+    let o = Command::new(env!("CARGO_BIN_EXE_futago"))
+        .args(["world", "export"])
+        .arg(root().join("worlds/office.toml"))
+        .args([
+            "--resolution",
+            "0.05",
+            "--band",
+            "0.15:0.25",
+            "--mesh",
+            "none",
+            "--out",
+        ])
+        .arg(&maps)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    const DX: f64 = 0.1;
+    // Gates may name the user's metrics, as any scenario's.
+    let gate = tmp.path().join("gate.toml");
+    std::fs::write(
+        &gate,
+        "[[gate]]\nmetric = \"external.ate.mean_m\"\nop = \"<\"\nvalue = 0.2\n",
+    )
+    .unwrap();
+    let (summary, printed, out) = serve_to_script(
+        &python,
+        CYCLONE_STACK,
+        &[&DX.to_string(), maps.join("office.yaml").to_str().unwrap()],
+        "scenarios/office-tour.toml",
+        domain(70),
+        &[
+            "--duration",
+            "4",
+            "--pose-topic",
+            "/amcl_pose",
+            "--map-topic",
+            "/map",
+            "--overlay",
+            gate.to_str().unwrap(),
+        ],
+        tmp.path(),
+    );
+    // Every pose the stack published was taken, and written as the trajectory `external`.
+    let poses = summary["serve"]["poses"].as_u64().unwrap();
+    assert!(poses > 200, "{printed}: {}", summary["serve"]);
+    assert!(
+        printed.starts_with(&format!("poses {poses} ")),
+        "{printed}: {poses} taken"
+    );
+    let lines = std::fs::read_to_string(out.join("external.txt")).unwrap();
+    assert_eq!(
+        lines.lines().filter(|l| !l.starts_with('#')).count() as u64,
+        poses
+    );
+    // Each estimate is the odometry moved DX along x, so its error from the truth is DX
+    // within the odometry's own: |e + d| lies in [d − |e|, d + |e|] (and TUM's rounding).
+    let m = &summary["metrics"];
+    let ate = m["external.ate.mean_m"].as_f64().unwrap();
+    assert_eq!(summary["gates"][0]["metric"], "external.ate.mean_m");
+    assert_eq!(summary["gates"][0]["value"].as_f64(), Some(ate));
+    let odometry = m["odometry.ate.max_m"].as_f64().unwrap();
+    assert!(
+        (ate - DX).abs() <= odometry + 1e-3,
+        "external ATE {ate} m against {DX} m, odometry off by up to {odometry} m"
+    );
+    // The map is a rasterisation of the world's own colliders in the laser's band, as the
+    // scorer's truth is: every true wall face is in it, at no distance (a flipped or shifted
+    // map would miss them). Its precision is not 1: the truth counts only the faces the robot
+    // can reach, and the map holds the walls' insides and closed rooms too.
+    assert!(
+        summary["serve"]["maps"].as_u64().unwrap() >= 1,
+        "{}",
+        summary["serve"]
+    );
+    let recall = m["external.map.recall_1cell"].as_f64().unwrap();
+    assert!(recall >= 0.99, "external.map.recall_1cell = {recall}");
+    let from_truth = m["external.map.mean_distance_from_truth_m"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        from_truth < 0.025,
+        "{from_truth} m from the true walls to the map's"
+    );
+    assert!(out.join("external_map.pgm").exists() && out.join("external_map.yaml").exists());
 }
