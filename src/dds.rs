@@ -25,6 +25,20 @@ pub trait RosType {
     }
 }
 
+/// Whether `t` is an absolute ROS 2 topic name: `/` then tokens of letters, digits and `_`,
+/// not starting with a digit, separated by single `/`.
+pub fn is_topic(t: &str) -> bool {
+    let Some(rest) = t.strip_prefix('/') else {
+        return false;
+    };
+    !rest.is_empty()
+        && rest.split('/').all(|token| {
+            !token.is_empty()
+                && !token.starts_with(|c: char| c.is_ascii_digit())
+                && token.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        })
+}
+
 /// `builtin_interfaces/Time`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
 pub struct Time {
@@ -496,6 +510,25 @@ mod tests {
         assert_eq!(LaserScan::dds_name(), "sensor_msgs::msg::dds_::LaserScan_");
         assert_eq!(Clock::dds_name(), "rosgraph_msgs::msg::dds_::Clock_");
         assert_eq!(TfMessage::dds_name(), "tf2_msgs::msg::dds_::TFMessage_");
+    }
+
+    #[test]
+    fn a_topic_is_an_absolute_ros_2_name() {
+        for t in ["/amcl_pose", "/map", "/robot_1/pose"] {
+            assert!(is_topic(t), "{t}");
+        }
+        for t in [
+            "amcl_pose",
+            "/",
+            "/map/",
+            "//map",
+            "/1map",
+            "/a-b",
+            "/a b",
+            "",
+        ] {
+            assert!(!is_topic(t), "{t}");
+        }
     }
 
     #[test]

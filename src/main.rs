@@ -727,12 +727,13 @@ struct ServeArgs {
     domain: Option<i32>,
     /// Real seconds to wait for each tick's command before going on without it (the run is
     /// then marked as not deterministic), and for subscribers to acknowledge what the link
-    /// publishes before failing.
-    #[arg(long, default_value_t = 10.0)]
-    timeout: f64,
-    /// Real seconds to wait for the controller to match before the first tick.
-    #[arg(long, default_value_t = 60.0)]
-    wait: f64,
+    /// publishes before failing [default: the scenario's external controller's, else 10].
+    #[arg(long)]
+    timeout: Option<f64>,
+    /// Real seconds to wait for the controller to match before the first tick [default: the
+    /// scenario's, else 60].
+    #[arg(long)]
+    wait: Option<f64>,
     /// Take geometry_msgs/TwistStamped on /cmd_vel (stamped with the tick's /clock) instead of
     /// Twist.
     #[arg(long)]
@@ -785,6 +786,7 @@ fn real_main() -> Result<u8> {
                     &a.overlays.load()?,
                     a.out.clone(),
                     &a.options(),
+                    serve::run_scenario,
                 )?
             }
         }

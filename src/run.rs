@@ -178,7 +178,8 @@ fn check_publishers(nodes: &[Scheduled], streams: &[stack::Streams]) -> Result<(
     {
         bail!(
             "nothing drives the robot: the scenario's controller is `external`, whose commands \
-             come over ROS 2; run it with `futago serve`"
+             come over ROS 2; give it the `command` that starts your stack, or run it with \
+             `futago serve` and start the stack yourself"
         );
     }
     for (n, st) in nodes.iter().zip(streams) {
@@ -761,7 +762,12 @@ fn simulate_scored(
 /// Runs a scenario and scores it without writing anything: for a search or a check that
 /// needs a run's metrics and gates, not its files.
 pub fn evaluate(s: &Scenario, opts: &RunOptions) -> Result<Scored> {
-    simulate_scored(s, opts, None, Vec::new())
+    evaluate_with(s, opts, Vec::new())
+}
+
+/// [`evaluate`] with `extra` nodes after the stack's (a ROS 2 link).
+pub fn evaluate_with(s: &Scenario, opts: &RunOptions, extra: Vec<Box<dyn Node>>) -> Result<Scored> {
+    simulate_scored(s, opts, None, extra)
 }
 
 /// Runs a scenario and writes its results into `out` (created or replaced whole).
@@ -976,6 +982,7 @@ pub fn command(
     overlays: &[crate::overlay::Overlay],
     out: Option<PathBuf>,
     opts: &RunOptions,
+    runner: Runner,
 ) -> Result<i32> {
     if let Some(d) = opts.duration
         && !(d.is_finite() && d > 0.0)
@@ -984,9 +991,13 @@ pub fn command(
     }
     let s = crate::stack::load_with(scenario, overlays)?;
     let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
-    let (summary, o) = run(&s, opts, &out)?;
+    let (summary, o) = runner(&s, opts, &out)?;
     Ok(print_result(&s, &summary, &o, &out))
 }
+
+/// What runs a loaded scenario into a folder: [`run`], or one that also starts what the
+/// scenario needs outside futago (`crate::serve::run_scenario`, a user's ROS 2 stack).
+pub type Runner = fn(&Scenario, &RunOptions, &Path) -> Result<(Value, Outcome)>;
 
 /// Prints a run's one-line result and its failed gates; gives the exit status: 0, or
 /// [`GATE_FAILED`] when a gate failed.

@@ -40,9 +40,11 @@
 
 use crate::dds::{self, RosType};
 use crate::ground_truth::Metrics;
+use crate::run::Outcome;
 use crate::run::{RunOptions, print_result, run_with};
 use crate::scenario::Scenario;
 use crate::stack::bag::{borrowed, laser_mounts, odometry_frames, optical_parent};
+use crate::stack::driver::{ControllerConfig, EXTERNAL, ExternalConfig, StackCommand, controller};
 use crate::stack::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, Trajectory, Truth};
 use anyhow::{Context, Result, bail};
 use dust_dds::domain::domain_participant::DomainParticipant;
@@ -67,6 +69,7 @@ use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::ros2msg::Pose;
 use futago_msgs::{DriveCommand, LaserScan, Odometry, Pose2, Time};
 use futago_sim::joint::JointConfig;
+use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -74,15 +77,16 @@ use std::time::{Duration, Instant};
 const SETTLE: Duration = Duration::from_secs(1);
 
 /// How `futago serve` links.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct ServeOptions {
     /// The DDS domain; `None`: `ROS_DOMAIN_ID`, else 0.
     pub domain: Option<i32>,
     /// Real seconds to wait for a tick's command before going on without it, and for a
-    /// reliable subscriber to acknowledge what the link published before it fails.
-    pub timeout: f64,
-    /// Real seconds to wait for the controller to match before the first tick.
-    pub wait: f64,
+    /// reliable subscriber to acknowledge what the link published before it fails
+    /// (`None`: 10).
+    pub timeout: Option<f64>,
+    /// Real seconds to wait for the controller to match before the first tick (`None`: 60).
+    pub wait: Option<f64>,
     /// Take `geometry_msgs/TwistStamped` on `/cmd_vel` instead of `Twist`.
     pub stamped: bool,
     /// Simulated seconds between the ticks that wait for a command (`None`: every tick): the
@@ -99,33 +103,59 @@ pub struct ServeOptions {
     pub map_topic: Option<String>,
 }
 
-impl Default for ServeOptions {
-    fn default() -> Self {
+impl ServeOptions {
+    /// These options (`futago serve`'s flags) over those of the scenario's external
+    /// controller `e`: what is set here wins.
+    pub fn over(&self, e: &ExternalConfig) -> ServeOptions {
         ServeOptions {
-            domain: None,
-            timeout: 10.0,
-            wait: 60.0,
-            stamped: false,
-            period: None,
-            camera_rate: None,
-            pose_topic: None,
-            map_topic: None,
+            domain: self.domain.or(e.domain),
+            timeout: self.timeout.or(e.timeout),
+            wait: self.wait.or(e.wait),
+            stamped: self.stamped || e.stamped,
+            period: self.period.or(e.period),
+            camera_rate: self.camera_rate.or(e.camera_rate),
+            pose_topic: self.pose_topic.clone().or_else(|| e.pose_topic.clone()),
+            map_topic: self.map_topic.clone().or_else(|| e.map_topic.clone()),
         }
     }
-}
 
-/// Whether `t` is an absolute ROS 2 topic name: `/` then tokens of letters, digits and `_`,
-/// not starting with a digit, separated by single `/`.
-fn is_topic(t: &str) -> bool {
-    let Some(rest) = t.strip_prefix('/') else {
-        return false;
-    };
-    !rest.is_empty()
-        && rest.split('/').all(|token| {
-            !token.is_empty()
-                && !token.starts_with(|c: char| c.is_ascii_digit())
-                && token.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-        })
+    fn timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.timeout.unwrap_or(10.0))
+    }
+
+    fn wait(&self) -> f64 {
+        self.wait.unwrap_or(60.0)
+    }
+
+    /// Checks the numbers and topic names, naming the flag.
+    fn check(&self) -> Result<()> {
+        for (name, v) in [
+            ("--timeout", self.timeout),
+            ("--wait", self.wait),
+            ("--period", self.period),
+            ("--camera-rate", self.camera_rate),
+        ] {
+            if let Some(v) = v
+                && !(v.is_finite() && v > 0.0 && v <= 86_400.0)
+            {
+                bail!("{name}: expected a positive number of seconds up to a day, found {v}");
+            }
+        }
+        for (name, t) in [
+            ("--pose-topic", &self.pose_topic),
+            ("--map-topic", &self.map_topic),
+        ] {
+            if let Some(t) = t
+                && !dds::is_topic(t)
+            {
+                bail!(
+                    "{name}: expected an absolute ROS 2 topic name such as /amcl_pose (letters, \
+                     digits, _ and /), found `{t}`"
+                );
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A DDS error as an error naming what was being done.
@@ -255,12 +285,64 @@ fn reader<T: TypeSupport + RosType + Send + 'static>(
     )
 }
 
+/// What the link asks of its UDP sockets' receive buffers: room for a burst of fragments of
+/// a large sample (a map, 0.2 MB at 5 cm for a 30 m × 18 m floor) from a peer. `dust_dds`
+/// 0.15 reassembles a sample wrongly when lost fragments come again packed otherwise
+/// (Cyclone DDS resends several in one submessage), so the link must not lose them. Linux
+/// caps it at `net.core.rmem_max`.
+const RECEIVE_BUFFER: usize = 8 << 20;
+
+/// The DDS participant factory: `dust_dds`'s own, but for the UDP sockets' receive buffers
+/// ([`RECEIVE_BUFFER`]).
+fn participant_factory()
+-> Result<&'static DomainParticipantFactory<dust_dds::std_runtime::StdRuntime>> {
+    use dust_dds::dds_async::domain_participant_factory::DomainParticipantFactoryAsync;
+    use dust_dds::rtps_udp_transport::udp_transport::RtpsUdpTransportParticipantFactoryBuilder;
+    use dust_dds::std_runtime::{StdRuntime, executor::Executor, timer::TimerDriver};
+    use std::sync::OnceLock;
+    static ASYNC: OnceLock<DomainParticipantFactoryAsync<StdRuntime>> = OnceLock::new();
+    static FACTORY: OnceLock<DomainParticipantFactory<StdRuntime>> = OnceLock::new();
+    if let Some(f) = FACTORY.get() {
+        return Ok(f);
+    }
+    let transport = RtpsUdpTransportParticipantFactoryBuilder::new()
+        .udp_receive_buffer_size(Some(RECEIVE_BUFFER))
+        .build()
+        .map_err(|e| anyhow::anyhow!("DDS: the UDP transport: {e}"))?;
+    let factory = ASYNC.get_or_init(|| {
+        // As dust_dds names a participant: this host's address and the process.
+        DomainParticipantFactoryAsync::new(
+            StdRuntime::new(Executor::new(), TimerDriver::new()),
+            std::process::id().to_ne_bytes(),
+            host_id(),
+            transport,
+        )
+    });
+    Ok(FACTORY.get_or_init(|| DomainParticipantFactory::new(factory)))
+}
+
+/// This host's IPv4 address that multicast leaves from (no packet is sent), for the
+/// participants' GUIDs; 0.0.0.0 where there is none.
+fn host_id() -> [u8; 4] {
+    std::net::UdpSocket::bind(("0.0.0.0", 0))
+        .and_then(|s| {
+            s.connect(("239.255.0.1", 7400))?;
+            s.local_addr()
+        })
+        .ok()
+        .and_then(|a| match a.ip() {
+            std::net::IpAddr::V4(v4) => Some(v4.octets()),
+            std::net::IpAddr::V6(_) => None,
+        })
+        .unwrap_or([0; 4])
+}
+
 impl Dds {
     /// The participant on `domain` and its topics for scenario `s`; `/cmd_vel` as
     /// `TwistStamped` when `stamped`.
     fn new(s: &Scenario, domain: i32, serve: &ServeOptions, patience: Duration) -> Result<Dds> {
         let stamped = serve.stamped;
-        let factory = DomainParticipantFactory::get_instance();
+        let factory = participant_factory()?;
         let participant = dds(
             "creating the participant",
             factory.create_participant(domain, QosKind::Default, NO_LISTENER, NO_STATUS),
@@ -341,9 +423,14 @@ impl Dds {
 
     /// Waits until the controller's `/cmd_vel` publisher and a `/clock` subscriber have
     /// matched, at most `wait` real seconds.
-    fn wait_for_controller(&self, wait: f64) -> Result<f64> {
+    fn wait_for_controller(&self, wait: f64, mut stack: Option<&mut StackProcess>) -> Result<f64> {
         let start = Instant::now();
         loop {
+            if let Some(p) = stack.as_deref_mut()
+                && let Some(status) = p.exited()
+            {
+                bail!("the stack exited ({status}) before it matched");
+            }
             let commands = match &self.command {
                 CommandReader::Twist(r) => r.get_subscription_matched_status(),
                 CommandReader::Stamped(r) => r.get_subscription_matched_status(),
@@ -712,7 +799,7 @@ impl Node for Link {
             self.take_estimates()?;
         }
         let e = &mut self.estimates;
-        let mut track = Trajectory::new("external");
+        let mut track = Trajectory::new(EXTERNAL);
         for (t, p) in &e.poses {
             track.push(*t, p);
         }
@@ -778,7 +865,7 @@ impl Node for Link {
         let mut m = if e.track.poses.is_empty() {
             Metrics::default()
         } else {
-            crate::ground_truth::score_trajectory(truth, "external", &e.track.poses)
+            crate::ground_truth::score_trajectory(truth, EXTERNAL, &e.track.poses)
         };
         if let Some(map) = &e.map {
             let world = truth.world_map(map.resolution, e.height)?;
@@ -791,6 +878,236 @@ impl Node for Link {
     }
 }
 
+/// The link for scenario `s` on `domain`, with its DDS entities matched with the
+/// controller's (waiting at most `o`'s `wait`; failing sooner if `stack`, the stack started
+/// for the run, exits).
+fn connect(
+    s: &Scenario,
+    domain: i32,
+    o: &ServeOptions,
+    stack: Option<&mut StackProcess>,
+) -> Result<Link> {
+    let height = match (s.lidars.first(), &o.map_topic) {
+        (Some((c, _)), _) => c.xyz[2],
+        (None, Some(_)) => bail!(
+            "--map-topic: a map is scored against the world's band at its laser's height, and \
+             {} has no laser",
+            s.spec.name
+        ),
+        (None, None) => 0.0,
+    };
+    let patience = o.timeout();
+    let link = Dds::new(s, domain, o, patience).context("starting the ROS 2 link")?;
+    let matched_after = link.wait_for_controller(o.wait(), stack)?;
+    Ok(Link {
+        dds: link,
+        timeout: patience,
+        wheel_base: s.spec.robot.wheel_base,
+        joints: s.movers.joints.clone(),
+        mounts: laser_mounts(s),
+        queued: Default::default(),
+        period: o.period.map(futago_msgs::Duration::from_secs),
+        camera_gap: o
+            .camera_rate
+            .map(|r| futago_msgs::Duration::from_secs(1.0 / r)),
+        next_due: Time::ZERO,
+        waits: 0,
+        last: None,
+        ticks: 0,
+        late: 0,
+        discarded: 0,
+        matched_after,
+        estimates: Estimates {
+            pose_topic: o.pose_topic.clone(),
+            map_topic: o.map_topic.clone(),
+            poses: Default::default(),
+            track: Trajectory::new(EXTERNAL),
+            map: None,
+            maps: 0,
+            height,
+        },
+    })
+}
+
+/// Runs `s` into `out` as `futago run` does. A scenario whose controller is `external` with
+/// a `command` has that stack started for the run, linked over DDS and stopped after
+/// ([`with_stack`]); `futago run`, `suite` and `tune` all run scenarios through here.
+pub fn run_scenario(s: &Scenario, opts: &RunOptions, out: &Path) -> Result<(Value, Outcome)> {
+    match started_stack(s) {
+        None => crate::run::run(s, opts, out),
+        Some(e) => with_stack(s, e, |link| run_with(s, opts, out, vec![link])),
+    }
+}
+
+/// [`crate::run::evaluate`], starting the scenario's stack as [`run_scenario`] does.
+pub fn evaluate_scenario(s: &Scenario, opts: &RunOptions) -> Result<crate::run::Scored> {
+    match started_stack(s) {
+        None => crate::run::evaluate(s, opts),
+        Some(e) => with_stack(s, e, |link| crate::run::evaluate_with(s, opts, vec![link])),
+    }
+}
+
+/// The scenario's external controller, when it names the command that starts its stack.
+fn started_stack(s: &Scenario) -> Option<&ExternalConfig> {
+    match controller(s) {
+        ControllerConfig::External(e) if e.command.is_some() => Some(e),
+        _ => None,
+    }
+}
+
+/// Starts the stack `e` names on a DDS domain of its own, links `s` to it, gives the link
+/// to `f` (which runs the scenario), and stops the stack, whatever `f` gave. An error carries
+/// the stack's last output.
+fn with_stack<T>(
+    s: &Scenario,
+    e: &ExternalConfig,
+    f: impl FnOnce(Box<dyn Node>) -> Result<T>,
+) -> Result<T> {
+    let o = ServeOptions::default().over(e);
+    let lease = DomainLease::take(o.domain)?;
+    let mut stack = StackProcess::start(e, lease.domain)?;
+    let r = connect(s, lease.domain, &o, Some(&mut stack)).and_then(|link| f(Box::new(link)));
+    stack.stop();
+    r.with_context(|| {
+        format!(
+            "the stack `{}` on DDS domain {}; its last output:\n{}",
+            stack.what,
+            lease.domain,
+            stack.tail(20)
+        )
+    })
+}
+
+/// A DDS domain held for one run. Given, it is used as it is; else the first of 100 to 232
+/// that no other futago run on this machine holds: each held domain is a lock on a file in
+/// the temporary folder, released when the lease is dropped or the process ends. (Domain ids
+/// below 100 are left to what the user runs outside futago, `ROS_DOMAIN_ID` 0 above all.)
+struct DomainLease {
+    domain: i32,
+    _lock: Option<std::fs::File>,
+}
+
+impl DomainLease {
+    fn take(domain: Option<i32>) -> Result<DomainLease> {
+        if let Some(domain) = domain {
+            return Ok(DomainLease {
+                domain,
+                _lock: None,
+            });
+        }
+        let dir = std::env::temp_dir();
+        for domain in 100..=232 {
+            let path = dir.join(format!("futago-dds-domain-{domain}.lock"));
+            let file = std::fs::OpenOptions::new()
+                .create(true)
+                .truncate(false)
+                .write(true)
+                .open(&path)
+                .with_context(|| format!("opening {}", path.display()))?;
+            if file.try_lock().is_ok() {
+                return Ok(DomainLease {
+                    domain,
+                    _lock: Some(file),
+                });
+            }
+        }
+        bail!(
+            "every DDS domain from 100 to 232 is held by another futago run on this machine \
+             (locks in {})",
+            dir.display()
+        )
+    }
+}
+
+/// A user's stack started for a run, in a process group of its own, its output in a log
+/// file; stopped (SIGINT to the group, as Ctrl-C stops `ros2 launch`; SIGKILL after 5 s) by
+/// [`StackProcess::stop`] or when dropped.
+struct StackProcess {
+    child: std::process::Child,
+    log: PathBuf,
+    /// The command line, for errors.
+    what: String,
+}
+
+impl StackProcess {
+    fn start(e: &ExternalConfig, domain: i32) -> Result<StackProcess> {
+        use std::os::unix::process::CommandExt;
+        let (mut command, what) = match &e.command {
+            Some(StackCommand::Shell(line)) => {
+                let mut c = std::process::Command::new("sh");
+                c.arg("-c").arg(line);
+                (c, line.clone())
+            }
+            Some(StackCommand::Argv(argv)) if !argv.is_empty() => {
+                let mut c = std::process::Command::new(&argv[0]);
+                c.args(&argv[1..]);
+                (c, argv.join(" "))
+            }
+            _ => bail!("controller.command: expected the command that starts the stack"),
+        };
+        let log =
+            std::env::temp_dir().join(format!("futago-stack-{}-{domain}.log", std::process::id()));
+        let out = std::fs::File::create(&log)
+            .with_context(|| format!("creating the stack's log {}", log.display()))?;
+        let err = out.try_clone()?;
+        let child = command
+            .current_dir(&e.dir)
+            .env("ROS_DOMAIN_ID", domain.to_string())
+            .stdin(std::process::Stdio::null())
+            .stdout(out)
+            .stderr(err)
+            .process_group(0)
+            .spawn()
+            .with_context(|| {
+                format!(
+                    "controller.command: starting `{what}` in {}",
+                    e.dir.display()
+                )
+            })?;
+        Ok(StackProcess { child, log, what })
+    }
+
+    /// How it ended, once it has.
+    fn exited(&mut self) -> Option<std::process::ExitStatus> {
+        self.child.try_wait().ok().flatten()
+    }
+
+    /// The last `n` lines it wrote.
+    fn tail(&self, n: usize) -> String {
+        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().collect();
+        lines[lines.len().saturating_sub(n)..].join("\n")
+    }
+
+    /// Stops its whole process group and reaps it.
+    fn stop(&mut self) {
+        let group = format!("-{}", self.child.id());
+        let signal = |sig: &str| {
+            let _ = std::process::Command::new("kill")
+                .args([sig, "--", &group])
+                .stderr(std::process::Stdio::null())
+                .status();
+        };
+        if self.exited().is_none() {
+            signal("-INT");
+            let until = Instant::now() + Duration::from_secs(5);
+            while self.exited().is_none() && Instant::now() < until {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+        // What it left behind in its group, and itself if it ignored SIGINT.
+        signal("-KILL");
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for StackProcess {
+    fn drop(&mut self) {
+        self.stop();
+        let _ = std::fs::remove_file(&self.log);
+    }
+}
+
 /// `futago serve`: loads the scenario with an external controller, links, waits for the
 /// controller, runs in lock-step and scores as `futago run` does.
 pub fn command(
@@ -800,31 +1117,43 @@ pub fn command(
     opts: &RunOptions,
     serve: &ServeOptions,
 ) -> Result<i32> {
-    for (name, v) in [
-        ("--timeout", Some(serve.timeout)),
-        ("--wait", Some(serve.wait)),
-        ("--period", serve.period),
-        ("--camera-rate", serve.camera_rate),
-    ] {
-        if let Some(v) = v
-            && !(v.is_finite() && v > 0.0 && v <= 86_400.0)
-        {
-            bail!("{name}: expected a positive number of seconds up to a day, found {v}");
-        }
+    // A scenario whose controller is already external keeps its table: its link options
+    // are the flags' defaults.
+    let written = futago_sim::config::load_toml::<toml::Table>(scenario).ok();
+    let is_external = written
+        .as_ref()
+        .and_then(|t| {
+            t.get("controller")?
+                .get("type")?
+                .as_str()
+                .map(|t| t == "external")
+        })
+        .unwrap_or(false);
+    let replaced = if is_external {
+        toml::Table::new()
+    } else {
+        toml::Table::from_iter([(
+            "controller".to_string(),
+            toml::Value::Table(toml::Table::from_iter([(
+                "type".to_string(),
+                toml::Value::String("external".into()),
+            )])),
+        )])
+    };
+    serve.check()?;
+    // The user's estimates' metrics, for the scenario's gates to name.
+    let mut modules = crate::stack::configs(crate::stack::MODULES);
+    if serve.pose_topic.is_some() {
+        modules.push(&ExternalTrajectory);
     }
-    for (name, t) in [
-        ("--pose-topic", &serve.pose_topic),
-        ("--map-topic", &serve.map_topic),
-    ] {
-        if let Some(t) = t
-            && !is_topic(t)
-        {
-            bail!(
-                "{name}: expected an absolute ROS 2 topic name such as /amcl_pose (letters, \
-                 digits, _ and /), found `{t}`"
-            );
-        }
+    if serve.map_topic.is_some() {
+        modules.push(&ExternalMap);
     }
+    let s = Scenario::load_replacing(scenario, overlays, &replaced, &modules)?;
+    let serve = match controller(&s) {
+        ControllerConfig::External(e) => serve.over(e),
+        _ => serve.clone(),
+    };
     let domain = match serve.domain {
         Some(d) => d,
         None => match std::env::var("ROS_DOMAIN_ID") {
@@ -839,34 +1168,7 @@ pub fn command(
             "--domain (or ROS_DOMAIN_ID): expected a DDS domain id from 0 to 232, found {domain}"
         );
     }
-    let external = toml::Table::from_iter([(
-        "controller".to_string(),
-        toml::Value::Table(toml::Table::from_iter([(
-            "type".to_string(),
-            toml::Value::String("external".into()),
-        )])),
-    )]);
-    // The user's estimates' metrics, for the scenario's gates to name.
-    let mut modules = crate::stack::configs(crate::stack::MODULES);
-    if serve.pose_topic.is_some() {
-        modules.push(&ExternalTrajectory);
-    }
-    if serve.map_topic.is_some() {
-        modules.push(&ExternalMap);
-    }
-    let s = Scenario::load_replacing(scenario, overlays, &external, &modules)?;
     let out = out.unwrap_or_else(|| PathBuf::from("out").join(&s.spec.name));
-    let patience = Duration::from_secs_f64(serve.timeout);
-    let height = match (s.lidars.first(), &serve.map_topic) {
-        (Some((c, _)), _) => c.xyz[2],
-        (None, Some(_)) => bail!(
-            "--map-topic: a map is scored against the world's band at its laser's height, and \
-             {} has no laser",
-            s.spec.name
-        ),
-        (None, None) => 0.0,
-    };
-    let link = Dds::new(&s, domain, serve, patience).context("starting the ROS 2 link")?;
     eprintln!(
         "futago serve: {} on DDS domain {domain}; waiting for a controller (/cmd_vel {}, /clock)",
         s.spec.name,
@@ -876,35 +1178,7 @@ pub fn command(
             "Twist"
         }
     );
-    let matched_after = link.wait_for_controller(serve.wait)?;
-    let node = Link {
-        dds: link,
-        timeout: patience,
-        wheel_base: s.spec.robot.wheel_base,
-        joints: s.movers.joints.clone(),
-        mounts: laser_mounts(&s),
-        queued: Default::default(),
-        period: serve.period.map(futago_msgs::Duration::from_secs),
-        camera_gap: serve
-            .camera_rate
-            .map(|r| futago_msgs::Duration::from_secs(1.0 / r)),
-        next_due: Time::ZERO,
-        waits: 0,
-        last: None,
-        ticks: 0,
-        late: 0,
-        discarded: 0,
-        matched_after,
-        estimates: Estimates {
-            pose_topic: serve.pose_topic.clone(),
-            map_topic: serve.map_topic.clone(),
-            poses: Default::default(),
-            track: Trajectory::new("external"),
-            map: None,
-            maps: 0,
-            height,
-        },
-    };
+    let node = connect(&s, domain, &serve, None)?;
     let (summary, o) = run_with(&s, opts, &out, vec![Box::new(node)])?;
     if summary["serve"]["deterministic"] == false {
         eprintln!(
@@ -913,28 +1187,4 @@ pub fn command(
         );
     }
     Ok(print_result(&s, &summary, &o, &out))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::is_topic;
-
-    #[test]
-    fn a_topic_is_an_absolute_ros_2_name() {
-        for t in ["/amcl_pose", "/map", "/robot_1/pose"] {
-            assert!(is_topic(t), "{t}");
-        }
-        for t in [
-            "amcl_pose",
-            "/",
-            "/map/",
-            "//map",
-            "/1map",
-            "/a-b",
-            "/a b",
-            "",
-        ] {
-            assert!(!is_topic(t), "{t}");
-        }
-    }
 }

@@ -245,7 +245,7 @@ pub fn suite(
         let mut crashes = Vec::new();
         let result = match (&isolation, &job.work) {
             (Some(i), _) => run_isolated(job, i, &out.join(&name), force, &name, &mut crashes),
-            (None, Work::Scenario(s)) => run::run(s, &opts, &out.join(&name))
+            (None, Work::Scenario(s)) => crate::serve::run_scenario(s, &opts, &out.join(&name))
                 .map(|(summary, _)| summary)
                 .map_err(|e| format!("{e:#}")),
             // The suite's jobs already share the cores: a twin's seeds run one at a time.

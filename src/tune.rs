@@ -458,7 +458,7 @@ fn evaluate_one(
     };
     // Scored in memory; the trial keeps its summary (no files listed: none were written)
     // and the scenario as run, to rerun it.
-    let scored = run::evaluate(&s, &opts).map_err(|e| format!("{e:#}"))?;
+    let scored = crate::serve::evaluate_scenario(&s, &opts).map_err(|e| format!("{e:#}"))?;
     let summary =
         run::Summary::new(&s, &scored, Default::default()).with_performance(&scored.outcome);
     std::fs::create_dir_all(dir)

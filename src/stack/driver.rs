@@ -354,12 +354,29 @@ impl Node for DriverNode {
 
 /// `navigation.goals_missed` (goals a navigator did not reach) where it is given goals.
 pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
-    if controller_type(s) == Some("navigate") {
-        vec!["navigation.goals_missed".into()]
-    } else {
-        Vec::new()
+    match controller_type(s) {
+        Some("navigate") => vec!["navigation.goals_missed".into()],
+        // The user's estimates the link scores, where the table names their topics.
+        Some("external") => {
+            let table = s.module("controller");
+            let has = |k: &str| table.and_then(|t| t.get(k)).is_some();
+            let mut names = Vec::new();
+            if has("pose_topic") {
+                names.extend(crate::ground_truth::trajectory_metric_names(EXTERNAL));
+            }
+            if has("map_topic") {
+                names.extend(crate::ground_truth::map_metric_names(&format!(
+                    "{EXTERNAL}.map"
+                )));
+            }
+            names
+        }
+        _ => Vec::new(),
     }
 }
+
+/// The name under which a user's stack's estimates are scored (`external.ate.mean_m`).
+pub const EXTERNAL: &str = "external";
 
 /// What drives the robot, as a scenario's `[controller]` table declares it, selected by its
 /// `type` key: a scripted plan ([`Script`]) or the navigator.
@@ -381,7 +398,106 @@ pub enum ControllerConfig {
     Route(RouteConfig),
     /// Commands from outside the stack: a user's ROS 2 stack over `futago serve`'s link
     /// ([`crate::serve`]); no driver node runs.
-    External,
+    External(ExternalConfig),
+}
+
+/// A command line: a string for `sh -c`, or the program and its arguments.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(untagged)]
+pub enum StackCommand {
+    Shell(String),
+    Argv(Vec<String>),
+}
+
+/// `[controller] type = "external"`: a user's ROS 2 stack drives the robot over the link
+/// (`crate::serve`). With `command`, `futago run`, `suite` and `tune` start that stack for
+/// each run (in the scenario's folder, with `ROS_DOMAIN_ID` set to the run's domain) and stop
+/// it after; without, only `futago serve` runs the scenario, and the user starts the stack.
+/// The other keys are the link's options, as `futago serve`'s flags of the same names, which
+/// override them.
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExternalConfig {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command: Option<StackCommand>,
+    /// The DDS domain; unset, a started stack gets a free one of 100 to 232.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub domain: Option<i32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timeout: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wait: Option<f64>,
+    #[serde(default)]
+    pub stamped: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub period: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_rate: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_topic: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub map_topic: Option<String>,
+    /// The folder the command runs in: the scenario file's.
+    #[serde(skip)]
+    pub dir: std::path::PathBuf,
+}
+
+impl ExternalConfig {
+    /// Checks its values; returns `(key, expectation)` on error.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        match &self.command {
+            Some(StackCommand::Shell(c)) if c.trim().is_empty() => {
+                return Err(("command".into(), "a command line, not empty".into()));
+            }
+            Some(StackCommand::Argv(a)) if a.first().is_none_or(|p| p.is_empty()) => {
+                return Err((
+                    "command".into(),
+                    "a program and its arguments, the program not empty".into(),
+                ));
+            }
+            _ => {}
+        }
+        if let Some(d) = self.domain
+            && !(0..=232).contains(&d)
+        {
+            return Err((
+                "domain".into(),
+                format!("a DDS domain id from 0 to 232, found {d}"),
+            ));
+        }
+        for (k, v) in [
+            ("timeout", self.timeout),
+            ("wait", self.wait),
+            ("period", self.period),
+            ("camera_rate", self.camera_rate),
+        ] {
+            if let Some(v) = v
+                && !(v.is_finite() && v > 0.0 && v <= 86_400.0)
+            {
+                return Err((
+                    k.into(),
+                    format!("a positive number up to 86400, found {v}"),
+                ));
+            }
+        }
+        for (k, t) in [
+            ("pose_topic", &self.pose_topic),
+            ("map_topic", &self.map_topic),
+        ] {
+            if let Some(t) = t
+                && !crate::dds::is_topic(t)
+            {
+                return Err((
+                    k.into(),
+                    format!(
+                        "an absolute ROS 2 topic name such as /amcl_pose (letters, digits, _ \
+                         and /), found `{t}`"
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl ControllerConfig {
@@ -402,8 +518,8 @@ impl ControllerConfig {
         match self {
             ControllerConfig::Idle
             | ControllerConfig::Explore(_)
-            | ControllerConfig::Coverage(_)
-            | ControllerConfig::External => Ok(()),
+            | ControllerConfig::Coverage(_) => Ok(()),
+            ControllerConfig::External(e) => e.validate(),
             ControllerConfig::Route(r) => {
                 if r.topic.is_empty() || r.topic.contains(char::is_whitespace) {
                     Err((
@@ -430,7 +546,7 @@ impl ControllerConfig {
             | ControllerConfig::Explore(_)
             | ControllerConfig::Coverage(_)
             | ControllerConfig::Route(_)
-            | ControllerConfig::External => None,
+            | ControllerConfig::External(_) => None,
         }
     }
 }
@@ -481,15 +597,7 @@ pub fn controller_config(path: &Path, table: &toml::Table) -> Result<ControllerC
                 "unknown field: an idle controller takes no parameters",
             )),
         },
-        "external" => match rest.keys().next() {
-            None => Ok(ControllerConfig::External),
-            Some(k) => Err(SpecError::new(
-                path,
-                format!("controller.{k}"),
-                "unknown field: an external controller (commands over `futago serve`'s ROS 2 \
-                 link) takes no parameters",
-            )),
-        },
+        "external" => Ok(ControllerConfig::External(typed(path, rest)?)),
         "segments" => Ok(ControllerConfig::Segments(typed(path, rest)?)),
         "waypoints" => Ok(ControllerConfig::Waypoints(typed(path, rest)?)),
         "navigate" => Ok(ControllerConfig::Navigate(typed(path, rest)?)),
@@ -511,7 +619,8 @@ impl ControllerConfig {
     /// The `[controller]` table with every key, defaults included.
     pub fn table(&self) -> toml::Table {
         let typed = match self {
-            ControllerConfig::Idle | ControllerConfig::External => Ok(toml::Table::new()),
+            ControllerConfig::Idle => Ok(toml::Table::new()),
+            ControllerConfig::External(c) => toml::Table::try_from(c),
             ControllerConfig::Segments(c) => toml::Table::try_from(c),
             ControllerConfig::Waypoints(c) => toml::Table::try_from(c),
             ControllerConfig::Navigate(c) => toml::Table::try_from(c),
@@ -529,7 +638,7 @@ impl ControllerConfig {
             ControllerConfig::Explore(_) => names[4],
             ControllerConfig::Coverage(_) => names[5],
             ControllerConfig::Route(_) => names[6],
-            ControllerConfig::External => names[7],
+            ControllerConfig::External(_) => names[7],
         };
         t.insert("type".into(), toml::Value::String(ty.into()));
         t
@@ -581,7 +690,13 @@ impl ModuleConfig for Module {
         let path = cx.path;
         let mut controller_table = cx.table("controller", table)?;
         let controller_laser = cx.take_name("controller", "laser", &mut controller_table)?;
-        let controller = controller_config(path, &controller_table)?;
+        let mut controller = controller_config(path, &controller_table)?;
+        if let ControllerConfig::External(e) = &mut controller {
+            e.dir = match path.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+                _ => ".".into(),
+            };
+        }
         let navigates = matches!(
             controller,
             ControllerConfig::Navigate(_)
@@ -649,9 +764,56 @@ impl super::StackModule for Module {
     /// The driver, but for an `external` controller, whose commands a node from outside the
     /// stack publishes (`futago serve`'s link).
     fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> super::Nodes {
-        if controller(s) == &ControllerConfig::External {
+        if matches!(controller(s), ControllerConfig::External(_)) {
             return Ok(Vec::new());
         }
         Ok(vec![Box::new(DriverNode::new(s)?) as Box<dyn Node>])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn external(text: &str) -> Result<ControllerConfig, SpecError> {
+        let table: toml::Table = toml::from_str(text).unwrap();
+        let c = controller_config(Path::new("s.toml"), &table)?;
+        c.validate()
+            .map_err(|(k, m)| SpecError::new(Path::new("s.toml"), format!("controller.{k}"), m))?;
+        Ok(c)
+    }
+
+    #[test]
+    fn an_external_controller_takes_its_stacks_command_and_the_links_options() {
+        let c = external(
+            "type = \"external\"\ncommand = [\"ros2\", \"launch\", \"x.py\"]\npose_topic = \"/amcl_pose\"\ntimeout = 30.0\n",
+        )
+        .unwrap();
+        let ControllerConfig::External(e) = &c else {
+            panic!("{c:?}");
+        };
+        assert_eq!(
+            e.command,
+            Some(StackCommand::Argv(vec![
+                "ros2".into(),
+                "launch".into(),
+                "x.py".into()
+            ]))
+        );
+        assert_eq!(e.timeout, Some(30.0));
+        // Its table as run lists what was set, and reads back the same.
+        let again = controller_config(Path::new("s.toml"), &c.table()).unwrap();
+        assert_eq!(again, c);
+        for (text, key) in [
+            ("command = \"  \"", "controller.command"),
+            ("command = []", "controller.command"),
+            ("pose_topic = \"amcl_pose\"", "controller.pose_topic"),
+            ("domain = 300", "controller.domain"),
+            ("wait = -1.0", "controller.wait"),
+            ("laser_topic = \"/scan\"", "controller.laser_topic"),
+        ] {
+            let e = external(&format!("type = \"external\"\n{text}\n")).unwrap_err();
+            assert_eq!(e.key, key, "{text}: {e}");
+        }
     }
 }
