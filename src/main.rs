@@ -750,6 +750,10 @@ struct ServeArgs {
     /// map frame, as AMCL's /amcl_pose), scored against the truth as `external.*`.
     #[arg(long)]
     pose_topic: Option<String>,
+    /// Take your stack's pose from its map → odom on /tf (slam_toolbox, Cartographer and AMCL
+    /// publish it) composed with the odometry at each tick, instead of a pose topic.
+    #[arg(long)]
+    pose_from_tf: bool,
     /// The topic of your stack's map (nav_msgs/OccupancyGrid, as /map): its newest is scored
     /// as `external.map.*`.
     #[arg(long)]
@@ -767,6 +771,7 @@ fn serve_main(a: ServeArgs) -> Result<i32> {
         period: a.period,
         camera_rate: a.camera_rate,
         pose_topic: a.pose_topic,
+        pose_from_tf: a.pose_from_tf,
         map_topic: a.map_topic,
     };
     let r = a.run;

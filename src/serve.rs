@@ -98,6 +98,9 @@ pub struct ServeOptions {
     /// The topic of the user's pose estimate (`geometry_msgs/PoseWithCovarianceStamped`, as
     /// AMCL's `/amcl_pose`), scored as the trajectory `external`.
     pub pose_topic: Option<String>,
+    /// Take the user's pose from its `map → odom` on `/tf` (as slam_toolbox, Cartographer
+    /// and AMCL publish it) composed with the odometry at each tick, instead of a topic.
+    pub pose_from_tf: bool,
     /// The topic of the user's map (`nav_msgs/OccupancyGrid`, as `/map`): its last one is
     /// scored as `external.map`.
     pub map_topic: Option<String>,
@@ -115,6 +118,7 @@ impl ServeOptions {
             period: self.period.or(e.period),
             camera_rate: self.camera_rate.or(e.camera_rate),
             pose_topic: self.pose_topic.clone().or_else(|| e.pose_topic.clone()),
+            pose_from_tf: self.pose_from_tf || e.pose_from_tf,
             map_topic: self.map_topic.clone().or_else(|| e.map_topic.clone()),
         }
     }
@@ -127,8 +131,16 @@ impl ServeOptions {
         self.wait.unwrap_or(60.0)
     }
 
+    /// Whether the user's pose is taken, from a topic or from `/tf`.
+    fn takes_pose(&self) -> bool {
+        self.pose_topic.is_some() || self.pose_from_tf
+    }
+
     /// Checks the numbers and topic names, naming the flag.
     fn check(&self) -> Result<()> {
+        if self.pose_topic.is_some() && self.pose_from_tf {
+            bail!("--pose-topic and --pose-from-tf: the pose comes from one or the other");
+        }
         for (name, v) in [
             ("--timeout", self.timeout),
             ("--wait", self.wait),
@@ -204,6 +216,8 @@ struct Dds {
     waitset: WaitSet,
     /// The user's pose estimates and maps, where asked for.
     pose: Option<DataReader<dds::PoseEstimate>>,
+    /// `/tf`, read for the user's `map → odom`.
+    tf_in: Option<DataReader<dds::TfMessage>>,
     map: Option<DataReader<dds::OccupancyGrid>>,
 }
 
@@ -232,6 +246,10 @@ fn topic<T: TypeSupport + RosType + Send + 'static>(
     participant: &DomainParticipant,
     topic: &str,
 ) -> Result<TopicDescription> {
+    // A topic both written and read (`/tf`) is created once.
+    if let Ok(Some(t)) = participant.lookup_topicdescription(&format!("rt{topic}")) {
+        return Ok(t);
+    }
     dds(
         &format!("creating topic {topic}"),
         participant.create_topic::<T>(
@@ -413,6 +431,11 @@ impl Dds {
                 Some(t) => Some(reader(p, t, 1000)?),
                 None => None,
             },
+            tf_in: if serve.pose_from_tf {
+                Some(reader(p, "/tf", 1000)?)
+            } else {
+                None
+            },
             map: match &serve.map_topic {
                 Some(t) => Some(reader(p, t, 1)?),
                 None => None,
@@ -485,6 +508,27 @@ impl Dds {
             .collect()
     }
 
+    /// The newest `map → odom` that arrived on `/tf`, if any (frames named as ROS 2 does,
+    /// without a leading `/`).
+    fn take_map_odom(&self) -> Option<Pose2> {
+        let frame = |f: &str| f.trim_start_matches('/').to_string();
+        self.tf_in
+            .as_ref()?
+            .take(1000, ANY_SAMPLE_STATE, ANY_VIEW_STATE, ANY_INSTANCE_STATE)
+            .unwrap_or_default()
+            .into_iter()
+            .filter_map(|s| s.data)
+            .flat_map(|m| m.transforms)
+            .filter(|t| frame(&t.header.frame_id) == "map" && frame(&t.child_frame_id) == "odom")
+            .map(|t| {
+                let (p, q) = (&t.transform.translation, &t.transform.rotation);
+                let yaw =
+                    (2.0 * (q.w * q.z + q.x * q.y)).atan2(1.0 - 2.0 * (q.y * q.y + q.z * q.z));
+                Pose2::new(p.x, p.y, yaw)
+            })
+            .rfind(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite())
+    }
+
     /// The newest map that arrived on the user's map topic, if any.
     fn take_map(&self) -> Option<dds::OccupancyGrid> {
         self.map
@@ -555,6 +599,10 @@ pub struct Link {
 /// trajectory `external`) and its newest map, scored as futago's own SLAM's are.
 struct Estimates {
     pose_topic: Option<String>,
+    /// Whether the pose is the user's `map → odom` (the newest, `map_odom`) composed with the
+    /// odometry at each tick.
+    from_tf: bool,
+    map_odom: Option<Pose2>,
     map_topic: Option<String>,
     /// Poses by stamp; a later one of the same stamp replaces it.
     poses: std::collections::BTreeMap<Time, Pose2>,
@@ -600,6 +648,9 @@ impl Link {
     fn take_estimates(&mut self) -> Result<()> {
         for (t, p) in self.dds.take_poses() {
             self.estimates.poses.insert(t, p);
+        }
+        if let Some(m) = self.dds.take_map_odom() {
+            self.estimates.map_odom = Some(m);
         }
         if let Some(m) = self.dds.take_map() {
             let topic = self.estimates.map_topic.as_deref().unwrap_or_default();
@@ -761,6 +812,10 @@ impl Node for Link {
         Self::write(&self.dds.clock, "/clock", dds::Clock { clock: now.into() })?;
         self.ticks += 1;
         self.take_estimates()?;
+        if let Some(m) = self.estimates.map_odom {
+            // The pose in the map as tf gives it at this tick: map → odom ∘ odom → base_link.
+            self.estimates.poses.insert(now, m.compose(&bus.odometry));
+        }
         if now < self.next_due {
             return Ok(());
         }
@@ -793,7 +848,7 @@ impl Node for Link {
 
     fn finish(&mut self, _bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
         let e = &self.estimates;
-        if e.pose_topic.is_some() || e.map_topic.is_some() {
+        if e.pose_topic.is_some() || e.from_tf || e.map_topic.is_some() {
             // What the stack published in answer to the last /clock.
             std::thread::sleep(SETTLE);
             self.take_estimates()?;
@@ -805,9 +860,13 @@ impl Node for Link {
         }
         let mut files = Vec::new();
         if let Some(dir) = out {
-            if let Some(topic) = &e.pose_topic {
+            if e.pose_topic.is_some() || e.from_tf {
+                let from = match &e.pose_topic {
+                    Some(topic) => topic.clone(),
+                    None => "its map → odom on /tf and the odometry".into(),
+                };
                 let header = format!(
-                    "# the pose estimates of the stack futago serve linked to, from {topic}\n# timestamp tx ty tz qx qy qz qw\n"
+                    "# the pose estimates of the stack futago serve linked to, from {from}\n# timestamp tx ty tz qx qy qz qw\n"
                 );
                 track.write(dir, EXTERNAL_TRAJECTORY_FILE, &header)?;
                 files.push(EXTERNAL_TRAJECTORY_FILE.to_string());
@@ -842,7 +901,7 @@ impl Node for Link {
                         .iter()
                         .map(|c| (c.name.clone(), serde_json::json!(c.published)))
                         .collect::<serde_json::Map<_, _>>(),
-                    "poses": e.pose_topic.as_ref().map(|_| e.track.poses.len()),
+                    "poses": (e.pose_topic.is_some() || e.from_tf).then_some(e.track.poses.len()),
                     "maps": e.map_topic.as_ref().map(|_| e.maps),
                 }),
             )],
@@ -919,6 +978,8 @@ fn connect(
         matched_after,
         estimates: Estimates {
             pose_topic: o.pose_topic.clone(),
+            from_tf: o.pose_from_tf,
+            map_odom: None,
             map_topic: o.map_topic.clone(),
             poses: Default::default(),
             track: Trajectory::new(EXTERNAL),
@@ -1143,7 +1204,7 @@ pub fn command(
     serve.check()?;
     // The user's estimates' metrics, for the scenario's gates to name.
     let mut modules = crate::stack::configs(crate::stack::MODULES);
-    if serve.pose_topic.is_some() {
+    if serve.takes_pose() {
         modules.push(&ExternalTrajectory);
     }
     if serve.map_topic.is_some() {

@@ -35,7 +35,7 @@ struct OdometryStart {
 /// A DDS domain of this test process's own, so that tests run side by side do not meet:
 /// below 100, where `futago run` leases domains for the stacks it starts.
 fn domain(offset: i32) -> i32 {
-    offset + (std::process::id() % 20) as i32
+    offset + (std::process::id() % 18) as i32
 }
 
 fn serve(scenario: &str, out: &Path, domain: i32, extra: &[&str]) -> Child {
@@ -489,7 +489,7 @@ fn a_cyclone_dds_controller_receives_clock_and_scans_and_drives_the_twin() {
     let (summary, printed) = serve_to_cyclone(
         &python,
         "scenarios/office-tour.toml",
-        domain(30),
+        domain(28),
         &["--duration", "3"],
     );
     // Every tick's /clock and every scan, as the run counted them.
@@ -524,7 +524,7 @@ fn a_cyclone_dds_subscriber_receives_the_depth_images_the_stack_renders_at_the_r
     let (summary, printed) = serve_to_cyclone(
         &python,
         "scenarios/lab-kinect.toml",
-        domain(50),
+        domain(46),
         &["--duration", "1.5", "--camera-rate", "10"],
     );
     let sent = summary["serve"]["camera_frames"]["kinect"]
@@ -557,7 +557,8 @@ fn a_cyclone_dds_subscriber_receives_the_depth_images_the_stack_renders_at_the_r
 /// along the world's x, with the odometry's stamp, and as its map (`/map`,
 /// `OccupancyGrid`) the map_server map given (PGM + YAML, turned into ROS's rows from the
 /// bottom), every 50 clocks; prints `poses N maps N`. Arguments: domain, deadline, DX, the
-/// map's YAML file.
+/// map's YAML file, and `tf` to publish instead, at each clock, `map → odom` on `/tf` as a
+/// shift of DX along x.
 const CYCLONE_STACK: &str = r##"
 import sys, time, os
 from dataclasses import dataclass
@@ -623,6 +624,18 @@ class PoseWithCovarianceStamped(IdlStruct, typename="geometry_msgs::msg::dds_::P
     header: Header
     pose: PoseWithCovariance
 @dataclass
+class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
+    translation: Vector3
+    rotation: Quaternion
+@dataclass
+class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
+    header: Header
+    child_frame_id: str
+    transform: Transform
+@dataclass
+class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
+    transforms: sequence[TransformStamped]
+@dataclass
 class MapMetaData(IdlStruct, typename="nav_msgs::msg::dds_::MapMetaData_"):
     map_load_time: Time
     resolution: float32
@@ -675,6 +688,8 @@ odom = DataReader(dp, Topic(dp, "rt/odom", Odometry, qos=q), qos=q)
 cmd = DataWriter(dp, Topic(dp, "rt/cmd_vel", Twist, qos=q), qos=q)
 pose = DataWriter(dp, Topic(dp, "rt/amcl_pose", PoseWithCovarianceStamped, qos=q), qos=q)
 grid = DataWriter(dp, Topic(dp, "rt/map", OccupancyGrid, qos=q), qos=q)
+tf_mode = len(sys.argv) > 5 and sys.argv[5] == "tf"
+tf = DataWriter(dp, Topic(dp, "rt/tf", TFMessage, qos=q), qos=q)
 deadline = time.time() + float(sys.argv[2])
 last = None
 clocks = poses = maps = 0
@@ -686,8 +701,13 @@ while time.time() < deadline and (last is None or time.time() - last < 3):
         if clocks % 50 == 1:
             grid.write(OccupancyGrid(Header(c.clock, "map"), info, cells))
             maps += 1
+        if tf_mode:
+            shift = Transform(Vector3(dx, 0.0, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0))
+            tf.write(TFMessage([TransformStamped(Header(c.clock, "map"), "odom", shift)]))
         cmd.write(Twist(linear=Vector3(0.1, 0.0, 0.0), angular=Vector3(0.0, 0.0, 0.2)))
     for o in odom.take(N=100):
+        if tf_mode:
+            continue
         p = o.pose.pose
         moved = Pose(Point(p.position.x + dx, p.position.y, p.position.z), p.orientation)
         pose.write(PoseWithCovarianceStamped(Header(o.header.stamp, "map"),
@@ -741,7 +761,7 @@ fn a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth() {
         CYCLONE_STACK,
         &[&DX.to_string(), maps.join("office.yaml").to_str().unwrap()],
         "scenarios/office-tour.toml",
-        domain(70),
+        domain(64),
         &[
             "--duration",
             "4",
@@ -875,4 +895,55 @@ fn a_suite_starts_the_stack_a_scenario_names_and_gates_its_estimates() {
     );
     assert!(summary["serve"]["poses"].as_u64().unwrap() > 150);
     assert_eq!(summary["serve"]["late"], 0);
+}
+
+#[test]
+fn a_stacks_map_to_odom_on_tf_composed_with_the_odometry_is_its_pose() {
+    let test = "a_stacks_map_to_odom_on_tf_composed_with_the_odometry_is_its_pose";
+    let Some(python) = python_with(test, &["cyclonedds"]) else {
+        return;
+    };
+    if !multicast_with(test) {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let maps = tmp.path().join("map");
+    let o = Command::new(env!("CARGO_BIN_EXE_futago"))
+        .args(["world", "export"])
+        .arg(root().join("worlds/office.toml"))
+        .args(["--mesh", "none", "--out"])
+        .arg(&maps)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    const DX: f64 = 0.1;
+    let (summary, printed, out) = serve_to_script(
+        &python,
+        CYCLONE_STACK,
+        &[
+            &DX.to_string(),
+            maps.join("office.yaml").to_str().unwrap(),
+            "tf",
+        ],
+        "scenarios/office-tour.toml",
+        domain(82),
+        &["--duration", "3", "--pose-from-tf"],
+        tmp.path(),
+    );
+    // A pose at every tick from the first map → odom on, each the odometry shifted DX along
+    // the map's x (map → odom is a shift, and odom is the world's frame at the start).
+    let poses = summary["serve"]["poses"].as_u64().unwrap();
+    let ticks = summary["serve"]["ticks"].as_u64().unwrap();
+    assert!(
+        poses + 10 >= ticks && poses <= ticks,
+        "{poses} poses of {ticks} ticks: {printed}"
+    );
+    let m = &summary["metrics"];
+    let ate = m["external.ate.mean_m"].as_f64().unwrap();
+    let odometry = m["odometry.ate.max_m"].as_f64().unwrap();
+    assert!(
+        (ate - DX).abs() <= odometry + 1e-3,
+        "external ATE {ate} m against {DX} m, odometry off by up to {odometry} m"
+    );
+    assert!(out.join("external.txt").exists());
 }

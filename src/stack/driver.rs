@@ -361,7 +361,11 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
             let table = s.module("controller");
             let has = |k: &str| table.and_then(|t| t.get(k)).is_some();
             let mut names = Vec::new();
-            if has("pose_topic") {
+            let from_tf = table
+                .and_then(|t| t.get("pose_from_tf"))
+                .and_then(toml::Value::as_bool)
+                .unwrap_or(false);
+            if has("pose_topic") || from_tf {
                 names.extend(crate::ground_truth::trajectory_metric_names(EXTERNAL));
             }
             if has("map_topic") {
@@ -435,6 +439,8 @@ pub struct ExternalConfig {
     pub camera_rate: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pose_topic: Option<String>,
+    #[serde(default)]
+    pub pose_from_tf: bool,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub map_topic: Option<String>,
     /// The folder the command runs in: the scenario file's.
@@ -479,6 +485,12 @@ impl ExternalConfig {
                     format!("a positive number up to 86400, found {v}"),
                 ));
             }
+        }
+        if self.pose_topic.is_some() && self.pose_from_tf {
+            return Err((
+                "pose_from_tf".into(),
+                "false with a pose_topic: the pose comes from one or the other".into(),
+            ));
         }
         for (k, t) in [
             ("pose_topic", &self.pose_topic),
@@ -810,6 +822,10 @@ mod tests {
             ("pose_topic = \"amcl_pose\"", "controller.pose_topic"),
             ("domain = 300", "controller.domain"),
             ("wait = -1.0", "controller.wait"),
+            (
+                "pose_topic = \"/pose\"\npose_from_tf = true",
+                "controller.pose_from_tf",
+            ),
             ("laser_topic = \"/scan\"", "controller.laser_topic"),
         ] {
             let e = external(&format!("type = \"external\"\n{text}\n")).unwrap_err();
