@@ -105,6 +105,21 @@ pub struct Quaternion {
     pub w: f64,
 }
 
+impl Quaternion {
+    /// The yaw of this unit quaternion: the z-axis rotation of the body's x axis.
+    pub fn yaw(&self) -> f64 {
+        (2.0 * (self.w * self.z + self.x * self.y))
+            .atan2(1.0 - 2.0 * (self.y * self.y + self.z * self.z))
+    }
+}
+
+/// The planar pose at `position` turned by `orientation`'s yaw; `None` where it is not
+/// finite (no pose).
+pub fn planar(position: &Vector3, orientation: &Quaternion) -> Option<futago_msgs::Pose2> {
+    let p = futago_msgs::Pose2::new(position.x, position.y, orientation.yaw());
+    (p.x.is_finite() && p.y.is_finite() && p.theta.is_finite()).then_some(p)
+}
+
 /// `geometry_msgs/Pose`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, DdsType)]
 pub struct Pose {
@@ -212,8 +227,7 @@ impl OccupancyGrid {
                 "resolution {r}: expected a positive cell side in metres"
             ));
         }
-        let q = &i.origin.orientation;
-        let yaw = (2.0 * (q.w * q.z + q.x * q.y)).atan2(1.0 - 2.0 * (q.y * q.y + q.z * q.z));
+        let yaw = i.origin.orientation.yaw();
         if !yaw.is_finite() || yaw.abs() > 1e-6 {
             return Err(format!(
                 "origin turned by {yaw} rad about z: expected a map aligned with its frame"

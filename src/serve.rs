@@ -37,6 +37,14 @@
 //! DDS is `dust_dds` (pure Rust, RTPS over UDP): no ROS installation is needed, and ROS 2
 //! nodes on Cyclone DDS or Fast DDS in the same domain (`--domain`, or `ROS_DOMAIN_ID`) see
 //! the topics. Discovery is the standard one (SPDP by multicast).
+//!
+//! **The user's estimates.** With `--pose-topic` (or `--pose-from-tf`, the stack's
+//! `map → odom` on `/tf`) and `--map-topic`, the link also takes what the stack estimates and
+//! scores it as futago's SLAM is scored: the trajectory `external` and `external.map`.
+//!
+//! **A started stack.** A scenario whose `[controller]` is `external` with a `command` is run
+//! by `futago run`, `suite` and `tune` through [`run_scenario`] and [`evaluate_scenario`],
+//! which start the stack for the run on a DDS domain of its own and stop it after.
 
 use crate::dds::{self, RosType};
 use crate::ground_truth::Metrics;
@@ -496,14 +504,8 @@ impl Dds {
             .into_iter()
             .filter_map(|s| s.data)
             .filter_map(|e| {
-                let p = &e.pose;
-                let q = &p.orientation;
-                let yaw =
-                    (2.0 * (q.w * q.z + q.x * q.y)).atan2(1.0 - 2.0 * (q.y * q.y + q.z * q.z));
-                let pose = Pose2::new(p.position.x, p.position.y, yaw);
-                // A pose that is not finite is no estimate.
-                (pose.x.is_finite() && pose.y.is_finite() && pose.theta.is_finite())
-                    .then(|| (Time::from(e.header.stamp), pose))
+                dds::planar(&e.pose.position, &e.pose.orientation)
+                    .map(|pose| (Time::from(e.header.stamp), pose))
             })
             .collect()
     }
@@ -520,13 +522,8 @@ impl Dds {
             .filter_map(|s| s.data)
             .flat_map(|m| m.transforms)
             .filter(|t| frame(&t.header.frame_id) == "map" && frame(&t.child_frame_id) == "odom")
-            .map(|t| {
-                let (p, q) = (&t.transform.translation, &t.transform.rotation);
-                let yaw =
-                    (2.0 * (q.w * q.z + q.x * q.y)).atan2(1.0 - 2.0 * (q.y * q.y + q.z * q.z));
-                Pose2::new(p.x, p.y, yaw)
-            })
-            .rfind(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite())
+            .filter_map(|t| dds::planar(&t.transform.translation, &t.transform.rotation))
+            .next_back()
     }
 
     /// The newest map that arrived on the user's map topic, if any.

@@ -132,10 +132,6 @@ impl Square {
     }
 }
 
-fn yaw(q: &dds::Quaternion) -> f64 {
-    (2.0 * (q.w * q.z + q.x * q.y)).atan2(1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-}
-
 /// Drives the served robot round a square by its odometry until `child` exits: for each
 /// `/clock` t_k, the command from the odometry stamped t_k (standing at t = 0),
 /// published as a `TwistStamped` stamped t_k. Returns the child's status and stderr.
@@ -221,7 +217,7 @@ fn drive_square(domain: i32, mut child: Child) -> (std::process::ExitStatus, Str
             if let Some(o) = s.data {
                 let q = &o.pose.orientation;
                 let at = &o.pose.position;
-                poses.insert(o.header.stamp.into(), [at.x, at.y, yaw(q)]);
+                poses.insert(o.header.stamp.into(), [at.x, at.y, q.yaw()]);
             }
         }
         let mut acted = false;
@@ -552,6 +548,27 @@ fn a_cyclone_dds_subscriber_receives_the_depth_images_the_stack_renders_at_the_r
     );
 }
 
+/// Writes the office world's map at the laser's height (0.2 m), as map_server has it, into
+/// `dir` (`office.pgm`, `office.yaml`): the truth's own rasterisation, as a stack's map.
+fn export_office_map(dir: &Path) {
+    let o = Command::new(env!("CARGO_BIN_EXE_futago"))
+        .args(["world", "export"])
+        .arg(root().join("worlds/office.toml"))
+        .args([
+            "--resolution",
+            "0.05",
+            "--band",
+            "0.15:0.25",
+            "--mesh",
+            "none",
+            "--out",
+        ])
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
 /// A stack on Cyclone DDS that drives as [`CYCLONE_CONTROLLER`] does, publishes as its pose
 /// estimate (`/amcl_pose`, `PoseWithCovarianceStamped`) each `/odom` pose moved `DX` metres
 /// along the world's x, with the odometry's stamp, and as its map (`/map`,
@@ -732,22 +749,7 @@ fn a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth() {
     let tmp = tempfile::tempdir().unwrap();
     // The truth's own map of the world at the laser's height (0.2 m), as map_server has it.
     let maps = tmp.path().join("map");
-    let o = Command::new(env!("CARGO_BIN_EXE_futago"))
-        .args(["world", "export"])
-        .arg(root().join("worlds/office.toml"))
-        .args([
-            "--resolution",
-            "0.05",
-            "--band",
-            "0.15:0.25",
-            "--mesh",
-            "none",
-            "--out",
-        ])
-        .arg(&maps)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    export_office_map(&maps);
     const DX: f64 = 0.1;
     // Gates may name the user's metrics, as any scenario's.
     let gate = tmp.path().join("gate.toml");
@@ -835,22 +837,7 @@ fn a_suite_starts_the_stack_a_scenario_names_and_gates_its_estimates() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("scenarios");
     std::fs::create_dir(&dir).unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_futago"))
-        .args(["world", "export"])
-        .arg(root().join("worlds/office.toml"))
-        .args([
-            "--resolution",
-            "0.05",
-            "--band",
-            "0.15:0.25",
-            "--mesh",
-            "none",
-            "--out",
-        ])
-        .arg(dir.join("map"))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    export_office_map(&dir.join("map"));
     std::fs::write(dir.join("stack.py"), CYCLONE_STACK).unwrap();
     // The office tour, driven by the stack: the shell form of `command`, paths relative to
     // the scenario's folder, the domain from the environment.
@@ -908,14 +895,7 @@ fn a_stacks_map_to_odom_on_tf_composed_with_the_odometry_is_its_pose() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let maps = tmp.path().join("map");
-    let o = Command::new(env!("CARGO_BIN_EXE_futago"))
-        .args(["world", "export"])
-        .arg(root().join("worlds/office.toml"))
-        .args(["--mesh", "none", "--out"])
-        .arg(&maps)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    export_office_map(&maps);
     const DX: f64 = 0.1;
     let (summary, printed, out) = serve_to_script(
         &python,
