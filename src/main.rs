@@ -746,6 +746,10 @@ struct ServeArgs {
     /// renders; cameras render only for it].
     #[arg(long)]
     camera_rate: Option<f64>,
+    /// Bin each camera's images N × N on the link: a colour block's mean, a depth block's
+    /// nearest reading, CameraInfo to match [default: full size].
+    #[arg(long)]
+    camera_scale: Option<u32>,
     /// The topic of your stack's pose estimate (geometry_msgs/PoseWithCovarianceStamped in the
     /// map frame, as AMCL's /amcl_pose), scored against the truth as `external.*`.
     #[arg(long)]
@@ -770,6 +774,7 @@ fn serve_main(a: ServeArgs) -> Result<i32> {
         stamped: a.stamped,
         period: a.period,
         camera_rate: a.camera_rate,
+        camera_scale: a.camera_scale,
         pose_topic: a.pose_topic,
         pose_from_tf: a.pose_from_tf,
         map_topic: a.map_topic,

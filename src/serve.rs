@@ -73,6 +73,7 @@ use dust_dds::publication::publisher::Publisher;
 use dust_dds::subscription::data_reader::DataReader;
 use dust_dds::topic_definition::topic_description::TopicDescription;
 use dust_dds::wait_set::{Condition, WaitSet};
+use futago_msgs::camera::Intrinsics;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::ros2msg::Pose;
 use futago_msgs::{DriveCommand, LaserScan, Odometry, Pose2, Time};
@@ -103,6 +104,9 @@ pub struct ServeOptions {
     /// Most camera frames a second each camera publishes (`None`: every frame the stack
     /// renders).
     pub camera_rate: Option<f64>,
+    /// Bin each camera's images `n × n` on the link (`None`: full size): a colour block's
+    /// mean, a depth block's nearest reading, the intrinsics to match.
+    pub camera_scale: Option<u32>,
     /// The topic of the user's pose estimate (`geometry_msgs/PoseWithCovarianceStamped`, as
     /// AMCL's `/amcl_pose`), scored as the trajectory `external`.
     pub pose_topic: Option<String>,
@@ -125,6 +129,7 @@ impl ServeOptions {
             stamped: self.stamped || e.stamped,
             period: self.period.or(e.period),
             camera_rate: self.camera_rate.or(e.camera_rate),
+            camera_scale: self.camera_scale.or(e.camera_scale),
             pose_topic: self.pose_topic.clone().or_else(|| e.pose_topic.clone()),
             pose_from_tf: self.pose_from_tf || e.pose_from_tf,
             map_topic: self.map_topic.clone().or_else(|| e.map_topic.clone()),
@@ -148,6 +153,11 @@ impl ServeOptions {
     fn check(&self) -> Result<()> {
         if self.pose_topic.is_some() && self.pose_from_tf {
             bail!("--pose-topic and --pose-from-tf: the pose comes from one or the other");
+        }
+        if let Some(n) = self.camera_scale
+            && !(1..=16).contains(&n)
+        {
+            bail!("--camera-scale: expected a binning factor from 1 to 16, found {n}");
         }
         for (name, v) in [
             ("--timeout", self.timeout),
@@ -580,6 +590,8 @@ pub struct Link {
     period: Option<futago_msgs::Duration>,
     /// Least simulated time between two published frames of a camera.
     camera_gap: Option<futago_msgs::Duration>,
+    /// The binning of the cameras' images on the link (1: none).
+    camera_scale: u32,
     /// The next tick that waits for a command.
     next_due: Time,
     last: Option<DriveCommand>,
@@ -791,16 +803,23 @@ impl Node for Link {
         let (parent, on) = optical_parent(frame, &*truth);
         let tf = dds::TfMessage::new(f.stamp, &[(parent, c.frame.as_str(), on)]);
         Self::write(&self.dds.tf, "/tf", tf)?;
-        let info = |k| dds::CameraInfo::pinhole(f.stamp, &c.frame, k);
+        let n = self.camera_scale;
+        let info = |k: &Intrinsics| dds::CameraInfo::pinhole(f.stamp, &c.frame, &k.binned(n));
         if let Some(image) = &f.rgb {
-            Self::write(&c.rgb, camera, dds::Image::rgb8(f.stamp, &c.frame, image))?;
+            let image = if n > 1 {
+                dds::Image::rgb8(f.stamp, &c.frame, &image.binned(n))
+            } else {
+                dds::Image::rgb8(f.stamp, &c.frame, image)
+            };
+            Self::write(&c.rgb, camera, image)?;
             Self::write(&c.rgb_info, camera, info(&f.rgb_intrinsics))?;
         }
-        Self::write(
-            &c.depth,
-            camera,
-            dds::Image::depth(f.stamp, &c.frame, &f.depth),
-        )?;
+        let depth = if n > 1 {
+            dds::Image::depth(f.stamp, &c.frame, &f.depth.binned(n))
+        } else {
+            dds::Image::depth(f.stamp, &c.frame, &f.depth)
+        };
+        Self::write(&c.depth, camera, depth)?;
         Self::write(&c.depth_info, camera, info(&f.depth_intrinsics))
     }
 
@@ -966,6 +985,7 @@ fn connect(
         camera_gap: o
             .camera_rate
             .map(|r| futago_msgs::Duration::from_secs(1.0 / r)),
+        camera_scale: o.camera_scale.unwrap_or(1),
         next_due: Time::ZERO,
         waits: 0,
         last: None,

@@ -35,7 +35,7 @@ struct OdometryStart {
 /// A DDS domain of this test process's own, so that tests run side by side do not meet:
 /// below 100, where `futago run` leases domains for the stacks it starts.
 fn domain(offset: i32) -> i32 {
-    offset + (std::process::id() % 18) as i32
+    offset + (std::process::id() % 12) as i32
 }
 
 fn serve(scenario: &str, out: &Path, domain: i32, extra: &[&str]) -> Child {
@@ -256,7 +256,7 @@ fn a_controller_over_dds_drives_a_square_by_odometry_and_the_run_is_the_same_twi
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
-    let d = domain(10);
+    let d = domain(4);
     let mut files = Vec::new();
     // Twice waiting at every tick; then waiting every third tick (45 ms), as for a controller
     // on its own timer, which this one is not: it answers every /clock, and the link takes
@@ -485,7 +485,7 @@ fn a_cyclone_dds_controller_receives_clock_and_scans_and_drives_the_twin() {
     let (summary, printed) = serve_to_cyclone(
         &python,
         "scenarios/office-tour.toml",
-        domain(28),
+        domain(16),
         &["--duration", "3"],
     );
     // Every tick's /clock and every scan, as the run counted them.
@@ -520,7 +520,7 @@ fn a_cyclone_dds_subscriber_receives_the_depth_images_the_stack_renders_at_the_r
     let (summary, printed) = serve_to_cyclone(
         &python,
         "scenarios/lab-kinect.toml",
-        domain(46),
+        domain(28),
         &["--duration", "1.5", "--camera-rate", "10"],
     );
     let sent = summary["serve"]["camera_frames"]["kinect"]
@@ -542,6 +542,45 @@ fn a_cyclone_dds_subscriber_receives_the_depth_images_the_stack_renders_at_the_r
             "images {sent} sizes {}x{}",
             depth[0].as_u64().unwrap(),
             depth[1].as_u64().unwrap()
+        )),
+        "{printed} against {sent} sent: {}",
+        summary["camera"]
+    );
+}
+
+#[test]
+fn a_cyclone_dds_subscriber_receives_the_images_binned_as_asked() {
+    let test = "a_cyclone_dds_subscriber_receives_the_images_binned_as_asked";
+    let Some(python) = python_with(test, &["cyclonedds"]) else {
+        return;
+    };
+    if !multicast_with(test) || !udp_receive_buffer_with(test, 1 << 20) {
+        return;
+    }
+    let (summary, printed) = serve_to_cyclone(
+        &python,
+        "scenarios/lab-kinect.toml",
+        domain(64),
+        &[
+            "--duration",
+            "0.5",
+            "--camera-rate",
+            "10",
+            "--camera-scale",
+            "4",
+        ],
+    );
+    // Every image sent, a quarter of the camera's size each way (whole blocks).
+    let sent = summary["serve"]["camera_frames"]["kinect"]
+        .as_u64()
+        .unwrap();
+    let depth = &summary["camera"][0]["depth"];
+    assert!(sent >= 4, "{sent} sent");
+    assert!(
+        printed.contains(&format!(
+            "images {sent} sizes {}x{}",
+            depth[0].as_u64().unwrap() / 4,
+            depth[1].as_u64().unwrap() / 4
         )),
         "{printed} against {sent} sent: {}",
         summary["camera"]
@@ -763,7 +802,7 @@ fn a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth() {
         CYCLONE_STACK,
         &[&DX.to_string(), maps.join("office.yaml").to_str().unwrap()],
         "scenarios/office-tour.toml",
-        domain(64),
+        domain(40),
         &[
             "--duration",
             "4",
@@ -906,7 +945,7 @@ fn a_stacks_map_to_odom_on_tf_composed_with_the_odometry_is_its_pose() {
             "tf",
         ],
         "scenarios/office-tour.toml",
-        domain(82),
+        domain(52),
         &["--duration", "3", "--pose-from-tf"],
         tmp.path(),
     );

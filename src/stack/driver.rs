@@ -438,6 +438,8 @@ pub struct ExternalConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera_rate: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_scale: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pose_topic: Option<String>,
     #[serde(default)]
     pub pose_from_tf: bool,
@@ -485,6 +487,14 @@ impl ExternalConfig {
                     format!("a positive number up to 86400, found {v}"),
                 ));
             }
+        }
+        if let Some(n) = self.camera_scale
+            && !(1..=16).contains(&n)
+        {
+            return Err((
+                "camera_scale".into(),
+                format!("a binning factor from 1 to 16, found {n}"),
+            ));
         }
         if self.pose_topic.is_some() && self.pose_from_tf {
             return Err((
