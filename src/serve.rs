@@ -149,42 +149,23 @@ impl ServeOptions {
         self.pose_topic.is_some() || self.pose_from_tf
     }
 
-    /// Checks the numbers and topic names, naming the flag.
+    /// Checks the numbers and topic names as a scenario's external controller's are
+    /// checked ([`ExternalConfig::validate`]), naming the flag.
     fn check(&self) -> Result<()> {
-        if self.pose_topic.is_some() && self.pose_from_tf {
-            bail!("--pose-topic and --pose-from-tf: the pose comes from one or the other");
-        }
-        if let Some(n) = self.camera_scale
-            && !(1..=16).contains(&n)
-        {
-            bail!("--camera-scale: expected a binning factor from 1 to 16, found {n}");
-        }
-        for (name, v) in [
-            ("--timeout", self.timeout),
-            ("--wait", self.wait),
-            ("--period", self.period),
-            ("--camera-rate", self.camera_rate),
-        ] {
-            if let Some(v) = v
-                && !(v.is_finite() && v > 0.0 && v <= 86_400.0)
-            {
-                bail!("{name}: expected a positive number of seconds up to a day, found {v}");
-            }
-        }
-        for (name, t) in [
-            ("--pose-topic", &self.pose_topic),
-            ("--map-topic", &self.map_topic),
-        ] {
-            if let Some(t) = t
-                && !dds::is_topic(t)
-            {
-                bail!(
-                    "{name}: expected an absolute ROS 2 topic name such as /amcl_pose (letters, \
-                     digits, _ and /), found `{t}`"
-                );
-            }
-        }
-        Ok(())
+        let as_keys = ExternalConfig {
+            timeout: self.timeout,
+            wait: self.wait,
+            period: self.period,
+            camera_rate: self.camera_rate,
+            camera_scale: self.camera_scale,
+            pose_topic: self.pose_topic.clone(),
+            pose_from_tf: self.pose_from_tf,
+            map_topic: self.map_topic.clone(),
+            ..ExternalConfig::default()
+        };
+        as_keys.validate().map_err(|(key, expected)| {
+            anyhow::anyhow!("--{}: expected {expected}", key.replace('_', "-"))
+        })
     }
 }
 

@@ -608,6 +608,28 @@ fn export_office_map(dir: &Path) {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
+/// Python with `cyclonedds`, where a map can be sent to the link: multicast loops back, and
+/// the link's socket may hold a map's burst of fragments (lost ones come again packed
+/// otherwise, which dust_dds 0.15 reassembles wrongly). `None`: `test` is skipped.
+fn cyclone_taking_maps(test: &str) -> Option<std::path::PathBuf> {
+    let python = python_with(test, &["cyclonedds"])?;
+    (multicast_with(test) && udp_receive_buffer_with(test, 1 << 20)).then_some(python)
+}
+
+/// Asserts that the linked stack's trajectory, the odometry moved `dx` along x, is off the
+/// truth by `dx` within the odometry's own error: |e + d| lies in [d − |e|, d + |e|] (and
+/// TUM's rounding). Gives its mean error.
+fn assert_error_is_the_shift(summary: &serde_json::Value, dx: f64) -> f64 {
+    let m = &summary["metrics"];
+    let ate = m["external.ate.mean_m"].as_f64().unwrap();
+    let odometry = m["odometry.ate.max_m"].as_f64().unwrap();
+    assert!(
+        (ate - dx).abs() <= odometry + 1e-3,
+        "external ATE {ate} m against {dx} m, odometry off by up to {odometry} m"
+    );
+    ate
+}
+
 /// A stack on Cyclone DDS that drives as [`CYCLONE_CONTROLLER`] does, publishes as its pose
 /// estimate (`/amcl_pose`, `PoseWithCovarianceStamped`) each `/odom` pose moved `DX` metres
 /// along the world's x, with the odometry's stamp, and as its map (`/map`,
@@ -777,14 +799,9 @@ print("poses", poses, "maps", maps)
 #[test]
 fn a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth() {
     let test = "a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth";
-    let Some(python) = python_with(test, &["cyclonedds"]) else {
+    let Some(python) = cyclone_taking_maps(test) else {
         return;
     };
-    // The map is a burst of fragments: lost ones come again packed otherwise, which
-    // dust_dds 0.15 reassembles wrongly, so the link's socket must hold the burst.
-    if !multicast_with(test) || !udp_receive_buffer_with(test, 1 << 20) {
-        return;
-    }
     let tmp = tempfile::tempdir().unwrap();
     // The truth's own map of the world at the laser's height (0.2 m), as map_server has it.
     let maps = tmp.path().join("map");
@@ -827,17 +844,10 @@ fn a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth() {
         lines.lines().filter(|l| !l.starts_with('#')).count() as u64,
         poses
     );
-    // Each estimate is the odometry moved DX along x, so its error from the truth is DX
-    // within the odometry's own: |e + d| lies in [d − |e|, d + |e|] (and TUM's rounding).
-    let m = &summary["metrics"];
-    let ate = m["external.ate.mean_m"].as_f64().unwrap();
+    let ate = assert_error_is_the_shift(&summary, DX);
     assert_eq!(summary["gates"][0]["metric"], "external.ate.mean_m");
     assert_eq!(summary["gates"][0]["value"].as_f64(), Some(ate));
-    let odometry = m["odometry.ate.max_m"].as_f64().unwrap();
-    assert!(
-        (ate - DX).abs() <= odometry + 1e-3,
-        "external ATE {ate} m against {DX} m, odometry off by up to {odometry} m"
-    );
+    let m = &summary["metrics"];
     // The map is a rasterisation of the world's own colliders in the laser's band, as the
     // scorer's truth is: every true wall face is in it, at no distance (a flipped or shifted
     // map would miss them). Its precision is not 1: the truth counts only the faces the robot
@@ -865,14 +875,9 @@ fn a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth() {
 #[test]
 fn a_suite_starts_the_stack_a_scenario_names_and_gates_its_estimates() {
     let test = "a_suite_starts_the_stack_a_scenario_names_and_gates_its_estimates";
-    let Some(python) = python_with(test, &["cyclonedds"]) else {
+    let Some(python) = cyclone_taking_maps(test) else {
         return;
     };
-    // The map is a burst of fragments: lost ones come again packed otherwise, which
-    // dust_dds 0.15 reassembles wrongly, so the link's socket must hold the burst.
-    if !multicast_with(test) || !udp_receive_buffer_with(test, 1 << 20) {
-        return;
-    }
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("scenarios");
     std::fs::create_dir(&dir).unwrap();
@@ -957,12 +962,6 @@ fn a_stacks_map_to_odom_on_tf_composed_with_the_odometry_is_its_pose() {
         poses + 10 >= ticks && poses <= ticks,
         "{poses} poses of {ticks} ticks: {printed}"
     );
-    let m = &summary["metrics"];
-    let ate = m["external.ate.mean_m"].as_f64().unwrap();
-    let odometry = m["odometry.ate.max_m"].as_f64().unwrap();
-    assert!(
-        (ate - DX).abs() <= odometry + 1e-3,
-        "external ATE {ate} m against {DX} m, odometry off by up to {odometry} m"
-    );
+    assert_error_is_the_shift(&summary, DX);
     assert!(out.join("external.txt").exists());
 }

@@ -499,7 +499,7 @@ impl ExternalConfig {
         if self.pose_topic.is_some() && self.pose_from_tf {
             return Err((
                 "pose_from_tf".into(),
-                "false with a pose_topic: the pose comes from one or the other".into(),
+                "no pose_topic with it: the pose comes from one or the other".into(),
             ));
         }
         for (k, t) in [
