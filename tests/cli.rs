@@ -2397,6 +2397,59 @@ fn a_turntable_scan_names_its_bad_lasers_joint_and_values() {
     }
 }
 
+/// The landmark maps seed 001's navigation localises in are made by `lab-visual-map`'s passes:
+/// each file's `made_by` names the run, and that run writes the committed file byte for byte
+/// (the own-pose map; the truth-placed ablation's command is checked to name its scenario).
+#[test]
+fn the_lab_landmark_maps_are_remade_by_the_command_in_their_header() {
+    let made_by = |file: &str| -> String {
+        let text = std::fs::read_to_string(root().join("worlds/maps").join(file)).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        v["made_by"].as_str().unwrap_or_default().to_string()
+    };
+    let truth = made_by("lab-landmarks-truth.json");
+    assert!(
+        truth.starts_with("futago run scenarios/lab-visual-map-truth.toml --seed 1 ")
+            && truth.ends_with("placed by the truth)"),
+        "{truth}"
+    );
+    let own = made_by("lab-landmarks.json");
+    let prefix = "futago run ";
+    assert!(
+        own.starts_with(prefix) && own.ends_with("about the wheels' prediction)"),
+        "{own}"
+    );
+    // `futago run FILE --seed N`, then the run's landmarks.json.
+    let args: Vec<&str> = own[prefix.len()..]
+        .split(" (")
+        .next()
+        .unwrap()
+        .split(' ')
+        .collect();
+    assert_eq!(args.len(), 3, "{own}");
+    assert_eq!(args[0], "scenarios/lab-visual-map.toml");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("map");
+    let o = futago(&[
+        "run",
+        args[0],
+        args[1],
+        args[2],
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    ok(&o);
+    let made = std::fs::read(out.join("landmarks.json")).unwrap();
+    let committed = std::fs::read(root().join("worlds/maps/lab-landmarks.json")).unwrap();
+    assert!(
+        made == committed,
+        "the run's landmarks.json ({} bytes) differs from worlds/maps/lab-landmarks.json ({} bytes): remake it with `{own}`",
+        made.len(),
+        committed.len()
+    );
+}
+
 /// A trinocular rig that is not an L, a missing or corrupt landmark map, and bad values are
 /// refused before anything runs, naming the key (and the file).
 #[test]

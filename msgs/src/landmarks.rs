@@ -32,6 +32,9 @@ pub const MAX_BYTES: u64 = 1 << 30;
 pub struct LandmarkFile {
     pub format: String,
     pub version: u32,
+    /// How the map was made: the command that remakes it, written by the run that did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub made_by: Option<String>,
     pub landmarks: Vec<LandmarkRecord>,
 }
 
@@ -104,6 +107,7 @@ impl LandmarkFile {
         LandmarkFile {
             format: FORMAT.into(),
             version: 1,
+            made_by: None,
             landmarks,
         }
     }

@@ -50,6 +50,18 @@ pub enum MapPoseSource {
     GroundTruth,
 }
 
+/// What each frame's search is centred on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapPrediction {
+    /// The last pose carried by the Create's wheel odometry since the last frame, its error
+    /// weighed by `mapping.odometry` (not in the seed, whose base had no usable encoders).
+    #[default]
+    Odometry,
+    /// The last pose (the seed: the robot is predicted to stand still).
+    Stationary,
+}
+
 /// `[visual_map]`: seed 001's trinocular mapping pass.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -62,6 +74,8 @@ pub struct VisualMapSpec {
     pub rate: f64,
     #[serde(default)]
     pub pose_source: MapPoseSource,
+    #[serde(default)]
+    pub prediction: MapPrediction,
     /// Landmarks seen fewer times than this are left out of the file (the seed's map figure
     /// shows those seen twice or more).
     #[serde(default = "default_min_observations")]
@@ -160,8 +174,8 @@ pub fn check_rig(
     Ok(b)
 }
 
-/// The node when the scenario has `[visual_map]`.
-pub fn node(s: &Scenario) -> Result<Option<VisualMapNode>> {
+/// The node when the scenario has `[visual_map]`, for a run with `seed`.
+pub fn node(s: &Scenario, seed: u64) -> Result<Option<VisualMapNode>> {
     let Some(spec) = s.module::<VisualMapSpec>() else {
         return Ok(None);
     };
@@ -176,7 +190,8 @@ pub fn node(s: &Scenario) -> Result<Option<VisualMapNode>> {
         intrinsics: right.rgb,
         height: right.mount.translation.z as f64,
     };
-    let start = s.start.compose(&super::camera_on_base(right));
+    let mount = super::camera_on_base(right);
+    let start = s.start.compose(&mount);
     Ok(Some(VisualMapNode {
         spec: spec.clone(),
         rig: Rig {
@@ -184,6 +199,19 @@ pub fn node(s: &Scenario) -> Result<Option<VisualMapNode>> {
             baseline,
         },
         mapper: LandmarkMapper::new(camera, baseline, spec.mapping, start),
+        mount,
+        last_odometry: None,
+        made_by: format!(
+            "futago run scenarios/{}.toml --seed {} (the run's {MAP_FILE}; frames placed by {})",
+            s.spec.name,
+            seed,
+            match (spec.pose_source, spec.prediction) {
+                (MapPoseSource::GroundTruth, _) => "the truth",
+                (MapPoseSource::Seed, MapPrediction::Odometry) =>
+                    "the seed's search about the wheels' prediction",
+                (MapPoseSource::Seed, MapPrediction::Stationary) => "the seed's search",
+            }
+        ),
         period: Duration::from_secs(1.0 / spec.rate),
         next: Time::ZERO,
         pending: [None, None, None],
@@ -213,6 +241,12 @@ pub struct VisualMapNode {
     spec: VisualMapSpec,
     rig: Rig,
     mapper: LandmarkMapper,
+    /// The right camera's planar pose on the base.
+    mount: Pose2,
+    /// The odometry's base pose at the last frame placed.
+    last_odometry: Option<Pose2>,
+    /// The map file's `made_by`.
+    made_by: String,
     period: Duration,
     next: Time,
     /// This instant's keypoints of right, left, top, and the right camera's true pose.
@@ -259,7 +293,7 @@ fn is_false(
 }
 
 impl VisualMapNode {
-    fn process(&mut self, time: Time) -> Result<()> {
+    fn process(&mut self, time: Time, odometry: Pose2) -> Result<()> {
         let [Some((_, right)), Some((_, left)), Some((_, top))] = std::mem::take(&mut self.pending)
         else {
             return Ok(());
@@ -281,8 +315,16 @@ impl VisualMapNode {
         }
         let known = (self.spec.pose_source == MapPoseSource::GroundTruth || self.frames.is_empty())
             .then_some(truth);
+        let camera = |o: &Pose2| o.compose(&self.mount);
+        let motion = match (self.spec.prediction, self.last_odometry) {
+            (MapPrediction::Odometry, Some(last)) => {
+                Some(camera(&last).between(&camera(&odometry)))
+            }
+            _ => None,
+        };
+        self.last_odometry = Some(odometry);
         let t1 = std::time::Instant::now();
-        let step = self.mapper.add_frame(&points, &right, known);
+        let step = self.mapper.add_frame(&points, &right, known, motion);
         self.mapping_s += t1.elapsed().as_secs_f64();
         // The truth of each new landmark: its keypoint's true depth from the true pose.
         let cam = self.mapper.camera;
@@ -362,7 +404,7 @@ impl Node for VisualMapNode {
             .iter()
             .all(|p| p.as_ref().is_some_and(|(t, _)| *t == bus.now))
         {
-            self.process(bus.now)?;
+            self.process(bus.now, bus.odometry)?;
             self.next = bus.now + self.period;
         }
         Ok(())
@@ -372,7 +414,7 @@ impl Node for VisualMapNode {
         let mut report = Report::default();
         if let Some(dir) = out {
             let path = dir.join(MAP_FILE);
-            let kept = futago_robot::localization::landmarks::LandmarkMap {
+            let mut file = futago_robot::localization::landmarks::LandmarkMap {
                 landmarks: self
                     .mapper
                     .map
@@ -381,9 +423,10 @@ impl Node for VisualMapNode {
                     .filter(|l| l.observed >= self.spec.min_observations)
                     .cloned()
                     .collect(),
-            };
-            kept.to_file()
-                .write(&path)
+            }
+            .to_file();
+            file.made_by = Some(self.made_by.clone());
+            file.write(&path)
                 .with_context(|| format!("writing {}", path.display()))?;
             report.files.push(MAP_FILE.into());
         }
@@ -431,6 +474,7 @@ impl Node for VisualMapNode {
             "frames": self.frames.len(),
             "baseline_m": self.rig.baseline,
             "pose_source": self.spec.pose_source,
+            "prediction": self.spec.prediction,
             "landmarks": map.landmarks.len(),
             "landmarks_seen_twice": seen_twice,
             "keypoints_per_frame": [mean(&|f| f.keypoints[0]), mean(&|f| f.keypoints[1]), mean(&|f| f.keypoints[2])],
@@ -563,7 +607,7 @@ impl ModuleConfig for Module {
 }
 
 impl StackModule for Module {
-    fn build(&self, s: &Scenario, _seed: u64, _out: Option<&Path>) -> Nodes {
-        boxed(node(s))
+    fn build(&self, s: &Scenario, seed: u64, _out: Option<&Path>) -> Nodes {
+        boxed(node(s, seed))
     }
 }
