@@ -275,16 +275,25 @@ impl LandmarkMapper {
         (view, matches)
     }
 
-    /// Eqs. 7–10 at `pose`: the sum of the matches' 3D Mahalanobis distances, each capped.
-    fn cost(&self, pose: &Pose2, points: &[StereoPoint], m: &[(PointMatch, DMat3)]) -> f64 {
+    /// Eqs. 7–10 at `pose`: each match's 3D Mahalanobis distance, uncapped.
+    fn distances<'a>(
+        &'a self,
+        pose: &Pose2,
+        points: &'a [StereoPoint],
+        m: &'a [(PointMatch, DMat3)],
+    ) -> impl Iterator<Item = f64> + 'a {
         let r = optical_rotation(pose.theta);
         let c = self.camera.centre(pose);
-        m.iter()
-            .map(|(pm, info)| {
-                let q =
-                    points[pm.point].position - r * (self.map.landmarks[pm.landmark].position - c);
-                q.dot(*info * q).min(self.config.outlier)
-            })
+        m.iter().map(move |(pm, info)| {
+            let q = points[pm.point].position - r * (self.map.landmarks[pm.landmark].position - c);
+            q.dot(*info * q)
+        })
+    }
+
+    /// Eq. 11's sum at `pose`, each match's distance capped (see the module).
+    fn cost(&self, pose: &Pose2, points: &[StereoPoint], m: &[(PointMatch, DMat3)]) -> f64 {
+        self.distances(pose, points, m)
+            .map(|d| d.min(self.config.outlier))
             .sum()
     }
 
@@ -298,33 +307,17 @@ impl LandmarkMapper {
         m: &[(PointMatch, DMat3)],
         prediction: Option<&(Pose2, DMat3)>,
     ) -> Pose2 {
-        let inliers: Vec<(PointMatch, DMat3)> = {
-            let r = optical_rotation(start.theta);
-            let c = self.camera.centre(&start);
-            m.iter()
-                .filter(|(pm, info)| {
-                    let q = points[pm.point].position
-                        - r * (self.map.landmarks[pm.landmark].position - c);
-                    q.dot(*info * q) < self.config.outlier
-                })
-                .copied()
-                .collect()
-        };
+        let inliers: Vec<(PointMatch, DMat3)> = m
+            .iter()
+            .zip(self.distances(&start, points, m))
+            .filter(|(_, d)| *d < self.config.outlier)
+            .map(|(x, _)| *x)
+            .collect();
         if inliers.len() < 3 {
             return start;
         }
         let sum = |p: &Pose2| -> f64 {
-            let r = optical_rotation(p.theta);
-            let c = self.camera.centre(p);
-            inliers
-                .iter()
-                .map(|(pm, info)| {
-                    let q = points[pm.point].position
-                        - r * (self.map.landmarks[pm.landmark].position - c);
-                    q.dot(*info * q)
-                })
-                .sum::<f64>()
-                + predicted_cost(p, prediction)
+            self.distances(p, points, &inliers).sum::<f64>() + predicted_cost(p, prediction)
         };
         let mut pose = start;
         let mut cost = sum(&pose);
