@@ -331,11 +331,13 @@ fn a_controller_over_dds_drives_a_square_by_odometry_and_the_run_is_the_same_twi
     assert!(files[0] == files[1], "two runs over the link differ");
 }
 
-/// A controller on Cyclone DDS: answers each /clock with one `Twist` (0.1 m/s, 0.2 rad/s)
-/// until the run has ended, and counts the scans and the depth images of camera `kinect`;
-/// prints `clocks N scans N beams N frames F images N sizes WxH`.
-const CYCLONE_CONTROLLER: &str = r#"
-import sys, time
+/// The Python both Cyclone scripts open with: Cyclone's imports and the ROS types every
+/// message here stamps itself with (`builtin_interfaces/Time`, `rosgraph_msgs/Clock`,
+/// `std_msgs/Header`).
+macro_rules! cyclone_preamble {
+    () => {
+        r#"
+import sys, time, os
 from dataclasses import dataclass
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.topic import Topic
@@ -343,7 +345,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.pub import DataWriter
 from cyclonedds.core import Qos, Policy
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import int32, uint8, uint32, float32, float64, sequence
+from cyclonedds.idl.types import int8, int32, uint8, uint32, float32, float64, sequence, array
 
 @dataclass
 class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
@@ -356,7 +358,16 @@ class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
 class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
     stamp: Time
     frame_id: str
-@dataclass
+"#
+    };
+}
+
+/// A controller on Cyclone DDS: answers each /clock with one `Twist` (0.1 m/s, 0.2 rad/s)
+/// until the run has ended, and counts the scans and the depth images of camera `kinect`;
+/// prints `clocks N scans N beams N frames F images N sizes WxH`.
+const CYCLONE_CONTROLLER: &str = concat!(
+    cyclone_preamble!(),
+    r#"@dataclass
 class LaserScan(IdlStruct, typename="sensor_msgs::msg::dds_::LaserScan_"):
     header: Header
     angle_min: float32
@@ -418,7 +429,8 @@ while time.time() < deadline and (last is None or time.time() - last < 3):
         time.sleep(0.0005)
 print("clocks", clocks, "scans", scans, "beams", beams, "frames", ",".join(sorted(frames)),
       "images", images, "sizes", ",".join(f"{w}x{h}" for w, h in sorted(sizes)))
-"#;
+"#
+);
 
 /// Serves `scenario` on `domain` with `args`, driven by [`CYCLONE_CONTROLLER`] in `python`;
 /// both must succeed. Returns the run's summary and what the controller printed.
@@ -637,29 +649,9 @@ fn assert_error_is_the_shift(summary: &serde_json::Value, dx: f64) -> f64 {
 /// bottom), every 50 clocks; prints `poses N maps N`. Arguments: domain, deadline, DX, the
 /// map's YAML file, and `tf` to publish instead, at each clock, `map → odom` on `/tf` as a
 /// shift of DX along x.
-const CYCLONE_STACK: &str = r##"
-import sys, time, os
-from dataclasses import dataclass
-from cyclonedds.domain import DomainParticipant
-from cyclonedds.topic import Topic
-from cyclonedds.sub import DataReader
-from cyclonedds.pub import DataWriter
-from cyclonedds.core import Qos, Policy
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import int8, int32, uint32, float32, float64, sequence, array
-
-@dataclass
-class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-    sec: int32
-    nanosec: uint32
-@dataclass
-class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
-    clock: Time
-@dataclass
-class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
-    stamp: Time
-    frame_id: str
-@dataclass
+const CYCLONE_STACK: &str = concat!(
+    cyclone_preamble!(),
+    r##"@dataclass
 class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
     x: float64
     y: float64
@@ -794,7 +786,8 @@ while time.time() < deadline and (last is None or time.time() - last < 3):
     if not got:
         time.sleep(0.0005)
 print("poses", poses, "maps", maps)
-"##;
+"##
+);
 
 #[test]
 fn a_stacks_pose_estimates_and_map_over_dds_are_scored_against_the_truth() {
