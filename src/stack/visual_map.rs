@@ -5,7 +5,10 @@
 //! At its rate the node takes the three cameras' frames of one instant, finds SIFT keypoints
 //! in each, matches and triangulates them (`perception::trinocular`), and hands the points
 //! to the mapper (`mapping::landmark_map`), which places the frame by the seed's exhaustive
-//! 3D search (`pose_source = "seed"`) or at the right camera's true pose (`"ground_truth"`).
+//! 3D search (`pose_source = "seed"`), centred on the wheels' prediction of the frame's
+//! motion (`prediction = "odometry"`) or on the last pose (`"stationary"`, the seed's), or at
+//! the right camera's true pose (`"ground_truth"`). The map file's `made_by` names the run
+//! that remakes it.
 //! The first frame is placed at the true pose: the seed's map frame is its first camera
 //! frame, and this ties it to the world's, where the truth scores it.
 //!

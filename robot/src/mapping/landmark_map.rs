@@ -5,7 +5,10 @@
 //! Kalman filter and their direction's descriptor renewed, the counters m and l kept (§2.3),
 //! and unmatched points added as new landmarks.
 //!
-//! The seed predicts no motion: the search is centred on the last pose. Its eq. 9 leaves the
+//! The seed predicts no motion: the search is centred on the last pose. Here, where the wheels
+//! report the frame's motion, it is centred on the last pose carried by it, and the cost adds
+//! the prediction's Mahalanobis distance ([`OdometryNoise`]); the grid's best pose is then
+//! refined by Gauss–Newton (`refine_iterations`). Neither is the seed's. Its eq. 9 leaves the
 //! stereo covariance out of Q; it is added here (the digest's reading: "this observation
 //! error is used"). Its outlier cut, δ ≥ 1, is read as a cap on each match's cost (a constant
 //! for a false match) at the χ² of 3 degrees of freedom at 99 % (11.34), since a cut at 1
