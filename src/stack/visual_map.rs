@@ -8,7 +8,7 @@
 //! 3D search (`pose_source = "seed"`), centred on the wheels' prediction of the frame's
 //! motion (`prediction = "odometry"`) or on the last pose (`"stationary"`, the seed's), or at
 //! the right camera's true pose (`"ground_truth"`). The map file's `made_by` names the run
-//! that remakes it.
+//! that remakes it, with the renderer backend it was forced to (`FUTAGO_GPU_BACKEND`).
 //! The first frame is placed at the true pose: the seed's map frame is its first camera
 //! frame, and this ties it to the world's, where the truth scores it.
 //!
@@ -205,7 +205,8 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<VisualMapNode>> {
         mount,
         last_odometry: None,
         made_by: format!(
-            "futago run scenarios/{}.toml --seed {} (the run's {MAP_FILE}; frames placed by {})",
+            "{}futago run scenarios/{}.toml --seed {} (the run's {MAP_FILE}; frames placed by {})",
+            backend_prefix(),
             s.spec.name,
             seed,
             match (spec.pose_source, spec.prediction) {
@@ -226,6 +227,18 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<VisualMapNode>> {
         mapping_s: 0.0,
         summary: None,
     }))
+}
+
+/// The renderer choice the run was forced to, as the shell prefix that repeats it (empty for
+/// `auto`): the keypoints come from rasterised pixels, and lavapipe and llvmpipe do not
+/// rasterise the same bits, so a map is remade byte for byte only on the backend that made it.
+fn backend_prefix() -> String {
+    use futago_render::gpu::{BACKEND_ENV, BackendChoice};
+    match BackendChoice::from_env() {
+        Ok(BackendChoice::Gl) => format!("{BACKEND_ENV}=gl "),
+        Ok(BackendChoice::Vulkan) => format!("{BACKEND_ENV}=vulkan "),
+        _ => String::new(),
+    }
 }
 
 /// One mapping frame's record.
