@@ -346,6 +346,19 @@ impl Footprint {
         got as f64 / self.total as f64
     }
 
+    /// The share of the reachable floor `planned` sweeps (the same grid) that this sweeps:
+    /// how much of what a route promised a drive delivered. 0 when `planned` sweeps none.
+    pub fn share_of(&self, planned: &Footprint) -> f64 {
+        let promised: Vec<usize> = (0..planned.swept.len())
+            .filter(|&k| planned.swept[k] && planned.reachable[k])
+            .collect();
+        if promised.is_empty() || planned.swept.len() != self.swept.len() {
+            return 0.0;
+        }
+        let got = promised.iter().filter(|&&k| self.swept[k]).count();
+        got as f64 / promised.len() as f64
+    }
+
     /// Each cell: 0 not reachable floor, 1 reachable and not swept, 2 swept.
     pub fn states(&self) -> Vec<u8> {
         (0..self.swept.len())
@@ -459,5 +472,34 @@ mod tests {
         let share = f.share();
         let expected = (6.0 * 60.0 + 2.0 * 18.0) / (18.0 * 98.0);
         assert!((share - expected).abs() < 0.01, "{share} vs {expected}");
+    }
+
+    /// A drive that stops halfway along a planned straight delivers about half of what the
+    /// plan swept, whatever else it sweeps beside it.
+    #[test]
+    fn a_drive_is_scored_against_the_route_it_was_promised() {
+        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 100, 40);
+        for j in 0..40 {
+            for i in 0..100 {
+                let wall = j == 0 || j == 39 || i == 0 || i == 99;
+                g.set(i, j, if wall { 100 } else { 0 });
+            }
+        }
+        let mut planned = Footprint::new(&g, 0.17, 0.2, [1.0, 0.5]).unwrap();
+        let mut driven = Footprint::new(&g, 0.17, 0.2, [1.0, 0.5]).unwrap();
+        for k in 0..=60 {
+            planned.add(&Pose2::new(1.0 + k as f64 * 0.05, 0.5, 0.0));
+        }
+        for k in 0..=30 {
+            driven.add(&Pose2::new(1.0 + k as f64 * 0.05, 0.5, 0.0));
+            driven.add(&Pose2::new(1.0 + k as f64 * 0.05, 1.5, 0.0));
+        }
+        // 6 rows × 60 cells and the two ends' 18-cell half-discs promised; 6 × 30 and two
+        // half-discs delivered (the first drive's start, and its end's, which lies inside the
+        // promised strip); the second drive, off the route, counts for nothing.
+        let got = driven.share_of(&planned);
+        let expected = (6.0 * 30.0 + 2.0 * 18.0) / (6.0 * 60.0 + 2.0 * 18.0);
+        assert!((got - expected).abs() < 0.03, "{got} vs {expected}");
+        assert_eq!(planned.share_of(&planned), 1.0);
     }
 }

@@ -59,6 +59,8 @@ pub struct CoverageNode {
     planning_s: f64,
     /// The share of the floor the route sweeps if driven exactly.
     planned_footprint: f64,
+    /// What the route sweeps if driven exactly, to score the drive against.
+    planned: Footprint,
     camera: Option<ScoredCamera>,
     surfaces: Option<Surfaces>,
     /// The floor's corridors and rooms, the share of each one's floor the robot's footprint
@@ -209,6 +211,7 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         route,
         planning_s,
         planned_footprint,
+        planned,
         camera,
         surfaces,
         regions,
@@ -704,6 +707,10 @@ impl Node for CoverageNode {
         m.insert("coverage.route.time_s", self.route.stats.time_s);
         m.insert("coverage.route.turns", self.route.stats.turns as f64);
         m.insert("coverage.route.footprint", self.planned_footprint);
+        m.insert(
+            "coverage.footprint_of_route",
+            self.footprint.share_of(&self.planned),
+        );
         m.insert("coverage.driven_m", self.driven_m);
         m.insert(
             "coverage.completed",

@@ -23,6 +23,12 @@ pub struct FollowParams {
     pub turn_tolerance: f64,
     /// Speed of each wheel in in-place turns, m/s.
     pub turn_speed: f64,
+    /// Where every point must be driven to (a coverage route's lane ends): a point then also
+    /// counts as reached once the robot, within `tolerance` of the segment leading to it, is
+    /// no more than this short of it along the segment, m. Without it a point is reached
+    /// anywhere within `tolerance` of it, which ends a lane `tolerance` short and cuts the
+    /// corner to the next lane.
+    pub pass: Option<f64>,
 }
 
 /// Follows one polyline.
@@ -67,20 +73,46 @@ impl PathFollower {
         (pose.x - a[0] - t * dx).hypot(pose.y - a[1] - t * dy)
     }
 
+    /// Counts the point being approached as reached (a caller that knows better than the
+    /// pose, such as a laser that finds the wall a route point lies against).
+    pub fn advance(&mut self) {
+        if !self.done() {
+            self.target += 1;
+            self.turning = true;
+        }
+    }
+
     /// True once the last point is reached.
     pub fn done(&self) -> bool {
         self.target >= self.path.len()
+    }
+
+    /// Whether the point being approached counts as reached from `pose` (see
+    /// [`FollowParams::pass`]).
+    fn reached(&self, pose: &Pose2) -> bool {
+        let w = &self.params;
+        let b = self.path[self.target];
+        let dist = (b[0] - pose.x).hypot(b[1] - pose.y);
+        let Some(pass) = w.pass else {
+            return dist <= w.tolerance;
+        };
+        let a = self.path[self.target - 1];
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len = dx.hypot(dy);
+        if len < 1e-9 {
+            return dist <= w.tolerance;
+        }
+        let (px, py) = (pose.x - a[0], pose.y - a[1]);
+        let short = len - (px * dx + py * dy) / len;
+        let across = (px * dy - py * dx).abs() / len;
+        dist <= pass || (short <= pass && across <= w.tolerance)
     }
 
     /// The command for the robot at `pose`; `STOP` once the path is done.
     pub fn command(&mut self, pose: &Pose2) -> DriveCommand {
         let w = self.params;
         // Advance past reached points.
-        while self.target < self.path.len() {
-            let t = self.path[self.target];
-            if (t[0] - pose.x).hypot(t[1] - pose.y) > w.tolerance {
-                break;
-            }
+        while self.target < self.path.len() && self.reached(pose) {
             self.target += 1;
             self.turning = true;
         }
@@ -150,5 +182,70 @@ pub fn arc_command(speed: f64, aim: [f64; 2]) -> DriveCommand {
             left: q(speed * (1.0 - half)),
             right: q(speed * (1.0 + half)),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use futago_msgs::Radius;
+
+    fn params(pass: Option<f64>) -> FollowParams {
+        FollowParams {
+            speed: 0.3,
+            lookahead: 0.35,
+            tolerance: 0.15,
+            turn_in_place: 45f64.to_radians(),
+            turn_tolerance: 8f64.to_radians(),
+            turn_speed: 0.12,
+            pass,
+        }
+    }
+
+    /// Drives a unicycle on the follower's commands (their wheel speeds, exactly) and returns
+    /// where it was when the follower moved on to the point after `corner`.
+    fn pose_at_corner(pass: Option<f64>) -> Pose2 {
+        // A lane 2 m along x, then a side step of 0.3 m to the next lane.
+        let path = vec![[0.0, 0.0], [2.0, 0.0], [2.0, 0.3], [0.0, 0.3]];
+        let mut f = PathFollower::new(params(pass), path);
+        let mut pose = Pose2::new(0.0, 0.0, 0.0);
+        let dt = 0.015;
+        for _ in 0..20_000 {
+            let cmd = f.command(&pose);
+            if f.target() == 2 {
+                return pose;
+            }
+            let (l, r) = match cmd {
+                DriveCommand::Drive { velocity, radius } => match radius {
+                    Radius::Straight => (velocity, velocity),
+                    Radius::InPlaceCcw => (-velocity, velocity),
+                    Radius::InPlaceCw => (velocity, -velocity),
+                    Radius::Arc(rad) => {
+                        let h = CREATE_WHEEL_BASE / 2.0;
+                        (velocity * (rad - h) / rad, velocity * (rad + h) / rad)
+                    }
+                },
+                DriveCommand::DriveDirect { left, right } => (left, right),
+            };
+            let v = (l + r) / 2.0;
+            let w = (r - l) / CREATE_WHEEL_BASE;
+            pose = Pose2::new(
+                pose.x + v * pose.theta.cos() * dt,
+                pose.y + v * pose.theta.sin() * dt,
+                pose.theta + w * dt,
+            );
+        }
+        panic!("the corner was never reached");
+    }
+
+    #[test]
+    fn a_lane_is_driven_to_its_end_when_points_must_be_passed() {
+        // Reached by distance, the lane ends a tolerance (0.15 m) short of its end...
+        let loose = pose_at_corner(None);
+        assert!((2.0 - loose.x - 0.15).abs() < 0.01, "{loose:?}");
+        // ...passed along the segment, within 2 cm of it.
+        let tight = pose_at_corner(Some(0.02));
+        assert!(2.0 - tight.x <= 0.02 + 1e-9, "{tight:?}");
+        assert!(tight.y.abs() < 0.01, "{tight:?}");
     }
 }

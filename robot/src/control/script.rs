@@ -171,6 +171,7 @@ impl WaypointConfig {
             turn_in_place: self.turn_in_place_deg.to_radians(),
             turn_tolerance: self.turn_tolerance_deg.to_radians(),
             turn_speed: self.turn_speed,
+            pass: None,
         }
     }
 }

@@ -39,6 +39,14 @@ pub struct NavigationConfig {
     pub lookahead: f64,
     /// A goal (or path point) counts as reached within this, m.
     pub goal_tolerance: f64,
+    /// A route's points (a coverage route's lane ends) are driven to within this along the
+    /// way to them, m: within `goal_tolerance`, a lane would end that much short and the
+    /// robot cut the corner to the next, leaving a triangle of floor unswept at each end.
+    pub route_pass: f64,
+    /// …or until the laser finds a wall this close ahead of the bumper, m, when the point is
+    /// within `goal_tolerance`: a pose estimate a few centimetres off would otherwise drive
+    /// the bumper into the wall the lane ends against (the route keeps 3 cm from walls).
+    pub route_wall_margin: f64,
     /// Turn in place when the aim is further off the heading than this, degrees.
     pub turn_in_place_deg: f64,
     pub turn_tolerance_deg: f64,
@@ -81,6 +89,8 @@ impl Default for NavigationConfig {
             speed: 0.3,
             lookahead: 0.35,
             goal_tolerance: 0.15,
+            route_pass: 0.02,
+            route_wall_margin: 0.03,
             turn_in_place_deg: 45.0,
             turn_tolerance_deg: 8.0,
             turn_speed: 0.12,
@@ -110,6 +120,8 @@ impl NavigationConfig {
             ("speed", self.speed, 0.01, 0.5),
             ("lookahead", self.lookahead, 0.05, 5.0),
             ("goal_tolerance", self.goal_tolerance, 0.01, 2.0),
+            ("route_pass", self.route_pass, 0.001, 2.0),
+            ("route_wall_margin", self.route_wall_margin, 0.0, 2.0),
             ("turn_in_place_deg", self.turn_in_place_deg, 1.0, 180.0),
             ("turn_tolerance_deg", self.turn_tolerance_deg, 0.1, 90.0),
             ("turn_speed", self.turn_speed, 0.01, 0.5),
@@ -137,7 +149,8 @@ impl NavigationConfig {
         Ok(())
     }
 
-    fn follow_params(&self) -> FollowParams {
+    /// The follower's parameters for a task: a route's points are passed (`route_pass`).
+    fn follow_params(&self, task: &Task) -> FollowParams {
         FollowParams {
             speed: self.speed,
             lookahead: self.lookahead,
@@ -145,6 +158,7 @@ impl NavigationConfig {
             turn_in_place: self.turn_in_place_deg.to_radians(),
             turn_tolerance: self.turn_tolerance_deg.to_radians(),
             turn_speed: self.turn_speed,
+            pass: matches!(task, Task::Route(_)).then_some(self.route_pass),
         }
     }
 }
@@ -469,9 +483,21 @@ impl Navigator {
         {
             return cmd;
         }
+        let wall = match (&self.task, input.scan) {
+            (Task::Route(_), Some((scan, mount))) => {
+                free_ahead(scan, &mount, self.config.robot_radius)
+            }
+            _ => f64::INFINITY,
+        };
         let Some(f) = self.follower.as_mut() else {
             return DriveCommand::STOP;
         };
+        if let Some(&goal) = f.path().get(f.target())
+            && (goal[0] - input.pose.x).hypot(goal[1] - input.pose.y) <= self.config.goal_tolerance
+            && wall <= self.config.robot_radius + self.config.route_wall_margin
+        {
+            f.advance();
+        }
         let cmd = f.command(&input.pose);
         if let Task::Route(route) = &self.task {
             // Points of the route the follower has passed.
@@ -604,7 +630,7 @@ impl Navigator {
                 goal,
             ) {
                 self.stats.people_detours += 1;
-                self.follower = Some(PathFollower::new(c.follow_params(), path));
+                self.follower = Some(PathFollower::new(c.follow_params(&self.task), path));
                 self.detoured = input.people.iter().map(|p| (p.id, p.position)).collect();
                 self.mode = Mode::Driving;
                 // The new path is followed from the next tick.
@@ -708,7 +734,10 @@ impl Navigator {
                     });
                     if let Some(path) = path {
                         self.stats.plans += 1;
-                        self.follower = Some(PathFollower::new(self.config.follow_params(), path));
+                        self.follower = Some(PathFollower::new(
+                            self.config.follow_params(&self.task),
+                            path,
+                        ));
                         return true;
                     }
                     self.stats.goals_unreachable += 1;
@@ -744,7 +773,10 @@ impl Navigator {
                         self.route_next = k;
                         self.route_at = path.len() - 1;
                         path.extend_from_slice(&route[k + 1..]);
-                        self.follower = Some(PathFollower::new(self.config.follow_params(), path));
+                        self.follower = Some(PathFollower::new(
+                            self.config.follow_params(&self.task),
+                            path,
+                        ));
                         return true;
                     }
                 }
@@ -774,7 +806,7 @@ impl Navigator {
                 ) {
                     Some(path) => {
                         self.stats.plans += 1;
-                        self.follower = Some(PathFollower::new(c.follow_params(), path));
+                        self.follower = Some(PathFollower::new(c.follow_params(&self.task), path));
                         true
                     }
                     None => {
@@ -785,6 +817,24 @@ impl Navigator {
             }
         }
     }
+}
+
+/// How far ahead of the robot's centre the nearest laser return in its path lies (within
+/// `half_width` of its centre line), m; infinite when none does.
+fn free_ahead(scan: &LaserScan, mount: &Pose2, half_width: f64) -> f64 {
+    scan.ranges
+        .iter()
+        .enumerate()
+        .filter_map(|(k, &r)| {
+            let r = r as f64;
+            if !r.is_finite() || r < scan.range_min || r > scan.range_max {
+                return None;
+            }
+            let a = scan.angle(k);
+            let p = mount.transform_point([r * a.cos(), r * a.sin()]);
+            (p[0] > 0.0 && p[1].abs() < half_width).then_some(p[0])
+        })
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// How often a robot spinning because its route found no path plans again, s: a turn of about
@@ -979,6 +1029,39 @@ mod tests {
         // A new route starts it again.
         nav.set_route(vec![[4.0, 3.0], [4.0, 4.0]]);
         assert!(!nav.finished());
+    }
+
+    /// A route's last point lies 0.2 m from a wall (the Create's radius and 3 cm), and the
+    /// pose estimate lags the robot by 5 cm: the lane ends where the laser finds the wall
+    /// 3 cm ahead of the bumper, short of contact, and not where the estimate reaches the point
+    /// (the true bumper would be in the wall by then).
+    #[test]
+    fn a_lane_against_a_wall_ends_where_the_laser_finds_the_wall() {
+        let wall_x = 5.95;
+        let route: Vec<[f64; 2]> = vec![[1.0, 1.0], [wall_x - 0.2, 1.0]];
+        let (mut nav, mut truth, dt) = route_in_room(&route);
+        let lag = 0.05;
+        for k in 0..4000 {
+            let estimate = Pose2::new(truth.x - lag, truth.y, truth.theta);
+            let scan = scan_with_return_at(wall_x - truth.x);
+            let input = NavInput {
+                scan: Some((&scan, Pose2::IDENTITY)),
+                ..plain_input(k, dt, estimate)
+            };
+            let (v, w) = unicycle(&nav.update(&input));
+            truth = truth.compose(&Pose2::new(v * dt, 0.0, w * dt));
+            assert!(
+                wall_x - truth.x > 0.17,
+                "the bumper met the wall: {truth:?}"
+            );
+            if nav.finished() {
+                break;
+            }
+        }
+        assert!(nav.finished());
+        assert_eq!(nav.stats().route_points_passed, route.len());
+        // Stopped within a few millimetres (a tick's travel) of the wall margin.
+        assert!((wall_x - truth.x - 0.2).abs() < 0.02, "{truth:?}");
     }
 
     /// A pose estimate inside a wall's margin, from which no path reaches the route: the
