@@ -1,7 +1,9 @@
 //! Seed 000's look-ahead arc controller (written for futago): follows a polyline by aiming at
 //! the point a look-ahead distance further along it and commanding the Create the circle
 //! through the robot and that point tangent to its heading (pure pursuit, R = L² / 2y), and
-//! turns in place where the aim lies too far off the heading (sharp corners, U-turns).
+//! turns in place where the aim lies too far off the heading (sharp corners, U-turns). A point
+//! is reached within a tolerance of it or, for routes whose every point must be driven to
+//! (a coverage route's lane ends, [`FollowParams::pass`]), once passed along its segment.
 
 use futago_msgs::{DriveCommand, Pose2, Radius, wrap_angle};
 
@@ -202,8 +204,8 @@ mod tests {
         }
     }
 
-    /// Drives a unicycle on the follower's commands (their wheel speeds, exactly) and returns
-    /// where it was when the follower moved on to the point after `corner`.
+    /// Drives a unicycle on the follower's commands (their wheel speeds, exactly) along a 2 m
+    /// lane and returns where it was when the follower counted the lane's end as reached.
     fn pose_at_corner(pass: Option<f64>) -> Pose2 {
         // A lane 2 m along x, then a side step of 0.3 m to the next lane.
         let path = vec![[0.0, 0.0], [2.0, 0.0], [2.0, 0.3], [0.0, 0.3]];
