@@ -833,6 +833,10 @@ fn coverage_section(picture: Option<&[u8]>, summary: &Value) -> String {
     let keys = [
         ("coverage.footprint", "footprint (driven)"),
         ("coverage.route.footprint", "footprint (planned)"),
+        (
+            "coverage.footprint_of_route",
+            "footprint (driven, of the planned)",
+        ),
         ("coverage.camera.walls", "camera: walls"),
         ("coverage.camera.floor", "camera: floor"),
         ("coverage.camera.furniture", "camera: furniture"),

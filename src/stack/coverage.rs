@@ -243,6 +243,7 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
         "route.time_s",
         "route.turns",
         "route.footprint",
+        "footprint_of_route",
         "driven_m",
         "completed",
         "time_s",
