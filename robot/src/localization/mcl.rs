@@ -323,13 +323,19 @@ impl Mcl {
             wrap_angle(dy.atan2(dx) - prev.theta)
         };
         let rot2 = wrap_angle(odometry.theta - prev.theta - rot1);
+        // The model's rotations are measured from the direction of travel, so a robot backing
+        // straight up turns by π and back: its noise is that of the turn to or from the
+        // nearer of forward and backward travel, as ROS amcl's diff model takes it. Charged
+        // the full π, a 15 cm back-off scattered the headings by ±80° (σ = √α1·π at α1 = 0.2)
+        // and lost the robot after bumps and blocked lanes (issue 47's coverage runs).
+        let turn = |r: f64| r.abs().min(wrap_angle(r - std::f64::consts::PI).abs());
+        let (n1, n2) = (turn(rot1), turn(rot2));
         let [a1, a2, a3, a4] = self.config.alpha;
         for p in &mut self.particles {
-            let r1 = rot1 + (a1 * rot1 * rot1 + a2 * trans * trans).sqrt() * gauss(&mut self.rng);
+            let r1 = rot1 + (a1 * n1 * n1 + a2 * trans * trans).sqrt() * gauss(&mut self.rng);
             let t = trans
-                + (a3 * trans * trans + a4 * (rot1 * rot1 + rot2 * rot2)).sqrt()
-                    * gauss(&mut self.rng);
-            let r2 = rot2 + (a1 * rot2 * rot2 + a2 * trans * trans).sqrt() * gauss(&mut self.rng);
+                + (a3 * trans * trans + a4 * (n1 * n1 + n2 * n2)).sqrt() * gauss(&mut self.rng);
+            let r2 = rot2 + (a1 * n2 * n2 + a2 * trans * trans).sqrt() * gauss(&mut self.rng);
             let th = p.theta + r1;
             *p = Pose2::new(p.x + t * th.cos(), p.y + t * th.sin(), wrap_angle(th + r2));
         }
@@ -901,6 +907,39 @@ mod tests {
         // The injected particles are there (the set's mean moves), the estimate is not moved.
         assert!(spread > 0.3, "no random particles were injected: {spread}");
         assert!(worst < 0.1, "{worst}");
+    }
+
+    /// Backing up is no noisier than driving forward: the same 15 cm straight back or ahead
+    /// spreads the particles' headings alike (the noise of a turn of 0, not π).
+    #[test]
+    fn backing_up_spreads_the_set_as_driving_forward_does() {
+        let start = Pose2::new(3.0, 2.0, 0.4);
+        let spread_after = |step: f64| -> f64 {
+            let config = MclConfig {
+                kld: false,
+                ..MclConfig::default()
+            };
+            let mut mcl = Mcl::new(config, MclMap::new(room()), 5);
+            mcl.set_pose(start, [0.0, 0.0, 0.0]);
+            mcl.predict(&Pose2::IDENTITY);
+            mcl.predict(&Pose2::new(step, 0.0, 0.0));
+            let th: Vec<f64> = mcl
+                .particles()
+                .iter()
+                .map(|p| wrap_angle(p.theta - start.theta))
+                .collect();
+            let mean = th.iter().sum::<f64>() / th.len() as f64;
+            (th.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / th.len() as f64).sqrt()
+        };
+        let (ahead, back) = (spread_after(0.15), spread_after(-0.15));
+        // Both: two rotations of σ = √α2 · 0.15 m = 0.067 rad each, about 0.095 rad together.
+        let expected = (2.0 * 0.2 * 0.15f64.powi(2)).sqrt();
+        for s in [ahead, back] {
+            assert!(
+                (s - expected).abs() < 0.2 * expected,
+                "{ahead} {back} vs {expected}"
+            );
+        }
     }
 
     /// A robot that stands still: the filter takes its first scan and then no more until
