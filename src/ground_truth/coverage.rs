@@ -449,17 +449,23 @@ mod tests {
         assert!((w.total()[1] - 0.5).abs() < 0.02, "{:?}", w.total());
     }
 
+    /// A `w` × `h` grid of 5 cm cells, free inside a one-cell wall.
+    fn walled(w: usize, h: usize) -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], w, h);
+        for j in 0..h {
+            for i in 0..w {
+                let wall = j == 0 || j == h - 1 || i == 0 || i == w - 1;
+                g.set(i, j, if wall { 100 } else { 0 });
+            }
+        }
+        g
+    }
+
     /// A robot that drives along the middle of a 1 m wide corridor sweeps a 0.34 m strip of
     /// the floor its footprint can reach (0.2 m to 0.8 m across, less 0.17 m each side).
     #[test]
     fn a_straight_drive_sweeps_its_strip() {
-        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 100, 20);
-        for j in 0..20 {
-            for i in 0..100 {
-                let wall = j == 0 || j == 19 || i == 0 || i == 99;
-                g.set(i, j, if wall { 100 } else { 0 });
-            }
-        }
+        let g = walled(100, 20);
         let mut f = Footprint::new(&g, 0.17, 0.2, [1.0, 0.5]).unwrap();
         for k in 0..=60 {
             f.add(&Pose2::new(1.0 + k as f64 * 0.05, 0.5, 0.0));
@@ -478,13 +484,7 @@ mod tests {
     /// plan swept, whatever else it sweeps beside it.
     #[test]
     fn a_drive_is_scored_against_the_route_it_was_promised() {
-        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 100, 40);
-        for j in 0..40 {
-            for i in 0..100 {
-                let wall = j == 0 || j == 39 || i == 0 || i == 99;
-                g.set(i, j, if wall { 100 } else { 0 });
-            }
-        }
+        let g = walled(100, 40);
         let mut planned = Footprint::new(&g, 0.17, 0.2, [1.0, 0.5]).unwrap();
         let mut driven = Footprint::new(&g, 0.17, 0.2, [1.0, 0.5]).unwrap();
         for k in 0..=60 {
