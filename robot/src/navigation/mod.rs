@@ -483,18 +483,17 @@ impl Navigator {
         {
             return cmd;
         }
-        let wall = match (&self.task, input.scan) {
-            (Task::Route(_), Some((scan, mount))) => {
-                free_ahead(scan, &mount, self.config.robot_radius)
-            }
-            _ => f64::INFINITY,
-        };
+        let route = matches!(self.task, Task::Route(_));
+        let c = self.config;
         let Some(f) = self.follower.as_mut() else {
             return DriveCommand::STOP;
         };
-        if let Some(&goal) = f.path().get(f.target())
-            && (goal[0] - input.pose.x).hypot(goal[1] - input.pose.y) <= self.config.goal_tolerance
-            && wall <= self.config.robot_radius + self.config.route_wall_margin
+        // The scan is looked at only near a route point, not at every tick.
+        if route
+            && let Some(&goal) = f.path().get(f.target())
+            && (goal[0] - input.pose.x).hypot(goal[1] - input.pose.y) <= c.goal_tolerance
+            && let Some((scan, mount)) = input.scan
+            && free_ahead(scan, &mount, c.robot_radius) <= c.robot_radius + c.route_wall_margin
         {
             f.advance();
         }
