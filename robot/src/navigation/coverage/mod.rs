@@ -80,8 +80,9 @@ impl Default for TimeModel {
 #[serde(deny_unknown_fields, default)]
 pub struct CoverageConfig {
     pub planner: PlannerKind,
-    /// Least distance from a route segment to an obstacle cell's centre, m: the Create's
-    /// radius (0.17 m) and a few centimetres (seed 000 drew a line about 40 cm thick).
+    /// Least distance from a route segment to an obstacle (the nearest edge of an obstacle
+    /// cell), m: the Create's radius (0.17 m) and 3 cm (seed 000 drew a line about 40 cm
+    /// thick).
     pub clearance: f64,
     pub seed000: seed000::Seed000Config,
     pub boustrophedon: boustrophedon::BoustrophedonConfig,
@@ -276,7 +277,11 @@ pub fn inside_polygon(polygon: &[[f64; 2]], p: [f64; 2]) -> bool {
 /// unknown) cell and the cells the robot's centre can reach from the start.
 pub struct Field {
     pub grid: OccupancyGrid,
-    /// Euclidean distance from each cell's centre to the nearest obstacle cell's centre, m.
+    /// Distance from each cell's centre to the nearest obstacle cell's edge, m: the Euclidean
+    /// distance between the centres less half a cell (0 on obstacle cells). Measured to the
+    /// centres, a clearance would leave the robot half a cell less room than it says, and
+    /// less on a coarser map: a route through a 0.35 m gap between two 5 cm specks kept
+    /// "0.2 m" from both and left the 0.34 m Create 5 mm a side.
     pub distance: Vec<f64>,
     /// Cells at least `clearance` from obstacles, 8-connected to the start's.
     pub reachable: Vec<bool>,
@@ -295,9 +300,10 @@ impl Field {
             .iter()
             .map(|&c| !(0..OCCUPIED).contains(&c))
             .collect();
+        let half = grid.resolution / 2.0;
         let distance: Vec<f64> = squared_edt(&sites, w, h)
             .into_iter()
-            .map(|d2| d2.sqrt() * grid.resolution)
+            .map(|d2| (d2.sqrt() * grid.resolution - half).max(0.0))
             .collect();
         let mut field = Field {
             grid: grid.clone(),
@@ -492,6 +498,31 @@ pub(crate) mod tests {
         assert_eq!(at(4.0, 1.0), 0, "inside the region, free");
         assert_eq!(at(2.0, 1.5), 100, "in the ellipse");
         assert_eq!(at(2.0, 1.9), 0, "above the ellipse");
+    }
+
+    #[test]
+    fn clearance_is_kept_from_the_edges_of_obstacle_cells() {
+        // Two one-cell specks in open floor whose facing edges are 0.35 m apart (cells of
+        // 5 cm: x in [2.0, 2.05) and [2.4, 2.45)), as in the Intel lab's clutter.
+        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 100, 100);
+        for j in 0..100 {
+            for i in 0..100 {
+                let border = i == 0 || j == 0 || i == 99 || j == 99;
+                g.set(i, j, if border { 100 } else { 0 });
+            }
+        }
+        g.set(40, 50, 100);
+        g.set(48, 50, 100);
+        let field = Field::new(&g, 0.2, [1.0, 1.0]).expect("field");
+        // Beside a speck: its edge is half a cell from the neighbouring cell's centre.
+        assert!((field.distance_at([1.975, 2.525]) - 0.025).abs() < 1e-12);
+        // The gap's middle (x = 2.225) is 0.175 m from either edge: a Create (0.17 m) passes
+        // with 5 mm a side, so a route keeping 0.2 m may not go there; measured between
+        // centres the middle was 0.2 m clear.
+        assert!((field.distance_at([2.225, 2.525]) - 0.175).abs() < 1e-12);
+        assert!(!field.reachable_at([2.225, 2.525]));
+        // Round the specks the floor is reachable.
+        assert!(field.reachable_at([2.225, 2.9]));
     }
 
     #[test]
