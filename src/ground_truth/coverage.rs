@@ -461,8 +461,9 @@ mod tests {
         g
     }
 
-    /// A robot that drives along the middle of a 1 m wide corridor sweeps a 0.34 m strip of
-    /// the floor its footprint can reach (0.2 m to 0.8 m across, less 0.17 m each side).
+    /// A robot that drives along the middle of a 0.9 m wide corridor sweeps a 0.34 m strip of
+    /// the floor its footprint can reach (its centre keeps 0.2 m from the walls' edges, at 0.05
+    /// and 0.95 m: 0.25 m to 0.75 m across, and 0.17 m more each side).
     #[test]
     fn a_straight_drive_sweeps_its_strip() {
         let g = walled(100, 20);
@@ -470,13 +471,13 @@ mod tests {
         for k in 0..=60 {
             f.add(&Pose2::new(1.0 + k as f64 * 0.05, 0.5, 0.0));
         }
-        // In 5 cm cells: reachable centres are the cells 0.2 m from the wall cells' centres
-        // (y from 0.225 to 0.775 m, x from 0.225 to 4.775 m); the floor they can sweep, the
-        // cells within 0.17 m of those, is 18 × 98 cells. The drive sweeps the 6 rows whose
+        // In 5 cm cells: reachable centres are the cells 0.2 m from the wall cells' edges
+        // (y from 0.275 to 0.725 m, x from 0.275 to 4.725 m); the floor they can sweep, the
+        // cells within 0.17 m of those, is 16 × 96 cells. The drive sweeps the 6 rows whose
         // centres lie within 0.17 m of y = 0.5 m along 60 cells, and about 18 cells of each
         // end's half-disc.
         let share = f.share();
-        let expected = (6.0 * 60.0 + 2.0 * 18.0) / (18.0 * 98.0);
+        let expected = (6.0 * 60.0 + 2.0 * 18.0) / (16.0 * 96.0);
         assert!((share - expected).abs() < 0.01, "{share} vs {expected}");
     }
 
