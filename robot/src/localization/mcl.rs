@@ -417,11 +417,16 @@ impl Mcl {
         (p.max(1e-12).ln(), consistent)
     }
 
+    /// Whether this filter skips beams: asked to, and on the beam model.
+    fn skips_beams(&self) -> bool {
+        self.config.beam_skip && self.config.model == SensorModel::Beam
+    }
+
     /// Which beams to weight by: all, or with beam skipping those enough particles find
     /// consistent (`terms`: each particle's [`Mcl::beam_term`]s, `None` inside a wall).
     fn beams_kept(&self, terms: &[Option<Vec<(f64, bool)>>], beams: usize) -> Vec<bool> {
         let c = &self.config;
-        if !c.beam_skip || c.model != SensorModel::Beam {
+        if !self.skips_beams() {
             return vec![true; beams];
         }
         let mut agree = vec![0usize; beams];
@@ -490,7 +495,7 @@ impl Mcl {
         let this = &*self;
         // The laser's position; beam angles already include the mount's yaw.
         let laser_of = |p: &Pose2| p.compose(&Pose2::new(mount.x, mount.y, 0.0));
-        let (logs, used) = if c.beam_skip && c.model == SensorModel::Beam {
+        let (logs, used) = if self.skips_beams() {
             // Every beam's term kept for the choice of beams.
             let terms: Vec<Option<Vec<(f64, bool)>>> = map_on_cores(&self.particles, |p| {
                 let laser = laser_of(p);
