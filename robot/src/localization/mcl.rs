@@ -71,9 +71,9 @@ pub struct MclConfig {
     /// filter is lost, not the map wrong). Not for the likelihood field: there amcl's test
     /// (the beam's end within the distance of any obstacle) holds for most beams of a wrong
     /// pose in a room, and a robot carried off kept its old pose on the beams that agreed
-    /// with it. A map rasterises a chair's 3 cm leg into cells of 5–10 cm: beams near the leg
-    /// that the true pose sees pass by it hit it on the map, each costs the true pose the
-    /// model's random floor (about 7 nats), and a few of them pull the set to a pose
+    /// with it. A map rasterises a chair's leg of a few centimetres into a block of 5 cm
+    /// cells: beams that pass the true leg hit the block on the map, each costs the true pose
+    /// the model's random floor (about 7 nats), and a few of them pull the set to a pose
     /// whose beams miss the cells; the office's boustrophedon run lost the robot for 107 s
     /// that way among the wide hall's chairs (issue 47).
     pub beam_skip: bool,
@@ -1132,9 +1132,9 @@ mod tests {
 
     /// Two rows of chair legs 0.3 m apart along the rows, 0.45 and 0.85 m to the left of a
     /// robot that drives past them, turns in place 70° towards them and back, and drives on.
-    /// Each leg is a 10 cm block on the map (a 3 cm leg rasterised across cells of 5 cm) and
-    /// absent from the world the scans are cast in, so the beams that pass between the true
-    /// legs hit the map's blocks. The largest and the mean error of the estimate.
+    /// Each leg is a 10 cm block on the map (a leg a few centimetres thick rasterised across
+    /// cells of 5 cm) and absent from the world the scans are cast in, so the beams that pass
+    /// between the true legs hit the map's blocks. The largest and the mean error of the estimate.
     fn past_the_legs(beam_skip: bool, seed: u64) -> (f64, f64) {
         let reference = MclMap::new(room());
         let mut legs = room();
