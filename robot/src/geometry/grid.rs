@@ -157,12 +157,24 @@ pub fn squared_edt(sites: &[bool], w: usize, h: usize) -> Vec<f64> {
 /// and the planners' tests share.
 #[cfg(test)]
 pub(crate) fn room() -> OccupancyGrid {
-    let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 200, 120);
-    for j in 0..120 {
-        for i in 0..200 {
-            let border = i == 0 || j == 0 || i == 199 || j == 119;
-            let wall = (99..=101).contains(&i) && j < 90;
-            g.set(i, j, if border || wall { 100 } else { 0 });
+    let mut g = walled(200, 120);
+    for j in 0..90 {
+        for i in 99..=101 {
+            g.set(i, j, 100);
+        }
+    }
+    g
+}
+
+/// A `width` × `height` grid of 5 cm cells at the origin, free inside a one-cell wall: the
+/// plain room of the navigation and coverage tests.
+#[cfg(test)]
+pub(crate) fn walled(width: usize, height: usize) -> OccupancyGrid {
+    let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], width, height);
+    for j in 0..height {
+        for i in 0..width {
+            let border = i == 0 || j == 0 || i == width - 1 || j == height - 1;
+            g.set(i, j, if border { 100 } else { 0 });
         }
     }
     g

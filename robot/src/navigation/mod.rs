@@ -872,14 +872,7 @@ mod tests {
 
     /// A 6 × 4 m room, free inside, 5 cm cells.
     fn room() -> OccupancyGrid {
-        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 120, 80);
-        for j in 0..80 {
-            for i in 0..120 {
-                let border = i == 0 || j == 0 || i == 119 || j == 79;
-                g.set(i, j, if border { 100 } else { 0 });
-            }
-        }
-        g
+        crate::geometry::grid::walled(120, 80)
     }
 
     /// A navigator driving `route` in [`room`], the robot at (1, 1) facing east, and the

@@ -141,14 +141,7 @@ mod tests {
 
     /// A 10 m × 4 m free room at 5 cm with walls round it.
     fn room() -> OccupancyGrid {
-        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 200, 80);
-        for j in 0..g.height {
-            for i in 0..g.width {
-                let wall = i == 0 || j == 0 || i == g.width - 1 || j == g.height - 1;
-                g.set(i, j, if wall { 100 } else { 0 });
-            }
-        }
-        g
+        crate::geometry::grid::walled(200, 80)
     }
 
     #[test]

@@ -504,13 +504,7 @@ pub(crate) mod tests {
     fn clearance_is_kept_from_the_edges_of_obstacle_cells() {
         // Two one-cell specks in open floor whose facing edges are 0.35 m apart (cells of
         // 5 cm: x in [2.0, 2.05) and [2.4, 2.45)), as in the Intel lab's clutter.
-        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 100, 100);
-        for j in 0..100 {
-            for i in 0..100 {
-                let border = i == 0 || j == 0 || i == 99 || j == 99;
-                g.set(i, j, if border { 100 } else { 0 });
-            }
-        }
+        let mut g = crate::geometry::grid::walled(100, 100);
         g.set(40, 50, 100);
         g.set(48, 50, 100);
         let field = Field::new(&g, 0.2, [1.0, 1.0]).expect("field");

@@ -348,13 +348,7 @@ mod tests {
     /// in sight of it.
     #[test]
     fn the_second_route_visits_every_unseen_wall_from_within_range() {
-        let mut g = OccupancyGrid::new(0.05, [0.0, 0.0], 120, 80);
-        for j in 0..80 {
-            for i in 0..120 {
-                let wall = i == 0 || j == 0 || i == 119 || j == 79;
-                g.set(i, j, if wall { 100 } else { 0 });
-            }
-        }
+        let g = crate::geometry::grid::walled(120, 80);
         let field = Field::new(&g, 0.2, [1.0, 1.0]).unwrap();
         let mut sight = WallSight::new(&g);
         // Points a few centimetres in front of the south and west walls: each marks the wall
