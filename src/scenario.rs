@@ -301,7 +301,9 @@ impl Resolving<'_> {
 
 /// Refuses pose source `source` at `key` unless the scenario runs the module that publishes
 /// it: `slam` needs a `[slam]` table, `localization` a `[localization]` or
-/// `[visual_localization]` one (both publish `pose/localization`). `what` opens the error.
+/// `[visual_localization]` one, or a `[scan3d]` that localises by the seed's own line ICP
+/// (its `pose_source` left at `line_icp`): each publishes `pose/localization`. `what` opens
+/// the error.
 fn require_pose(
     path: &Path,
     spec: &ScenarioSpec,
@@ -317,7 +319,17 @@ fn require_pose(
     if tables.iter().any(|t| spec.module(t).is_some()) {
         return Ok(());
     }
-    let named: Vec<String> = tables.iter().map(|t| format!("[{t}]")).collect();
+    let seed_localises = |t: &toml::Value| {
+        t.get("pose_source")
+            .is_none_or(|v| v.as_str() == Some("line_icp"))
+    };
+    if source == PoseSource::Localization && spec.module("scan3d").is_some_and(seed_localises) {
+        return Ok(());
+    }
+    let mut named: Vec<String> = tables.iter().map(|t| format!("[{t}]")).collect();
+    if source == PoseSource::Localization {
+        named.push("[scan3d] (localising by its line ICP)".into());
+    }
     Err(SpecError::new(
         path,
         key,

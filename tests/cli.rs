@@ -2392,6 +2392,18 @@ fn a_turntable_scan_names_its_bad_lasers_joint_and_values() {
             "planning = { planner = \"nearest\" }\nstops = [[2.0, 0.0],",
             "scan3d.planning.planner",
         ),
+        // Driving on `pose/localization` needs a localiser: the seed's line ICP is one, a
+        // [scan3d] placing its scans by odometry is not.
+        (
+            "stops = [[2.0, 0.0],",
+            "pose_source = \"odometry\"\nstops = [[2.0, 0.0],",
+            "controller.pose_source`: driving on this pose needs a [localization] or [visual_localization] or [scan3d] (localising by its line ICP) table",
+        ),
+        (
+            "stops = [[2.0, 0.0],",
+            "registration = { max_distance = [0.1, 0.3] }\nstops = [[2.0, 0.0],",
+            "scan3d.registration.max_distance",
+        ),
     ] {
         edited_scenario_is_refused(tmp.path(), &text, from, to, expect);
     }

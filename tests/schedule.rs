@@ -43,7 +43,7 @@ fn publishers_run_before_their_consumers_and_cycles_state_their_lag() {
 
     // The turntable mapper hands the driver its views and waits for the driver to finish
     // them: a cycle, kept in the table's order, the driver taking a view a tick late.
-    let (order, lags) = schedule_of("corridor-scan3d");
+    let (order, lags) = schedule_of("corridor-scan3d-truth");
     assert!(before(&order, "driver", "scan3d"), "{order:?}");
     assert!(before(&order, "oracle", "driver"), "{order:?}");
     assert_eq!(lags, [lag("driver", "path/scan3d", "scan3d")]);

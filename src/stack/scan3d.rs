@@ -138,13 +138,19 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
         travel: 0.0,
         last_truth: None,
         ticked: false,
-        view_pose: None,
+        view_truth: None,
+        view_started: false,
+        view_done: false,
+        guess_errors: Vec::new(),
         views_scored: 0,
         coverage_from: 0,
         band: m.planning.band,
         vertical: m.laser.clone(),
         horizontal: m.horizontal.clone(),
         horizontal_mount: horizontal.planar_mount(),
+        horizontal_height: horizontal.xyz[2],
+        slice: Vec::new(),
+        sliced: 0,
         joint: m.joint.clone(),
         source: m.pose_source,
         joint_history: VecDeque::new(),
@@ -212,6 +218,12 @@ pub struct Scan3dNode {
     vertical: String,
     horizontal: String,
     horizontal_mount: Pose2,
+    /// The horizontal laser's height above the floor, m, and the 3D map's slice about it (map
+    /// frame) that the seed's localiser matches against after each view, gathered from the
+    /// kept scans before `sliced`.
+    horizontal_height: f64,
+    slice: Vec<[f64; 2]>,
+    sliced: usize,
     joint: String,
     source: Scan3dPose,
     /// The table's angle as its encoder reported it (time, rad).
@@ -223,8 +235,10 @@ pub struct Scan3dNode {
     /// Simulated seconds each view's sweep took, pauses included.
     sweep_seconds: Vec<f64>,
     sweep_started: Option<Time>,
-    /// Each view's placing pose against the truth: position (m) and heading (°) errors.
+    /// Each view's placing pose against the truth: position (m) and heading (°) errors; and
+    /// those of the pose the sweep was taken at, before registration.
     view_errors: Vec<(f64, f64)>,
+    guess_errors: Vec<(f64, f64)>,
     scenario: String,
     /// Whether anything in the world moves (the dynamic measures exist only then).
     has_movers: bool,
@@ -239,8 +253,11 @@ pub struct Scan3dNode {
     last_truth: Option<Pose2>,
     /// A control tick happened, for the scorer to look at.
     ticked: bool,
-    /// The pose a view that just began is placed by, until it is scored.
-    view_pose: Option<Pose2>,
+    /// A view's sweep just began, or just entered the map, for the scorer to look at; the
+    /// true pose when it began.
+    view_started: bool,
+    view_done: bool,
+    view_truth: Option<Pose2>,
     /// Views whose points the coverage has taken.
     views_scored: usize,
     /// Placed scans before this one the coverage has taken.
@@ -317,6 +334,34 @@ impl Scan3dNode {
                 Some(a0 + f * (a1 - a0))
             }
         }
+    }
+
+    /// A view's sweep has entered the map: the seed's localiser, if it places the scans,
+    /// takes the registration's correction and matches from now on against the map's slice
+    /// at its laser's height.
+    fn relocalise(&mut self, bus: &mut Bus) {
+        let Some(icp) = &mut self.icp else {
+            return;
+        };
+        let (h, band) = (self.horizontal_height, icp.config().slice);
+        let kept = self.mapper.kept();
+        self.slice.extend(
+            kept[self.sliced..]
+                .iter()
+                .flat_map(|s| s.points.iter())
+                .filter(|(p, _)| (p[2] - h).abs() <= band)
+                .map(|(p, _)| [p[0], p[1]]),
+        );
+        self.sliced = kept.len();
+        let (est, at) = icp.pose();
+        let mut now = est.compose(&at.between(&bus.odometry));
+        if let Some(Some(r)) = self.mapper.registrations().last()
+            && !r.refused
+        {
+            now = r.pose.compose(&r.guess.inverse()).compose(&now);
+        }
+        icp.reset(now, bus.odometry, &self.slice);
+        bus.publish_pose("localization", now, bus.odometry);
     }
 
     fn table_now(&self, bus: &Bus) -> f64 {
@@ -421,9 +466,13 @@ impl Node for Scan3dNode {
             super::bus::ROUTE_DONE.to_string(),
         ];
         consumes.extend(self.source.node().and_then(super::bus::pose_topic));
+        let mut publishes = vec!["path/scan3d".into(), format!("joint/{}", self.joint)];
+        if self.icp.is_some() {
+            publishes.push("pose/localization".into());
+        }
         Streams {
             consumes,
-            publishes: vec!["path/scan3d".into(), format!("joint/{}", self.joint)],
+            publishes,
             ..Streams::default()
         }
     }
@@ -440,9 +489,13 @@ impl Node for Scan3dNode {
     fn on_scan(&mut self, laser: &str, scan: &LaserScan, bus: &mut Bus) -> Result<()> {
         if laser == self.horizontal {
             let at = bus.odometry.compose(&self.horizontal_mount);
-            self.mapper.on_horizontal(scan, &at, bus.now);
+            let movers = self.mapper.on_horizontal(scan, &at, bus.now);
             if let Some(icp) = &mut self.icp {
-                icp.update(scan, &self.horizontal_mount, bus.odometry);
+                if let Some((t, positions)) = movers {
+                    icp.movers(t, &positions);
+                }
+                let pose = icp.update(scan, &self.horizontal_mount, bus.odometry);
+                bus.publish_pose("localization", pose, bus.odometry);
             }
         } else if laser == self.vertical {
             // The table's angle halfway through the scan's sweep.
@@ -476,10 +529,16 @@ impl Node for Scan3dNode {
 
     fn on_control(&mut self, bus: &mut Bus) -> Result<()> {
         self.ticked = true;
-        let pose = self.pose(bus);
+        let mut pose = self.pose(bus);
         let table = self.table_now(bus);
         let was_sweeping = self.sweep_started.is_some();
+        let views = self.mapper.views().len();
         let mut r = self.mapper.control(bus.now, pose, bus.route_done, table);
+        if self.mapper.views().len() > views {
+            self.view_done = true;
+            self.relocalise(bus);
+            pose = self.pose(bus);
+        }
         if matches!(self.mapper.phase(), Phase::Planning { .. }) {
             self.plan_view();
             r = self.mapper.control(bus.now, pose, bus.route_done, table);
@@ -497,7 +556,7 @@ impl Node for Scan3dNode {
         match (was_sweeping, sweeping) {
             (false, true) => {
                 self.sweep_started = Some(bus.now);
-                self.view_pose = Some(pose);
+                self.view_started = true;
             }
             (true, false) => {
                 if let Some(t) = self.sweep_started.take() {
@@ -520,11 +579,24 @@ impl Node for Scan3dNode {
             self.travel += (r.x - p.x).hypot(r.y - p.y);
         }
         self.last_truth = Some(r);
-        // The pose the view's scans are placed by, against the truth.
-        if let Some(pose) = self.view_pose.take() {
-            let e = pose.between(&r);
-            self.view_errors
-                .push((e.x.hypot(e.y), e.theta.abs().to_degrees()));
+        // The pose the view's scans are placed by, and the one its sweep was taken at,
+        // against the truth when the sweep began (the robot stands through it).
+        if std::mem::take(&mut self.view_started) {
+            self.view_truth = Some(r);
+        }
+        if std::mem::take(&mut self.view_done)
+            && let (Some(t), Some(placed)) = (self.view_truth.take(), self.mapper.views().last())
+        {
+            let guess = match self.mapper.registrations().last() {
+                Some(Some(g)) => g.guess,
+                _ => *placed,
+            };
+            let error = |p: &Pose2| {
+                let e = p.between(&t);
+                (e.x.hypot(e.y), e.theta.abs().to_degrees())
+            };
+            self.view_errors.push(error(placed));
+            self.guess_errors.push(error(&guess));
         }
         self.score_views();
     }
@@ -550,6 +622,20 @@ impl Node for Scan3dNode {
             "voxels_known": carved_kept.len(),
             "view_poses": self.mapper.views().iter().map(|p| [p.x, p.y, p.theta]).collect::<Vec<_>>(),
             "view_errors": self.view_errors.iter().map(|(p, h)| json!({ "position_m": p, "heading_deg": h })).collect::<Vec<_>>(),
+            "view_errors_unregistered": self.guess_errors.iter().map(|(p, h)| json!({ "position_m": p, "heading_deg": h })).collect::<Vec<_>>(),
+            "registrations": self.mapper.registrations().iter().map(|r| r.map(|r| {
+                let d = r.guess.between(&r.pose);
+                json!({
+                    "sweep_surfels": r.sweep_surfels,
+                    "map_surfels": r.map_surfels,
+                    "pairs": r.pairs,
+                    "iterations": r.iterations,
+                    "refused": r.refused,
+                    "degenerate": r.degenerate,
+                    "correction": [d.x, d.y, d.theta],
+                })
+            })).collect::<Vec<_>>(),
+            "points_left_out_for_movers": self.icp.as_ref().map(|i| i.left_out()),
             "planned_views": self.plans.iter().map(|v| json!({
                 "position": v.position,
                 "new_cells": v.new_cells,
@@ -623,6 +709,19 @@ impl Node for Scan3dNode {
         let mark = self.to_mark();
         m.insert("scan3d.views_to_95", mark.map_or(f64::NAN, |x| x.0 as f64));
         m.insert("scan3d.travel_to_95_m", mark.map_or(f64::NAN, |x| x.1));
+        // How far from the truth the views' scans were placed.
+        let n = self.view_errors.len();
+        let max = |f: fn(&(f64, f64)) -> f64| self.view_errors.iter().map(f).fold(0.0, f64::max);
+        m.insert("scan3d.view_error.position_max_m", max(|e| e.0));
+        m.insert(
+            "scan3d.view_error.position_mean_m",
+            if n > 0 {
+                self.view_errors.iter().map(|e| e.0).sum::<f64>() / n as f64
+            } else {
+                f64::NAN
+            },
+        );
+        m.insert("scan3d.view_error.heading_max_deg", max(|e| e.1));
         let carved = if self.lengths.is_empty() {
             Vec::new()
         } else {
@@ -875,6 +974,9 @@ fn metric_names(s: &ScenarioSpec, spec: &Scan3dSpec) -> Vec<String> {
         "scan3d.travel_m",
         "scan3d.views_to_95",
         "scan3d.travel_to_95_m",
+        "scan3d.view_error.position_max_m",
+        "scan3d.view_error.position_mean_m",
+        "scan3d.view_error.heading_max_deg",
     ]
     .map(String::from)
     .to_vec();
@@ -1113,6 +1215,19 @@ impl ModuleConfig for Module {
                 format!(
                     "laser `{}` rides on a joint; the mover detector needs one fixed to the base",
                     m.horizontal
+                ),
+            ));
+        }
+        if m.pose_source == Scan3dPose::LineIcp
+            && let Some(other) = ["localization", "visual_localization"]
+                .into_iter()
+                .find(|k| cx.spec.module(k).is_some())
+        {
+            return Err(SpecError::new(
+                path,
+                "scan3d.pose_source",
+                format!(
+                    "the seed's line ICP publishes `pose/localization`, as [{other}] does, and a scenario runs one localiser; place the scans by it with pose_source = \"localization\", or drop [{other}]"
                 ),
             ));
         }

@@ -50,6 +50,18 @@ pub struct LineIcpConfig {
     /// ... or once this long has passed since it, s: a standing robot can be pushed (by a
     /// person walking into it) without its wheels knowing.
     pub max_interval: f64,
+    /// Points within this of a mover the temporal difference reported ([`LineIcp::movers`])
+    /// are left out of the match and of the keyframes, m: a person's legs and body about the
+    /// blob's centre (0.3 m), and the way they walk at 1 m/s in the 0.25 s the detector
+    /// reports late.
+    pub mover_radius: f64,
+    /// Movers are remembered this long, s.
+    pub mover_memory: f64,
+    /// Half the height of the 3D map's slice about the laser's height that becomes the
+    /// reference after each view's sweep ([`LineIcp::reset`]), m: the LMS200's vertical
+    /// beams 0.5° apart put a point every 2.6 cm of height on a wall 3 m away, so ±5 cm
+    /// holds three or four of each scan.
+    pub slice: f64,
 }
 
 impl Default for LineIcpConfig {
@@ -64,6 +76,9 @@ impl Default for LineIcpConfig {
             max_range: 6.0,
             min_motion: [0.02, 0.02],
             max_interval: 0.5,
+            mover_radius: 0.55,
+            mover_memory: 1.0,
+            slice: 0.05,
         }
     }
 }
@@ -87,6 +102,9 @@ impl LineIcpConfig {
                 ("min_motion", self.min_motion[0], 0.0, 10.0),
                 ("min_motion", self.min_motion[1], 0.0, 3.2),
                 ("max_interval", self.max_interval, 0.0, 3600.0),
+                ("mover_radius", self.mover_radius, 0.0, 10.0),
+                ("mover_memory", self.mover_memory, 0.0, 3600.0),
+                ("slice", self.slice, 0.001, 10.0),
             ],
         )
     }
@@ -276,6 +294,10 @@ pub struct LineIcp {
     keyframe: Option<Pose2>,
     evaluations: usize,
     scans: usize,
+    /// Movers reported recently: when, and where in the odometry frame.
+    movers: std::collections::VecDeque<(futago_msgs::Time, [f64; 2])>,
+    /// Points left out for lying near a mover.
+    left_out: usize,
 }
 
 impl LineIcp {
@@ -290,7 +312,37 @@ impl LineIcp {
             keyframe: None,
             evaluations: 0,
             scans: 0,
+            movers: Default::default(),
+            left_out: 0,
         }
+    }
+
+    /// Movers seen at `at`, at `positions` in the odometry frame (the temporal difference's
+    /// blobs): points near them are left out of the scans matched for `mover_memory`
+    /// seconds.
+    pub fn movers(&mut self, at: futago_msgs::Time, positions: &[[f64; 2]]) {
+        self.movers.extend(positions.iter().map(|p| (at, *p)));
+    }
+
+    /// Points left out so far for lying near a mover.
+    pub fn left_out(&self) -> usize {
+        self.left_out
+    }
+
+    pub fn config(&self) -> &LineIcpConfig {
+        &self.config
+    }
+
+    /// Starts again from `pose` at odometry pose `odometry`, matching against `reference`
+    /// (map frame) and what is added to it from here: a better estimate of where the robot is
+    /// and of what is around it (a 3D map's slice at the laser's height) replaces the
+    /// keyframes the old estimate placed, which would pull the pose back to it.
+    pub fn reset(&mut self, pose: Pose2, odometry: Pose2, reference: &[[f64; 2]]) {
+        self.pose = pose;
+        self.odometry = odometry;
+        self.reference = Reference::new(self.config.cell, self.config.max_distance);
+        self.reference.add(reference);
+        self.keyframe = Some(pose);
     }
 
     /// The estimate at the last match, and the odometry pose then.
@@ -318,7 +370,28 @@ impl LineIcp {
         }
         self.matched = Some(scan.stamp);
         self.odometry = odometry;
-        let points: Vec<[f64; 2]> = scan
+        let memory = self.config.mover_memory;
+        while self
+            .movers
+            .front()
+            .is_some_and(|(t, _)| (scan.stamp - *t).secs() > memory)
+        {
+            self.movers.pop_front();
+        }
+        // The movers in the base frame.
+        let back = odometry.inverse();
+        let movers: Vec<[f64; 2]> = self
+            .movers
+            .iter()
+            .map(|(_, p)| back.transform_point(*p))
+            .collect();
+        let radius = self.config.mover_radius;
+        let near_mover = |p: &[f64; 2]| {
+            movers
+                .iter()
+                .any(|m| (m[0] - p[0]).hypot(m[1] - p[1]) <= radius)
+        };
+        let all: Vec<[f64; 2]> = scan
             .ranges
             .iter()
             .enumerate()
@@ -328,6 +401,8 @@ impl LineIcp {
                 mount.transform_point([*r as f64 * a.cos(), *r as f64 * a.sin()])
             })
             .collect();
+        let points: Vec<[f64; 2]> = all.iter().filter(|p| !near_mover(p)).copied().collect();
+        self.left_out += all.len() - points.len();
         self.scans += 1;
         self.pose = if self.reference.len() < 10 || points.len() < 10 {
             guess
@@ -470,5 +545,85 @@ mod tests {
             drift.x.hypot(drift.y) > 1.0,
             "odometry drifted only {drift:?}"
         );
+    }
+
+    /// Points near a mover the detector reported are left out: a person standing in the
+    /// room, reported where they stand, costs the scan exactly the beams that hit them
+    /// (nothing else lies within `mover_radius` of them); reported elsewhere, or longer ago
+    /// than `mover_memory`, nothing.
+    #[test]
+    fn points_near_a_reported_mover_are_left_out() {
+        use crate::mapping::icp::tests_support::{ROOM, scan_of};
+        let t = futago_msgs::Time::from_secs;
+        let start = Pose2::IDENTITY;
+        let mut icp = LineIcp::new(LineIcpConfig::default(), start, start);
+        let mut empty = scan_of(&ROOM, &start);
+        empty.stamp = t(0.0);
+        icp.update(&empty, &Pose2::IDENTITY, start);
+        // A person 0.3 m across about (1, −1): 1 m from the wall y = −2, 2.2 m from the box.
+        let (a, b) = (0.85, 1.15);
+        let person = [
+            ([a, -b], [b, -b]),
+            ([b, -b], [b, -a]),
+            ([b, -a], [a, -a]),
+            ([a, -a], [a, -b]),
+        ];
+        let segs: Vec<_> = ROOM.iter().chain(&person).copied().collect();
+        let mut seen = scan_of(&segs, &start);
+        let hit = seen
+            .ranges
+            .iter()
+            .zip(&empty.ranges)
+            .filter(|(x, y)| x != y)
+            .count();
+        assert!(hit >= 5, "{hit} beams on the person");
+        seen.stamp = t(1.0);
+        icp.movers(t(0.8), &[[3.0, 2.0]]);
+        icp.update(&seen, &Pose2::IDENTITY, start);
+        assert_eq!(icp.left_out(), 0, "a mover elsewhere");
+        seen.stamp = t(2.0);
+        icp.movers(t(1.5), &[[1.0, -1.0]]);
+        icp.update(&seen, &Pose2::IDENTITY, start);
+        assert_eq!(icp.left_out(), hit);
+        seen.stamp = t(3.0);
+        icp.update(&seen, &Pose2::IDENTITY, start);
+        assert_eq!(icp.left_out(), hit, "forgotten after a second");
+    }
+
+    /// A reset replaces the pose and the reference: a robot whose map frame is moved 1 m
+    /// along x (a better map placed the room there) matches its scans against the new
+    /// reference from the new pose and stays there; its old keyframes, 1 m off in the new
+    /// frame, would have pulled it away.
+    #[test]
+    fn a_reset_takes_the_new_pose_and_reference() {
+        use crate::mapping::icp::tests_support::{ROOM, scan_of};
+        let t = futago_msgs::Time::from_secs;
+        let start = Pose2::new(0.5, 0.2, 0.1);
+        let mut icp = LineIcp::new(LineIcpConfig::default(), start, start);
+        let mut scan = scan_of(&ROOM, &start);
+        scan.stamp = t(0.0);
+        icp.update(&scan, &Pose2::IDENTITY, start);
+        // The room 1 m further along x, its walls sampled every 2 cm.
+        let shifted: Vec<[f64; 2]> = ROOM
+            .iter()
+            .flat_map(|(p, q)| {
+                let n = ((q[0] - p[0]).hypot(q[1] - p[1]) / 0.02).ceil() as usize;
+                (0..=n).map(move |k| {
+                    let f = k as f64 / n as f64;
+                    [1.0 + p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1])]
+                })
+            })
+            .collect();
+        let moved = Pose2::new(1.5, 0.2, 0.1);
+        icp.reset(moved, start, &shifted);
+        assert_eq!(icp.pose(), (moved, start));
+        for k in 1..=5 {
+            scan.stamp = t(k as f64);
+            let est = icp.update(&scan, &Pose2::IDENTITY, start);
+            assert!(
+                est.distance(&moved) < 0.01 && (est.theta - moved.theta).abs() < 0.002,
+                "{est:?}"
+            );
+        }
     }
 }

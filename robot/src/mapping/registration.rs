@@ -345,17 +345,17 @@ impl EnvironmentMap {
 /// One residual: `p` in the input's base frame, `q` and the normal `n` (point to plane; `None`:
 /// point to point in x, y) in the world.
 #[derive(Debug, Clone, Copy)]
-struct Pair {
-    p: [f64; 3],
-    q: [f64; 3],
-    n: Option<[f64; 3]>,
+pub(crate) struct Pair {
+    pub(crate) p: [f64; 3],
+    pub(crate) q: [f64; 3],
+    pub(crate) n: Option<[f64; 3]>,
 }
 
 /// A term of the error: its weight and its pairs (the weight is shared by its pairs, as the
 /// thesis's mean).
-struct Term {
-    weight: f64,
-    pairs: Vec<Pair>,
+pub(crate) struct Term {
+    pub(crate) weight: f64,
+    pub(crate) pairs: Vec<Pair>,
 }
 
 /// Residuals and their derivatives by x, y, yaw at `pose`.
@@ -401,7 +401,12 @@ fn cost(pose: &Pose2, terms: &[Term]) -> f64 {
 /// step: along a corridor the walls say nothing of x, and the few pairs that do (door frames,
 /// a 5 cm map's steps) would slide the keyframe (Zhang, Kaess and Singh 2016's solution
 /// remapping).
-fn minimise(start: Pose2, terms: &[Term], steps: usize, degenerate: f64) -> (Pose2, bool) {
+pub(crate) fn minimise(
+    start: Pose2,
+    terms: &[Term],
+    steps: usize,
+    degenerate: f64,
+) -> (Pose2, bool) {
     let mut pose = start;
     let mut lambda = 1e-4;
     let mut current = cost(&pose, terms);
