@@ -767,9 +767,10 @@ impl Node for Scan3dNode {
 
 /// Seed 004's 3D scan, timed by parts (`futago bench scan3d`): one full sweep of the
 /// scenario's turntable at its start, simulated (physics, both lasers, the people) with the
-/// robot standing; the sweep's scans placed; both voxel maps updated (the map update);
-/// free-space carving of the sweep's points (the removal); and the next view planned on the
-/// compressed grid. Wall seconds of each part, the median of `repeats`.
+/// robot standing; the sweep's scans placed; both voxel maps and the surfels updated (the map
+/// update); free-space carving of the sweep's points (the removal); the next view planned on
+/// the compressed grid; and the sweep registered against the surfels of its own map (what a
+/// later view's registration costs). Wall seconds of each part, the median of `repeats`.
 pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
     use futago_robot::mapping::turntable::Phase;
     use std::time::Instant;
@@ -791,8 +792,14 @@ pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
         t.sort_by(f64::total_cmp);
         t[t.len() / 2]
     };
-    let (mut sim_s, mut place_s, mut update_s, mut removal_s, mut plan_s) =
-        (vec![], vec![], vec![], vec![], vec![]);
+    let (mut sim_s, mut place_s, mut update_s, mut removal_s, mut plan_s, mut register_s) = (
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+    );
     let (mut scans, mut points) = (0, 0);
     for k in 0..repeats.max(1) {
         let seed = s.spec.seed + k as u64;
@@ -871,6 +878,17 @@ pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
             )
         });
         plan_s.push(t0.elapsed().as_secs_f64());
+        // Register the sweep against the surfels of the map it made: what each later view's
+        // registration costs, pairing included.
+        let back = pose.inverse();
+        let local: Vec<[f64; 3]> = kept
+            .iter()
+            .map(|p| futago_robot::mapping::registration::place(&back, *p))
+            .collect();
+        let t0 = Instant::now();
+        let registered = node.mapper.surfels().register(&local, pose);
+        register_s.push(t0.elapsed().as_secs_f64());
+        let _ = registered;
         scans = taken.len();
         points = kept.len();
         let _ = (carved, view);
@@ -885,6 +903,7 @@ pub fn bench(s: &Scenario, repeats: usize) -> Result<serde_json::Value> {
         "map_update_s": median(update_s),
         "removal_s": median(removal_s),
         "view_planning_s": median(plan_s),
+        "registration_s": median(register_s),
     }))
 }
 

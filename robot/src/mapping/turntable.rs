@@ -206,8 +206,9 @@ pub struct StopAndScan {
     carved_all: VoxelMap,
     /// The views' poses as placed (after registration).
     views: Vec<Pose2>,
-    /// The kept scans' surfaces, that each sweep is registered against; what registering
-    /// each view's sweep did (`None`: not registered, the first view or registration off).
+    /// The surfaces of the kept scans' points that carving keeps, that each sweep is
+    /// registered against (made again as each sweep enters the map); what registering each
+    /// view's sweep did (`None`: not registered, the first view or registration off).
     surfels: SurfelMap,
     registrations: Vec<Option<Registration>>,
     stats: SweepStats,
@@ -388,16 +389,22 @@ impl StopAndScan {
             self.view_pose = r.pose;
         }
         self.registrations.push(registration);
-        self.surfels.add(
-            self.sweep
-                .iter()
-                .flat_map(|s| s.points.iter().map(|(p, _)| *p)),
-        );
         for s in self.sweep.drain(..) {
             insert(&mut self.carved_kept, &s);
             insert(&mut self.carved_all, &s);
             self.kept.push(s);
             self.stats.scans_kept += 1;
+        }
+        if self.config.registration.enabled {
+            // The surfels of what carving keeps: a person the sweeps saw through is not a
+            // surface to register against.
+            let points: Vec<[f64; 3]> = self
+                .kept
+                .iter()
+                .flat_map(|s| s.points.iter().map(|(p, _)| *p))
+                .collect();
+            self.surfels = SurfelMap::new(self.config.registration);
+            self.surfels.add(self.carved_kept.keep_static(&points));
         }
         self.views.push(self.view_pose);
         self.stats.views += 1;
