@@ -256,31 +256,31 @@ impl SurfelMap {
         self.surfels.is_empty()
     }
 
-    /// Registers a sweep whose points are `points` in the robot's base frame (x forward,
-    /// z up from the floor), placed by `guess` (map frame), against the surfels: the pose
-    /// that places them best.
-    pub fn register(&self, points: &[[f64; 3]], guess: Pose2) -> Registration {
-        let c = &self.config;
-        // The surfels that constrain x, y or yaw, in a k-d tree of their centroids (sorted by
-        // cell, so that the result does not depend on the hash map's order).
+    /// The surfels that constrain x, y or yaw (not facing up or down), in cell order, so that
+    /// what is made of them does not depend on the hash map's order.
+    fn sideways(&self) -> Vec<Surfel> {
         let mut keyed: Vec<(&[i64; 3], &Surfel)> = self
             .surfels
             .iter()
             .filter(|(_, s)| s.normal[2].abs() < VERTICAL_NORMAL)
             .collect();
         keyed.sort_unstable_by_key(|(k, _)| **k);
-        let surfels: Vec<Surfel> = keyed.into_iter().map(|(_, s)| *s).collect();
+        keyed.into_iter().map(|(_, s)| *s).collect()
+    }
+
+    /// Registers a sweep whose points are `points` in the robot's base frame (x forward,
+    /// z up from the floor), placed by `guess` (map frame), against the surfels: the pose
+    /// that places them best.
+    pub fn register(&self, points: &[[f64; 3]], guess: Pose2) -> Registration {
+        let c = &self.config;
+        // The map's surfels in a k-d tree of their centroids.
+        let surfels = self.sideways();
         let centroids: Vec<[f64; 3]> = surfels.iter().map(|s| s.centroid).collect();
         let index = Index::new(&centroids);
-        // The sweep's own surfels, in the robot's frame, in cell order.
+        // The sweep's own, in the robot's frame.
         let mut own = SurfelMap::new(*c);
         own.add(points.iter().copied());
-        let mut sweep: Vec<(&[i64; 3], &Surfel)> = own
-            .surfels
-            .iter()
-            .filter(|(_, s)| s.normal[2].abs() < VERTICAL_NORMAL)
-            .collect();
-        sweep.sort_unstable_by_key(|(k, _)| **k);
+        let sweep = own.sideways();
         let agree = c.max_angle.to_radians().cos();
         let refuse = |pairs, iterations| Registration {
             guess,
@@ -309,7 +309,7 @@ impl SurfelMap {
                 weight: 1.0,
                 pairs: sweep
                     .iter()
-                    .filter_map(|(_, own)| {
+                    .filter_map(|own| {
                         let (p, n) = (own.centroid, own.normal);
                         let w = crate::mapping::registration::place(&pose, p);
                         let n = [cos * n[0] - sin * n[1], sin * n[0] + cos * n[1], n[2]];
