@@ -709,19 +709,19 @@ impl Node for Scan3dNode {
         let mark = self.to_mark();
         m.insert("scan3d.views_to_95", mark.map_or(f64::NAN, |x| x.0 as f64));
         m.insert("scan3d.travel_to_95_m", mark.map_or(f64::NAN, |x| x.1));
-        // How far from the truth the views' scans were placed.
+        // How far from the truth the views' scans were placed (none placed: not a number).
         let n = self.view_errors.len();
-        let max = |f: fn(&(f64, f64)) -> f64| self.view_errors.iter().map(f).fold(0.0, f64::max);
-        m.insert("scan3d.view_error.position_max_m", max(|e| e.0));
-        m.insert(
-            "scan3d.view_error.position_mean_m",
-            if n > 0 {
-                self.view_errors.iter().map(|e| e.0).sum::<f64>() / n as f64
-            } else {
-                f64::NAN
-            },
-        );
-        m.insert("scan3d.view_error.heading_max_deg", max(|e| e.1));
+        let of = |f: fn(&(f64, f64)) -> f64, mean: bool| {
+            let v = self.view_errors.iter().map(f);
+            match (n, mean) {
+                (0, _) => f64::NAN,
+                (_, true) => v.sum::<f64>() / n as f64,
+                (_, false) => v.fold(0.0, f64::max),
+            }
+        };
+        m.insert("scan3d.view_error.position_max_m", of(|e| e.0, false));
+        m.insert("scan3d.view_error.position_mean_m", of(|e| e.0, true));
+        m.insert("scan3d.view_error.heading_max_deg", of(|e| e.1, false));
         let carved = if self.lengths.is_empty() {
             Vec::new()
         } else {
