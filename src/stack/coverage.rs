@@ -26,6 +26,7 @@ use futago_msgs::{Duration, Pose2, Time};
 use futago_robot::control::PoseSource;
 use futago_robot::geometry::grid::OCCUPIED;
 use futago_robot::navigation::coverage::second_pass::{self, SecondPassConfig, WallSight};
+use futago_robot::navigation::coverage::swept::Swept;
 use futago_robot::navigation::coverage::{self, Field, ROBOT_RADIUS, Route, RouteStats};
 use serde_json::{Value, json};
 use std::path::Path;
@@ -92,6 +93,9 @@ struct SecondPass {
     config: SecondPassConfig,
     field: Field,
     sight: WallSight,
+    /// The robot's own record of the floor its footprint swept, placed by the pose it steers
+    /// by, against what the first route promised.
+    swept: Swept,
     /// Where the driver takes its pose from (the same pose places the camera's points).
     pose_source: PoseSource,
     time_model: coverage::TimeModel,
@@ -100,9 +104,24 @@ struct SecondPass {
     gaps: usize,
     views: usize,
     unseeable: usize,
-    /// Driven length and camera shares (walls, all) at the end of the first route.
-    before: Option<(f64, f64, f64)>,
+    floor_gaps: usize,
+    floor_stops: usize,
+    /// The figures at the end of the first route.
+    before: Option<Figures>,
     planning_s: f64,
+}
+
+/// The figures a second pass is judged against, taken at the end of the first route.
+#[derive(Debug, Clone, Copy)]
+struct Figures {
+    driven_m: f64,
+    /// The camera's seen share of the walls, and of every surface.
+    walls: f64,
+    all: f64,
+    /// The camera's seen share of the scored regions' walls.
+    regions_walls: f64,
+    /// The true footprint's share of what the first route promised.
+    footprint: f64,
 }
 
 /// The node when the scenario's controller is `coverage`.
@@ -188,20 +207,26 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         .map(|(&s, &a)| s >= MIN_REACHABLE_SHARE || a >= min_reachable_m2)
         .collect();
     let second = match (&camera, s.spec.coverage.second_pass.enabled) {
-        (Some(_), true) => Some(SecondPass {
-            config: s.spec.coverage.second_pass.clone(),
-            field: Field::new(&floor, s.spec.coverage.clearance, start)
-                .map_err(|e| anyhow::anyhow!("coverage: {e}"))?,
-            sight: WallSight::new(&floor),
-            pose_source: control.pose_source,
-            time_model: s.spec.coverage.time_model,
-            started: None,
-            gaps: 0,
-            views: 0,
-            unseeable: 0,
-            before: None,
-            planning_s: 0.0,
-        }),
+        (Some(_), true) => {
+            let field = Field::new(&floor, s.spec.coverage.clearance, start)
+                .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
+            Some(SecondPass {
+                config: s.spec.coverage.second_pass.clone(),
+                swept: Swept::new(&field, &route.points),
+                field,
+                sight: WallSight::new(&floor),
+                pose_source: control.pose_source,
+                time_model: s.spec.coverage.time_model,
+                started: None,
+                gaps: 0,
+                views: 0,
+                unseeable: 0,
+                floor_gaps: 0,
+                floor_stops: 0,
+                before: None,
+                planning_s: 0.0,
+            })
+        }
         (None, true) => anyhow::bail!(
             "coverage.second_pass.enabled: the second pass needs a camera off any joint ([[camera]])"
         ),
@@ -258,8 +283,10 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
                 .chain(&["all"])
                 .map(|c| format!("coverage.camera.{c}")),
         );
-        // By kind of region (where the world has that kind), and the worst region's walls.
-        for kind in ["rooms", "corridors"] {
+        // By kind of region (where the world has that kind), over all the scored regions
+        // together (`regions`: the walls and floor of the rooms and corridors the route is asked
+        // to cover), and the worst region's walls.
+        for kind in ["rooms", "corridors", "regions"] {
             for class in ["walls", "floor"] {
                 names.push(format!("coverage.camera.{kind}.{class}"));
             }
@@ -270,10 +297,15 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
                 [
                     "walls_before",
                     "all_before",
+                    "regions_walls_before",
                     "walls_gain",
                     "extra_m",
                     "views",
                     "gaps",
+                    "footprint_before",
+                    "own_footprint",
+                    "floor_gaps",
+                    "floor_stops",
                 ]
                 .iter()
                 .map(|k| format!("coverage.second_pass.{k}")),
@@ -322,13 +354,25 @@ impl SecondPass {
     fn plan(&mut self, bus: &Bus) -> Result<(Vec<[f64; 2]>, RouteStats)> {
         let t0 = Instant::now();
         let here = self.pose(bus);
-        let (points, gaps) =
-            second_pass::plan(&self.field, &self.sight, [here.x, here.y], &self.config)
-                .map_err(|e| anyhow::anyhow!("coverage.second_pass: {e}"))?;
+        let second_pass::SecondRoute {
+            points,
+            gaps,
+            floor_gaps,
+            floor_stops,
+        } = second_pass::plan(
+            &self.field,
+            &self.sight,
+            Some(&self.swept),
+            [here.x, here.y],
+            &self.config,
+        )
+        .map_err(|e| anyhow::anyhow!("coverage.second_pass: {e}"))?;
         self.planning_s = t0.elapsed().as_secs_f64();
         self.gaps = gaps.len();
         self.views = gaps.iter().map(|g| g.views.len()).sum();
         self.unseeable = gaps.iter().map(|g| g.unseeable).sum();
+        self.floor_gaps = floor_gaps.len();
+        self.floor_stops = floor_stops;
         let stats = coverage::route_stats(&points, Some(here.theta), &self.time_model);
         Ok((points, stats))
     }
@@ -351,24 +395,27 @@ const MIN_REACHABLE_SHARE: f64 = 0.5;
 
 impl CoverageNode {
     /// The camera's coverage by region: per region its (walls, floor) area and seen area;
-    /// per kind (rooms, corridors) the seen shares of walls and floor over the scored regions
-    /// ([`MIN_REACHABLE_SHARE`]), 1 where there is none to see; and the lowest seen share of walls among the scored regions
-    /// with at least [`MIN_REGION_WALLS`] of walls.
+    /// per kind (rooms, corridors, and `None` for both together) the seen shares of walls and
+    /// floor over the scored regions ([`MIN_REACHABLE_SHARE`]), 1 where there is none to see;
+    /// and the lowest seen share of walls among the scored regions with at least
+    /// [`MIN_REGION_WALLS`] of walls.
     #[allow(clippy::type_complexity)]
     fn by_region(
         &self,
     ) -> Option<(
         Vec<([f64; 3], [f64; 3])>,
-        Vec<(Kind, [f64; 2])>,
+        Vec<(Option<Kind>, [f64; 2])>,
         Option<f64>,
     )> {
         let s = self.surfaces.as_ref()?;
         let areas = s.region_areas(&self.seen);
         let mut kinds = Vec::new();
-        for kind in [Kind::Room, Kind::Corridor] {
+        for kind in [Some(Kind::Room), Some(Kind::Corridor), None] {
             let (mut total, mut got) = ([0.0; 2], [0.0; 2]);
             for (r, (t, g)) in areas.iter().enumerate() {
-                if self.scored_regions[r] && self.regions.regions()[r].kind == kind {
+                if self.scored_regions[r]
+                    && kind.is_none_or(|kind| self.regions.regions()[r].kind == kind)
+                {
                     for (k, class) in [1, 0].into_iter().enumerate() {
                         total[k] += t[class];
                         got[k] += g[class];
@@ -393,6 +440,28 @@ impl CoverageNode {
             .map(|(_, (t, g))| g[1] / t[1])
             .min_by(f64::total_cmp);
         Some((areas, kinds, worst))
+    }
+
+    /// The figures now: driven length, the camera's shares and the footprint's.
+    fn figures(&self) -> Figures {
+        let (walls, all) = match &self.surfaces {
+            Some(s) => {
+                let (by, all) = s.shares(&self.seen);
+                (by[1].unwrap_or(0.0), all)
+            }
+            None => (0.0, 0.0),
+        };
+        let regions_walls = self
+            .by_region()
+            .and_then(|(_, kinds, _)| kinds.into_iter().find(|(k, _)| k.is_none()))
+            .map_or(0.0, |(_, [walls, _])| walls);
+        Figures {
+            driven_m: self.driven_m,
+            walls,
+            all,
+            regions_walls,
+            footprint: self.footprint.share_of(&self.planned),
+        }
     }
 
     fn sample(&mut self, now: Time) {
@@ -570,21 +639,23 @@ impl Node for CoverageNode {
             bus.publish_path("coverage", self.route.points.clone());
             self.published = true;
         }
+        if let Some(second) = &mut self.second {
+            let p = second.pose(bus);
+            second.swept.add(&second.field, [p.x, p.y]);
+        }
         if self.done_at.is_none()
             && let Some(done) = bus.route_done
         {
+            let figures = self
+                .second
+                .as_ref()
+                .is_some_and(|s| s.started.is_none())
+                .then(|| self.figures());
             match &mut self.second {
                 None => self.done_at = Some(done),
                 Some(second) => match &second.started {
                     None => {
-                        let (walls, all) = match &self.surfaces {
-                            Some(s) => {
-                                let (by, all) = s.shares(&self.seen);
-                                (by[1].unwrap_or(0.0), all)
-                            }
-                            None => (0.0, 0.0),
-                        };
-                        second.before = Some((self.driven_m, walls, all));
+                        second.before = figures;
                         let (points, stats) = second.plan(bus)?;
                         if points.len() < 2 {
                             self.done_at = Some(done);
@@ -636,7 +707,16 @@ impl Node for CoverageNode {
                 "views": s.views,
                 "unseeable_pieces": s.unseeable,
                 "planning_s": s.planning_s,
-                "before": s.before.map(|(m, walls, all)| json!({"driven_m": m, "camera_walls": walls, "camera_all": all})),
+                "floor_gaps": s.floor_gaps,
+                "floor_stops": s.floor_stops,
+                "own_footprint": s.swept.share(),
+                "before": s.before.map(|f| json!({
+                    "driven_m": f.driven_m,
+                    "camera_walls": f.walls,
+                    "camera_all": f.all,
+                    "camera_regions_walls": f.regions_walls,
+                    "footprint_of_route": f.footprint,
+                })),
             })
         });
         if let (Some(dir), Some((_, points, _))) =
@@ -728,8 +808,9 @@ impl Node for CoverageNode {
             if let Some((_, kinds, worst)) = self.by_region() {
                 for (kind, [walls, floor]) in kinds {
                     let name = match kind {
-                        Kind::Room => "rooms",
-                        Kind::Corridor => "corridors",
+                        Some(Kind::Room) => "rooms",
+                        Some(Kind::Corridor) => "corridors",
+                        None => "regions",
                     };
                     m.insert(format!("coverage.camera.{name}.walls"), walls);
                     m.insert(format!("coverage.camera.{name}.floor"), floor);
@@ -741,19 +822,30 @@ impl Node for CoverageNode {
             if let Some(second) = &self.second {
                 // Without a second route (nothing missed, or the first never finished), the
                 // figures before it are those at the end.
-                let (before_m, walls0, all0) =
-                    second
-                        .before
-                        .unwrap_or((self.driven_m, by[1].unwrap_or(0.0), all));
-                m.insert("coverage.second_pass.walls_before", walls0);
-                m.insert("coverage.second_pass.all_before", all0);
+                let before = second.before.unwrap_or_else(|| self.figures());
+                m.insert("coverage.second_pass.walls_before", before.walls);
+                m.insert("coverage.second_pass.all_before", before.all);
+                m.insert(
+                    "coverage.second_pass.regions_walls_before",
+                    before.regions_walls,
+                );
                 m.insert(
                     "coverage.second_pass.walls_gain",
-                    by[1].unwrap_or(0.0) - walls0,
+                    by[1].unwrap_or(0.0) - before.walls,
                 );
-                m.insert("coverage.second_pass.extra_m", self.driven_m - before_m);
+                m.insert(
+                    "coverage.second_pass.extra_m",
+                    self.driven_m - before.driven_m,
+                );
                 m.insert("coverage.second_pass.views", second.views as f64);
                 m.insert("coverage.second_pass.gaps", second.gaps as f64);
+                m.insert("coverage.second_pass.footprint_before", before.footprint);
+                m.insert("coverage.second_pass.own_footprint", second.swept.share());
+                m.insert("coverage.second_pass.floor_gaps", second.floor_gaps as f64);
+                m.insert(
+                    "coverage.second_pass.floor_stops",
+                    second.floor_stops as f64,
+                );
             }
         }
         Ok(m)

@@ -18,6 +18,7 @@
 pub mod boustrophedon;
 pub mod second_pass;
 pub mod seed000;
+pub mod swept;
 
 use crate::geometry::grid::{OCCUPIED, squared_edt};
 use futago_msgs::grid::OccupancyGrid;

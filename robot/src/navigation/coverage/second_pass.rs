@@ -11,7 +11,13 @@
 //! [`SecondPassConfig::view_min`] and [`SecondPassConfig::view_max`] from it, the one with a
 //! clear line of sight to the most of its cells; viewpoints are visited nearest first, each
 //! followed by a short step towards its gap, so that the robot ends its approach facing it.
+//!
+//! The same route sweeps the floor the first one promised and the robot's footprint missed
+//! (issue 47's final pass over the driven footprint): the gaps of the robot's own record
+//! ([`Swept`], placed by its pose estimate) of at least [`SecondPassConfig::min_floor_gap`]
+//! get stops ([`super::swept::stops`]) that join the viewpoints in the nearest-first order.
 
+use super::swept::{Swept, stops};
 use super::{Field, NEIGHBOURS_8, ROBOT_RADIUS};
 use crate::geometry::grid::OCCUPIED;
 use futago_msgs::grid::OccupancyGrid;
@@ -32,6 +38,16 @@ pub struct SecondPassConfig {
     pub min_gap: f64,
     /// The step towards the gap after each viewpoint, m.
     pub approach: f64,
+    /// Also sweep the floor the first route promised and the footprint missed.
+    pub floor: bool,
+    /// Least area of a floor gap to be swept, m²: a 20 cm square. The slivers pose noise
+    /// leaves between lanes are smaller; a lane driven a few centimetres off leaves a strip
+    /// as long as the lane.
+    pub min_floor_gap: f64,
+    /// How much nearer than the robot's radius a stop's centre must be to the floor it is to
+    /// sweep, m: the robot reaches a stop within the driver's tolerance and its estimate's
+    /// error.
+    pub floor_margin: f64,
 }
 
 impl Default for SecondPassConfig {
@@ -42,6 +58,9 @@ impl Default for SecondPassConfig {
             view_max: 2.5,
             min_gap: 0.3,
             approach: 0.15,
+            floor: true,
+            min_floor_gap: 0.04,
+            floor_margin: 0.05,
         }
     }
 }
@@ -56,6 +75,8 @@ impl SecondPassConfig {
                 ("view_max", self.view_max, 0.3, 10.0),
                 ("min_gap", self.min_gap, 0.0, 100.0),
                 ("approach", self.approach, 0.0, 1.0),
+                ("min_floor_gap", self.min_floor_gap, 0.0, 100.0),
+                ("floor_margin", self.floor_margin, 0.0, ROBOT_RADIUS),
             ],
         )?;
         if self.view_max <= self.view_min {
@@ -161,14 +182,28 @@ pub struct Gap {
 /// at 2 m.
 pub const PIECE_RADIUS: f64 = 1.0;
 
-/// The second route: from `start`, each gap's viewpoint and a step towards the gap, joined
-/// by grid paths; with the gaps it visits (and those it could not find a viewpoint for).
+/// The second route and what it visits.
+#[derive(Debug, Clone)]
+pub struct SecondRoute {
+    /// From the start, joined by grid paths, map frame, m.
+    pub points: Vec<[f64; 2]>,
+    /// The walls' gaps (with those no viewpoint was found for).
+    pub gaps: Vec<Gap>,
+    /// The floor's gaps (cells of the field's grid) and the stops that sweep them.
+    pub floor_gaps: Vec<Vec<usize>>,
+    pub floor_stops: usize,
+}
+
+/// The second route: from `start`, each wall gap's viewpoint with a step towards the gap, and
+/// (with `swept` and [`SecondPassConfig::floor`]) the stops over the floor's gaps, nearest
+/// first, joined by grid paths.
 pub fn plan(
     field: &Field,
     sight: &WallSight,
+    swept: Option<&Swept>,
     start: [f64; 2],
     config: &SecondPassConfig,
-) -> Result<(Vec<[f64; 2]>, Vec<Gap>), String> {
+) -> Result<SecondRoute, String> {
     let g = &field.grid;
     let (w, h) = (g.width, g.height);
     let wanted = wanted_walls(field, config.view_max);
@@ -221,9 +256,22 @@ pub fn plan(
             }
         }
     }
-    // Nearest viewpoint first (straight-line distance; the legs are joined by grid paths).
-    let mut todo: Vec<([f64; 2], [f64; 2])> =
-        gaps.iter().flat_map(|g| g.views.iter().copied()).collect();
+    // Stops over the floor's gaps: no step after them (`None` for a target).
+    let floor_gaps = match swept {
+        Some(swept) if config.floor => swept.gaps(field, config.min_floor_gap),
+        _ => Vec::new(),
+    };
+    let floor: Vec<[f64; 2]> = floor_gaps
+        .iter()
+        .flat_map(|cells| stops(field, cells, config.floor_margin))
+        .collect();
+    let floor_stops = floor.len();
+    // Nearest stop first (straight-line distance; the legs are joined by grid paths).
+    let mut todo: Vec<([f64; 2], Option<[f64; 2]>)> = gaps
+        .iter()
+        .flat_map(|g| g.views.iter().map(|&(v, t)| (v, Some(t))))
+        .chain(floor.into_iter().map(|v| (v, None)))
+        .collect();
     let mut points = vec![start];
     let mut here = start;
     while !todo.is_empty() {
@@ -236,6 +284,10 @@ pub fn plan(
             .expect("todo is not empty");
         let (v, target) = todo.swap_remove(k);
         points.push(v);
+        let Some(target) = target else {
+            here = v;
+            continue;
+        };
         // A step towards the gap, where it keeps the robot's clearance.
         let (dx, dy) = (target[0] - v[0], target[1] - v[1]);
         let d = dx.hypot(dy).max(1e-9);
@@ -251,7 +303,12 @@ pub fn plan(
         }
     }
     let points = field.repair(points)?;
-    Ok((points, gaps))
+    Ok(SecondRoute {
+        points,
+        gaps,
+        floor_gaps,
+        floor_stops,
+    })
 }
 
 /// The reachable cell from which the most of `cells` lie within range and in clear sight
@@ -360,7 +417,11 @@ mod tests {
             sight.add_point([0.06, j as f64 * 0.05 + 0.025]);
         }
         let config = SecondPassConfig::default();
-        let (route, gaps) = plan(&field, &sight, [1.0, 1.0], &config).unwrap();
+        let SecondRoute {
+            points: route,
+            gaps,
+            ..
+        } = plan(&field, &sight, None, [1.0, 1.0], &config).unwrap();
         // East and north walls form one gap (they meet at the north-east corner), 78 + 118
         // cells: each point marked the wall cell nearest it, not a corner's other wall.
         let sizes: Vec<usize> = gaps.iter().map(|g| g.cells.len()).collect();
@@ -392,11 +453,66 @@ mod tests {
                 all.seen[k] = true;
             }
         }
-        let (route, gaps) = plan(&field, &all, [1.0, 1.0], &config).unwrap();
+        let SecondRoute {
+            points: route,
+            gaps,
+            ..
+        } = plan(&field, &all, None, [1.0, 1.0], &config).unwrap();
         assert!(gaps.is_empty() && route == vec![[1.0, 1.0]]);
         // The room's inner wall cells: 2·(118 + 78) less the 4 corners, which face no free
         // 4-neighbour.
         assert_eq!(wanted.iter().filter(|w| **w).count(), 2 * (118 + 78));
+    }
+
+    /// Every wall seen, but the first route's middle lane driven 12 cm off: the second route
+    /// goes to the floor's gap alone, its stops in the order met from the start, and without
+    /// `floor` it has nothing to do.
+    #[test]
+    fn the_second_route_sweeps_the_floor_the_footprint_missed() {
+        let g = crate::geometry::grid::walled(120, 80);
+        let field = Field::new(&g, 0.2, [1.0, 1.0]).unwrap();
+        let config = SecondPassConfig::default();
+        let mut sight = WallSight::new(&g);
+        for (k, want) in wanted_walls(&field, config.view_max).iter().enumerate() {
+            sight.seen[k] = *want;
+        }
+        let route = [
+            [1.0, 1.0],
+            [5.0, 1.0],
+            [5.0, 1.3],
+            [1.0, 1.3],
+            [1.0, 1.6],
+            [5.0, 1.6],
+        ];
+        let mut swept = Swept::new(&field, &route);
+        let off = [
+            [1.0, 1.0],
+            [5.0, 1.0],
+            [5.0, 1.18],
+            [1.0, 1.18],
+            [1.0, 1.6],
+            [5.0, 1.6],
+        ];
+        super::super::swept::drive(&mut swept, &field, &off);
+        let second = plan(&field, &sight, Some(&swept), [5.0, 1.6], &config).unwrap();
+        assert!(second.gaps.is_empty());
+        assert_eq!(second.floor_gaps.len(), 1);
+        assert!(second.floor_stops >= 2, "{}", second.floor_stops);
+        // Driven, the second route sweeps the gap.
+        let before = swept.clone();
+        super::super::swept::drive(&mut swept, &field, &second.points);
+        assert!(swept.gaps(&field, config.min_floor_gap).is_empty());
+        // Nearest first from the east end: the stops run west, the route does not double back
+        // more than a stop's spacing.
+        let xs: Vec<f64> = second.points.iter().map(|p| p[0]).collect();
+        assert!(xs.windows(2).all(|w| w[1] <= w[0] + 0.3), "{xs:?}");
+
+        let walls_only = SecondPassConfig {
+            floor: false,
+            ..config
+        };
+        let second = plan(&field, &sight, Some(&before), [5.0, 1.6], &walls_only).unwrap();
+        assert!(second.floor_gaps.is_empty() && second.points == vec![[5.0, 1.6]]);
     }
 
     /// A wall hidden behind another is not in sight; the wall itself is.
