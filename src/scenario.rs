@@ -158,6 +158,20 @@ pub trait ModuleConfig: Sync {
         None
     }
 
+    /// The pose topic (`pose/TOPIC`) its node publishes when the scenario holds `table` for
+    /// it, read from the raw table (a module resolved earlier may ask before this one is
+    /// resolved): pose sources are checked against these ([`Resolving::require_pose`]), and
+    /// two modules may not publish the same one.
+    fn pose_topic(&self, _table: &toml::Value) -> Option<&'static str> {
+        None
+    }
+
+    /// The topic it can publish and how an error names the table that makes it do so
+    /// (`[localization]`), for modules that can publish one.
+    fn pose_table(&self) -> Option<(&'static str, &'static str)> {
+        None
+    }
+
     /// The metric names its scorer declares for `spec`, given its own resolved spec (none
     /// when the scenario has no table for it).
     fn metric_names(
@@ -226,6 +240,8 @@ pub struct Resolving<'a> {
     pub lidars: &'a [(LidarConfig, LidarSpec)],
     pub cameras: &'a [KinectSpec],
     pub earlier: &'a ModuleSpecs,
+    /// Every module of the stack, to ask which publishes a pose topic.
+    pub modules: &'a [&'static dyn ModuleConfig],
 }
 
 impl Resolving<'_> {
@@ -295,46 +311,54 @@ impl Resolving<'_> {
     /// Refuses pose source `source` at `key` unless the scenario runs the module that
     /// publishes it (see [`require_pose`]).
     pub fn require_pose(&self, key: &str, source: PoseSource, what: &str) -> Result<(), SpecError> {
-        require_pose(self.path, self.spec, key, source, what)
+        require_pose(self.path, self.spec, self.modules, key, source, what)
     }
 }
 
-/// Refuses pose source `source` at `key` unless the scenario runs the module that publishes
-/// it: `slam` needs a `[slam]` table, `localization` a `[localization]` or
-/// `[visual_localization]` one, or a `[scan3d]` that localises by the seed's own line ICP
-/// (its `pose_source` left at `line_icp`): each publishes `pose/localization`. `what` opens
-/// the error.
+/// Refuses pose source `source` at `key` unless the scenario runs a module that publishes
+/// it, as that module declares ([`ModuleConfig::pose_topic`]): `slam` needs `pose/slam`,
+/// `localization` needs `pose/localization`. `what` opens the error, which names the tables
+/// that can publish it.
 fn require_pose(
     path: &Path,
     spec: &ScenarioSpec,
+    modules: &[&'static dyn ModuleConfig],
     key: &str,
     source: PoseSource,
     what: &str,
 ) -> Result<(), SpecError> {
-    let tables: &[&str] = match source {
-        PoseSource::Slam => &["slam"],
-        PoseSource::Localization => &["localization", "visual_localization"],
+    let topic = match source {
+        PoseSource::Slam => "slam",
+        PoseSource::Localization => "localization",
         PoseSource::GroundTruth | PoseSource::Odometry => return Ok(()),
     };
-    if tables.iter().any(|t| spec.module(t).is_some()) {
+    if pose_publisher(spec, modules, topic).is_some() {
         return Ok(());
     }
-    let seed_localises = |t: &toml::Value| {
-        t.get("pose_source")
-            .is_none_or(|v| v.as_str() == Some("line_icp"))
-    };
-    if source == PoseSource::Localization && spec.module("scan3d").is_some_and(seed_localises) {
-        return Ok(());
-    }
-    let mut named: Vec<String> = tables.iter().map(|t| format!("[{t}]")).collect();
-    if source == PoseSource::Localization {
-        named.push("[scan3d] (localising by its line ICP)".into());
-    }
+    let named: Vec<&str> = modules
+        .iter()
+        .filter_map(|m| m.pose_table())
+        .filter(|(t, _)| *t == topic)
+        .map(|(_, table)| table)
+        .collect();
     Err(SpecError::new(
         path,
         key,
         format!("{what} needs a {} table", named.join(" or ")),
     ))
+}
+
+/// The key of the scenario's module that publishes `pose/TOPIC`, if one does.
+fn pose_publisher(
+    spec: &ScenarioSpec,
+    modules: &[&'static dyn ModuleConfig],
+    topic: &str,
+) -> Option<&'static str> {
+    modules.iter().find_map(|m| {
+        let key = m.key()?;
+        let table = spec.module(key)?;
+        (m.pose_topic(table) == Some(topic)).then_some(key)
+    })
 }
 
 /// The largest magnitude a gate's value may have.
@@ -890,6 +914,25 @@ fn resolve_modules(
             ),
         ));
     }
+    // A pose topic has one publisher: two localisers would overwrite each other's estimates.
+    let mut publishers: Vec<(&str, &str)> = Vec::new();
+    for &m in modules {
+        let Some((key, table)) = m.key().and_then(|k| Some((k, spec.modules.get(k)?))) else {
+            continue;
+        };
+        if let Some(topic) = m.pose_topic(table) {
+            if let Some((_, first)) = publishers.iter().find(|(t, _)| *t == topic) {
+                return Err(SpecError::new(
+                    path,
+                    key,
+                    format!(
+                        "[{key}] publishes `pose/{topic}`, as [{first}] does, and a pose topic has one publisher: drop one of them"
+                    ),
+                ));
+            }
+            publishers.push((topic, key));
+        }
+    }
     let mut resolved = ModuleSpecs::default();
     for &m in modules {
         let own = match m.key().and_then(|k| spec.modules.get(k)) {
@@ -905,6 +948,7 @@ fn resolve_modules(
                     lidars,
                     cameras,
                     earlier: &resolved,
+                    modules,
                 };
                 Some(Arc::from(m.resolve(&cx, table)?))
             }

@@ -2397,7 +2397,14 @@ fn a_turntable_scan_names_its_bad_lasers_joint_and_values() {
         (
             "stops = [[2.0, 0.0],",
             "pose_source = \"odometry\"\nstops = [[2.0, 0.0],",
-            "controller.pose_source`: driving on this pose needs a [localization] or [visual_localization] or [scan3d] (localising by its line ICP) table",
+            "controller.pose_source`: driving on this pose needs a [localization] or [scan3d] (localising by its line ICP) or [visual_localization] table",
+        ),
+        // The seed's line ICP publishes `pose/localization`, as MCL does: one publisher a
+        // topic, whichever module it is.
+        (
+            "[scan3d]",
+            "[localization]\n\n[scan3d]",
+            "`scan3d`: [scan3d] publishes `pose/localization`, as [localization] does, and a pose topic has one publisher",
         ),
         (
             "stops = [[2.0, 0.0],",

@@ -270,6 +270,14 @@ impl ModuleConfig for Module {
         Some("localization")
     }
 
+    fn pose_topic(&self, _table: &toml::Value) -> Option<&'static str> {
+        Some("localization")
+    }
+
+    fn pose_table(&self) -> Option<(&'static str, &'static str)> {
+        Some(("localization", "[localization]"))
+    }
+
     fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
         let mut l: LocalizationSpec = cx.typed("localization", cx.table("localization", table)?)?;
         if cx.lidars.is_empty() {

@@ -1045,13 +1045,14 @@ pub struct MapLength {
 /// Which pose places seed 004's scans: another node's or the truth, or the seed's own
 /// localisation on the horizontal laser (`line_icp`: odometry, then point-to-line ICP by
 /// Nelder–Mead, `scan3d.line_icp.*`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Scan3dPose {
     GroundTruth,
     Odometry,
     Localization,
     Slam,
+    #[default]
     LineIcp,
 }
 
@@ -1087,7 +1088,7 @@ pub fn scan3d_config(path: &Path, table: &toml::Table) -> Result<Scan3dSpec, Spe
         )
     })?;
     let pose_source = match rest.remove("pose_source") {
-        None => Scan3dPose::LineIcp,
+        None => Scan3dPose::default(),
         Some(v) => Scan3dPose::deserialize(v.clone()).map_err(|_| {
             SpecError::new(
                 path,
@@ -1188,6 +1189,20 @@ impl ModuleConfig for Module {
         Some("scan3d")
     }
 
+    /// `pose/localization` when it localises by the seed's line ICP (its `pose_source`, the
+    /// default); a value that does not parse publishes nothing (resolving names the error).
+    fn pose_topic(&self, table: &toml::Value) -> Option<&'static str> {
+        let source = match table.get("pose_source") {
+            None => Scan3dPose::default(),
+            Some(v) => Scan3dPose::deserialize(v.clone()).ok()?,
+        };
+        (source == Scan3dPose::LineIcp).then_some("localization")
+    }
+
+    fn pose_table(&self) -> Option<(&'static str, &'static str)> {
+        Some(("localization", "[scan3d] (localising by its line ICP)"))
+    }
+
     fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
         let path = cx.path;
         let mut m = scan3d_config(path, &cx.table("scan3d", table)?)?;
@@ -1234,19 +1249,6 @@ impl ModuleConfig for Module {
                 format!(
                     "laser `{}` rides on a joint; the mover detector needs one fixed to the base",
                     m.horizontal
-                ),
-            ));
-        }
-        if m.pose_source == Scan3dPose::LineIcp
-            && let Some(other) = ["localization", "visual_localization"]
-                .into_iter()
-                .find(|k| cx.spec.module(k).is_some())
-        {
-            return Err(SpecError::new(
-                path,
-                "scan3d.pose_source",
-                format!(
-                    "the seed's line ICP publishes `pose/localization`, as [{other}] does, and a scenario runs one localiser; place the scans by it with pose_source = \"localization\", or drop [{other}]"
                 ),
             ));
         }

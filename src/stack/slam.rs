@@ -245,6 +245,14 @@ impl ModuleConfig for Module {
         Some("slam")
     }
 
+    fn pose_topic(&self, _table: &toml::Value) -> Option<&'static str> {
+        Some("slam")
+    }
+
+    fn pose_table(&self) -> Option<(&'static str, &'static str)> {
+        Some(("slam", "[slam]"))
+    }
+
     /// `laser` and SLAM's keys ([`SlamConfig`]), naming `slam.KEY` in errors.
     fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
         let mut rest = cx.table("slam", table)?;

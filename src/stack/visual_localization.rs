@@ -501,15 +501,17 @@ impl ModuleConfig for Module {
         Some("visual_localization")
     }
 
+    fn pose_topic(&self, _table: &toml::Value) -> Option<&'static str> {
+        Some("localization")
+    }
+
+    fn pose_table(&self) -> Option<(&'static str, &'static str)> {
+        Some(("localization", "[visual_localization]"))
+    }
+
     fn resolve(&self, cx: &Resolving<'_>, table: &toml::Value) -> Result<Spec, SpecError> {
         let key = "visual_localization";
         let mut v: VisualLocalizationSpec = cx.typed(key, cx.table(key, table)?)?;
-        if cx.spec.module("localization").is_some() {
-            return Err(cx.error(
-                key,
-                "a scenario runs one localiser on `pose/localization`: [localization] or [visual_localization]",
-            ));
-        }
         let path = cx.path;
         let cam = cx.camera(key, v.camera.as_deref())?;
         let name = cam.name.clone();

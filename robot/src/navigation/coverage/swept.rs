@@ -174,18 +174,16 @@ pub fn stops(field: &Field, cells: &[usize], margin: f64) -> Vec<[f64; 2]> {
     let mut count: Vec<usize> = candidates.iter().map(|(_, gap)| gap.len()).collect();
     let mut taken = vec![false; cells.len()];
     let mut out = Vec::new();
-    loop {
-        // The first candidate with the most cells left.
-        let Some(best) =
-            (0..candidates.len())
-                .filter(|&a| count[a] > 0)
-                .fold(None, |best: Option<usize>, a| match best {
-                    Some(b) if count[b] >= count[a] => best,
-                    _ => Some(a),
-                })
-        else {
-            break;
-        };
+    // The first candidate with the most cells left, while one takes any.
+    let first_best = |count: &[usize]| {
+        (0..count.len())
+            .filter(|&a| count[a] > 0)
+            .fold(None, |best: Option<usize>, a| match best {
+                Some(b) if count[b] >= count[a] => best,
+                _ => Some(a),
+            })
+    };
+    while let Some(best) = first_best(&count) {
         for &n in &candidates[best].1 {
             if !taken[n] {
                 taken[n] = true;
