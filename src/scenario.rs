@@ -332,7 +332,12 @@ fn require_pose(
         PoseSource::Localization => "localization",
         PoseSource::GroundTruth | PoseSource::Odometry => return Ok(()),
     };
-    if pose_publisher(spec, modules, topic).is_some() {
+    let published = modules.iter().any(|m| {
+        m.key()
+            .and_then(|key| spec.module(key))
+            .is_some_and(|table| m.pose_topic(table) == Some(topic))
+    });
+    if published {
         return Ok(());
     }
     let named: Vec<&str> = modules
@@ -346,19 +351,6 @@ fn require_pose(
         key,
         format!("{what} needs a {} table", named.join(" or ")),
     ))
-}
-
-/// The key of the scenario's module that publishes `pose/TOPIC`, if one does.
-fn pose_publisher(
-    spec: &ScenarioSpec,
-    modules: &[&'static dyn ModuleConfig],
-    topic: &str,
-) -> Option<&'static str> {
-    modules.iter().find_map(|m| {
-        let key = m.key()?;
-        let table = spec.module(key)?;
-        (m.pose_topic(table) == Some(topic)).then_some(key)
-    })
 }
 
 /// The largest magnitude a gate's value may have.

@@ -406,6 +406,25 @@ impl Field {
     }
 }
 
+/// The 8-connected groups of the cells of a `w × h` grid where `cells` holds, each in the
+/// order [`flood_8`] finds it, groups in the order of their first cell (bottom row first).
+pub fn groups_8(w: usize, h: usize, cells: &[bool]) -> Vec<Vec<usize>> {
+    let mut taken = vec![false; w * h];
+    let mut groups = Vec::new();
+    for k0 in 0..w * h {
+        if !cells[k0] || taken[k0] {
+            continue;
+        }
+        taken[k0] = true;
+        groups.push(flood_8(w, h, k0, |m| {
+            let take = cells[m] && !taken[m];
+            taken[m] |= take;
+            take
+        }));
+    }
+    groups
+}
+
 /// The cells 8-connected to `seed` (first) through cells that `take` accepts, in the order
 /// found (breadth first). `take` is asked of each neighbour of each cell found and must
 /// remember what it took, so that it refuses a cell the second time.

@@ -209,28 +209,15 @@ pub fn plan(
     let wanted = wanted_walls(field, config.view_max);
     let missing: Vec<bool> = (0..w * h).map(|k| wanted[k] && !sight.seen[k]).collect();
     // Gaps: 8-connected groups of missing cells, scanned bottom row first.
-    let mut label = vec![usize::MAX; w * h];
-    let mut gaps: Vec<Gap> = Vec::new();
     let min_cells = (config.min_gap / g.resolution).ceil() as usize;
-    for k0 in 0..w * h {
-        if !missing[k0] || label[k0] != usize::MAX {
-            continue;
-        }
-        let id = gaps.len();
-        label[k0] = id;
-        let cells = super::flood_8(w, h, k0, |m| {
-            let take = missing[m] && label[m] == usize::MAX;
-            if take {
-                label[m] = id;
-            }
-            take
-        });
-        gaps.push(Gap {
+    let mut gaps: Vec<Gap> = super::groups_8(w, h, &missing)
+        .into_iter()
+        .map(|cells| Gap {
             cells,
             views: Vec::new(),
             unseeable: 0,
-        });
-    }
+        })
+        .collect();
     gaps.retain(|gap| gap.cells.len() >= min_cells.max(1));
     for gap in &mut gaps {
         // Pieces: the cells within PIECE_RADIUS of the first cell not yet taken.
@@ -476,23 +463,8 @@ mod tests {
         for (k, want) in wanted_walls(&field, config.view_max).iter().enumerate() {
             sight.seen[k] = *want;
         }
-        let route = [
-            [1.0, 1.0],
-            [5.0, 1.0],
-            [5.0, 1.3],
-            [1.0, 1.3],
-            [1.0, 1.6],
-            [5.0, 1.6],
-        ];
+        let (route, off) = super::super::swept::lanes_driven_off();
         let mut swept = Swept::new(&field, &route);
-        let off = [
-            [1.0, 1.0],
-            [5.0, 1.0],
-            [5.0, 1.18],
-            [1.0, 1.18],
-            [1.0, 1.6],
-            [5.0, 1.6],
-        ];
         super::super::swept::drive(&mut swept, &field, &off);
         let second = plan(&field, &sight, Some(&swept), [5.0, 1.6], &config).unwrap();
         assert!(second.gaps.is_empty());

@@ -29,6 +29,23 @@ const STEP: f64 = 0.02;
 /// drives at most 0.5 m/s; control ticks are 0.1 s or less apart).
 pub const JUMP: f64 = 0.5;
 
+/// Three lanes 0.3 m apart along y = 1.0, 1.3, 1.6 (x from 1 to 5 m), and the same driven
+/// with the middle lane 12 cm low: between y = 1.35 and 1.43 no disc of the drive reaches.
+#[cfg(test)]
+pub(crate) fn lanes_driven_off() -> ([[f64; 2]; 6], [[f64; 2]; 6]) {
+    let lanes = |middle: f64| {
+        [
+            [1.0, 1.0],
+            [5.0, 1.0],
+            [5.0, middle],
+            [1.0, middle],
+            [1.0, 1.6],
+            [5.0, 1.6],
+        ]
+    };
+    (lanes(1.3), lanes(1.18))
+}
+
 /// Drives `swept` along the polyline `points`, adding a position every 5 cm (as the control
 /// ticks would).
 #[cfg(test)]
@@ -108,24 +125,11 @@ impl Swept {
         let missing: Vec<bool> = (0..w * h)
             .map(|k| self.planned[k] && !self.swept[k])
             .collect();
-        let mut taken = vec![false; w * h];
-        let mut gaps = Vec::new();
         let cell_area = g.resolution * g.resolution;
-        for k0 in 0..w * h {
-            if !missing[k0] || taken[k0] {
-                continue;
-            }
-            taken[k0] = true;
-            let cells = super::flood_8(w, h, k0, |m| {
-                let take = missing[m] && !taken[m];
-                taken[m] |= take;
-                take
-            });
-            if cells.len() as f64 * cell_area >= min_area {
-                gaps.push(cells);
-            }
-        }
-        gaps
+        super::groups_8(w, h, &missing)
+            .into_iter()
+            .filter(|cells| cells.len() as f64 * cell_area >= min_area)
+            .collect()
     }
 }
 
@@ -209,14 +213,7 @@ mod tests {
     fn a_lane_driven_off_leaves_a_gap_that_the_stops_sweep() {
         let g = crate::geometry::grid::walled(120, 80);
         let field = Field::new(&g, 0.2, [1.0, 1.0]).unwrap();
-        let route = [
-            [1.0, 1.0],
-            [5.0, 1.0],
-            [5.0, 1.3],
-            [1.0, 1.3],
-            [1.0, 1.6],
-            [5.0, 1.6],
-        ];
+        let (route, off) = lanes_driven_off();
         let mut swept = Swept::new(&field, &route);
         // Driven exactly, the record keeps the promise.
         let mut exact = swept.clone();
@@ -224,18 +221,7 @@ mod tests {
         assert_eq!(exact.share(), 1.0);
         assert!(exact.gaps(&field, 0.0).is_empty());
         // The middle lane 12 cm low: between y = 1.35 and 1.43 no disc reaches.
-        drive(
-            &mut swept,
-            &field,
-            &[
-                [1.0, 1.0],
-                [5.0, 1.0],
-                [5.0, 1.18],
-                [1.0, 1.18],
-                [1.0, 1.6],
-                [5.0, 1.6],
-            ],
-        );
+        drive(&mut swept, &field, &off);
         assert!(swept.share() < 1.0);
         let gaps = swept.gaps(&field, 0.04);
         assert_eq!(
