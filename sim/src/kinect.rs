@@ -471,7 +471,7 @@ fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng) {
 /// `f(v, row)` for each row `v` of an image `width` pixels wide, the rows split into
 /// contiguous blocks over the machine's cores. Each row's result depends on its own inputs
 /// alone, so the image is the same whatever the number of threads. (The Nguyen noise of a
-/// 320×240 image is some 7 ms on one core, a fifth of a coverage run's time at two frames a
+/// 320×240 image is some 7 ms on one core, a seventh of a coverage run's time at two frames a
 /// second.)
 fn rows_on_cores(data: &mut [f32], width: usize, f: impl Fn(usize, &mut [f32]) + Sync) {
     let rows = data.len() / width.max(1);
