@@ -601,7 +601,12 @@ pub fn simulate_with(
             sim.teleport(prev_truth);
         }
         let t0 = Instant::now();
-        let out = sim.step(cmd.take().as_ref());
+        let out = sim.step_taking(cmd.take().as_ref(), &mut |l, stamp| {
+            let name = &s.lidars[l].0.name;
+            to.lasers[l]
+                .iter()
+                .any(|&i| nodes[i].node.wants_scan(name, stamp))
+        });
         sim_seconds += t0.elapsed().as_secs_f64();
         let now = sim.time();
         truth.robot = sim.robot_pose();

@@ -235,6 +235,41 @@ fn the_robot_drives_on_mcl_and_stays_localised_while_odometry_drifts() {
 }
 
 #[test]
+fn a_laser_casts_only_the_scans_read_and_a_recorder_changes_no_reading() {
+    // office-mcl's localiser takes a scan at 4 Hz of the 40 Hz laser, and its driver none:
+    // with the CARMEN recorder off, only those are cast; with it on, every scan is, and the
+    // localiser's track is the same to the byte.
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("scenarios/office-mcl.toml"))
+        .unwrap()
+        .replace(
+            "../worlds/office.toml",
+            root().join("worlds/office.toml").to_str().unwrap(),
+        );
+    let quiet = write(
+        tmp.path(),
+        "quiet.toml",
+        format!("{text}\n[output]\ncarmen = false\n"),
+    );
+    let recorded = write(tmp.path(), "recorded.toml", &text);
+    let (a, b) = (tmp.path().join("quiet"), tmp.path().join("recorded"));
+    run_for(&quiet, &a, Some("20"));
+    run_for(&recorded, &b, Some("20"));
+    let scans = |dir: &Path| summary(dir)["lidar"][0]["scans"].as_u64().unwrap();
+    // 20 s at 40 Hz is 800 scans (801 with the one at 20 s); at 4 Hz, 80 (81).
+    assert!((800..=801).contains(&scans(&b)), "{}", scans(&b));
+    assert!((80..=81).contains(&scans(&a)), "{}", scans(&a));
+    assert!(b.join("scans.clf").exists() && !a.join("scans.clf").exists());
+    let track = |dir: &Path| std::fs::read(dir.join("localization.txt")).unwrap();
+    assert!(track(&a).len() > 1000);
+    assert_eq!(
+        track(&a),
+        track(&b),
+        "the recorder changed what the localiser saw"
+    );
+}
+
+#[test]
 fn agents_leave_their_ground_truth_and_sensors_ride_joints() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();

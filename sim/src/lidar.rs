@@ -312,6 +312,9 @@ pub struct Lidar {
     dropout: f64,
     errors: BeamErrors,
     sweep: bool,
+    /// The laser's stream, as given: scan `k` draws from its ChaCha stream `k`.
+    key: ChaCha8Rng,
+    /// The stream of the scan in progress.
     rng: ChaCha8Rng,
     /// Index of the next scan to start.
     next_scan: i64,
@@ -340,6 +343,7 @@ impl Lidar {
             dropout: config.dropout,
             errors: config.errors.clone(),
             sweep: config.sweep,
+            key: rng.clone(),
             rng,
             next_scan: 0,
             scan: None,
@@ -360,10 +364,17 @@ impl Lidar {
     /// the first hit and what was hit) and returns a scan when its last beam is done, with
     /// what each beam hit (truth for scorers: a beam that returned nothing, by dropout or
     /// noise past the range, hit [`BeamHit::Nothing`]).
+    ///
+    /// A scan falling due is made only if `wanted(stamp)` says so; one nobody wants is
+    /// skipped whole, its rays never cast. Each scan draws its noise from its own stream (the
+    /// `k`th ChaCha stream of the laser's key), so which scans are made changes none of the
+    /// readings of the others: a recorder that takes every scan leaves what a localiser that
+    /// takes one in ten sees as it was.
     pub fn update(
         &mut self,
         now: Time,
         laser_pose: &Pose,
+        wanted: impl FnOnce(Time) -> bool,
         mut cast: impl FnMut(Vec3, Vec3, f32) -> Option<(f32, BeamHit)>,
     ) -> Option<(LaserScan, Vec<BeamHit>)> {
         if self.scan.is_none() {
@@ -371,7 +382,14 @@ impl Lidar {
             if now < start {
                 return None;
             }
+            let k = self.next_scan;
             self.next_scan += 1;
+            if !wanted(start) {
+                return None;
+            }
+            self.rng = self.key.clone();
+            self.rng.set_stream(k as u64);
+            self.rng.set_word_pos(0);
             let angle_min = -self.spec.angle_increment * (self.spec.beams - 1) as f64 / 2.0;
             self.scan = Some(LaserScan {
                 frame: self.name.clone(),
@@ -518,11 +536,14 @@ mod tests {
             casts.set(casts.get() + 1);
             Some((1.0, BeamHit::Static))
         };
-        assert!(l.update(Time::from_secs(0.0), &pose, cast).is_none());
+        assert!(
+            l.update(Time::from_secs(0.0), &pose, |_| true, cast)
+                .is_none()
+        );
         let mut t = 0.0;
         let scan = loop {
             t += 0.005;
-            if let Some((s, hits)) = l.update(Time::from_secs(t), &pose, cast) {
+            if let Some((s, hits)) = l.update(Time::from_secs(t), &pose, |_| true, cast) {
                 assert_eq!(hits.len(), s.ranges.len());
                 assert!(hits.iter().all(|h| *h == BeamHit::Static));
                 break s;
@@ -535,7 +556,10 @@ mod tests {
         assert!(scan.ranges.iter().all(|r| (r - 1.0).abs() < 0.06));
         assert_eq!(scan.stamp, Time::ZERO);
         // The next scan starts at 0.1 s.
-        assert!(l.update(Time::from_secs(0.095), &pose, cast).is_none());
+        assert!(
+            l.update(Time::from_secs(0.095), &pose, |_| true, cast)
+                .is_none()
+        );
     }
 
     #[test]
@@ -552,9 +576,12 @@ mod tests {
         let spec = cfg.resolve(Path::new("x"), "l").unwrap();
         let mut l = Lidar::new(&cfg, spec, stream(0, "x"));
         let (scan, hits) = l
-            .update(Time::ZERO, &Pose::IDENTITY, |_, _, _| {
-                Some((1.0, BeamHit::Static))
-            })
+            .update(
+                Time::ZERO,
+                &Pose::IDENTITY,
+                |_| true,
+                |_, _, _| Some((1.0, BeamHit::Static)),
+            )
             .expect("an instant scan");
         assert!(scan.ranges.iter().all(|r| *r == f32::INFINITY));
         assert!(hits.iter().all(|h| *h == BeamHit::Nothing));
@@ -565,9 +592,12 @@ mod tests {
         let spec = cfg.resolve(Path::new("x"), "l").unwrap();
         let mut l = Lidar::new(&cfg, spec.clone(), stream(0, "x"));
         let (scan, hits) = l
-            .update(Time::ZERO, &Pose::IDENTITY, |_, _, _| {
-                Some((1.0, BeamHit::Static))
-            })
+            .update(
+                Time::ZERO,
+                &Pose::IDENTITY,
+                |_| true,
+                |_, _, _| Some((1.0, BeamHit::Static)),
+            )
             .expect("an instant scan");
         assert!(scan.ranges.iter().all(|r| r.is_finite()));
         let far = scan.ranges.iter().filter(|r| **r > 1.5).count();
@@ -577,5 +607,44 @@ mod tests {
             scan.ranges.len()
         );
         assert!(hits.iter().all(|h| *h == BeamHit::Nothing));
+    }
+
+    #[test]
+    fn a_scan_is_the_same_whichever_other_scans_are_made() {
+        let mut cfg = LidarConfig::preset(LidarPreset::Urg04lx);
+        cfg.sweep = false;
+        let spec = cfg.resolve(Path::new("x"), "l").unwrap();
+        let casts = std::cell::Cell::new(0);
+        let cast = |_: Vec3, _: Vec3, _: f32| {
+            casts.set(casts.get() + 1);
+            Some((2.0, BeamHit::Static))
+        };
+        // Scans at 10 Hz for 1 s: every one, then every third.
+        let run = |every: i64| {
+            let mut l = Lidar::new(&cfg, spec.clone(), stream(4, "front"));
+            let mut made = Vec::new();
+            for k in 0..10 {
+                let t = Time::from_secs(k as f64 * 0.1);
+                let want = |stamp: Time| {
+                    assert_eq!(stamp, t);
+                    k % every == 0
+                };
+                if let Some((s, _)) = l.update(t, &Pose::IDENTITY, want, cast) {
+                    made.push((k, s.ranges));
+                }
+            }
+            made
+        };
+        let all = run(1);
+        casts.set(0);
+        let some = run(3);
+        // The scans not wanted cast no ray.
+        assert_eq!(casts.get(), 4 * spec.beams);
+        assert_eq!(some.len(), 4);
+        for (k, ranges) in &some {
+            assert_eq!(&all[*k as usize].1, ranges, "scan {k}");
+        }
+        // And the scans differ from one another (each its own noise).
+        assert_ne!(all[0].1, all[1].1);
     }
 }

@@ -637,8 +637,19 @@ impl Simulation {
     }
 
     /// Advances one physics step. `command`, if given, replaces the drive command (it holds
-    /// until the next one, as on the Create).
+    /// until the next one, as on the Create). Every laser makes every scan.
     pub fn step(&mut self, command: Option<&DriveCommand>) -> StepOutput {
+        self.step_taking(command, &mut |_, _| true)
+    }
+
+    /// [`Simulation::step`], where laser `i`'s scan stamped `stamp` that falls due in this
+    /// step is made only if `wanted(i, stamp)`: its rays are cast for someone who reads it.
+    /// What the scans made read does not depend on which others are (see [`Lidar::update`]).
+    pub fn step_taking(
+        &mut self,
+        command: Option<&DriveCommand>,
+        wanted: &mut dyn FnMut(usize, Time) -> bool,
+    ) -> StepOutput {
         let mut out = StepOutput::default();
         if let Some(c) = command {
             self.drive.command(c);
@@ -733,7 +744,8 @@ impl Simulation {
             let laser_pose = frames[i] * l.mount;
             let movers = &self.movers;
             let colliders = &self.physics.colliders;
-            if let Some((scan, hits)) = l.update(self.time, &laser_pose, |o, d, max| {
+            let wanted = |stamp| wanted(i, stamp);
+            if let Some((scan, hits)) = l.update(self.time, &laser_pose, wanted, |o, d, max| {
                 rays += 1;
                 qp.cast_ray(&Ray::new(o, d), max, true).map(|(c, t)| {
                     let body = colliders.get(c).and_then(|c| c.parent());

@@ -35,6 +35,10 @@ pub struct DriverNode {
     driver: Driver,
     /// The navigator's laser for obstacles: its name and mount.
     laser: Option<(String, Pose2)>,
+    /// The scans it takes are `navigation.scan_rate`'s period apart: the next is the first
+    /// stamped at or after `next_scan`.
+    scan_period: Duration,
+    next_scan: Time,
     last_scan: Option<LaserScan>,
     /// The navigator plans on SLAM's map, taken at this period.
     map_period: Option<Duration>,
@@ -121,6 +125,8 @@ impl DriverNode {
                 .then(|| Duration::from_secs(spec.navigation.replan_period / 2.0)),
             driver,
             laser,
+            scan_period: Duration::from_secs(1.0 / spec.navigation.scan_rate),
+            next_scan: Time::ZERO,
             last_scan: None,
             map_seen: None,
             pending: Vec::new(),
@@ -202,8 +208,16 @@ impl Node for DriverNode {
         Ok(())
     }
 
+    /// The scans at `navigation.scan_rate`.
+    fn wants_scan(&self, laser: &str, stamp: Time) -> bool {
+        self.laser.as_ref().is_some_and(|(n, _)| n == laser) && stamp >= self.next_scan
+    }
+
+    /// Takes the scans it wants alone, not every scan made for another node: what it sees
+    /// does not hang on whether a recorder is on.
     fn on_scan(&mut self, laser: &str, scan: &LaserScan, _bus: &mut Bus) -> Result<()> {
-        if self.laser.as_ref().is_some_and(|(n, _)| n == laser) {
+        if self.wants_scan(laser, scan.stamp) {
+            self.next_scan = scan.stamp + self.scan_period;
             self.last_scan = Some(scan.clone());
         }
         Ok(())

@@ -139,6 +139,11 @@ impl Node for LocalizationNode {
         Ok(())
     }
 
+    /// The scans at its rate alone.
+    fn wants_scan(&self, laser: &str, stamp: Time) -> bool {
+        laser == self.laser && stamp >= self.next
+    }
+
     fn on_scan(&mut self, laser: &str, scan: &LaserScan, bus: &mut Bus) -> Result<()> {
         if laser != self.laser || scan.stamp < self.next {
             return Ok(());
