@@ -138,15 +138,21 @@ impl Plane {
         k.iter_mut().for_each(|x| *x /= sum);
         let (w, h) = (self.w as isize, self.h as isize);
         let mut tmp = vec![0f32; self.v.len()];
+        // Each row extended by its edge pixels, so that the taps run over whole rows (which
+        // the compiler vectorises) in the same order for every pixel: the sums are those of
+        // taking each pixel's taps in turn.
+        let ru = r as usize;
+        let mut padded = vec![0f32; self.w + 2 * ru];
         for y in 0..h {
             let row = &self.v[(y * w) as usize..((y + 1) * w) as usize];
-            for x in 0..w {
-                let mut s = 0f32;
-                for (j, kj) in k.iter().enumerate() {
-                    let xx = (x + j as isize - r).clamp(0, w - 1);
-                    s += kj * row[xx as usize];
+            padded[..ru].fill(row[0]);
+            padded[ru..ru + self.w].copy_from_slice(row);
+            padded[ru + self.w..].fill(row[self.w - 1]);
+            let dst = &mut tmp[(y * w) as usize..((y + 1) * w) as usize];
+            for (j, kj) in k.iter().enumerate() {
+                for (d, s) in dst.iter_mut().zip(&padded[j..j + self.w]) {
+                    *d += kj * s;
                 }
-                tmp[(y * w + x) as usize] = s;
             }
         }
         let mut out = vec![0f32; self.v.len()];
