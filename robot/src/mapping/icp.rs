@@ -314,9 +314,17 @@ impl PointMap {
     /// The nearest map point to `q` within `max` (≤ the bucket size).
     pub fn nearest(&self, q: [f64; 2], max: f64) -> Option<&Oriented> {
         let (bi, bj) = Self::key(q[0], q[1], self.bucket);
+        // Only the buckets that the square round the disk of radius `max` reaches, widened by
+        // a micrometre for the rounding of the distances below: no other holds a point within
+        // `max`, and those left are visited in the same order, so the nearest (ties too) is
+        // the one all nine would give. Late iterations look 0.1 m round a point in 0.5 m
+        // buckets: one to four buckets instead of nine (most of SLAM's time).
+        let reach = max * (1.0 + 1e-9) + 1e-6;
+        let (li, lj) = Self::key(q[0] - reach, q[1] - reach, self.bucket);
+        let (hi, hj) = Self::key(q[0] + reach, q[1] + reach, self.bucket);
         let mut best: Option<(&Oriented, f64)> = None;
-        for i in bi - 1..=bi + 1 {
-            for j in bj - 1..=bj + 1 {
+        for i in li.max(bi - 1)..=hi.min(bi + 1) {
+            for j in lj.max(bj - 1)..=hj.min(bj + 1) {
                 let Some(b) = self.buckets.get(&(i, j)) else {
                     continue;
                 };
