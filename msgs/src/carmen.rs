@@ -532,8 +532,8 @@ mod tests {
             f32::EPSILON,
             5.6,
             30.0,
-            4.0949997,
-            0.0194999,
+            4.095,
+            0.0195,
         ]);
         for r in values {
             let mut fast = String::new();
