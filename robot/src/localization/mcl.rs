@@ -8,7 +8,7 @@
 //!
 //! Seed 000's configuration is the default: 500 particles, the beam model, one beam every 15°.
 
-use crate::geometry::grid::{OCCUPIED, obstacle_distance};
+use crate::geometry::grid::{CHAMFER_OVERESTIMATE, OCCUPIED, obstacle_distance};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2, wrap_angle};
 use rand::{Rng, SeedableRng};
@@ -295,10 +295,6 @@ impl MclMap {
         max
     }
 }
-
-/// The most by which the chamfer distance (weights 1 and √2) exceeds the Euclidean, as a
-/// factor (1.0824 at 22.5°), rounded up.
-const CHAMFER_OVERESTIMATE: f64 = 1.09;
 
 /// A pose estimate: the weighted mean and the covariance of (x, y, θ).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -27,7 +27,7 @@
 //! next-best-view planners commonly do) up to `range`, stopping at obstacles.
 
 use crate::config::ConfigError;
-use crate::geometry::grid::{OCCUPIED, obstacle_distance};
+use crate::geometry::grid::{CHAMFER_OVERESTIMATE, OCCUPIED, obstacle_distance};
 use crate::navigation::coverage::inside_polygon;
 use crate::navigation::exploration::frontiers;
 use crate::navigation::planner::{grid_path, travel_costs};
@@ -381,10 +381,6 @@ fn free_run(grid: &OccupancyGrid, config: &ViewPlanningConfig) -> Vec<f32> {
         })
         .collect()
 }
-
-/// The most by which the chamfer distance (weights 1 and √2) exceeds the Euclidean, as a
-/// factor (1.0824 at 22.5°), rounded up.
-const CHAMFER_OVERESTIMATE: f64 = 1.09;
 
 fn predict(
     grid: &OccupancyGrid,
