@@ -527,14 +527,7 @@ mod tests {
             3e9,
             f32::MAX,
         ]);
-        values.extend([
-            f32::MIN_POSITIVE,
-            f32::EPSILON,
-            5.6,
-            30.0,
-            4.095,
-            0.0195,
-        ]);
+        values.extend([f32::MIN_POSITIVE, f32::EPSILON, 5.6, 30.0, 4.095, 0.0195]);
         for r in values {
             let mut fast = String::new();
             push_millis(&mut fast, r);

@@ -312,9 +312,6 @@ pub struct Lidar {
     dropout: f64,
     errors: BeamErrors,
     sweep: bool,
-    /// The laser's stream, as given: scan `k` draws from its ChaCha stream `k`.
-    key: ChaCha8Rng,
-    /// The stream of the scan in progress.
     rng: ChaCha8Rng,
     /// Index of the next scan to start.
     next_scan: i64,
@@ -343,7 +340,6 @@ impl Lidar {
             dropout: config.dropout,
             errors: config.errors.clone(),
             sweep: config.sweep,
-            key: rng.clone(),
             rng,
             next_scan: 0,
             scan: None,
@@ -366,10 +362,12 @@ impl Lidar {
     /// noise past the range, hit [`BeamHit::Nothing`]).
     ///
     /// A scan falling due is made only if `wanted(stamp)` says so; one nobody wants is
-    /// skipped whole, its rays never cast. Each scan draws its noise from its own stream (the
-    /// `k`th ChaCha stream of the laser's key), so which scans are made changes none of the
-    /// readings of the others: a recorder that takes every scan leaves what a localiser that
-    /// takes one in ten sees as it was.
+    /// skipped whole, its rays never cast, but its noise is still drawn: the stream stays
+    /// where every scan made would have left it, so which scans are made changes none of the
+    /// readings of the others (a recorder that takes every scan leaves what a localiser that
+    /// takes one in ten sees as it was, and a run's bytes do not hang on who reads the
+    /// laser). A laser with beam errors on (`errors`) draws according to what each beam hits,
+    /// so its scans are all made.
     pub fn update(
         &mut self,
         now: Time,
@@ -382,14 +380,15 @@ impl Lidar {
             if now < start {
                 return None;
             }
-            let k = self.next_scan;
             self.next_scan += 1;
-            if !wanted(start) {
+            if !wanted(start) && self.errors.is_off() {
+                // The draws each beam makes below, whatever it hits.
+                for _ in 0..self.spec.beams {
+                    let _: f64 = StandardNormal.sample(&mut self.rng);
+                    let _: f64 = self.rng.random();
+                }
                 return None;
             }
-            self.rng = self.key.clone();
-            self.rng.set_stream(k as u64);
-            self.rng.set_word_pos(0);
             let angle_min = -self.spec.angle_increment * (self.spec.beams - 1) as f64 / 2.0;
             self.scan = Some(LaserScan {
                 frame: self.name.clone(),

@@ -154,8 +154,9 @@ pub trait Node {
     /// wants it, as a camera renders only for a node that wants the frame: a localiser that
     /// updates at 4 Hz need not have a 40 Hz laser's rays cast for it ten times a second,
     /// most of a laser-only loop's time. Every scan made goes to every consumer, wanted or
-    /// not. A scan's readings do not depend on which other scans are made (each has its own
-    /// noise stream), so a recorder that wants every scan changes nothing the others see.
+    /// not. A scan's readings do not depend on which other scans are made (a scan skipped
+    /// still draws its noise), so a recorder that wants every scan changes nothing the
+    /// others see.
     fn wants_scan(&self, _laser: &str, _stamp: Time) -> bool {
         true
     }

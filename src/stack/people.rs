@@ -134,8 +134,19 @@ const NEEDS_MAP: [bool; 4] = [false, true, true, false];
 const MATCH_RADII: [f64; 2] = [0.5, 0.3];
 
 /// The people's node of a scenario: `None` without people.
+/// Whether the scenario has people walking, for whom the people node runs.
+fn has_people(s: &Scenario) -> bool {
+    !s.movers.people.is_empty() || !s.movers.flows.is_empty()
+}
+
+/// Whether the stack tracks people from the laser and publishes `people/tracked`: the people
+/// node runs with a laser to track from.
+pub fn tracks_people(s: &Scenario) -> bool {
+    has_people(s) && !s.lidars.is_empty()
+}
+
 pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
-    if s.movers.people.is_empty() && s.movers.flows.is_empty() {
+    if !has_people(s) {
         return Ok(None);
     }
     let file = match out {

@@ -57,7 +57,8 @@ pub struct NavigationConfig {
     /// The laser's scans the navigator looks at, Hz (the newest at each control tick): at
     /// 10 Hz the robot at its 0.3 m/s moves 3 cm between them, a fifth of `stop_distance`.
     /// Nav2's local costmap takes the laser at 5 Hz. A laser scanning faster casts only the
-    /// scans some node reads.
+    /// scans some node reads. A stack that tracks people reads every scan (the driver node):
+    /// a walker closes faster than the robot drives.
     pub scan_rate: f64,
     /// Stop for laser returns this far ahead of the bumper, m…
     pub stop_distance: f64,
