@@ -206,15 +206,20 @@ fn exploration_maps_both_rooms_on_slam_without_a_bump() {
     assert!(truth.iter().any(|p| p.pose.translation[0] > 4.7));
 }
 
-#[test]
-fn the_robot_drives_on_mcl_and_stays_localised_while_odometry_drifts() {
-    let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(root().join("scenarios/office-mcl.toml"))
+/// office-mcl's scenario text, its world named by an absolute path (to be written elsewhere).
+fn office_mcl() -> String {
+    std::fs::read_to_string(root().join("scenarios/office-mcl.toml"))
         .unwrap()
         .replace(
             "../worlds/office.toml",
             root().join("worlds/office.toml").to_str().unwrap(),
-        );
+        )
+}
+
+#[test]
+fn the_robot_drives_on_mcl_and_stays_localised_while_odometry_drifts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = office_mcl();
     let scenario = write(tmp.path(), "mcl.toml", &text);
     let out = tmp.path().join("mcl");
     run_for(&scenario, &out, Some("60"));
@@ -240,12 +245,7 @@ fn a_laser_casts_only_the_scans_read_and_a_recorder_changes_no_reading() {
     // with the CARMEN recorder off, only those are cast; with it on, every scan is, and the
     // localiser's track is the same to the byte.
     let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(root().join("scenarios/office-mcl.toml"))
-        .unwrap()
-        .replace(
-            "../worlds/office.toml",
-            root().join("worlds/office.toml").to_str().unwrap(),
-        );
+    let text = office_mcl();
     let quiet = write(
         tmp.path(),
         "quiet.toml",
