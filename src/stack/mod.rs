@@ -251,7 +251,10 @@ pub fn laser<'a>(
     s.lidars
         .iter()
         .find(|(c, _)| Some(c.name.as_str()) == name)
-        .ok_or_else(|| anyhow::anyhow!("no laser is named {name:?}"))
+        .ok_or_else(|| match name {
+            Some(n) => anyhow::anyhow!("no laser is named `{n}`"),
+            None => anyhow::anyhow!("no laser is named, and the scenario has none"),
+        })
 }
 
 /// A scenario's nodes of one module, in their order.
