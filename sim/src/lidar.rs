@@ -643,7 +643,7 @@ mod tests {
         for (k, ranges) in &some {
             assert_eq!(&all[*k as usize].1, ranges, "scan {k}");
         }
-        // And the scans differ from one another (each its own noise).
+        // And the scans differ from one another (the stream moves on from scan to scan).
         assert_ne!(all[0].1, all[1].1);
     }
 }

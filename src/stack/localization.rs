@@ -145,7 +145,7 @@ impl Node for LocalizationNode {
     }
 
     fn on_scan(&mut self, laser: &str, scan: &LaserScan, bus: &mut Bus) -> Result<()> {
-        if laser != self.laser || scan.stamp < self.next {
+        if !self.wants_scan(laser, scan.stamp) {
             return Ok(());
         }
         self.next = scan.stamp + self.period;

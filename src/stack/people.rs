@@ -133,7 +133,6 @@ const NEEDS_MAP: [bool; 4] = [false, true, true, false];
 /// The DROW benchmark's association radii, m.
 const MATCH_RADII: [f64; 2] = [0.5, 0.3];
 
-/// The people's node of a scenario: `None` without people.
 /// Whether the scenario has people walking, for whom the people node runs.
 fn has_people(s: &Scenario) -> bool {
     !s.movers.people.is_empty() || !s.movers.flows.is_empty()
@@ -145,6 +144,7 @@ pub fn tracks_people(s: &Scenario) -> bool {
     has_people(s) && !s.lidars.is_empty()
 }
 
+/// The people's node of a scenario: `None` without people.
 pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
     if !has_people(s) {
         return Ok(None);
