@@ -626,7 +626,8 @@ const SR4000_RANGE: f64 = 5.0;
 /// Seed 002's depth-camera MCL: milliseconds per frame (the batched render of every
 /// particle's depth, the re-projection of the measured image, the likelihood, weighting and
 /// resampling) for each particle count and render size, on the SR4000's 43.6° × 34.6°
-/// camera at the Kinect's 0.42 m over `start`, the measured image rendered at the truth.
+/// camera at the Kinect's 0.42 m over `start`, the measured image rendered at the truth;
+/// then the same with the likelihood field in 3D (no render), and the field's build time.
 pub fn bench_depth_mcl(
     world: &World,
     start: Pose2,
@@ -636,10 +637,32 @@ pub fn bench_depth_mcl(
 ) -> Result<Value> {
     use futago_msgs::camera::Intrinsics;
     use futago_robot::localization::depth_mcl::{
-        CameraState, DepthMcl, DepthMclConfig, DepthModel, model_far, reproject,
+        CameraState, DepthMcl, DepthMclConfig, DepthModel, Likelihood, MeshModel, model_far,
+        reproject,
     };
-    let mut renderer =
-        futago_render::Renderer::new(&world.scene()).context("starting the renderer")?;
+    let scene = world.scene();
+    let renderer = futago_render::Renderer::new(&scene).context("starting the renderer")?;
+    let meshes: Vec<futago_render::TriMesh> = scene
+        .bodies
+        .iter()
+        .flat_map(|b| {
+            b.parts
+                .iter()
+                .map(|p| p.mesh.transformed(b.pose.rotation, b.pose.translation, 1.0))
+        })
+        .collect();
+    let t = Instant::now();
+    let field = crate::stack::depth_localization::surface_field(
+        &meshes,
+        DepthMclConfig::default().field_cell,
+    )?;
+    let field_build_s = t.elapsed().as_secs_f64();
+    let field_voxels = field.dims();
+    let mut model = MeshModel {
+        renderer,
+        field: Some(field),
+    };
+    let renderer = &mut model.renderer;
     let camera = Intrinsics::from_fov(176, 144, 43.6f64.to_radians(), 34.6f64.to_radians())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let truth = CameraState {
@@ -665,17 +688,45 @@ pub fn bench_depth_mcl(
             let k = camera.scaled(w, h);
             let config = DepthMclConfig {
                 particles: n,
+                likelihood: Likelihood::Field,
                 ..DepthMclConfig::default()
             };
             let mut mcl = DepthMcl::new(config, truth, 1);
             let z = reproject(&image, &camera, &k);
-            mcl.update(&mut renderer, &k, &z, SR4000_RANGE, None)
+            mcl.update(&mut model, &k, &z, SR4000_RANGE, None)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let t = Instant::now();
+            for _ in 0..frames.max(1) {
+                let z = reproject(&image, &camera, &k);
+                mcl.update(&mut model, &k, &z, SR4000_RANGE, None)
+                    .map_err(|e| anyhow::anyhow!("{e}"))?;
+            }
+            let ms = t.elapsed().as_secs_f64() * 1e3 / frames.max(1) as f64;
+            rows.push(json!({
+                "likelihood": "field",
+                "particles": n,
+                "size": [w, h],
+                "ms_per_frame": ms,
+            }));
+        }
+    }
+    let renderer = &mut model.renderer;
+    for &n in particles {
+        for &[w, h] in sizes {
+            let k = camera.scaled(w, h);
+            let config = DepthMclConfig {
+                particles: n,
+                ..DepthMclConfig::default()
+            };
+            let mut mcl = DepthMcl::new(config, truth, 1);
+            let z = reproject(&image, &camera, &k);
+            mcl.update(renderer, &k, &z, SR4000_RANGE, None)
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
             let t = Instant::now();
             for _ in 0..frames.max(1) {
                 // The measured image is re-projected every frame, as the node does.
                 let z = reproject(&image, &camera, &k);
-                mcl.update(&mut renderer, &k, &z, SR4000_RANGE, None)
+                mcl.update(renderer, &k, &z, SR4000_RANGE, None)
                     .map_err(|e| anyhow::anyhow!("{e}"))?;
             }
             let ms = t.elapsed().as_secs_f64() * 1e3 / frames.max(1) as f64;
@@ -690,6 +741,7 @@ pub fn bench_depth_mcl(
             }
             let render_ms = t.elapsed().as_secs_f64() * 1e3 / frames.max(1) as f64;
             rows.push(json!({
+                "likelihood": "seed",
                 "particles": n,
                 "size": [w, h],
                 "ms_per_frame": ms,
@@ -697,7 +749,6 @@ pub fn bench_depth_mcl(
             }));
         }
     }
-    let scene = world.scene();
     let triangles: usize = scene
         .bodies
         .iter()
@@ -708,6 +759,7 @@ pub fn bench_depth_mcl(
         "world": world.name,
         "triangles": triangles,
         "frames": frames,
+        "field": { "build_s": field_build_s, "voxels": field_voxels },
         "rows": rows,
     }))
 }

@@ -36,7 +36,10 @@ use anyhow::{Context, Result};
 use futago_msgs::camera::Intrinsics;
 use futago_msgs::tum::{Stamped, format_line};
 use futago_msgs::{Duration, Pose2, Pose3, Time};
-use futago_robot::localization::depth_mcl::{CameraState, DepthMcl, DepthMclConfig, reproject};
+use futago_robot::geometry::distance_field::DistanceField;
+use futago_robot::localization::depth_mcl::{
+    CameraState, DepthMcl, DepthMclConfig, Likelihood, MeshModel, reproject,
+};
 use futago_robot::localization::model::{self, ModelConfig};
 use futago_sim::config::{SpecError, check_range};
 use futago_sim::noise::stream;
@@ -83,7 +86,10 @@ pub struct DepthLocalizationNode {
     mcl: Option<DepthMcl>,
     config: DepthMclConfig,
     seed: u64,
-    renderer: futago_render::Renderer,
+    /// The model: its renderer, and its distance field for the likelihood field.
+    surfaces: MeshModel,
+    /// The wall time the distance field took to build, s (not in the node's time).
+    field_s: f64,
     camera: String,
     /// The camera's depth intrinsics and those of the render.
     depth: Intrinsics,
@@ -147,14 +153,24 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         None => cam.depth,
     };
     let draws_anywhere = spec.global || spec.mcl.alpha_slow > 0.0 || spec.mcl.alpha_fast > 0.0;
-    let (scene, model, meshes) = model_scene(s, &spec.model, seed, draws_anywhere)?;
+    let weighs_by_field = spec.mcl.likelihood == Likelihood::Field;
+    let (scene, model, meshes) =
+        model_scene(s, &spec.model, seed, draws_anywhere || weighs_by_field)?;
     let renderer =
         futago_render::Renderer::new(&scene).context("depth_localization: rendering the model")?;
+    let t0 = Instant::now();
+    let field = match &meshes {
+        Some(meshes) if weighs_by_field => Some(surface_field(meshes, spec.mcl.field_cell)?),
+        _ => None,
+    };
+    let field_s = t0.elapsed().as_secs_f64();
+    let meshes = meshes.filter(|_| draws_anywhere);
     Ok(Some(DepthLocalizationNode {
         mcl: None,
         config: spec.mcl,
         seed: stream(seed, "depth_localization.mcl").random(),
-        renderer,
+        surfaces: MeshModel { renderer, field },
+        field_s,
         camera: cam.name.clone(),
         depth: cam.depth,
         render,
@@ -172,6 +188,32 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
         global: spec.global,
         events: s.spec.event.iter().map(|e| e.time).collect(),
     }))
+}
+
+/// Voxels a model's distance field may take (4 bytes each): the office at 5 cm is some
+/// 30 million.
+const MAX_FIELD_VOXELS: u64 = 100_000_000;
+
+/// The distance field of the model's surfaces (its meshes in the model's frame), for the
+/// likelihood field (also `futago bench depth-mcl`'s).
+pub fn surface_field(meshes: &[futago_render::TriMesh], cell: f64) -> Result<DistanceField> {
+    let triangles: Vec<[[f64; 3]; 3]> = meshes
+        .iter()
+        .flat_map(|m| {
+            m.indices.iter().filter_map(|t| {
+                let corner = |i: u32| {
+                    m.positions
+                        .get(i as usize)
+                        .map(|p| [p.x as f64, p.y as f64, p.z as f64])
+                };
+                Some([corner(t[0])?, corner(t[1])?, corner(t[2])?])
+            })
+        })
+        .collect();
+    // A point measured outside the grid is placed by its distance to the grid, so the
+    // margin need only hold the surfaces' near side.
+    DistanceField::new(&triangles, cell, 0.5, MAX_FIELD_VOXELS)
+        .map_err(|e| anyhow::anyhow!("depth_localization.mcl.field_cell: {e}"))
 }
 
 /// The model's scene, a description of it for the summary, and, when `keep`, its meshes in
@@ -487,7 +529,7 @@ impl Node for DepthLocalizationNode {
         let mcl = self.mcl.as_mut().expect("made above");
         let est = mcl
             .update(
-                &mut self.renderer,
+                &mut self.surfaces,
                 &self.render,
                 &measured,
                 self.range,
@@ -588,6 +630,12 @@ impl Node for DepthLocalizationNode {
             "render": [self.render.width, self.render.height],
             "carrier": if self.mount2.is_some() { "robot" } else { "agent" },
             "model": self.model,
+            "likelihood": self.config.likelihood,
+            "field": self.surfaces.field.as_ref().map(|f| json!({
+                "cell_m": f.cell(),
+                "voxels": f.dims(),
+                "build_s": self.field_s,
+            })),
             "frame_ms": frame_ms,
             "path_error": {
                 "median_m": median,

@@ -24,6 +24,7 @@
 //! Rendering goes through [`DepthModel`]; the stack's own renderer (futago-render) implements
 //! it, so the filter never sees the simulator's world, only the model it was given.
 
+use crate::geometry::distance_field::DistanceField;
 use futago_msgs::camera::{DepthImage, Intrinsics};
 use futago_msgs::{Pose2, Pose3, wrap_angle};
 use rand::{Rng, SeedableRng};
@@ -42,6 +43,35 @@ pub trait DepthModel {
         far: f64,
         out: &mut Vec<f32>,
     ) -> Result<(), String>;
+
+    /// The model's surfaces as a distance field, for [`Likelihood::Field`]; `None` (the
+    /// default) where the model offers none.
+    fn field(&self) -> Option<&DistanceField> {
+        None
+    }
+}
+
+/// A model drawn by the stack's renderer, with the distance field of the same surfaces where
+/// the filter weighs by the likelihood field.
+pub struct MeshModel {
+    pub renderer: futago_render::Renderer,
+    pub field: Option<DistanceField>,
+}
+
+impl DepthModel for MeshModel {
+    fn render_batch(
+        &mut self,
+        intr: &Intrinsics,
+        poses: &[Pose3],
+        far: f64,
+        out: &mut Vec<f32>,
+    ) -> Result<(), String> {
+        self.renderer.render_batch(intr, poses, far, out)
+    }
+
+    fn field(&self) -> Option<&DistanceField> {
+        self.field.as_ref()
+    }
 }
 
 impl DepthModel for futago_render::Renderer {
@@ -112,6 +142,9 @@ pub struct DepthMclConfig {
     /// see the same surface and share the model's errors, so the summed log-likelihood is
     /// scaled to this many pixels, whatever the render size.
     pub independent_pixels: f64,
+    /// The likelihood field's voxel, m: a measured point's distance to the model is known to
+    /// within half its diagonal.
+    pub field_cell: f64,
     /// The constant-velocity model's change of velocity per frame, standard deviations:
     /// forward and leftward (m per frame, per frame) and yaw rate (rad per frame, per frame).
     /// The defaults, 3 mm and 0.002 rad, are at 8 frames a second (σ / 0.125²) a change of
@@ -169,6 +202,15 @@ pub enum Likelihood {
     /// and scaled to `independent_pixels`. A pixel where the model draws nothing is an
     /// outlier. Where the depth says little the weights stay flat, and the particles spread.
     Sensor,
+    /// The likelihood field in 3D (Thrun et al. §6.4): each measured point, placed by the
+    /// particle's pose, is weighed by its distance to the model's nearest surface under the
+    /// sensor model's Gaussian and outlier share, looked up in a distance field of the model
+    /// (voxels of `field_cell`); the log-likelihoods summed and scaled to
+    /// `independent_pixels`. No render: the points are a grid of the measured image's pixels,
+    /// about four for each independent one. Unlike the render, it does not see that a
+    /// particle's view passes through a wall, nor that the model shows a surface the camera
+    /// did not measure.
+    Field,
 }
 
 /// The prediction step where no odometry is given.
@@ -204,6 +246,7 @@ impl Default for DepthMclConfig {
             pixel_sigma: 0.05,
             outlier: 0.1,
             independent_pixels: 400.0,
+            field_cell: 0.05,
             alpha_slow: 0.0,
             alpha_fast: 0.0,
             search_steps: 4,
@@ -240,6 +283,7 @@ impl DepthMclConfig {
                 ("pixel_sigma", self.pixel_sigma, 1e-4, 10.0),
                 ("outlier", self.outlier, 1e-6, 1.0),
                 ("independent_pixels", self.independent_pixels, 1.0, 1e8),
+                ("field_cell", self.field_cell, 0.005, 1.0),
                 ("alpha_slow", self.alpha_slow, 0.0, 1.0),
                 ("search_share", self.search_share, 0.0, 1.0),
                 ("alpha_fast", self.alpha_fast, 0.0, 1.0),
@@ -479,7 +523,7 @@ impl DepthMcl {
         let c = self.config;
         self.track_fit(match c.likelihood {
             Likelihood::Seed => best / valid as f64,
-            Likelihood::Sensor => (best / c.independent_pixels).exp(),
+            Likelihood::Sensor | Likelihood::Field => (best / c.independent_pixels).exp(),
         });
         let share = if self.w_slow > 0.0 && !self.free.is_empty() {
             (1.0 - self.w_fast / self.w_slow).max(0.0)
@@ -518,6 +562,21 @@ impl DepthMcl {
         states: &[CameraState],
     ) -> Result<Vec<f64>, String> {
         let pixels = (intr.width * intr.height) as usize;
+        let c = self.config;
+        if self.sensor.as_ref().is_none_or(|(r, _)| *r != range) {
+            self.sensor = Some((range, SensorModel::new(c.pixel_sigma, c.outlier, range)));
+        }
+        if c.likelihood == Likelihood::Field {
+            let field = model.field().ok_or(
+                "the likelihood field needs the model's distance field, and the model has none",
+            )?;
+            let sensor = &self.sensor.as_ref().expect("made above").1;
+            let points = field_points(intr, measured, c.independent_pixels);
+            let scale = c.independent_pixels / points.len().max(1) as f64;
+            return Ok(super::mcl::map_on_cores(states, FIELD_SERIAL_BELOW, |s| {
+                scale * field_log_likelihood(field, sensor, &s.pose(), &points)
+            }));
+        }
         self.poses.clear();
         self.poses.extend(states.iter().map(|p| p.pose()));
         let far = model_far(range, self.config.alpha);
@@ -529,18 +588,13 @@ impl DepthMcl {
                 states.len()
             ));
         }
-        let c = self.config;
         Ok(match c.likelihood {
             Likelihood::Seed => self
                 .rendered
                 .chunks_exact(pixels)
                 .map(|predicted| score(measured, predicted, c.alpha))
                 .collect(),
-            Likelihood::Sensor => {
-                if self.sensor.as_ref().is_none_or(|(r, _)| *r != range) {
-                    let m = SensorModel::new(c.pixel_sigma, c.outlier, range);
-                    self.sensor = Some((range, m));
-                }
+            Likelihood::Sensor | Likelihood::Field => {
                 let model = &self.sensor.as_ref().expect("made above").1;
                 let valid = measured.iter().filter(|m| **m > 0.0).count().max(1);
                 let scale = c.independent_pixels / valid as f64;
@@ -556,7 +610,7 @@ impl DepthMcl {
     fn set_weights(&mut self, raw: &[f64]) {
         match self.config.likelihood {
             Likelihood::Seed => self.weigh(raw),
-            Likelihood::Sensor => self.weigh_logs(raw),
+            Likelihood::Sensor | Likelihood::Field => self.weigh_logs(raw),
         }
     }
 
@@ -835,6 +889,79 @@ impl SensorModel {
     }
 }
 
+/// Measured points the likelihood field weighs per independent pixel (`independent_pixels`).
+const FIELD_POINTS_PER_PIXEL: f64 = 4.0;
+
+/// Below this many particles the likelihood field weighs them on one thread (a particle's
+/// points take some 0.1 ms).
+const FIELD_SERIAL_BELOW: usize = 16;
+
+/// The measured points the likelihood field weighs, in the camera's body frame (x forward, y
+/// left, z up): every valid pixel of a grid over the image (of intrinsics `intr`) whose step
+/// leaves about four pixels for each of `independent` ones.
+pub fn field_points(intr: &Intrinsics, measured: &[f32], independent: f64) -> Vec<[f64; 3]> {
+    let (w, h) = (intr.width as usize, intr.height as usize);
+    let step = ((w * h) as f64 / (FIELD_POINTS_PER_PIXEL * independent.max(1.0)))
+        .sqrt()
+        .floor()
+        .max(1.0) as usize;
+    let mut points = Vec::new();
+    for v in (step / 2..h).step_by(step) {
+        for u in (step / 2..w).step_by(step) {
+            let z = measured.get(v * w + u).copied().unwrap_or(0.0) as f64;
+            if !(z > 0.0 && z.is_finite()) {
+                continue;
+            }
+            // The optical ray (x right, y down, z forward) in the body frame.
+            let x = (u as f64 - intr.cx) / intr.fx * z;
+            let y = (v as f64 - intr.cy) / intr.fy * z;
+            points.push([z, -x, -y]);
+        }
+    }
+    points
+}
+
+/// Σ ln p over `points` (camera body frame) placed by the camera pose `pose`, each weighed by
+/// the sensor model at its distance to the model's surfaces.
+fn field_log_likelihood(
+    field: &DistanceField,
+    sensor: &SensorModel,
+    pose: &Pose3,
+    points: &[[f64; 3]],
+) -> f64 {
+    let [x, y, z, w] = pose.rotation;
+    // The rotation matrix of the unit quaternion.
+    let r = [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - z * w),
+            2.0 * (x * z + y * w),
+        ],
+        [
+            2.0 * (x * y + z * w),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - x * w),
+        ],
+        [
+            2.0 * (x * z - y * w),
+            2.0 * (y * z + x * w),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ];
+    let t = pose.translation;
+    points
+        .iter()
+        .map(|p| {
+            let q = [
+                r[0][0] * p[0] + r[0][1] * p[1] + r[0][2] * p[2] + t[0],
+                r[1][0] * p[0] + r[1][1] * p[1] + r[1][2] * p[2] + t[1],
+                r[2][0] * p[0] + r[2][1] * p[1] + r[2][2] * p[2] + t[2],
+            ];
+            sensor.lookup(field.distance(q) as f32) as f64
+        })
+        .sum()
+}
+
 /// Seed 002 eq. (8): `Σ α / (α + |Δz|)` over the pixels measured; a pixel where the model
 /// draws nothing scores 0.
 pub fn score(measured: &[f32], predicted: &[f32], alpha: f64) -> f64 {
@@ -1080,8 +1207,75 @@ mod tests {
         track_with(pillars, config, step)
     }
 
+    /// The twelve triangles of the box `lo..hi`.
+    fn box_triangles(lo: [f64; 3], hi: [f64; 3]) -> Vec<[[f64; 3]; 3]> {
+        let corner = |k: usize| {
+            [
+                if k & 1 == 0 { lo[0] } else { hi[0] },
+                if k & 2 == 0 { lo[1] } else { hi[1] },
+                if k & 4 == 0 { lo[2] } else { hi[2] },
+            ]
+        };
+        // Each face by its four corners (bit patterns), split along a diagonal.
+        let faces = [
+            [0, 1, 3, 2],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 3, 7, 6],
+            [0, 2, 6, 4],
+            [1, 3, 7, 5],
+        ];
+        faces
+            .iter()
+            .flat_map(|f| {
+                [
+                    [corner(f[0]), corner(f[1]), corner(f[2])],
+                    [corner(f[0]), corner(f[2]), corner(f[3])],
+                ]
+            })
+            .collect()
+    }
+
+    /// The room's surfaces as triangles: its walls, floor and ceiling, and its pillars.
+    fn room_triangles(pillars: bool) -> Vec<[[f64; 3]; 3]> {
+        let mut t = box_triangles([0.0; 3], [10.0, 4.0, 3.0]);
+        for (a, b) in PILLARS.into_iter().filter(|_| pillars) {
+            t.extend(box_triangles(a, b));
+        }
+        t
+    }
+
+    /// The room with its distance field, where the filter weighs by the likelihood field.
+    struct FieldRoom {
+        room: BoxRoom,
+        field: Option<DistanceField>,
+    }
+
+    impl DepthModel for FieldRoom {
+        fn render_batch(
+            &mut self,
+            intr: &Intrinsics,
+            poses: &[Pose3],
+            far: f64,
+            out: &mut Vec<f32>,
+        ) -> Result<(), String> {
+            self.room.render_batch(intr, poses, far, out)
+        }
+
+        fn field(&self) -> Option<&DistanceField> {
+            self.field.as_ref()
+        }
+    }
+
     fn track_with(pillars: bool, config: DepthMclConfig, step: f64) -> (f64, f64, f64) {
-        let mut room = BoxRoom { pillars };
+        let field = (config.likelihood == Likelihood::Field).then(|| {
+            DistanceField::new(&room_triangles(pillars), config.field_cell, 0.5, 10_000_000)
+                .unwrap()
+        });
+        let mut room = FieldRoom {
+            room: BoxRoom { pillars },
+            field,
+        };
         let start = CameraState {
             position: [1.0, 2.0, 1.0],
             rpy: [0.0, 0.0, 0.2],
@@ -1093,7 +1287,7 @@ mod tests {
             truth.position[0] += step;
             truth.position[1] = 2.0 + 0.1 * (k as f64 * 0.2).sin();
             truth.rpy[2] = 0.2 + 0.1 * (k as f64 * 0.15).sin();
-            let z = render(&room, &truth);
+            let z = render(&room.room, &truth);
             let est = mcl.update(&mut room, &intr(), &z, RANGE, None).unwrap();
             errors.push(
                 (est.state.position[0] - truth.position[0])
@@ -1141,6 +1335,65 @@ mod tests {
                 "{motion:?}: median {median}, worst {worst}, yaw {yaw}"
             );
         }
+    }
+
+    /// The likelihood field in 3D, with no render, also tracks the camera within the seed's
+    /// 7 cm, with either motion model, among pillars; asked of a model without a field, the
+    /// filter says so.
+    #[test]
+    fn the_likelihood_field_tracks_a_moving_camera() {
+        for motion in [MotionModel::RandomWalk, MotionModel::ConstantVelocity] {
+            let config = DepthMclConfig {
+                motion,
+                likelihood: Likelihood::Field,
+                ..DepthMclConfig::default()
+            };
+            let (median, worst, yaw) = track_with(true, config, 0.05);
+            assert!(
+                median < 0.07 && worst < 0.15 && yaw < 3f64.to_radians(),
+                "{motion:?}: median {median}, worst {worst}, yaw {yaw}"
+            );
+        }
+        let config = DepthMclConfig {
+            likelihood: Likelihood::Field,
+            ..DepthMclConfig::default()
+        };
+        let start = CameraState {
+            position: [1.0, 2.0, 1.0],
+            rpy: [0.0; 3],
+        };
+        let mut room = BoxRoom { pillars: true };
+        let z = render(&room, &start);
+        let e = DepthMcl::new(config, start, 1)
+            .update(&mut room, &intr(), &z, RANGE, None)
+            .unwrap_err();
+        assert!(e.contains("distance field"), "{e}");
+    }
+
+    /// The field's points are the measured pixels' points in the body frame: a pixel on the
+    /// optical axis lies straight ahead, one right of and below the centre lies to the right
+    /// (−y) and below (−z); invalid pixels give none.
+    #[test]
+    fn field_points_are_back_projected_into_the_body_frame() {
+        let i = Intrinsics::from_fov(8, 6, 1.0, 0.8).unwrap();
+        let mut d = vec![0.0f32; 48];
+        // With 2 independent pixels the grid's step is floor(√(48/8)) = 2, from pixel 1.
+        d[3 * 8 + 3] = 2.0;
+        d[5 * 8 + 7] = 3.0;
+        d[9] = f32::NAN; // pixel (1, 1)
+        let p = field_points(&i, &d, 2.0);
+        assert_eq!(p.len(), 2, "{p:?}");
+        let want = |u: f64, v: f64, z: f64| [z, -(u - i.cx) / i.fx * z, -(v - i.cy) / i.fy * z];
+        for (got, w) in p.iter().zip([want(3.0, 3.0, 2.0), want(7.0, 5.0, 3.0)]) {
+            for k in 0..3 {
+                assert!((got[k] - w[k]).abs() < 1e-12, "{got:?} vs {w:?}");
+            }
+        }
+        assert!(
+            p[1][1] < 0.0 && p[1][2] < 0.0,
+            "right and below: {:?}",
+            p[1]
+        );
     }
 
     /// In six degrees of freedom the filter (the seed's random walk, 400 particles) also

@@ -531,15 +531,16 @@ impl Mcl {
         let laser_of = |p: &Pose2| p.compose(&Pose2::new(mount.x, mount.y, 0.0));
         let (logs, used) = if self.skips_beams() {
             // Every beam's term kept for the choice of beams.
-            let terms: Vec<Option<Vec<(f64, bool)>>> = map_on_cores(&self.particles, |p| {
-                let laser = laser_of(p);
-                (!this.map.occupied_or_outside(p.x, p.y)).then(|| {
-                    beams
-                        .iter()
-                        .map(|&(a, z)| this.beam_term(&laser, a, z))
-                        .collect()
-                })
-            });
+            let terms: Vec<Option<Vec<(f64, bool)>>> =
+                map_on_cores(&self.particles, SERIAL_BELOW, |p| {
+                    let laser = laser_of(p);
+                    (!this.map.occupied_or_outside(p.x, p.y)).then(|| {
+                        beams
+                            .iter()
+                            .map(|&(a, z)| this.beam_term(&laser, a, z))
+                            .collect()
+                    })
+                });
             let keep = self.beams_kept(&terms, beams.len());
             let logs: Vec<f64> = terms
                 .iter()
@@ -555,7 +556,7 @@ impl Mcl {
                 .collect();
             (logs, keep.iter().filter(|k| **k).count())
         } else {
-            let logs = map_on_cores(&self.particles, |p| {
+            let logs = map_on_cores(&self.particles, SERIAL_BELOW, |p| {
                 if this.map.occupied_or_outside(p.x, p.y) {
                     return f64::NEG_INFINITY;
                 }
@@ -778,12 +779,17 @@ impl Mcl {
 
 /// `f` of each of `items`, in their order, computed on the machine's cores in contiguous
 /// chunks. Each result depends on its item alone, so the output is the same whatever the
-/// number of threads; fewer than [`SERIAL_BELOW`] items stay on this thread, where starting
-/// threads would cost more than it saves. Weighting the particles is most of the filter's
-/// time (a ray cast and a likelihood for each beam of each particle).
-fn map_on_cores<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+/// number of threads; fewer than `serial_below` items stay on this thread, where starting
+/// threads would cost more than it saves. Weighting the particles is most of a filter's
+/// time (here a ray cast and a likelihood for each beam of each particle; in the depth
+/// camera's likelihood field, thousands of points for each).
+pub(crate) fn map_on_cores<T: Sync, R: Send>(
+    items: &[T],
+    serial_below: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if threads < 2 || items.len() < SERIAL_BELOW {
+    if threads < 2 || items.len() < serial_below {
         return items.iter().map(f).collect();
     }
     let chunk = items.len().div_ceil(threads);
@@ -921,7 +927,11 @@ mod tests {
         for n in [0, 1, SERIAL_BELOW - 1, SERIAL_BELOW, 1001, 5000] {
             let items: Vec<u64> = (0..n as u64).collect();
             let want: Vec<u64> = items.iter().map(|k| k * k + 1).collect();
-            assert_eq!(map_on_cores(&items, |k| k * k + 1), want, "{n} items");
+            assert_eq!(
+                map_on_cores(&items, SERIAL_BELOW, |k| k * k + 1),
+                want,
+                "{n} items"
+            );
         }
     }
 
