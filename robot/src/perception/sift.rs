@@ -267,6 +267,7 @@ fn extrema(
     let (w, h) = (dog[0].w, dog[0].h);
     let threshold = config.contrast as f32;
     let pre = 0.8 * threshold;
+    let mut grads: Vec<Option<Gradients>> = gauss.iter().map(|_| None).collect();
     for level in 1..=s {
         for y in BORDER..h - BORDER {
             for x in BORDER..w - BORDER {
@@ -283,7 +284,7 @@ fn extrema(
                 let scale_in_octave =
                     config.sigma as f32 * 2f32.powf((pl as f32 + off[2]) / s as f32);
                 let d_s = (1u32 << octave) as f32;
-                let g = &gauss[pl];
+                let g = grads[pl].get_or_insert_with(|| Gradients::new(&gauss[pl]));
                 let fx = px as f32 + off[0];
                 let fy = py as f32 + off[1];
                 for angle in orientations(g, fx, fy, scale_in_octave) {
@@ -393,33 +394,57 @@ fn refine(
     None
 }
 
-/// The gradient (magnitude, angle) of `g` at integer (x, y), or none at the edge.
-fn gradient(g: &Plane, x: isize, y: isize) -> Option<(f32, f32)> {
-    if x < 1 || y < 1 || x >= g.w as isize - 1 || y >= g.h as isize - 1 {
-        return None;
+/// The gradients (magnitude, angle) of one Gaussian level, each computed the first time a
+/// keypoint's window reads it: the windows of neighbouring keypoints overlap, and the angle's
+/// arc tangent was a third of the detector's time when every window computed its own.
+struct Gradients<'a> {
+    g: &'a Plane,
+    /// (magnitude, angle) per pixel; NaN magnitude: not computed yet.
+    cache: Vec<(f32, f32)>,
+}
+
+impl<'a> Gradients<'a> {
+    fn new(g: &'a Plane) -> Gradients<'a> {
+        Gradients {
+            g,
+            cache: vec![(f32::NAN, 0.0); g.w * g.h],
+        }
     }
-    let (x, y) = (x as usize, y as usize);
-    let dx = g.at(x + 1, y) - g.at(x - 1, y);
-    let dy = g.at(x, y + 1) - g.at(x, y - 1);
-    Some(((dx * dx + dy * dy).sqrt(), dy.atan2(dx)))
+
+    /// The gradient (magnitude, angle) at integer (x, y), or none at the edge.
+    fn at(&mut self, x: isize, y: isize) -> Option<(f32, f32)> {
+        let g = self.g;
+        if x < 1 || y < 1 || x >= g.w as isize - 1 || y >= g.h as isize - 1 {
+            return None;
+        }
+        let (x, y) = (x as usize, y as usize);
+        let slot = &mut self.cache[y * g.w + x];
+        if slot.0.is_nan() {
+            let dx = g.at(x + 1, y) - g.at(x - 1, y);
+            let dy = g.at(x, y + 1) - g.at(x, y - 1);
+            *slot = ((dx * dx + dy * dy).sqrt(), dy.atan2(dx));
+        }
+        Some(*slot)
+    }
 }
 
 /// Dominant orientations at (x, y) of scale `sigma` (octave pixels): the peaks of a 36-bin,
 /// Gaussian-weighted histogram of gradient directions, smoothed, above 0.8 of the highest,
 /// each refined by a parabola through its neighbours.
-fn orientations(g: &Plane, x: f32, y: f32, sigma: f32) -> Vec<f32> {
+fn orientations(g: &mut Gradients, x: f32, y: f32, sigma: f32) -> Vec<f32> {
     let ws = ORI_SIGMA * sigma;
     let r = (3.0 * ws).round() as isize;
     let (cx, cy) = (x.round() as isize, y.round() as isize);
     let mut hist = [0f32; ORI_BINS];
     for dy in -r..=r {
         for dx in -r..=r {
-            let Some((m, a)) = gradient(g, cx + dx, cy + dy) else {
+            let Some((m, a)) = g.at(cx + dx, cy + dy) else {
                 continue;
             };
             let (fx, fy) = ((cx + dx) as f32 - x, (cy + dy) as f32 - y);
             let wgt = (-(fx * fx + fy * fy) / (2.0 * ws * ws)).exp();
-            let b = ((a + PI) / (2.0 * PI) * ORI_BINS as f32).floor() as isize;
+            // Not negative (a ≥ −π), so truncation is the floor.
+            let b = ((a + PI) / (2.0 * PI) * ORI_BINS as f32) as isize;
             hist[b.rem_euclid(ORI_BINS as isize) as usize] += wgt * m;
         }
     }
@@ -452,10 +477,18 @@ fn orientations(g: &Plane, x: f32, y: f32, sigma: f32) -> Vec<f32> {
     out
 }
 
+/// ⌊x⌋ for |x| < 2³¹ without the maths library's call (which baseline x86-64 makes for
+/// `floor` and `trunc`): the integer conversion truncates, one less where that rounded up
+/// (below zero).
+fn floor_small(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t > x { t - 1.0 } else { t }
+}
+
 /// The 4 × 4 × 8 descriptor at (x, y), scale `sigma`, orientation `angle` (octave pixels),
 /// with trilinear interpolation, a Gaussian window of half the descriptor's width, and the
 /// clamp at 0.2.
-fn describe(g: &Plane, x: f32, y: f32, sigma: f32, angle: f32) -> Descriptor {
+fn describe(g: &mut Gradients, x: f32, y: f32, sigma: f32, angle: f32) -> Descriptor {
     let cell = CELL_SCALE * sigma;
     let radius = (cell * std::f32::consts::SQRT_2 * (CELLS as f32 + 1.0) * 0.5).round() as isize;
     let (c, s) = (angle.cos(), angle.sin());
@@ -473,7 +506,7 @@ fn describe(g: &Plane, x: f32, y: f32, sigma: f32, angle: f32) -> Descriptor {
             if bx <= -1.0 || bx >= CELLS as f32 || by <= -1.0 || by >= CELLS as f32 {
                 continue;
             }
-            let Some((m, a)) = gradient(g, cx + dx, cy + dy) else {
+            let Some((m, a)) = g.at(cx + dx, cy + dy) else {
                 continue;
             };
             let wgt = (-(rx * rx + ry * ry) / (2.0 * half * half)).exp() * m;
@@ -481,7 +514,8 @@ fn describe(g: &Plane, x: f32, y: f32, sigma: f32, angle: f32) -> Descriptor {
             if o >= DIR_BINS as f32 {
                 o -= DIR_BINS as f32;
             }
-            let (x0, y0, o0) = (bx.floor(), by.floor(), o.floor());
+            // o ≥ 0, so truncation is its floor; bx and by lie in (−1, CELLS).
+            let (x0, y0, o0) = (floor_small(bx), floor_small(by), o as i32 as f32);
             let (ax, ay, ao) = (bx - x0, by - y0, o - o0);
             for (iy, wy) in [(y0 as isize, 1.0 - ay), (y0 as isize + 1, ay)] {
                 if iy < 0 || iy >= CELLS as isize {
@@ -557,6 +591,50 @@ mod tests {
     /// Hand case: a lone Gaussian blob of σ 4 px is found at its centre at about its own
     /// scale (the scale-normalised Laplacian of a Gaussian blob of σ_b peaks at σ = σ_b), as a
     /// bright blob's minimum of D (D = G(kσ) − G(σ) is negative on a bright peak).
+    /// The floor without the maths library is the floor, across zero and at integers.
+    #[test]
+    fn floor_small_is_the_floor() {
+        for k in -4000..4000 {
+            let x = k as f32 * 0.0037;
+            assert_eq!(floor_small(x), x.floor(), "{x}");
+        }
+        for x in [-1.0f32, -0.0, 0.0, 1.0, 3.0, -0.999_999_94, 3.999_999_8] {
+            assert_eq!(floor_small(x), x.floor(), "{x}");
+        }
+    }
+
+    /// A gradient read through the cache is the one computed from the level's pixels, on
+    /// the first read and the second, and none at the edge.
+    #[test]
+    fn cached_gradients_are_the_level_s_own() {
+        let (w, h) = (9usize, 7usize);
+        let plane = Plane {
+            w,
+            h,
+            v: (0..w * h).map(|k| ((k * 37 % 11) as f32).sin()).collect(),
+        };
+        let mut g = Gradients::new(&plane);
+        for _ in 0..2 {
+            for y in 1..h - 1 {
+                for x in 1..w - 1 {
+                    let dx = plane.at(x + 1, y) - plane.at(x - 1, y);
+                    let dy = plane.at(x, y + 1) - plane.at(x, y - 1);
+                    let want = ((dx * dx + dy * dy).sqrt(), dy.atan2(dx));
+                    assert_eq!(g.at(x as isize, y as isize), Some(want), "({x}, {y})");
+                }
+            }
+        }
+        for (x, y) in [
+            (0, 3),
+            (3, 0),
+            (w as isize - 1, 3),
+            (3, h as isize - 1),
+            (-2, 1),
+        ] {
+            assert_eq!(g.at(x, y), None, "({x}, {y})");
+        }
+    }
+
     #[test]
     fn a_gaussian_blob_is_found_at_its_centre_and_scale() {
         let b = [(120.3, 90.6, 4.0, 0.4)];
