@@ -18,10 +18,12 @@ use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Instant;
 
-/// Measures (1) the real-time factor of the scenario with its lasers, (2) without them
-/// (physics, robot and controller alone), and (3) single-thread ray casts per second from
-/// random free poses of the scenario's world with the URG-04LX's and a 30 m beam fan.
-pub fn bench(s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> {
+/// Measures (1) the real-time factor of the scenario (loaded from `path`) with its lasers
+/// and stack, (2) without them (physics, robot and controller alone: the lasers, the stack's
+/// modules and the gates left out, the controller driving on the true pose), and (3)
+/// single-thread ray casts per second from random free poses of the scenario's world with
+/// the URG-04LX's and a 30 m beam fan.
+pub fn bench(path: &Path, s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> {
     let opts = RunOptions {
         seed: None,
         duration,
@@ -30,8 +32,7 @@ pub fn bench(s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> 
         force: false,
     };
     let full = run_in_memory(s, &opts)?;
-    let mut bare = s.clone();
-    bare.lidars.clear();
+    let (bare, drives) = physics_only(path, s, duration)?;
     let physics = run_in_memory(&bare, &opts)?;
 
     let mut sim = Simulation::new(
@@ -53,9 +54,52 @@ pub fn bench(s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> 
         "scenario": s.spec.name,
         "sim_time_s": full.sim_time,
         "with_lasers": { "wall_time_s": full.wall_time, "real_time_factor": full.sim_time / full.wall_time, "laser_rays": full.laser_rays, "steps": full.steps },
-        "physics_only": { "wall_time_s": physics.wall_time, "real_time_factor": physics.sim_time / physics.wall_time },
+        "physics_only": {
+            "wall_time_s": physics.wall_time,
+            "real_time_factor": physics.sim_time / physics.wall_time,
+            "controller": if drives { "the scenario's, on the true pose" } else { "standing still: the scenario's needs its stack" },
+        },
         "ray_casting_one_core": rates,
     }))
+}
+
+/// The scenario without its lasers and its stack: only `[controller]` of the modules' tables,
+/// on the true pose where it names a pose source (the localiser it would read is gone), and
+/// no gates (their metrics are gone with the modules). A controller that cannot drive without
+/// them (exploration on SLAM's map, a stop-and-scan survey on its laser) is replaced by a
+/// script that stands still for the run's duration. With whether the scenario's own
+/// controller drives.
+fn physics_only(path: &Path, s: &Scenario, duration: Option<f64>) -> Result<(Scenario, bool)> {
+    let mut spec = s.spec.clone();
+    spec.lidar.clear();
+    spec.gate.clear();
+    spec.modules.retain(|k, _| k == "controller");
+    if let Some(toml::Value::Table(c)) = spec.modules.get_mut("controller")
+        && c.contains_key("pose_source")
+    {
+        c.insert("pose_source".into(), "ground_truth".into());
+    }
+    let world = |_: &Path| Ok(s.world.clone());
+    if let Ok(bare) = crate::stack::from_spec_with(path, spec.clone(), &mut { world }) {
+        return Ok((bare, true));
+    }
+    // Standing still for the whole run (an idle controller would end the run at once).
+    let mut still = toml::Table::new();
+    let length = duration.map_or(spec.duration, |d| d.max(spec.duration));
+    still.insert("duration".into(), length.into());
+    still.insert("velocity".into(), 0.0.into());
+    let mut standing = toml::Table::new();
+    standing.insert("type".into(), "segments".into());
+    standing.insert(
+        "segments".into(),
+        toml::Value::Array(vec![toml::Value::Table(still)]),
+    );
+    spec.modules
+        .insert("controller".into(), toml::Value::Table(standing));
+    let bare = crate::stack::from_spec_with(path, spec, &mut { world }).map_err(|e| {
+        anyhow::anyhow!("the scenario without its lasers and stack (physics only): {e}")
+    })?;
+    Ok((bare, false))
 }
 
 /// `n` random camera poses in the world's bounds at height `z`, each with free space around

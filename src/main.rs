@@ -1160,7 +1160,7 @@ fn bench(command: BenchCommand) -> Result<i32> {
             scenario,
             duration,
             rays,
-        } => bench::bench(&load(&scenario)?, duration, rays.max(682))?,
+        } => bench::bench(&scenario, &load(&scenario)?, duration, rays.max(682))?,
         BenchCommand::Scan3d { scenario, repeats } => {
             stack::scan3d::bench(&load(&scenario)?, repeats)?
         }

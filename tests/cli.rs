@@ -1388,6 +1388,37 @@ fn a_missing_gpu_driver_is_a_clear_error() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("FUTAGO_GPU_BACKEND"));
 }
 
+/// `futago bench sim` measures scenarios whose stack reads the lasers: the physics-only run
+/// leaves the stack out and drives the scenario's controller on the true pose (office-mcl,
+/// which drives on its localiser), or stands still where the controller needs the stack
+/// (exploration on SLAM's map); both runs simulate the asked time.
+#[test]
+fn the_simulator_bench_runs_scenarios_whose_stack_reads_the_lasers() {
+    for (sc, drives) in [
+        ("scenarios/office-mcl.toml", true),
+        ("scenarios/office-explore.toml", false),
+    ] {
+        let o = futago(&["bench", "sim", sc, "--duration", "3", "--rays", "1000"]);
+        ok(&o);
+        let b: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let sim = b["sim_time_s"].as_f64().unwrap();
+        assert!((sim - 3.0).abs() < 0.05, "{sc}: {b}");
+        let p = &b["physics_only"];
+        let rtf = p["real_time_factor"].as_f64().unwrap();
+        let wall = p["wall_time_s"].as_f64().unwrap();
+        // The physics-only run simulated the same 3 s.
+        assert!((rtf * wall - 3.0).abs() < 0.05, "{sc}: {p}");
+        assert_eq!(
+            p["controller"]
+                .as_str()
+                .unwrap()
+                .starts_with("the scenario's"),
+            drives,
+            "{sc}: {p}"
+        );
+    }
+}
+
 #[test]
 fn sensor_bench_reads_poses_and_rejects_bad_ones() {
     let tmp = tempfile::tempdir().unwrap();
