@@ -670,8 +670,9 @@ const SR4000_RANGE: f64 = 5.0;
 /// Seed 002's depth-camera MCL: milliseconds per frame (the batched render of every
 /// particle's depth, the re-projection of the measured image, the likelihood, weighting and
 /// resampling) for each particle count and render size, on the SR4000's 43.6° × 34.6°
-/// camera at the Kinect's 0.42 m over `start`, the measured image rendered at the truth;
-/// then the same with the likelihood field in 3D (no render), and the field's build time.
+/// camera at the Kinect's 0.42 m over `start`, the measured image rendered at the truth:
+/// weighed by the likelihood field in 3D (no render) and by the seed's render-and-compare
+/// (with the render's own time), and the field's build time.
 pub fn bench_depth_mcl(
     world: &World,
     start: Pose2,
@@ -679,6 +680,7 @@ pub fn bench_depth_mcl(
     sizes: &[[u32; 2]],
     frames: usize,
 ) -> Result<Value> {
+    use crate::stack::depth_localization::{scene_meshes, surface_field};
     use futago_msgs::camera::Intrinsics;
     use futago_robot::localization::depth_mcl::{
         CameraState, DepthMcl, DepthMclConfig, DepthModel, Likelihood, MeshModel, model_far,
@@ -686,27 +688,14 @@ pub fn bench_depth_mcl(
     };
     let scene = world.scene();
     let renderer = futago_render::Renderer::new(&scene).context("starting the renderer")?;
-    let meshes: Vec<futago_render::TriMesh> = scene
-        .bodies
-        .iter()
-        .flat_map(|b| {
-            b.parts
-                .iter()
-                .map(|p| p.mesh.transformed(b.pose.rotation, b.pose.translation, 1.0))
-        })
-        .collect();
     let t = Instant::now();
-    let field = crate::stack::depth_localization::surface_field(
-        &meshes,
-        DepthMclConfig::default().field_cell,
-    )?;
+    let field = surface_field(&scene_meshes(&scene), DepthMclConfig::default().field_cell)?;
     let field_build_s = t.elapsed().as_secs_f64();
     let field_voxels = field.dims();
     let mut model = MeshModel {
         renderer,
         field: Some(field),
     };
-    let renderer = &mut model.renderer;
     let camera = Intrinsics::from_fov(176, 144, 43.6f64.to_radians(), 34.6f64.to_radians())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let truth = CameraState {
@@ -718,7 +707,7 @@ pub fn bench_depth_mcl(
         rpy: [0.0, 0.0, start.theta],
     };
     let mut measured = Vec::new();
-    renderer
+    model
         .render_batch(&camera, &[truth.pose()], SR4000_RANGE, &mut measured)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let image = futago_msgs::camera::DepthImage {
@@ -727,70 +716,49 @@ pub fn bench_depth_mcl(
         data: measured,
     };
     let mut rows = Vec::new();
-    for &n in particles {
-        for &[w, h] in sizes {
-            let k = camera.scaled(w, h);
-            let config = DepthMclConfig {
-                particles: n,
-                likelihood: Likelihood::Field,
-                ..DepthMclConfig::default()
-            };
-            let mut mcl = DepthMcl::new(config, truth, 1);
-            let z = reproject(&image, &camera, &k);
-            mcl.update(&mut model, &k, &z, SR4000_RANGE, None)
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
-            let t = Instant::now();
-            for _ in 0..frames.max(1) {
+    for likelihood in [Likelihood::Field, Likelihood::Seed] {
+        for &n in particles {
+            for &[w, h] in sizes {
+                let k = camera.scaled(w, h);
+                let config = DepthMclConfig {
+                    particles: n,
+                    likelihood,
+                    ..DepthMclConfig::default()
+                };
+                let mut mcl = DepthMcl::new(config, truth, 1);
                 let z = reproject(&image, &camera, &k);
                 mcl.update(&mut model, &k, &z, SR4000_RANGE, None)
                     .map_err(|e| anyhow::anyhow!("{e}"))?;
+                let t = Instant::now();
+                for _ in 0..frames.max(1) {
+                    // The measured image is re-projected every frame, as the node does.
+                    let z = reproject(&image, &camera, &k);
+                    mcl.update(&mut model, &k, &z, SR4000_RANGE, None)
+                        .map_err(|e| anyhow::anyhow!("{e}"))?;
+                }
+                let ms = t.elapsed().as_secs_f64() * 1e3 / frames.max(1) as f64;
+                let mut row = json!({
+                    "likelihood": likelihood,
+                    "particles": n,
+                    "size": [w, h],
+                    "ms_per_frame": ms,
+                });
+                if likelihood != Likelihood::Field {
+                    // The render alone, of the particles as the last frame left them.
+                    let poses: Vec<_> = mcl.particles().iter().map(|p| p.pose()).collect();
+                    let far = model_far(SR4000_RANGE, config.alpha);
+                    let mut out = Vec::new();
+                    let t = Instant::now();
+                    for _ in 0..frames.max(1) {
+                        model
+                            .render_batch(&k, &poses, far, &mut out)
+                            .map_err(|e| anyhow::anyhow!("{e}"))?;
+                    }
+                    row["render_ms"] =
+                        json!(t.elapsed().as_secs_f64() * 1e3 / frames.max(1) as f64);
+                }
+                rows.push(row);
             }
-            let ms = t.elapsed().as_secs_f64() * 1e3 / frames.max(1) as f64;
-            rows.push(json!({
-                "likelihood": "field",
-                "particles": n,
-                "size": [w, h],
-                "ms_per_frame": ms,
-            }));
-        }
-    }
-    let renderer = &mut model.renderer;
-    for &n in particles {
-        for &[w, h] in sizes {
-            let k = camera.scaled(w, h);
-            let config = DepthMclConfig {
-                particles: n,
-                ..DepthMclConfig::default()
-            };
-            let mut mcl = DepthMcl::new(config, truth, 1);
-            let z = reproject(&image, &camera, &k);
-            mcl.update(renderer, &k, &z, SR4000_RANGE, None)
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
-            let t = Instant::now();
-            for _ in 0..frames.max(1) {
-                // The measured image is re-projected every frame, as the node does.
-                let z = reproject(&image, &camera, &k);
-                mcl.update(renderer, &k, &z, SR4000_RANGE, None)
-                    .map_err(|e| anyhow::anyhow!("{e}"))?;
-            }
-            let ms = t.elapsed().as_secs_f64() * 1e3 / frames.max(1) as f64;
-            // The render alone, of the particles as the last frame left them.
-            let poses: Vec<_> = mcl.particles().iter().map(|p| p.pose()).collect();
-            let mut out = Vec::new();
-            let t = Instant::now();
-            for _ in 0..frames.max(1) {
-                renderer
-                    .render_batch(&k, &poses, model_far(SR4000_RANGE, config.alpha), &mut out)
-                    .map_err(|e| anyhow::anyhow!("{e}"))?;
-            }
-            let render_ms = t.elapsed().as_secs_f64() * 1e3 / frames.max(1) as f64;
-            rows.push(json!({
-                "likelihood": "seed",
-                "particles": n,
-                "size": [w, h],
-                "ms_per_frame": ms,
-                "render_ms": render_ms,
-            }));
         }
     }
     let triangles: usize = scene

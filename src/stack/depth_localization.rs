@@ -190,8 +190,8 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<DepthLocalizationNode>> {
     }))
 }
 
-/// Voxels a model's distance field may take (4 bytes each): the office at 5 cm is some
-/// 30 million.
+/// Voxels a model's distance field may take (2 bytes each, 6 while it is built): the office's
+/// world at 5 cm takes some 17 million.
 const MAX_FIELD_VOXELS: u64 = 100_000_000;
 
 /// The distance field of the model's surfaces (its meshes in the model's frame), for the
@@ -216,6 +216,19 @@ pub fn surface_field(meshes: &[futago_render::TriMesh], cell: f64) -> Result<Dis
         .map_err(|e| anyhow::anyhow!("depth_localization.mcl.field_cell: {e}"))
 }
 
+/// Every body of a scene at its initial pose, as meshes in the world frame.
+pub fn scene_meshes(scene: &futago_render::Scene) -> Vec<futago_render::TriMesh> {
+    scene
+        .bodies
+        .iter()
+        .flat_map(|b| {
+            b.parts
+                .iter()
+                .map(|p| p.mesh.transformed(b.pose.rotation, b.pose.translation, 1.0))
+        })
+        .collect()
+}
+
 /// The model's scene, a description of it for the summary, and, when `keep`, its meshes in
 /// the model's frame (for the free space).
 fn model_scene(
@@ -229,27 +242,15 @@ fn model_scene(
     Option<Vec<futago_render::TriMesh>>,
 )> {
     let key = "depth_localization.model.file";
-    // Every body of a scene at its initial pose, in the world frame.
-    let flatten = |scene: &futago_render::Scene| {
-        scene
-            .bodies
-            .iter()
-            .flat_map(|b| {
-                b.parts
-                    .iter()
-                    .map(|p| p.mesh.transformed(b.pose.rotation, b.pose.translation, 1.0))
-            })
-            .collect::<Vec<_>>()
-    };
     let (meshes, source) = match &spec.file {
         None if spec.perturb.is_none() => {
             let scene = s.world.scene();
-            let meshes = flatten(&scene);
+            let meshes = scene_meshes(&scene);
             let triangles: usize = meshes.iter().map(|m| m.triangle_count()).sum();
             let v = json!({ "source": "world", "triangles": triangles });
             return Ok((scene, v, keep.then_some(meshes)));
         }
-        None => (flatten(&s.world.scene()), "world".to_string()),
+        None => (scene_meshes(&s.world.scene()), "world".to_string()),
         Some(file) => {
             let path = Path::new(file);
             let ext = path

@@ -51,14 +51,14 @@ pub trait DepthModel {
     }
 }
 
-/// A model drawn by the stack's renderer, with the distance field of the same surfaces where
-/// the filter weighs by the likelihood field.
-pub struct MeshModel {
-    pub renderer: futago_render::Renderer,
+/// A model drawn by a renderer (by default the stack's), with the distance field of the same
+/// surfaces where the filter weighs by the likelihood field.
+pub struct MeshModel<R = futago_render::Renderer> {
+    pub renderer: R,
     pub field: Option<DistanceField>,
 }
 
-impl DepthModel for MeshModel {
+impl<R: DepthModel> DepthModel for MeshModel<R> {
     fn render_batch(
         &mut self,
         intr: &Intrinsics,
@@ -1245,35 +1245,13 @@ mod tests {
         t
     }
 
-    /// The room with its distance field, where the filter weighs by the likelihood field.
-    struct FieldRoom {
-        room: BoxRoom,
-        field: Option<DistanceField>,
-    }
-
-    impl DepthModel for FieldRoom {
-        fn render_batch(
-            &mut self,
-            intr: &Intrinsics,
-            poses: &[Pose3],
-            far: f64,
-            out: &mut Vec<f32>,
-        ) -> Result<(), String> {
-            self.room.render_batch(intr, poses, far, out)
-        }
-
-        fn field(&self) -> Option<&DistanceField> {
-            self.field.as_ref()
-        }
-    }
-
     fn track_with(pillars: bool, config: DepthMclConfig, step: f64) -> (f64, f64, f64) {
         let field = (config.likelihood == Likelihood::Field).then(|| {
             DistanceField::new(&room_triangles(pillars), config.field_cell, 0.5, 10_000_000)
                 .unwrap()
         });
-        let mut room = FieldRoom {
-            room: BoxRoom { pillars },
+        let mut room = MeshModel {
+            renderer: BoxRoom { pillars },
             field,
         };
         let start = CameraState {
@@ -1287,7 +1265,7 @@ mod tests {
             truth.position[0] += step;
             truth.position[1] = 2.0 + 0.1 * (k as f64 * 0.2).sin();
             truth.rpy[2] = 0.2 + 0.1 * (k as f64 * 0.15).sin();
-            let z = render(&room.room, &truth);
+            let z = render(&room.renderer, &truth);
             let est = mcl.update(&mut room, &intr(), &z, RANGE, None).unwrap();
             errors.push(
                 (est.state.position[0] - truth.position[0])
