@@ -173,6 +173,8 @@ pub fn node(s: &Scenario, out: Option<&Path>) -> Result<Option<PeopleNode>> {
             leg_scans: LegScans::default(),
             people: LaserPeople::new(s.spec.people, default_model()?),
             map_seen: None,
+            maps_taken: 0,
+            map_period: s.spec.people.map_period,
             frames: Vec::new(),
             scans: Vec::new(),
             unscored: None,
@@ -228,8 +230,11 @@ struct Tracking {
     /// The segments of the people each scan sees ([`LegScans`]).
     leg_scans: LegScans,
     people: LaserPeople,
-    /// The time of the map last given to `people`.
+    /// The time of the map last given to `people`, and how many it was given.
     map_seen: Option<Time>,
+    maps_taken: usize,
+    /// Maps are wanted no more often than this ([`PeopleConfig::map_period`]).
+    map_period: f64,
     frames: Vec<Frame>,
     scans: Vec<ScanFrame>,
     /// People in depth images, feeding the same tracker.
@@ -370,6 +375,7 @@ impl Node for PeopleNode {
 
     fn streams(&self) -> Streams {
         let mut consumes = vec!["truth".to_string()];
+        let mut periods = Vec::new();
         if let Some(t) = &self.tracking {
             consumes.push(format!("scan/{}", t.laser));
             if let Some(d) = &t.depth {
@@ -378,16 +384,22 @@ impl Node for PeopleNode {
             if let Some(src) = t.source {
                 consumes.push(format!("pose/{src}"));
                 consumes.push(format!("map/{src}"));
+                if t.map_period > 0.0 {
+                    periods.push((
+                        format!("map/{src}"),
+                        futago_msgs::Duration::from_secs(t.map_period),
+                    ));
+                }
             }
         }
         Streams {
+            periods,
             publishes: self
                 .tracking
                 .iter()
                 .map(|_| "people/tracked".to_string())
                 .collect(),
             consumes,
-            ..Streams::default()
         }
     }
 
@@ -457,6 +469,7 @@ impl Node for PeopleNode {
         {
             t.people.set_map(map);
             t.map_seen = Some(stamp);
+            t.maps_taken += 1;
         }
         let in_map = t
             .source
@@ -595,6 +608,7 @@ impl Node for PeopleNode {
             let m = clear_mot(&t.frames, crate::ground_truth::mot::MOT_GATE);
             let mut tracking = m.summary();
             tracking["laser"] = json!(t.laser);
+            tracking["maps_taken"] = json!(t.maps_taken);
             entry["tracking"] = tracking;
             entry["leg_scans"] = t.leg_scans.summary();
             let mut detection = serde_json::Map::new();
