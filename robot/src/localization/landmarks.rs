@@ -301,15 +301,17 @@ impl SearchConfig {
 }
 
 /// The pose of the window with the least `cost` (the first such in [`SearchConfig::poses`]'s
-/// order), and that cost.
+/// order), and that cost. `cost(pose, bound)` is handed the least cost so far: a cost that
+/// is a sum of non-negative terms may stop adding once it reaches `bound` and return what it
+/// has, since that pose can no longer be the least, and the search's result is the same.
 pub fn grid_search(
     config: &SearchConfig,
     prior: &Pose2,
-    mut cost: impl FnMut(&Pose2) -> f64,
+    mut cost: impl FnMut(&Pose2, f64) -> f64,
 ) -> (Pose2, f64) {
     let mut best = (*prior, f64::INFINITY);
     for p in config.poses(prior) {
-        let c = cost(&p);
+        let c = cost(&p, best.1);
         if c < best.1 {
             best = (p, c);
         }
@@ -692,6 +694,21 @@ pub fn prepare(
 /// Eq. 19 at `pose`: the sum of the matches' image-plane Mahalanobis distances, each capped
 /// at `outlier`.
 pub fn reprojection_cost(camera: &Camera, pose: &Pose2, m: &[Prepared], outlier: f64) -> f64 {
+    reprojection_cost_below(camera, pose, m, outlier, f64::INFINITY)
+}
+
+/// [`reprojection_cost`], which stops adding once the sum reaches `bound` and returns the sum
+/// so far: each term is a Mahalanobis distance (the information is positive definite, the
+/// pixel noise's variance added to every covariance) or the cap, never negative, so the whole
+/// sum would be no less, and [`grid_search`] keeps the same pose. Most of the search's poses
+/// are far from the least cost, and stop after a few of the matches.
+pub fn reprojection_cost_below(
+    camera: &Camera,
+    pose: &Pose2,
+    m: &[Prepared],
+    outlier: f64,
+    bound: f64,
+) -> f64 {
     let r = optical_rotation(pose.theta);
     let c = camera.centre(pose);
     let k = &camera.intrinsics;
@@ -708,6 +725,9 @@ pub fn reprojection_cost(camera: &Camera, pose: &Pose2, m: &[Prepared], outlier:
             e.dot(p.information * e).min(outlier)
         };
         sum += d;
+        if sum >= bound {
+            return sum;
+        }
     }
     sum
 }
@@ -771,8 +791,8 @@ pub fn localise(
     } else {
         match solver {
             Solver::Search => {
-                let (best, cost) = grid_search(&config.search, prior, |p| {
-                    reprojection_cost(camera, p, &prepared, config.outlier)
+                let (best, cost) = grid_search(&config.search, prior, |p, bound| {
+                    reprojection_cost_below(camera, p, &prepared, config.outlier, bound)
                 });
                 if config.refine {
                     refine(camera, &best, cost, &prepared, config.outlier)
@@ -1014,9 +1034,14 @@ mod tests {
             });
         }
         let cfg = MonocularConfig::default();
-        let (best, _) = grid_search(&cfg.search, &prior, |p| {
+        let (best, _) = grid_search(&cfg.search, &prior, |p, _| {
             reprojection_cost(&c, p, &m, cfg.outlier)
         });
+        // Stopping each sum at the least so far finds the same pose and cost.
+        let bounded = grid_search(&cfg.search, &prior, |p, bound| {
+            reprojection_cost_below(&c, p, &m, cfg.outlier, bound)
+        });
+        assert_eq!(bounded.0, best);
         assert!(best.distance(&truth) < 0.011, "{best:?}");
         assert!((best.theta - truth.theta).abs() < 0.6f64.to_radians());
         let r = pnp_ransac(&c, &prior, &m, 7, &cfg);

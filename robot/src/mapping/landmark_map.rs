@@ -293,11 +293,26 @@ impl LandmarkMapper {
         })
     }
 
-    /// Eq. 11's sum at `pose`, each match's distance capped (see the module).
-    fn cost(&self, pose: &Pose2, points: &[StereoPoint], m: &[(PointMatch, DMat3)]) -> f64 {
-        self.distances(pose, points, m)
-            .map(|d| d.min(self.config.outlier))
-            .sum()
+    /// Eq. 11's sum at `pose`, each match's distance capped (see the module); or `Err` with
+    /// the sum so far once it reaches `bound`: every term is a Mahalanobis distance or the
+    /// cap, never negative, and the search's prediction term is one too, so the pose's whole
+    /// cost would be no less, and [`grid_search`] keeps the same pose.
+    fn cost_below(
+        &self,
+        pose: &Pose2,
+        points: &[StereoPoint],
+        m: &[(PointMatch, DMat3)],
+        bound: f64,
+    ) -> Result<f64, f64> {
+        // The empty sum, as `Iterator::sum` starts from it, so the additions are the same.
+        let mut sum: f64 = std::iter::empty::<f64>().sum();
+        for d in self.distances(pose, points, m) {
+            sum += d.min(self.config.outlier);
+            if sum >= bound {
+                return Err(sum);
+            }
+        }
+        Ok(sum)
     }
 
     /// Gauss–Newton on eq. 11 from the grid's best pose `start`, over the matches within the
@@ -401,13 +416,15 @@ impl LandmarkMapper {
                         .collect()
                 };
                 let mut cache: Vec<(i64, Vec<(PointMatch, DMat3)>)> = Vec::new();
-                let grid = grid_search(&self.config.search, &prior, |p| {
+                let grid = grid_search(&self.config.search, &prior, |p, bound| {
                     let key = (p.theta * 1e6).round() as i64;
                     if cache.last().is_none_or(|(k, _)| *k != key) {
                         cache.clear();
                         cache.push((key, infos(p.theta)));
                     }
-                    self.cost(p, points, &cache[0].1) + predicted_cost(p, prediction.as_ref())
+                    self.cost_below(p, points, &cache[0].1, bound)
+                        .unwrap_or_else(|partial| partial)
+                        + predicted_cost(p, prediction.as_ref())
                 })
                 .0;
                 self.refine(grid, points, &infos(grid.theta), prediction.as_ref())
