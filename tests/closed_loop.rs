@@ -216,40 +216,25 @@ fn exploration_maps_both_rooms_on_slam_without_a_bump() {
 fn people_tracking_takes_a_growing_map_at_its_period() {
     let tmp = tempfile::tempdir().unwrap();
     let world = root().join("worlds/lab.toml");
-    let scenario = write(
-        tmp.path(),
-        "slam-people.toml",
-        format!(
-            "name = \"slam-people\"\nworld = {world:?}\nduration = 6.0\nstart = \"centre\"\n\
-             [[lidar]]\nname = \"front\"\npreset = \"utm-30lx\"\n\
-             [slam]\nlaser = \"front\"\nmin_travel = 0.02\nmin_turn = 0.02\n\
-             [controller]\ntype = \"segments\"\nsegments = [{{ duration = 6.0, wheels = [-0.1, 0.1] }}]\n\
-             [[person]]\nname = \"p\"\nroute = [[4.5, 2.5], [4.5, 4.5]]\nmode = \"back_and_forth\"\n"
-        ),
-    );
-    let taken = |dir: &str, period: Option<&str>| {
-        let overlays: Vec<futago::overlay::Overlay> = period
-            .map(|p| {
-                futago::overlay::Overlay::parse_set(&format!("people.map_period={p}")).unwrap()
-            })
-            .into_iter()
-            .collect();
-        let s = futago::stack::load_with(&scenario, &overlays).unwrap_or_else(|e| panic!("{e}"));
-        let opts = RunOptions {
-            seed: None,
-            duration: None,
-            progress: false,
-            report: false,
-            force: false,
-        };
-        let (summary, _) =
-            run::run(&s, &opts, &tmp.path().join(dir)).unwrap_or_else(|e| panic!("{e:#}"));
+    let taken = |name: &str, people: &str| {
+        let scenario = write(
+            tmp.path(),
+            &format!("{name}.toml"),
+            format!(
+                "name = \"slam-people\"\nworld = {world:?}\nduration = 6.0\nstart = \"centre\"\n\
+                 [[lidar]]\nname = \"front\"\npreset = \"utm-30lx\"\n\
+                 [slam]\nlaser = \"front\"\nmin_travel = 0.02\nmin_turn = 0.02\n\
+                 [controller]\ntype = \"segments\"\nsegments = [{{ duration = 6.0, wheels = [-0.1, 0.1] }}]\n\
+                 [[person]]\nname = \"p\"\nroute = [[4.5, 2.5], [4.5, 4.5]]\nmode = \"back_and_forth\"\n{people}"
+            ),
+        );
+        let summary = run_for(&scenario, &tmp.path().join(name), None);
         summary["people"]["tracking"]["maps_taken"]
             .as_u64()
             .unwrap()
     };
-    let every = taken("every", Some("0"));
-    let periodic = taken("periodic", None);
+    let every = taken("every", "[people]\nmap_period = 0.0\n");
+    let periodic = taken("periodic", "");
     assert!(every > 50, "{every} maps taken at every change");
     assert!((3..=7).contains(&periodic), "{periodic} maps taken at 1 s");
 }

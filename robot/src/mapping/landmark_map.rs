@@ -422,9 +422,10 @@ impl LandmarkMapper {
                         cache.clear();
                         cache.push((key, infos(p.theta)));
                     }
-                    self.cost_below(p, points, &cache[0].1, bound)
-                        .unwrap_or_else(|partial| partial)
-                        + predicted_cost(p, prediction.as_ref())
+                    match self.cost_below(p, points, &cache[0].1, bound) {
+                        Ok(sum) => sum + predicted_cost(p, prediction.as_ref()),
+                        Err(partial) => partial,
+                    }
                 })
                 .0;
                 self.refine(grid, points, &infos(grid.theta), prediction.as_ref())

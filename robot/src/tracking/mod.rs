@@ -39,7 +39,9 @@ pub struct PeopleConfig {
     /// at every change). Taking one computes its distance transform over the whole grid:
     /// at every SLAM update among walkers that was 264 of a 300 s run in the pillared hall,
     /// and a map a second old lacks only what the robot has seen in that second, which the
-    /// map difference reads as unknown, not free, so it flags nothing there.
+    /// map difference reads as unknown, not free, so it flags nothing there. (After a loop
+    /// closure moves SLAM's map, the old one is read against the new pose for up to that
+    /// long.)
     pub map_period: f64,
 }
 
