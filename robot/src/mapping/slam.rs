@@ -793,10 +793,9 @@ impl Slam {
     }
 
     /// Call at the end of a log. Optimises once more if loop closures arrived since the last
-    /// optimisation; then, for the graph method, searches every keyframe against every submap
-    /// ([`GraphConfig::final_search`]), optimises, and removes the loop closures left further
-    /// than [`GraphConfig::outlier_sigmas`] from the optimum, re-optimising after each removal
-    /// (twice at most: a removal can unmask one more).
+    /// optimisation; then, for the graph method, removes the loop closures left further than
+    /// [`GraphConfig::outlier_sigmas`] from the optimum, searches every keyframe against every
+    /// submap ([`GraphConfig::final_search`]), optimises, and removes outliers again.
     pub fn finish(&mut self) {
         if self.pending_loops > 0 {
             self.optimize();
@@ -804,19 +803,31 @@ impl Slam {
         if self.config.method != SlamMethod::Graph {
             return;
         }
-        let g = self.config.graph;
-        if g.final_search && self.final_loops() > 0 {
+        // The final search keeps the matches that agree with the graph's estimate, so the
+        // outliers go first: a graph bent by a wrong loop closure would have the search
+        // confirm more of the same.
+        self.remove_outliers();
+        if self.config.graph.final_search && self.final_loops() > 0 {
             self.optimize();
+            self.remove_outliers();
         }
-        if g.outlier_sigmas > 0.0 {
-            for _ in 0..2 {
-                let removed = self.graph.remove_outliers(g.outlier_sigmas);
-                if removed == 0 {
-                    break;
-                }
-                self.outliers += removed;
-                self.optimize();
+    }
+
+    /// Removes the loop closures left further than [`GraphConfig::outlier_sigmas`] from the
+    /// optimum, re-optimising after each removal (twice at most: a removal can unmask one
+    /// more).
+    fn remove_outliers(&mut self) {
+        let sigmas = self.config.graph.outlier_sigmas;
+        if sigmas <= 0.0 {
+            return;
+        }
+        for _ in 0..2 {
+            let removed = self.graph.remove_outliers(sigmas);
+            if removed == 0 {
+                break;
             }
+            self.outliers += removed;
+            self.optimize();
         }
     }
 
@@ -1111,6 +1122,40 @@ mod tests {
         assert!(fixed.end_heading_error > 0.3, "{fixed:?}");
     }
 
+    /// A wrong loop closure that entered the graph online (a keyframe placed 1 m from where
+    /// its place is, as keyframes in a row that see one place alike can confirm) bends the
+    /// graph; the end of the log removes it as an outlier, and the trajectory ends as good as
+    /// without it. (On this ring the final search finds no wrong match on the bent graph
+    /// either, so the test holds whichever comes first; office-explore's seed 1, with the
+    /// beams cast at their own times, is where the order mattered: issue 47's note.)
+    #[test]
+    fn a_wrong_loop_closure_is_gone_by_the_end_of_the_log() {
+        let (clean, _) = ring_drive(SlamConfig::default(), 1.04);
+        let (bent, slam) = ring_drive_then(SlamConfig::default(), 1.04, |slam| {
+            let g = slam.config.graph;
+            let (from, to) = (0, slam.graph.nodes.len() / 2);
+            let wrong = slam.graph.nodes[from]
+                .between(&slam.graph.nodes[to])
+                .compose(&Pose2::new(1.0, 0.0, 0.0));
+            let mut edge = Edge::with_sigmas(
+                from,
+                to,
+                wrong,
+                [g.loop_sigma_xy, g.loop_sigma_xy, g.loop_sigma_angle],
+            );
+            edge.huber = Some(g.loop_huber);
+            slam.graph.edges.push(edge);
+            slam.loop_closures += 1;
+            slam.optimize();
+        });
+        assert!(slam.outliers() >= 1, "{bent:?}");
+        assert!(
+            bent.worst < clean.worst + 0.02,
+            "{bent:?} against {clean:?}"
+        );
+        assert!(bent.end_heading_error < 0.02, "{bent:?}");
+    }
+
     /// What [`ring_drive`] measured.
     #[derive(Debug)]
     struct RingResult {
@@ -1124,6 +1169,15 @@ mod tests {
     /// Graph SLAM on dead reckoning alone (the front end's matches refused) round [`ring`],
     /// with odometry that over-turns by the factor `turn_scale`.
     fn ring_drive(config: SlamConfig, turn_scale: f64) -> (RingResult, Slam) {
+        ring_drive_then(config, turn_scale, |_| {})
+    }
+
+    /// [`ring_drive`], with `before_finish` done to the SLAM before the end of the log.
+    fn ring_drive_then(
+        config: SlamConfig,
+        turn_scale: f64,
+        before_finish: impl FnOnce(&mut Slam),
+    ) -> (RingResult, Slam) {
         let config = SlamConfig {
             method: SlamMethod::Graph,
             max_correction: 0.0,
@@ -1156,6 +1210,7 @@ mod tests {
             truths.push(truth);
             odometry_worst = odometry_worst.max(odo.distance(&truth));
         }
+        before_finish(&mut slam);
         slam.finish();
         let traj = slam.trajectory();
         let worst = traj
