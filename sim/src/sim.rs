@@ -399,6 +399,10 @@ impl Simulation {
         );
         body.set_linvel(Vec3::ZERO, true);
         body.set_angvel(Vec3::ZERO, true);
+        // No beam is cast from somewhere between where the robot was and where it is put.
+        for l in &mut self.lidars {
+            l.forget_motion();
+        }
     }
 
     /// Ground-truth velocity of the robot in its own frame.

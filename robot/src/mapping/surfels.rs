@@ -60,6 +60,16 @@ pub struct SurfelConfig {
     /// A correction larger than this is refused, m and rad: the registration found some other
     /// place that fits, not the drift since the last view.
     pub max_correction: [f64; 2],
+    /// The error of a map plane at a pair at which the pair counts half, m: each pair counts
+    /// `1 / (1 + v / plane_sigma²)`, with `v` the variance of the map surfel's plane where the
+    /// sweep's surfel lies ([`Surfel::offset_variance`]) and of the sweep surfel's centroid.
+    /// The LMS200's 1.5 cm range noise over a cell's eight points places its plane to 5 mm at
+    /// the centroid, and a pair of two such surfels counts 0.64 (more points, more); a patch
+    /// of two far scan lines, or one tilted by a corner it straddles, reached a cell away
+    /// along it can be 2-5 cm off there, and its pair counts 0.2 to 0.04. Such patches made
+    /// most of the error of sweeps registered from the truth on hall-scan3d (issue 47's
+    /// note).
+    pub plane_sigma: f64,
     /// Directions whose share of the normalised JᵀJ falls below this are left unchanged
     /// ([`crate::mapping::registration::RegistrationConfig::degenerate`]).
     pub degenerate: f64,
@@ -78,6 +88,7 @@ impl Default for SurfelConfig {
             tolerance: 1e-5,
             min_pairs: 100,
             max_correction: [0.5, 0.1],
+            plane_sigma: 0.01,
             degenerate: 0.02,
         }
     }
@@ -100,6 +111,7 @@ impl SurfelConfig {
                 ("min_pairs", self.min_pairs as f64, 3.0, 1e9),
                 ("max_correction", self.max_correction[0], 0.0, 100.0),
                 ("max_correction", self.max_correction[1], 0.0, 3.2),
+                ("plane_sigma", self.plane_sigma, 1e-4, 10.0),
                 ("degenerate", self.degenerate, 0.0, 1e6),
             ],
         )?;
@@ -130,6 +142,33 @@ struct Moments {
 pub struct Surfel {
     pub centroid: [f64; 3],
     pub normal: [f64; 3],
+    /// The patch's in-plane axes (unit) and its points' variance along each, m², and its
+    /// points' variance off the plane and their count: what the plane's uncertainty is made
+    /// of ([`Surfel::offset_variance`]).
+    pub axes: [[f64; 3]; 2],
+    pub spread: [f64; 2],
+    pub thickness: f64,
+    pub count: u32,
+}
+
+impl Surfel {
+    /// The variance of the plane's offset at `at` (a point on or near it), m²: the least-squares
+    /// plane through `count` points scattered `thickness` off it has its offset at the
+    /// centroid uncertain by `thickness / count`, and its tilt about each in-plane axis by
+    /// `thickness / (count · spread)`, so the offset grows with the distance from the centroid
+    /// along the patch. A patch of few points seen from afar (two or three scan lines) is
+    /// well placed where it was measured and poorly a cell away.
+    pub fn offset_variance(&self, at: [f64; 3]) -> f64 {
+        let d = [
+            at[0] - self.centroid[0],
+            at[1] - self.centroid[1],
+            at[2] - self.centroid[2],
+        ];
+        let along = |a: [f64; 3]| d[0] * a[0] + d[1] * a[1] + d[2] * a[2];
+        let (d1, d2) = (along(self.axes[0]), along(self.axes[1]));
+        self.thickness / self.count as f64
+            * (1.0 + d1 * d1 / self.spread[0] + d2 * d2 / self.spread[1])
+    }
 }
 
 impl Moments {
@@ -174,11 +213,18 @@ impl Moments {
         if middle.is_nan() || middle <= 0.0 || small > c.planarity * middle {
             return None;
         }
-        let v = eig.eigenvectors.column(order[0]);
-        let len = v.norm();
-        (len > 0.0).then(|| Surfel {
+        let unit = |k: usize| {
+            let v = eig.eigenvectors.column(order[k]);
+            let len = v.norm();
+            (len > 0.0).then(|| [v[0] / len, v[1] / len, v[2] / len])
+        };
+        Some(Surfel {
             centroid: m,
-            normal: [v[0] / len, v[1] / len, v[2] / len],
+            normal: unit(0)?,
+            axes: [unit(1)?, unit(2)?],
+            spread: [middle, eig.eigenvalues[order[2]]],
+            thickness: small,
+            count: self.n,
         })
     }
 }
@@ -282,6 +328,7 @@ impl SurfelMap {
         own.add(points.iter().copied());
         let sweep = own.sideways();
         let agree = c.max_angle.to_radians().cos();
+        let plane2 = c.plane_sigma * c.plane_sigma;
         let refuse = |pairs, iterations| Registration {
             guess,
             pose: guess,
@@ -305,39 +352,46 @@ impl SurfelMap {
             };
             let max = c.max_distance[0] + f * (c.max_distance[1] - c.max_distance[0]);
             let (sin, cos) = pose.theta.sin_cos();
+            // JᵀJ's eigenvalues are the shares of the pairs that constrain each direction,
+            // each counted by its certainty (`degenerate`): a direction that only uncertain
+            // planes constrain is left as the guess has it.
+            let found: Vec<Pair> = sweep
+                .iter()
+                .filter_map(|own| {
+                    let (p, n) = (own.centroid, own.normal);
+                    let w = crate::mapping::registration::place(&pose, p);
+                    let n = [cos * n[0] - sin * n[1], sin * n[0] + cos * n[1], n[2]];
+                    let s = index
+                        .nearest_n(&w, CANDIDATES)
+                        .into_iter()
+                        .map(|j| &surfels[j])
+                        .find(|s| (0..3).map(|k| s.normal[k] * n[k]).sum::<f64>().abs() >= agree)?;
+                    let d2 = (0..3).map(|k| (w[k] - s.centroid[k]).powi(2)).sum::<f64>();
+                    let r = (0..3)
+                        .map(|k| s.normal[k] * (w[k] - s.centroid[k]))
+                        .sum::<f64>();
+                    // The centroids of two cells on one surface lie up to a cell apart
+                    // along it; the distance off the plane is what must be small.
+                    let reach = max + c.cell;
+                    // Tukey's biweight on the distance off the plane, as a scale of the
+                    // residual and its derivatives: a pair far off its plane (a person,
+                    // a surface the map has not got) pulls less as the distance shrinks.
+                    let weight = (1.0 - (r / max).powi(2)).powi(2);
+                    // Less for a pair whose map plane is poorly known where the
+                    // sweep's surfel lies (a patch of few points, tilted by a corner it
+                    // straddles, reached a cell away along it).
+                    let v = s.offset_variance(w) + own.thickness / own.count as f64;
+                    let weight = weight / (1.0 + v / plane2);
+                    (d2 <= reach * reach && r.abs() <= max).then_some(Pair {
+                        p,
+                        q: s.centroid,
+                        n: Some(s.normal.map(|v| v * weight.sqrt())),
+                    })
+                })
+                .collect();
             let term = Term {
                 weight: 1.0,
-                pairs: sweep
-                    .iter()
-                    .filter_map(|own| {
-                        let (p, n) = (own.centroid, own.normal);
-                        let w = crate::mapping::registration::place(&pose, p);
-                        let n = [cos * n[0] - sin * n[1], sin * n[0] + cos * n[1], n[2]];
-                        let s = index
-                            .nearest_n(&w, CANDIDATES)
-                            .into_iter()
-                            .map(|j| &surfels[j])
-                            .find(|s| {
-                                (0..3).map(|k| s.normal[k] * n[k]).sum::<f64>().abs() >= agree
-                            })?;
-                        let d2 = (0..3).map(|k| (w[k] - s.centroid[k]).powi(2)).sum::<f64>();
-                        let r = (0..3)
-                            .map(|k| s.normal[k] * (w[k] - s.centroid[k]))
-                            .sum::<f64>();
-                        // The centroids of two cells on one surface lie up to a cell apart
-                        // along it; the distance off the plane is what must be small.
-                        let reach = max + c.cell;
-                        // Tukey's biweight on the distance off the plane, as a scale of the
-                        // residual and its derivatives: a pair far off its plane (a person,
-                        // a surface the map has not got) pulls less as the distance shrinks.
-                        let weight = (1.0 - (r / max).powi(2)).powi(2);
-                        (d2 <= reach * reach && r.abs() <= max).then_some(Pair {
-                            p,
-                            q: s.centroid,
-                            n: Some(s.normal.map(|v| v * weight.sqrt())),
-                        })
-                    })
-                    .collect(),
+                pairs: found,
             };
             pairs = term.pairs.len();
             if pairs < c.min_pairs {
@@ -444,6 +498,41 @@ mod tests {
         let mut few = SurfelMap::new(SurfelConfig::default());
         few.add([[0.3, 0.0, 1.1], [0.35, 0.0, 1.1], [0.3, 0.0, 1.15]]);
         assert!(few.is_empty());
+    }
+
+    /// A patch of two vertical scan lines 0.1 m apart, four points each 5 cm apart, 1 cm off
+    /// the wall y = 2.1 in a pattern that is uncorrelated with x and z: its points' variances
+    /// are 0.0025 m² along x, 0.003125 m² along z and 1e-4 m² off the plane, so the plane's
+    /// offset is uncertain by 1e-4 / 8 m² at the centroid, and by 17 times that 0.2 m along x
+    /// (1 + 0.2² / 0.0025).
+    #[test]
+    fn a_planes_offset_is_less_certain_away_from_its_points() {
+        let mut points = Vec::new();
+        for (x, signs) in [(0.0, [1.0, -1.0, -1.0, 1.0]), (0.1, [-1.0, 1.0, 1.0, -1.0])] {
+            for (k, sign) in signs.into_iter().enumerate() {
+                points.push([1.02 + x, 2.1 + 0.01 * sign, 1.02 + 0.05 * k as f64]);
+            }
+        }
+        let mut map = SurfelMap::new(SurfelConfig::default());
+        map.add(points);
+        let s = *map.surfels().next().expect("a surfel");
+        let c = s.centroid;
+        assert!(
+            (c[0] - 1.07).abs() < 1e-12 && (c[1] - 2.1).abs() < 1e-12,
+            "{c:?}"
+        );
+        let at = |dx: f64, dz: f64| s.offset_variance([c[0] + dx, c[1], c[2] + dz]);
+        let near = 1e-4 / 8.0;
+        assert!((at(0.0, 0.0) - near).abs() < 1e-12, "{}", at(0.0, 0.0));
+        assert!(
+            (at(0.2, 0.0) - 17.0 * near).abs() < 1e-10,
+            "{}",
+            at(0.2, 0.0)
+        );
+        let up = 1.0 + 0.2 * 0.2 / 0.003125;
+        assert!((at(0.0, 0.2) - up * near).abs() < 1e-10, "{}", at(0.0, 0.2));
+        // Off the plane the offset's uncertainty is the same as on it.
+        assert!((s.offset_variance([c[0], c[1] + 0.05, c[2]]) - near).abs() < 1e-12);
     }
 
     /// A sweep seen from a pose 0.25 m and 2° from where the guess puts it is moved back onto
