@@ -19,7 +19,8 @@ use std::path::Path;
 use std::time::Instant;
 
 /// Measures (1) the real-time factor of the scenario (loaded from `path`) with its lasers
-/// and stack, (2) without them (physics, robot and controller alone: the lasers, the stack's
+/// and stack (`lasers_read` false where no node of the stack reads a laser: scans are made
+/// on demand, so that run cast none and timed no laser), (2) without them (physics, robot and controller alone: the lasers, the stack's
 /// modules and the gates left out, the controller driving on the true pose), and (3)
 /// single-thread ray casts per second from random free poses of the scenario's world with
 /// the URG-04LX's and a 30 m beam fan.
@@ -53,7 +54,7 @@ pub fn bench(path: &Path, s: &Scenario, duration: Option<f64>, rays: usize) -> R
     Ok(json!({
         "scenario": s.spec.name,
         "sim_time_s": full.sim_time,
-        "with_lasers": { "wall_time_s": full.wall_time, "real_time_factor": full.sim_time / full.wall_time, "laser_rays": full.laser_rays, "steps": full.steps },
+        "with_lasers": { "wall_time_s": full.wall_time, "real_time_factor": full.sim_time / full.wall_time, "laser_rays": full.laser_rays, "lasers_read": full.laser_rays > 0, "steps": full.steps },
         "physics_only": {
             "wall_time_s": physics.wall_time,
             "real_time_factor": physics.sim_time / physics.wall_time,

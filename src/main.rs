@@ -1160,7 +1160,17 @@ fn bench(command: BenchCommand) -> Result<i32> {
             scenario,
             duration,
             rays,
-        } => bench::bench(&scenario, &load(&scenario)?, duration, rays.max(682))?,
+        } => {
+            let r = bench::bench(&scenario, &load(&scenario)?, duration, rays.max(682))?;
+            if r["with_lasers"]["lasers_read"] == false {
+                eprintln!(
+                    "futago: warning: {}: no node of its stack reads a laser, so the run \
+                     \"with_lasers\" cast no scan; bench a scenario whose stack reads them",
+                    scenario.display()
+                );
+            }
+            r
+        }
         BenchCommand::Scan3d { scenario, repeats } => {
             stack::scan3d::bench(&load(&scenario)?, repeats)?
         }

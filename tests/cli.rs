@@ -1403,6 +1403,11 @@ fn the_simulator_bench_runs_scenarios_whose_stack_reads_the_lasers() {
         let b: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         let sim = b["sim_time_s"].as_f64().unwrap();
         assert!((sim - 3.0).abs() < 0.05, "{sc}: {b}");
+        assert_eq!(b["with_lasers"]["lasers_read"], true, "{sc}: {b}");
+        assert!(
+            b["with_lasers"]["laser_rays"].as_u64().unwrap() > 0,
+            "{sc}: {b}"
+        );
         let p = &b["physics_only"];
         let rtf = p["real_time_factor"].as_f64().unwrap();
         let wall = p["wall_time_s"].as_f64().unwrap();
@@ -1417,6 +1422,25 @@ fn the_simulator_bench_runs_scenarios_whose_stack_reads_the_lasers() {
             "{sc}: {p}"
         );
     }
+    // A tour on the true pose reads none of its lasers: no scan is cast, and the bench says so.
+    let o = futago(&[
+        "bench",
+        "sim",
+        "scenarios/office-tour.toml",
+        "--duration",
+        "3",
+        "--rays",
+        "1000",
+    ]);
+    ok(&o);
+    let b: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(b["with_lasers"]["laser_rays"], 0, "{b}");
+    assert_eq!(b["with_lasers"]["lasers_read"], false, "{b}");
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("no node of its stack reads a laser"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 #[test]
