@@ -20,8 +20,9 @@ use std::time::Instant;
 
 /// Measures (1) the real-time factor of the scenario (loaded from `path`) with its lasers
 /// and stack (`lasers_read` false where no node of the stack reads a laser: scans are made
-/// on demand, so that run cast none and timed no laser), (2) without them (physics, robot and controller alone: the lasers, the stack's
-/// modules and the gates left out, the controller driving on the true pose), and (3)
+/// on demand, so that run cast none and timed no laser), (2) without them (physics, robot
+/// and controller alone: the lasers, the stack's modules and the gates left out, the
+/// controller driving on the true pose), and (3)
 /// single-thread ray casts per second from random free poses of the scenario's world with
 /// the URG-04LX's and a 30 m beam fan.
 pub fn bench(path: &Path, s: &Scenario, duration: Option<f64>, rays: usize) -> Result<Value> {
