@@ -42,7 +42,7 @@ use futago_msgs::{LaserScan, Odometry, Pose2, Time};
 use futago_robot::control::PoseSource;
 use futago_robot::mapping::line_icp::LineIcp;
 use futago_robot::mapping::turntable::TurntableConfig;
-use futago_robot::mapping::turntable::{Phase, StopAndScan, TableMount};
+use futago_robot::mapping::turntable::{Phase, PlacedScan, StopAndScan, TableMount};
 use futago_robot::mapping::voxels::VoxelMap;
 use futago_robot::navigation::views::{View, ViewPlanningConfig, next_view};
 use futago_sim::config::SpecError;
@@ -155,6 +155,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<Scan3dNode>> {
         source: m.pose_source,
         joint_history: VecDeque::new(),
         placed: Vec::new(),
+        kept_moved: 0,
         last_placed: None,
         sweep_seconds: Vec::new(),
         sweep_started: None,
@@ -228,8 +229,11 @@ pub struct Scan3dNode {
     source: Scan3dPose,
     /// The table's angle as its encoder reported it (time, rad).
     joint_history: VecDeque<(Time, f64)>,
-    /// Every placed scan's points, each with whether a mover was hit (truth, for scoring).
+    /// Every placed scan's points, each with whether a mover was hit (truth, for scoring);
+    /// a kept scan's as it entered the map (see [`move_to_map`]).
     placed: Vec<Labelled>,
+    /// Kept scans whose points `placed` holds as they entered the map.
+    kept_moved: usize,
     /// The last vertical scan placed, waiting for its truth: its stamp and beam indices.
     last_placed: Option<(Time, BeamPoints)>,
     /// Simulated seconds each view's sweep took, pauses included.
@@ -269,6 +273,34 @@ pub struct Scan3dNode {
     planning: ViewPlanningConfig,
     plans: Vec<View>,
     rng: ChaCha8Rng,
+}
+
+/// Moves the points of the `placed` scans that entered the map as `kept` (matched by stamp)
+/// to where they entered it. A sweep's scans are placed by the view's pose as they come;
+/// registration then moves the whole sweep before it enters the map (the dropped scans of a
+/// paused sweep entered the carving map as placed, and stay so). The coverage, the removal
+/// scores and the raw map are of the map as built; scored at the pose before registration,
+/// the coverage of a survey on its own poses measured a map it never held.
+fn move_to_map(placed: &mut [Labelled], kept: &[PlacedScan]) {
+    if kept.is_empty() {
+        return;
+    }
+    let at: FxHashMap<i64, usize> = placed
+        .iter()
+        .enumerate()
+        .map(|(k, s)| (s.stamp.0, k))
+        .collect();
+    for s in kept {
+        let Some(l) = at.get(&s.stamp.0).map(|&k| &mut placed[k]) else {
+            continue;
+        };
+        // The same beams in the same order (both are the scan's returns as placed).
+        if l.points.len() == s.points.len() {
+            for ((p, _), (q, _)) in l.points.iter_mut().zip(&s.points) {
+                *p = *q;
+            }
+        }
+    }
 }
 
 /// The true surfaces of the area to map: the world's floor, walls and furniture faces near
@@ -405,7 +437,10 @@ impl Scan3dNode {
         if views == self.views_scored {
             return;
         }
-        let kept: FxHashSet<i64> = self.mapper.kept().iter().map(|s| s.stamp.0).collect();
+        let kept = self.mapper.kept();
+        move_to_map(&mut self.placed, &kept[self.kept_moved..]);
+        self.kept_moved = kept.len();
+        let kept: FxHashSet<i64> = kept.iter().map(|s| s.stamp.0).collect();
         // The placed scans not yet taken, kept in the map, static points only.
         let from = self.coverage_from;
         let points = self.placed[from..]
@@ -1305,6 +1340,30 @@ impl StackModule for Module {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A kept scan moved by registration moves its labelled points with it, labels kept; a
+    /// scan not kept (dropped in a pause) stays where it was placed.
+    #[test]
+    fn kept_scans_are_scored_where_they_entered_the_map() {
+        let labelled = |t: f64, x: f64| Labelled {
+            stamp: Time::from_secs(t),
+            points: vec![([x, 0.0, 1.0], false), ([x, 1.0, 1.0], true)],
+        };
+        let mut placed = vec![labelled(1.0, 2.0), labelled(2.0, 2.0)];
+        let registered = PlacedScan {
+            stamp: Time::from_secs(2.0),
+            angle: 0.0,
+            origin: [0.0, 0.0, 0.5],
+            points: vec![([2.1, 0.02, 1.0], 0), ([2.1, 1.02, 1.0], 1)],
+            misses: Vec::new(),
+        };
+        move_to_map(&mut placed, &[registered]);
+        assert_eq!(placed[0].points, labelled(1.0, 2.0).points);
+        assert_eq!(
+            placed[1].points,
+            vec![([2.1, 0.02, 1.0], false), ([2.1, 1.02, 1.0], true)]
+        );
+    }
 
     /// Hand-counted: 4 static points (one on the floor) and 2 dynamic ones in two scans, in
     /// voxels of their own; the removal keeps 3 static (the floor's among them) and 1
