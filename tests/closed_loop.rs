@@ -543,3 +543,74 @@ fn the_monocular_localisers_track_the_camera_in_the_landmark_map() {
     let tum = std::fs::read_to_string(out.join("visual_localization.txt")).unwrap();
     assert_eq!(tum.lines().count() as u64, v["frames"].as_u64().unwrap());
 }
+
+/// The boustrophedon lanes are replanned once MCL has settled, spaced for the covariance it
+/// publishes with its estimate: the new route starts where the robot is, its spacing is the
+/// one the filter's spread calls for, and that spread is centimetres, as its errors are. The
+/// truth-driven ablation, whose pose comes with no covariance, keeps the configured lanes.
+#[test]
+fn coverage_lanes_are_replanned_for_the_localisations_covariance() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let s = short_run("scenarios/office-coverage-bcd.toml", "16", &out);
+    let lanes = &s["coverage"]["lanes"];
+    let v = |k: &str| lanes[k].as_f64().unwrap_or_else(|| panic!("{k}: {lanes}"));
+    // 40 estimates at MCL's 4 Hz: about 10 s in.
+    let at = v("at_s");
+    assert!((9.0..16.0).contains(&at), "{lanes}");
+    let sigma = v("sigma_m");
+    assert!((0.005..0.08).contains(&sigma), "{lanes}");
+    let spacing = v("spacing_m");
+    let expected =
+        futago_robot::navigation::coverage::boustrophedon::spacing_from_sigma(sigma, 0.34, 0.01);
+    assert!((spacing - expected).abs() < 1e-12, "{lanes}");
+    assert!(spacing < 0.34 && spacing > 0.17, "{lanes}");
+    // The route driven is the new one: it starts where the robot was then (on its estimate,
+    // centimetres from the truth), not at the scenario's start.
+    let route = std::fs::read_to_string(out.join("coverage_route.txt")).unwrap();
+    let first: Vec<f64> = route
+        .lines()
+        .find(|l| !l.starts_with('#'))
+        .unwrap()
+        .split_whitespace()
+        .map(|x| x.parse().unwrap())
+        .collect();
+    let truth =
+        futago_msgs::tum::parse(&std::fs::read_to_string(out.join("groundtruth.txt")).unwrap())
+            .unwrap();
+    let then = truth
+        .iter()
+        .min_by(|a, b| {
+            (a.stamp.secs() - at)
+                .abs()
+                .total_cmp(&(b.stamp.secs() - at).abs())
+        })
+        .unwrap();
+    let [tx, ty, _] = then.pose.translation;
+    assert!(
+        (first[0] - tx).hypot(first[1] - ty) < 0.15,
+        "{first:?} vs ({tx}, {ty})"
+    );
+    let start = &truth[0].pose.translation;
+    assert!(
+        (tx - start[0]).hypot(ty - start[1]) > 0.3,
+        "the robot had not moved by {at} s"
+    );
+    assert_ne!(s["coverage"]["route"], lanes["first_route"], "{lanes}");
+    // The filter's account of its own spread, beside its errors.
+    let l = &s["localization"];
+    assert!(l["mean_sigma_m"].as_f64().unwrap() > 0.0, "{l}");
+    let within = l["within_2_sigma"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&within), "{l}");
+
+    let out = tmp.path().join("truth");
+    let s = short_run("scenarios/office-coverage-bcd-truth.toml", "2", &out);
+    let lanes = &s["coverage"]["lanes"];
+    assert_eq!(lanes["spacing_m"].as_f64(), Some(0.3), "{lanes}");
+    assert!(
+        lanes["configured"]
+            .as_str()
+            .is_some_and(|w| w.contains("no covariance")),
+        "{lanes}"
+    );
+}

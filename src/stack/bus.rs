@@ -44,6 +44,9 @@ pub struct Bus {
     history: VecDeque<(Time, Pose2)>,
     paths: BTreeMap<String, (Time, Path)>,
     estimates: BTreeMap<String, Option<(Pose2, Option<Pose2>)>>,
+    /// The covariance of (x, y, θ) published with an estimate, by topic (ROS's
+    /// `PoseWithCovariance`): m², m·rad, rad².
+    covariances: BTreeMap<String, (Time, [[f64; 3]; 3])>,
     maps: BTreeMap<String, (Time, Arc<OccupancyGrid>)>,
     subscriptions: BTreeMap<String, Option<Duration>>,
 }
@@ -71,6 +74,7 @@ impl Bus {
             history: VecDeque::from([(Time::ZERO, start)]),
             paths: BTreeMap::new(),
             estimates: estimates.into_iter().map(|t| (t, None)).collect(),
+            covariances: BTreeMap::new(),
             maps: BTreeMap::new(),
             subscriptions: subscriptions.into_iter().collect(),
         }
@@ -133,6 +137,24 @@ impl Bus {
     /// Publishes estimate `pose` on `pose/TOPIC`, made when odometry read `at`.
     pub fn publish_pose(&mut self, topic: &str, pose: Pose2, at: Pose2) {
         self.set_estimate(topic, Some((pose, Some(at))));
+    }
+
+    /// Publishes the covariance of the estimate just published on `pose/TOPIC` (its own
+    /// uncertainty when it was made; odometry since adds to it), stamped now.
+    pub fn publish_covariance(&mut self, topic: &str, covariance: [[f64; 3]; 3]) {
+        let stamped = (self.now, covariance);
+        match self.covariances.get_mut(topic) {
+            Some(slot) => *slot = stamped,
+            None => {
+                self.covariances.insert(topic.to_string(), stamped);
+            }
+        }
+    }
+
+    /// The covariance last published with the estimate on `pose/TOPIC`, and its stamp, if
+    /// its publisher gives one.
+    pub fn covariance(&self, topic: &str) -> Option<(Time, [[f64; 3]; 3])> {
+        self.covariances.get(topic).copied()
     }
 
     /// Publishes estimate `pose` on `pose/TOPIC` to be taken as it is until the next one,

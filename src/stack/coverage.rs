@@ -25,6 +25,7 @@ use anyhow::{Context, Result};
 use futago_msgs::{Duration, Pose2, Time};
 use futago_robot::control::PoseSource;
 use futago_robot::geometry::grid::OCCUPIED;
+use futago_robot::localization::covariance::position_sigma;
 use futago_robot::navigation::coverage::second_pass::{self, SecondPassConfig, WallSight};
 use futago_robot::navigation::coverage::swept::Swept;
 use futago_robot::navigation::coverage::{self, Field, ROBOT_RADIUS, Route, RouteStats};
@@ -85,6 +86,28 @@ pub struct CoverageNode {
     scenario: String,
     /// The second pass, when enabled and a camera is scored.
     second: Option<SecondPass>,
+    /// The lanes replanned from the localisation's covariance, when asked for.
+    lanes: Option<Lanes>,
+}
+
+/// The boustrophedon lanes replanned once the localisation has settled, spaced for its own
+/// covariance (`coverage.boustrophedon.lanes_from_covariance`): the first route is planned
+/// before the filter has made any estimate, from the configured spacing.
+struct Lanes {
+    /// The map and configuration the first route was planned on, the floor and start its
+    /// promise is measured on.
+    map: futago_msgs::grid::OccupancyGrid,
+    config: coverage::CoverageConfig,
+    floor: futago_msgs::grid::OccupancyGrid,
+    start: [f64; 2],
+    /// The topic whose covariance is read (the pose the driver steers by) and that pose.
+    topic: String,
+    pose_source: PoseSource,
+    /// The position spread of each estimate taken, m, and the stamp of the last one.
+    sigmas: Vec<f64>,
+    last: Option<Time>,
+    /// Once replanned (or given up): its figures.
+    replanned: Option<Value>,
 }
 
 /// The second pass's state: the robot's own record of the walls its camera saw, and, once
@@ -163,21 +186,7 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
     let footprint = Footprint::new(&floor, ROBOT_RADIUS, s.spec.coverage.clearance, start)
         .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
     // What the route would sweep if driven exactly.
-    let mut planned = Footprint::new(&floor, ROBOT_RADIUS, s.spec.coverage.clearance, start)
-        .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
-    for w in route.points.windows(2) {
-        let n = ((w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]) / 0.02)
-            .ceil()
-            .max(1.0) as usize;
-        for k in 0..=n {
-            let t = k as f64 / n as f64;
-            planned.add(&Pose2::new(
-                w[0][0] + t * (w[1][0] - w[0][0]),
-                w[0][1] + t * (w[1][1] - w[0][1]),
-                0.0,
-            ));
-        }
-    }
+    let planned = promised(&floor, s.spec.coverage.clearance, start, &route.points)?;
     let planned_footprint = planned.share();
     let mut reachable_m2 = vec![0.0; regions.regions().len()];
     let g = footprint.grid();
@@ -232,6 +241,21 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         ),
         _ => None,
     };
+    let lanes = (s.spec.coverage.planner == coverage::PlannerKind::Boustrophedon
+        && s.spec.coverage.boustrophedon.lanes_from_covariance)
+        .then(|| super::bus::pose_topic(control.pose_source))
+        .flatten()
+        .map(|topic| Lanes {
+            map: map.clone(),
+            config: s.spec.coverage.clone(),
+            floor: floor.clone(),
+            start,
+            topic: topic.trim_start_matches("pose/").to_string(),
+            pose_source: control.pose_source,
+            sigmas: Vec::new(),
+            last: None,
+            replanned: None,
+        });
     Ok(Some(CoverageNode {
         route,
         planning_s,
@@ -254,7 +278,34 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         published: false,
         scenario: s.spec.name.clone(),
         second,
+        lanes,
     }))
+}
+
+/// What `route` sweeps on `floor` if driven exactly (the floor reachable from `start` with
+/// `clearance`).
+fn promised(
+    floor: &futago_msgs::grid::OccupancyGrid,
+    clearance: f64,
+    start: [f64; 2],
+    route: &[[f64; 2]],
+) -> Result<Footprint> {
+    let mut planned = Footprint::new(floor, ROBOT_RADIUS, clearance, start)
+        .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
+    for w in route.windows(2) {
+        let n = ((w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]) / 0.02)
+            .ceil()
+            .max(1.0) as usize;
+        for k in 0..=n {
+            let t = k as f64 / n as f64;
+            planned.add(&Pose2::new(
+                w[0][0] + t * (w[1][0] - w[0][0]),
+                w[0][1] + t * (w[1][1] - w[0][1]),
+                0.0,
+            ));
+        }
+    }
+    Ok(planned)
 }
 
 /// The names this node scores where the controller is `coverage`.
@@ -375,6 +426,93 @@ impl SecondPass {
         self.floor_stops = floor_stops;
         let stats = coverage::route_stats(&points, Some(here.theta), &self.time_model);
         Ok((points, stats))
+    }
+}
+
+impl Lanes {
+    /// What became of the lanes: replanned (with the spread and spacing), or why not.
+    fn figures(&self) -> Value {
+        if let Some(v) = &self.replanned {
+            return v.clone();
+        }
+        let spacing = self.config.boustrophedon.spacing;
+        let why = if self.sigmas.is_empty() {
+            format!("pose/{} carries no covariance", self.topic)
+        } else {
+            format!(
+                "{} of the {} estimates to settle on came before the run ended",
+                self.sigmas.len(),
+                self.config.boustrophedon.settle_estimates
+            )
+        };
+        json!({"spacing_m": spacing, "configured": why})
+    }
+}
+
+impl CoverageNode {
+    /// Takes the localisation's newest covariance, and once enough are in, replans the
+    /// lanes from the robot's pose with the spacing they call for
+    /// ([`coverage::boustrophedon::spacing_from_sigma`]): the route and its promise are
+    /// replaced, and the robot's own record of what it swept keeps what the first lanes did.
+    fn replan_lanes(&mut self, bus: &mut Bus) -> Result<()> {
+        let Some(lanes) = self.lanes.as_mut().filter(|l| l.replanned.is_none()) else {
+            return Ok(());
+        };
+        // The first route is done, or the second pass is under way: nothing left to replan.
+        if bus.route_done.is_some() {
+            lanes.replanned = Some(json!({
+                "spacing_m": lanes.config.boustrophedon.spacing,
+                "configured": "the first route was done before the localisation settled",
+            }));
+            return Ok(());
+        }
+        let Some((t, covariance)) = bus
+            .covariance(&lanes.topic)
+            .filter(|(t, _)| lanes.last.is_none_or(|l| *t > l))
+        else {
+            return Ok(());
+        };
+        lanes.last = Some(t);
+        lanes.sigmas.push(position_sigma(&covariance));
+        let c = &lanes.config.boustrophedon;
+        if lanes.sigmas.len() < c.settle_estimates {
+            return Ok(());
+        }
+        let mut sorted = lanes.sigmas.clone();
+        sorted.sort_by(f64::total_cmp);
+        let sigma = sorted[sorted.len() / 2];
+        let spacing =
+            coverage::boustrophedon::spacing_from_sigma(sigma, 2.0 * ROBOT_RADIUS, c.miss);
+        let mut config = lanes.config.clone();
+        config.boustrophedon.spacing = spacing;
+        let here = bus.pose_from(lanes.pose_source);
+        let first = self.route.stats;
+        let mut figures = json!({
+            "at_s": bus.now.secs(),
+            "estimates": lanes.sigmas.len(),
+            "sigma_m": sigma,
+            "spacing_m": spacing,
+            "first_route": first,
+        });
+        let t0 = Instant::now();
+        match coverage::plan(&lanes.map, &config, [here.x, here.y]) {
+            Ok(route) => {
+                let planned = promised(&lanes.floor, config.clearance, lanes.start, &route.points)?;
+                self.planned_footprint = planned.share();
+                self.planned = planned;
+                if let Some(second) = &mut self.second {
+                    second.swept.promise(&second.field, &route.points);
+                }
+                bus.publish_path("coverage", route.points.clone());
+                self.route = route;
+            }
+            // Keep driving the first lanes where the robot's pose gives no route (off the
+            // reachable floor).
+            Err(e) => figures["error"] = json!(e),
+        }
+        figures["planning_s"] = json!(t0.elapsed().as_secs_f64());
+        lanes.replanned = Some(figures);
+        Ok(())
     }
 }
 
@@ -639,6 +777,7 @@ impl Node for CoverageNode {
             bus.publish_path("coverage", self.route.points.clone());
             self.published = true;
         }
+        self.replan_lanes(bus)?;
         if let Some(second) = &mut self.second {
             let p = second.pose(bus);
             second.swept.add(&second.field, [p.x, p.y]);
@@ -762,6 +901,7 @@ impl Node for CoverageNode {
             "regions": regions,
             "second_pass": second,
             "route": self.route.stats,
+            "lanes": self.lanes.as_ref().map(Lanes::figures),
             "route_done_s": self.done_at.map(|t| t.secs()),
             "driven_m": self.driven_m,
             "surface_area_m2": self.surfaces.as_ref().map(|s| {

@@ -11,6 +11,7 @@ use crate::ground_truth::Metrics;
 use crate::scenario::{ModuleConfig, Resolving, Scenario, ScenarioSpec, Spec};
 use anyhow::{Context, Result};
 use futago_msgs::{Duration, LaserScan, Pose2, Time, wrap_angle};
+use futago_robot::localization::covariance::{position_nees, position_sigma};
 use futago_robot::localization::mcl::MclConfig;
 use futago_robot::localization::mcl::{Mcl, MclMap};
 use futago_robot::tracking::exclusion::{Exclusion, ExclusionConfig};
@@ -38,8 +39,13 @@ pub struct LocalizationNode {
     updates: u64,
     /// (time s, position error m, heading error rad) at each update.
     errors: Vec<(f64, f64, f64)>,
-    /// The estimate just published, until the scorer measures it against the truth.
-    unscored: Option<Pose2>,
+    /// The estimate just published and its covariance, until the scorer measures it against
+    /// the truth.
+    unscored: Option<(Pose2, [[f64; 3]; 3])>,
+    /// Per scored update: the filter's own position spread (the square root of the larger
+    /// eigenvalue of its x, y covariance), m, and the normalised estimation error squared of
+    /// its position (e' P⁻¹ e over x, y: 2 on average for a filter whose covariance is true).
+    spread: Vec<(f64, Option<f64>)>,
     /// The estimates as TUM lines.
     track: Trajectory,
     /// Kidnapping times, s, and whether the filter starts globally.
@@ -83,6 +89,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<LocalizationNode>> {
         updates: 0,
         errors: Vec::new(),
         unscored: None,
+        spread: Vec::new(),
         track: Trajectory::new("localization"),
         events: s.spec.event.iter().map(|e| e.time).collect(),
         global: spec.global,
@@ -161,17 +168,21 @@ impl Node for LocalizationNode {
         };
         let est = self.mcl.update(&at, scan, &self.mount);
         bus.publish_pose("localization", est.pose, at);
+        bus.publish_covariance("localization", est.covariance);
         self.updates += 1;
         self.particles_sum += est.particles as u64;
         self.particles_max = self.particles_max.max(est.particles);
         let now = bus.pose("localization").unwrap_or(est.pose);
-        self.unscored = Some(now);
+        self.unscored = Some((now, est.covariance));
         self.track.push(bus.now, &now);
         Ok(())
     }
 
     fn observe(&mut self, truth: &TrueState, bus: &Bus) {
-        if let Some(now) = self.unscored.take() {
+        if let Some((now, cov)) = self.unscored.take() {
+            let e = [truth.robot.x - now.x, truth.robot.y - now.y];
+            self.spread
+                .push((position_sigma(&cov), position_nees(&cov, e)));
             self.errors.push((
                 bus.now.secs(),
                 now.distance(&truth.robot),
@@ -200,6 +211,22 @@ impl Node for LocalizationNode {
             "mean_particles": self.particles_sum as f64 / self.updates.max(1) as f64,
             "max_particles": self.particles_max,
         });
+        // The filter's own spread against its errors: how far a user may trust the
+        // covariance it publishes (consumers size margins from it).
+        if !self.spread.is_empty() {
+            let k = self.spread.len() as f64;
+            let nees: Vec<f64> = self.spread.iter().filter_map(|s| s.1).collect();
+            let mut sorted = nees.clone();
+            sorted.sort_by(f64::total_cmp);
+            v["mean_sigma_m"] = json!(self.spread.iter().map(|s| s.0).sum::<f64>() / k);
+            v["mean_position_nees"] = json!(nees.iter().sum::<f64>() / nees.len().max(1) as f64);
+            v["median_position_nees"] = json!(sorted.get(sorted.len() / 2));
+            // A position within two of its own standard deviations: 86 % of the time for
+            // a Gaussian error in two dimensions whose covariance is the published one
+            // (e' P⁻¹ e ≤ 4, χ² with 2 degrees of freedom).
+            v["within_2_sigma"] =
+                json!(nees.iter().filter(|n| **n <= 4.0).count() as f64 / nees.len().max(1) as f64);
+        }
         if !self.events.is_empty() {
             v["kidnappings"] =
                 json!(self.events.iter().zip(recovery_times(&self.position_errors(), &self.events)).map(|(t, r)| json!({

@@ -34,9 +34,21 @@ pub enum Sweep {
 #[serde(deny_unknown_fields, default)]
 pub struct BoustrophedonConfig {
     /// Distance between lanes, m: the Create's footprint (0.34 m) less an overlap for
-    /// tracking error.
+    /// tracking error. With [`Self::lanes_from_covariance`], the spacing of the first
+    /// lanes, until the localisation has settled.
     pub spacing: f64,
     pub sweep: Sweep,
+    /// Size the lanes' overlap from the localisation's own covariance once it has settled,
+    /// and replan the lanes from there ([`spacing_from_sigma`]). Where the pose the robot
+    /// steers by comes with no covariance, `spacing` stays.
+    pub lanes_from_covariance: bool,
+    /// The expected share of the floor between two lanes that the localisation's errors
+    /// may leave unswept, which the overlap is sized for: 1 %, issue 47's goal of 99 % of
+    /// the promised floor.
+    pub miss: f64,
+    /// How many of the localisation's estimates the spread is taken over (their median):
+    /// the first few, while the filter settles from its initial spread, do not move it.
+    pub settle_estimates: usize,
 }
 
 impl Default for BoustrophedonConfig {
@@ -44,14 +56,84 @@ impl Default for BoustrophedonConfig {
         BoustrophedonConfig {
             spacing: 0.3,
             sweep: Sweep::Auto,
+            lanes_from_covariance: true,
+            miss: 0.01,
+            settle_estimates: 40,
         }
     }
 }
 
 impl BoustrophedonConfig {
     pub fn validate(&self, key: &str) -> Result<(), (String, String)> {
-        crate::config::check_ranges(key, &[("spacing", self.spacing, 0.05, 10.0)])
+        crate::config::check_ranges(
+            key,
+            &[
+                ("spacing", self.spacing, 0.05, 10.0),
+                ("miss", self.miss, 1e-6, 0.5),
+                (
+                    "settle_estimates",
+                    self.settle_estimates as f64,
+                    1.0,
+                    100_000.0,
+                ),
+            ],
+        )
     }
+}
+
+/// The lane spacing that keeps the expected unswept share of the floor between two lanes
+/// at `miss`, for a footprint `width` wide (m) steered by an estimate whose position has
+/// standard deviation `sigma` (m) across the lanes; never below half the footprint.
+///
+/// Each lane is driven where the estimate puts it, so it lies off its plan by the
+/// estimate's error; two lanes driven a lane's length apart in time are taken as
+/// independent, so the gap between them grows by X ~ N(0, 2σ²). With an overlap `o` the
+/// strip missed is (X − o)⁺, whose expectation is s φ(o/s) − o Q(o/s) for s = √2 σ; the
+/// overlap is the least `o` for which that is at most `miss` of the spacing `width − o`.
+/// Where no overlap reaches it (a spread near the footprint's size) the spacing is half
+/// the footprint, which doubles the lanes.
+pub fn spacing_from_sigma(sigma: f64, width: f64, miss: f64) -> f64 {
+    let floor = 0.5 * width;
+    if !(sigma.is_finite() && sigma >= 0.0 && width > 0.0 && miss > 0.0) {
+        return floor;
+    }
+    let s = std::f64::consts::SQRT_2 * sigma;
+    if s == 0.0 {
+        return width;
+    }
+    let phi = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let upper_tail = |z: f64| 0.5 * libm::erfc(z / std::f64::consts::SQRT_2);
+    // The expected strip missed, less what `miss` allows, at overlap `o`.
+    let excess = |o: f64| s * phi(o / s) - o * upper_tail(o / s) - miss * (width - o);
+    if excess(0.0) <= 0.0 {
+        return width;
+    }
+    // The excess falls while the tail beyond the overlap is heavier than `miss` (its
+    // derivative is miss − Q(o / s)), so it is least where Q(o / s) = miss, and falls all
+    // the way from 0 to there: the overlap is found by bisection below that point, or half
+    // the footprint, where the spacing stops anyway.
+    let (mut z_lo, mut z_hi) = (0.0, 40.0);
+    for _ in 0..80 {
+        let mid = 0.5 * (z_lo + z_hi);
+        if upper_tail(mid) > miss {
+            z_lo = mid;
+        } else {
+            z_hi = mid;
+        }
+    }
+    let (mut lo, mut hi) = (0.0, (s * z_hi).min(floor));
+    if excess(hi) > 0.0 {
+        return floor;
+    }
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if excess(mid) > 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (width - hi).max(floor)
 }
 
 /// A cell of the decomposition: a run `[lo, hi]` of reachable cells per column, columns in
@@ -183,12 +265,13 @@ fn sweep(
     let (cells, touching) = decompose(&runs, jump);
     // Lanes per cell, then the cells nearest first.
     let res = g.resolution;
-    let step = ((c.spacing / res).round() as usize).max(1);
     let lanes_of = |cell: &Cell| -> Vec<usize> {
         // Column offsets within the cell: the first and last columns, and as few between
-        // them as keep lanes at most `step` apart.
+        // them as keep lanes `spacing` apart on average (each within a column of it): the
+        // count comes from the spacing in metres, not rounded to columns, so that a spacing
+        // a few millimetres under a multiple of the cell size still adds its lane.
         let n = cell.runs.len();
-        let gaps = (n - 1).div_ceil(step);
+        let gaps = (((n - 1) as f64 * res / c.spacing) - 1e-9).ceil().max(0.0) as usize;
         let mut k: Vec<usize> = (0..=gaps).map(|g| g * (n - 1) / gaps.max(1)).collect();
         k.dedup();
         k
@@ -298,6 +381,106 @@ mod tests {
     use super::super::tests::floor;
     use super::super::{CoverageConfig, Field, PlannerKind, ROBOT_RADIUS, plan as plan_route};
     use super::*;
+
+    /// At the spacing found, lanes driven with independent Gaussian errors of the given
+    /// spread leave `miss` of the floor between them unswept: checked by sampling the two
+    /// lanes' errors, not by the formula the spacing came from.
+    #[test]
+    fn spacing_from_sigma_leaves_the_share_asked_for() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let width = 2.0 * ROBOT_RADIUS;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for (sigma, miss) in [(0.02, 0.01), (0.035, 0.01), (0.03, 0.03)] {
+            let spacing = spacing_from_sigma(sigma, width, miss);
+            assert!(
+                spacing < width && spacing > 0.5 * width,
+                "{sigma}: {spacing}"
+            );
+            let overlap = width - spacing;
+            let normal = Normal::new(0.0, sigma).unwrap();
+            let n = 400_000;
+            let missed: f64 = (0..n)
+                .map(|_| {
+                    let gap = normal.sample(&mut rng) - normal.sample(&mut rng);
+                    (gap - overlap).max(0.0)
+                })
+                .sum::<f64>()
+                / n as f64;
+            let share = missed / spacing;
+            assert!(
+                (share - miss).abs() < 0.05 * miss,
+                "σ {sigma}: spacing {spacing:.4} misses {share:.5}, asked {miss}"
+            );
+        }
+        // A perfect estimate needs no overlap; a wider spread, more; one near the
+        // footprint's size cannot be helped by overlap and gets half-footprint lanes.
+        assert_eq!(spacing_from_sigma(0.0, width, 0.01), width);
+        let (a, b) = (
+            spacing_from_sigma(0.02, width, 0.01),
+            spacing_from_sigma(0.05, width, 0.01),
+        );
+        assert!(b < a, "{a} {b}");
+        assert_eq!(spacing_from_sigma(0.3, width, 0.01), 0.5 * width);
+        assert_eq!(spacing_from_sigma(f64::NAN, width, 0.01), 0.5 * width);
+    }
+
+    /// Lanes are spread evenly across a cell, as few as keep them `spacing` apart on
+    /// average: a spacing a few millimetres under the one that fits the room exactly adds
+    /// a lane (rounded to the map's 5 cm columns it would not), and none is ever farther
+    /// from the next than the spacing and one column.
+    #[test]
+    fn lanes_keep_the_spacing_asked_for_between_columns() {
+        use futago_msgs::grid::OccupancyGrid;
+        let res = 0.05;
+        let mut g = OccupancyGrid::new(res, [0.0, 0.0], 140, 100);
+        for j in 0..100 {
+            for i in 0..140 {
+                let c = g.cell_center(i, j);
+                let room = (0.5..6.5).contains(&c[0]) && (0.5..4.5).contains(&c[1]);
+                g.set(i, j, if room { 0 } else { 100 });
+            }
+        }
+        let lanes = |spacing: f64| -> Vec<f64> {
+            let mut config = CoverageConfig {
+                planner: PlannerKind::Boustrophedon,
+                ..CoverageConfig::default()
+            };
+            config.boustrophedon.sweep = Sweep::Y;
+            config.boustrophedon.spacing = spacing;
+            let route = plan_route(&g, &config, [1.0, 1.0]).expect("a route");
+            // The lanes: segments along y longer than a metre, by their x.
+            let mut xs: Vec<f64> = route
+                .points
+                .windows(2)
+                .filter(|w| (w[0][0] - w[1][0]).abs() < 1e-9 && (w[0][1] - w[1][1]).abs() > 1.0)
+                .map(|w| w[0][0])
+                .collect();
+            xs.sort_by(f64::total_cmp);
+            xs.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
+            xs
+        };
+        let first = lanes(0.3);
+        let span = first[first.len() - 1] - first[0];
+        let fits = ((span / 0.3) - 1e-9).ceil();
+        assert_eq!(first.len() - 1, fits as usize, "{first:?}");
+        // Just under the spacing that divides the span into `fits` gaps.
+        let tight = span / fits - 0.004;
+        for spacing in [0.3, tight, 0.27, 0.42] {
+            let xs = lanes(spacing);
+            let gaps = xs.len() - 1;
+            assert_eq!(
+                gaps,
+                ((span / spacing) - 1e-9).ceil() as usize,
+                "{spacing}: {xs:?}"
+            );
+            for w in xs.windows(2) {
+                assert!(w[1] - w[0] <= spacing + res + 1e-9, "{spacing}: {xs:?}");
+            }
+            assert!(span / gaps as f64 <= spacing + 1e-9, "{spacing}: {xs:?}");
+        }
+        assert_eq!(lanes(tight).len(), first.len() + 1);
+    }
 
     /// The robot's footprint (a disc of the Create's radius) swept along the route covers
     /// at least 99 % of the floor it can sweep at all (the reachable cells' footprints), and

@@ -91,6 +91,12 @@ impl Swept {
         s
     }
 
+    /// Replaces the promise with what `route` sweeps, keeping the record of what was swept
+    /// (the lanes replanned once the localisation settled).
+    pub fn promise(&mut self, field: &Field, route: &[[f64; 2]]) {
+        self.planned = Swept::new(field, route).planned;
+    }
+
     /// Sweeps the footprint from the last position added to `p` (map frame, m). It is called
     /// at the control rate, a few centimetres apart; a step of more than [`JUMP`] is the
     /// estimate jumping (a relocalisation), not a drive, and sweeps only `p`.
