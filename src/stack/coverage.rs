@@ -94,11 +94,10 @@ pub struct CoverageNode {
 /// covariance (`coverage.boustrophedon.lanes_from_covariance`): the first route is planned
 /// before the filter has made any estimate, from the configured spacing.
 struct Lanes {
-    /// The map and configuration the first route was planned on, the floor and start its
-    /// promise is measured on.
+    /// The map and configuration the first route was planned on, and the start its promise
+    /// is measured from.
     map: futago_msgs::grid::OccupancyGrid,
     config: coverage::CoverageConfig,
-    floor: futago_msgs::grid::OccupancyGrid,
     start: [f64; 2],
     /// The topic whose covariance is read (the pose the driver steers by) and that pose.
     topic: String,
@@ -248,7 +247,6 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         .map(|topic| Lanes {
             map: map.clone(),
             config: s.spec.coverage.clone(),
-            floor: floor.clone(),
             start,
             topic: topic.trim_start_matches("pose/").to_string(),
             pose_source: control.pose_source,
@@ -497,7 +495,8 @@ impl CoverageNode {
         let t0 = Instant::now();
         match coverage::plan(&lanes.map, &config, [here.x, here.y]) {
             Ok(route) => {
-                let planned = promised(&lanes.floor, config.clearance, lanes.start, &route.points)?;
+                let floor = coverage::restricted(&lanes.map, &lanes.config);
+                let planned = promised(&floor, config.clearance, lanes.start, &route.points)?;
                 self.planned_footprint = planned.share();
                 self.planned = planned;
                 if let Some(second) = &mut self.second {
