@@ -173,6 +173,11 @@ import math
 def planar(x, y, yaw): return (x, y, 0.0, 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
 def pose(p): return T['geometry_msgs/msg/Pose'](position=point(*p[:3]), orientation=quat(*p[3:]))
 t = 12_000_000_005
+# x, y and the rotation about z in rows and columns 0, 1 and 5 of the 6 x 6, row-major.
+cov6 = np.zeros(36)
+for (r, c), v in {(0, 0): 0.01, (0, 1): 0.002, (0, 5): 0.0003, (1, 0): 0.002, (1, 1): 0.02,
+                  (1, 5): -0.0004, (5, 0): 0.0003, (5, 1): -0.0004, (5, 5): 0.005}.items():
+    cov6[6 * r + c] = v
 msgs = {
   'rosgraph_msgs/msg/Clock': T['rosgraph_msgs/msg/Clock'](clock=time(t)),
   'sensor_msgs/msg/LaserScan': T['sensor_msgs/msg/LaserScan'](
@@ -194,6 +199,10 @@ msgs = {
                       ('base_link', 'rear', planar(-0.1, 0.02, math.pi))]]),
   'geometry_msgs/msg/PoseStamped': T['geometry_msgs/msg/PoseStamped'](
       header=header(t, 'world'), pose=pose(planar(-3.5, 0.25, -1.0))),
+  'geometry_msgs/msg/PoseWithCovarianceStamped': T['geometry_msgs/msg/PoseWithCovarianceStamped'](
+      header=header(t, 'map'),
+      pose=T['geometry_msgs/msg/PoseWithCovariance'](pose=pose(planar(2.0, -1.0, 0.5)),
+          covariance=cov6)),
   'nav_msgs/msg/OccupancyGrid': T['nav_msgs/msg/OccupancyGrid'](
       header=header(t, 'map'),
       info=T['nav_msgs/msg/MapMetaData'](map_load_time=time(t), resolution=0.05, width=3,
@@ -289,6 +298,19 @@ fn every_message_type_futago_writes_serialises_as_rosbags_serialises_it() {
         (
             "geometry_msgs/msg/PoseStamped",
             ros2msg::pose_stamped(t, "world", &Pose::planar(-3.5, 0.25, -1.0)),
+        ),
+        (
+            "geometry_msgs/msg/PoseWithCovarianceStamped",
+            ros2msg::pose_with_covariance_stamped(
+                t,
+                "map",
+                &Pose::planar(2.0, -1.0, 0.5),
+                &ros2msg::planar_covariance(&[
+                    [0.01, 0.002, 0.0003],
+                    [0.002, 0.02, -0.0004],
+                    [0.0003, -0.0004, 0.005],
+                ]),
+            ),
         ),
         (
             "nav_msgs/msg/OccupancyGrid",

@@ -56,6 +56,7 @@ fn the_bag_changes_nothing_the_run_computes_and_is_the_same_bytes_twice() {
         "/map",
         "/ground_truth/people",
         "/scan",
+        "/localization/pose",
     ] {
         assert!(counts[topic].as_u64().unwrap_or(0) > 0, "{topic}: {counts}");
     }

@@ -68,6 +68,10 @@ const DEFINITIONS: &[(&str, &str)] = &[
         "std_msgs/Header header\ngeometry_msgs/Pose pose\n",
     ),
     (
+        "geometry_msgs/PoseWithCovarianceStamped",
+        "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n",
+    ),
+    (
         "nav_msgs/MapMetaData",
         "builtin_interfaces/Time map_load_time\nfloat32 resolution\nuint32 width\nuint32 height\n\
          geometry_msgs/Pose origin\n",
@@ -265,6 +269,36 @@ pub fn pose_stamped(t: Time, frame: &str, p: &Pose) -> Vec<u8> {
     w.header(t, frame);
     pose(&mut w, p);
     w.into_bytes()
+}
+
+/// A `geometry_msgs/msg/PoseWithCovarianceStamped` (as ROS amcl's `/amcl_pose`): the pose
+/// and its covariance of (x, y, z, rotation about x, y, z), row-major.
+pub fn pose_with_covariance_stamped(
+    t: Time,
+    frame: &str,
+    p: &Pose,
+    covariance: &[f64; 36],
+) -> Vec<u8> {
+    let mut w = CdrWriter::default();
+    w.header(t, frame);
+    pose(&mut w, p);
+    for v in covariance {
+        w.f64(*v);
+    }
+    w.into_bytes()
+}
+
+/// The 6 × 6 covariance (x, y, z, rotation about x, y, z; row-major) of a planar estimate's
+/// (x, y, θ) covariance: the planar terms in their places, the rest zero, as amcl fills it.
+pub fn planar_covariance(c: &[[f64; 3]; 3]) -> [f64; 36] {
+    let mut out = [0.0; 36];
+    let index = [0, 1, 5];
+    for (a, &i) in index.iter().enumerate() {
+        for (b, &j) in index.iter().enumerate() {
+            out[i * 6 + j] = c[a][b];
+        }
+    }
+    out
 }
 
 /// A `nav_msgs/msg/OccupancyGrid` of `g` in `frame` at `t` (cells −1 unknown, 0–100).

@@ -15,6 +15,7 @@
 //! | `/NAME/rgb/image_raw`, `/NAME/depth/image_raw` | `sensor_msgs/Image` | each frame the stack took (`rgb8`; `32FC1` metres, NaN without a reading) |
 //! | `/NAME/rgb/camera_info`, `/NAME/depth/camera_info` | `sensor_msgs/CameraInfo` | with each image |
 //! | `/map` | `nav_msgs/OccupancyGrid` (latched) | each map the stack publishes: localisation's if it runs, else SLAM's (its final map at the end) |
+//! | `/localization/pose` | `geometry_msgs/PoseWithCovarianceStamped` | with `[localization]`: each estimate MCL publishes, with its covariance (as amcl's `/amcl_pose`), in `map` at the odometry report after it, the pose carried there by odometry |
 //! | `/ground_truth/pose` | `geometry_msgs/PoseStamped` | the robot's true pose in `world`, at the ground-truth rate |
 //! | `/ground_truth/people` | `visualization_msgs/MarkerArray` | every person as a cylinder in `world`, at the ground-truth rate |
 //!
@@ -91,6 +92,10 @@ pub struct BagRecorder {
     map: usize,
     truth: usize,
     markers: usize,
+    /// `/localization/pose`, where the scenario localises, and the stamp of the last
+    /// covariance written.
+    estimate: Option<usize>,
+    estimate_written: Option<Time>,
     /// The stamp of the last map written.
     map_written: Option<Time>,
 }
@@ -139,6 +144,16 @@ impl BagRecorder {
                 "visualization_msgs/msg/MarkerArray",
                 false,
             ),
+            estimate: s
+                .module::<super::localization::LocalizationSpec>()
+                .map(|_| {
+                    bag.topic(
+                        "/localization/pose",
+                        "geometry_msgs/msg/PoseWithCovarianceStamped",
+                        false,
+                    )
+                }),
+            estimate_written: None,
             bag: Some(bag),
             lasers,
             cameras,
@@ -163,6 +178,26 @@ impl BagRecorder {
         ["localization", "slam"]
             .into_iter()
             .find(|t| bus.pose(t).is_some())
+    }
+
+    /// Writes the localisation's estimate with its covariance if a new one was published.
+    fn write_estimate(&mut self, bus: &Bus) -> Result<()> {
+        let Some(topic) = self.estimate else {
+            return Ok(());
+        };
+        let Some((stamp, covariance)) = bus.covariance("localization") else {
+            return Ok(());
+        };
+        let Some(est) = bus.pose("localization") else {
+            return Ok(());
+        };
+        if self.estimate_written.is_some_and(|t| t >= stamp) {
+            return Ok(());
+        }
+        self.estimate_written = Some(stamp);
+        let cov = ros2msg::planar_covariance(&covariance);
+        let msg = ros2msg::pose_with_covariance_stamped(bus.now, MAP, &planar(&est), &cov);
+        self.write(topic, bus.now, &msg)
     }
 
     /// Writes the map of the map frame's source if it is new.
@@ -322,6 +357,7 @@ impl Node for BagRecorder {
         }
         let msg = ros2msg::tf(t, &tf);
         self.write(self.tf, t, &msg)?;
+        self.write_estimate(bus)?;
         self.write_map(bus)
     }
 
