@@ -43,9 +43,10 @@ pub struct NavigationConfig {
     /// way to them, m: within `goal_tolerance`, a lane would end that much short and the
     /// robot cut the corner to the next, leaving a triangle of floor unswept at each end.
     pub route_pass: f64,
-    /// …or until the laser finds a wall this close ahead of the bumper, m, when the point is
-    /// within `goal_tolerance`: a pose estimate a few centimetres off would otherwise drive
-    /// the bumper into the wall the lane ends against (the route keeps 3 cm from walls).
+    /// …or until the laser finds a wall this close ahead of the middle of the bumper, m, when
+    /// the point is within `goal_tolerance`: a pose estimate a few centimetres off would
+    /// otherwise drive the bumper into the wall the lane ends against (the route keeps 3 cm
+    /// from walls).
     pub route_wall_margin: f64,
     /// Turn in place when the aim is further off the heading than this, degrees.
     pub turn_in_place_deg: f64,
@@ -501,7 +502,7 @@ impl Navigator {
             && let Some(&goal) = f.path().get(f.target())
             && (goal[0] - input.pose.x).hypot(goal[1] - input.pose.y) <= c.goal_tolerance
             && let Some((scan, mount)) = input.scan
-            && free_ahead(scan, &mount, c.robot_radius) <= c.robot_radius + c.route_wall_margin
+            && wall_ends_lane(scan, &mount, &c)
         {
             f.advance();
         }
@@ -826,6 +827,13 @@ impl Navigator {
     }
 }
 
+/// Whether `scan` (from a laser at `mount`) finds the wall a route point lies against: a
+/// return within `route_wall_margin` of the bumper's middle half ([`ROUTE_WALL_BAND`]).
+fn wall_ends_lane(scan: &LaserScan, mount: &Pose2, c: &NavigationConfig) -> bool {
+    free_ahead(scan, mount, c.robot_radius * ROUTE_WALL_BAND)
+        <= c.robot_radius + c.route_wall_margin
+}
+
 /// How far ahead of the robot's centre the nearest laser return in its path lies (within
 /// `half_width` of its centre line), m; infinite when none does.
 fn free_ahead(scan: &LaserScan, mount: &Pose2, half_width: f64) -> f64 {
@@ -853,6 +861,14 @@ const SPIN_REPLAN_PERIOD: f64 = 0.5;
 const ROUTE_BUMP_LIMIT: usize = 3;
 /// How many route points ahead a route driver tries when the next cannot be reached.
 const ROUTE_LOOKAHEAD: usize = 5;
+/// The share of the robot's radius each side of its centre line in which a laser return
+/// counts as the wall a route point lies against ([`NavigationConfig::route_wall_margin`]):
+/// the middle half of the bumper. A wall the lane ends against crosses it; a wall alongside,
+/// which the route passes at its clearance (3 cm) less one map cell and the pose's error, lies
+/// nearer than the robot's radius to its centre line and, counted across the whole bumper,
+/// ended lanes along walls up to `goal_tolerance` short (`office-coverage-bcd-truth` seed 1:
+/// the robot turned 13 cm short of the corner at (16.375, 15.675), the wall beside it).
+const ROUTE_WALL_BAND: f64 = 0.5;
 /// Least clearance of a grid path to a route point, m: the Create's radius and 1 cm.
 const ROUTE_CLEARANCE: f64 = 0.18;
 
@@ -1062,6 +1078,56 @@ mod tests {
         assert_eq!(nav.stats().route_points_passed, route.len());
         // Stopped within a few millimetres (a tick's travel) of the wall margin.
         assert!((wall_x - truth.x - 0.2).abs() < 0.02, "{truth:?}");
+    }
+
+    /// The wall a lane ends against, and a wall alongside the lane 16 cm from the robot's
+    /// centre (the route's 3 cm clearance less a map cell's quantisation and the pose's
+    /// error): only the first ends the lane. Counted across the whole bumper, the wall
+    /// alongside ended lanes up to `goal_tolerance` (15 cm) short of their corners, leaving
+    /// their floor unswept (`office-coverage-bcd-truth` lost 2.8 % of its promise).
+    #[test]
+    fn only_a_wall_ahead_ends_a_lane_not_one_alongside() {
+        let c = NavigationConfig::default();
+        // A straight wall through `a` along direction `dir` (robot frame), as a laser at the
+        // centre sees it: 1° beams over the front half.
+        let scan_of_wall = |a: [f64; 2], dir: [f64; 2]| {
+            let ranges = (0..181)
+                .map(|k| {
+                    let t = (k as f64 - 90.0).to_radians();
+                    let (u, v) = (t.cos(), t.sin());
+                    // Solve s·(u, v) = a + q·dir for s.
+                    let det = u * -dir[1] - v * -dir[0];
+                    let s = (a[0] * -dir[1] - a[1] * -dir[0]) / det;
+                    if det.abs() > 1e-9 && s > 0.0 && s < 30.0 {
+                        s as f32
+                    } else {
+                        f32::INFINITY
+                    }
+                })
+                .collect();
+            LaserScan {
+                angle_min: -std::f64::consts::FRAC_PI_2,
+                angle_increment: 1f64.to_radians(),
+                ranges,
+                ..scan_with_return_at(1.0)
+            }
+        };
+        let mount = Pose2::IDENTITY;
+        let alongside = scan_of_wall([0.0, 0.16], [1.0, 0.0]);
+        assert!(!wall_ends_lane(&alongside, &mount, &c));
+        // The same wall, the robot 5° off the lane towards it.
+        let (s5, c5) = 5f64.to_radians().sin_cos();
+        let angled = scan_of_wall([0.0, 0.19 / c5], [c5, -s5]);
+        assert!(!wall_ends_lane(&angled, &mount, &c));
+        // The wall the lane ends against, 3 cm ahead of the bumper, square or 20° off.
+        let ahead = scan_of_wall([0.2, 0.0], [0.0, 1.0]);
+        assert!(wall_ends_lane(&ahead, &mount, &c));
+        let (s20, c20) = 20f64.to_radians().sin_cos();
+        let skew = scan_of_wall([0.2, 0.0], [s20, c20]);
+        assert!(wall_ends_lane(&skew, &mount, &c));
+        // 10 cm ahead of the bumper it does not yet.
+        let far = scan_of_wall([0.27, 0.0], [0.0, 1.0]);
+        assert!(!wall_ends_lane(&far, &mount, &c));
     }
 
     /// A pose estimate inside a wall's margin, from which no path reaches the route: the
