@@ -22,7 +22,7 @@ use crate::control::pursuit::{FollowParams, PathFollower};
 use crate::tracking::people::TrackedPerson;
 use exploration::path_to_frontier;
 use futago_msgs::grid::OccupancyGrid;
-use futago_msgs::{BumpsAndDrops, DriveCommand, LaserScan, Pose2, Radius, Time, wrap_angle};
+use futago_msgs::{BumpsAndDrops, DriveCommand, LaserScan, Pose2, Radius, Time};
 use planner::{PlannerConfig, RoadMap};
 use serde::Deserialize;
 
@@ -828,40 +828,55 @@ impl Navigator {
 }
 
 /// Whether `scan` (from a laser at `mount`) finds the wall a route point lies against: the
-/// beams that look ahead through the bumper's middle half at `route_wall_margin` from it
-/// ([`ROUTE_WALL_BAND`]: those within a cone of that half-width from the robot's centre), by
-/// their median distance ahead (a beam with no return counts as far), within the margin. A
-/// wall the lane ends against fills the cone; a wall alongside the lane lies outside it but
-/// for a few readings that the laser's noise throws in, which the median ignores. The
-/// nearest return in the cone would be read short by the noise: some 300 beams of σ = 3 cm on
-/// seed 000's laser put it 8 cm short and ended lanes 5 cm before their corners.
+/// nearest of its returns, once despeckled ([`despeckled`]), that lies ahead within the
+/// bumper's middle half ([`ROUTE_WALL_BAND`]), within `route_wall_margin` of the bumper. The
+/// raw nearest return read a wall ahead short by the laser's noise (the nearest of some 300
+/// returns of σ = 3 cm on seed 000's laser, 8 cm short), ending lanes 5 cm before their
+/// corners, and took a few noisy readings of a wall alongside for one ahead.
 fn wall_ends_lane(scan: &LaserScan, mount: &Pose2, c: &NavigationConfig) -> bool {
-    let reach = c.robot_radius + c.route_wall_margin;
-    let cone = (c.robot_radius * ROUTE_WALL_BAND / reach).atan();
-    let mut ahead: Vec<f64> = scan
+    let half_width = c.robot_radius * ROUTE_WALL_BAND;
+    despeckled(scan, mount)
+        .filter(|p| p[0] > 0.0 && p[1].abs() < half_width)
+        .any(|p| p[0] <= c.robot_radius + c.route_wall_margin)
+}
+
+/// Beams a laser return is despeckled over ([`despeckled`]).
+const DESPECKLE_BEAMS: usize = 9;
+
+/// A scan's returns in the robot's frame, each the component-wise median of the returns of
+/// [`DESPECKLE_BEAMS`] neighbouring beams (at least half of them valid): a running median
+/// along the scan, as ROS's laser_filters' median filter, which keeps an object that spans a
+/// few beams and drops a reading that noise alone throws in.
+fn despeckled<'a>(scan: &'a LaserScan, mount: &'a Pose2) -> impl Iterator<Item = [f64; 2]> + 'a {
+    let points: Vec<Option<[f64; 2]>> = scan
         .ranges
         .iter()
         .enumerate()
-        .filter_map(|(k, &r)| {
+        .map(|(k, &r)| {
             let r = r as f64;
-            let a = scan.angle(k);
-            if r.is_finite() && r >= scan.range_min && r <= scan.range_max {
-                let p = mount.transform_point([r * a.cos(), r * a.sin()]);
-                (p[0] > 0.0 && p[1].atan2(p[0]).abs() <= cone).then_some(p[0])
-            } else if r.is_nan() || r < scan.range_min {
-                None
-            } else {
-                // No return: the way is clear as far as the laser sees.
-                (wrap_angle(mount.theta + a).abs() <= cone).then_some(f64::INFINITY)
-            }
+            (r.is_finite() && r >= scan.range_min && r <= scan.range_max).then(|| {
+                let a = scan.angle(k);
+                mount.transform_point([r * a.cos(), r * a.sin()])
+            })
         })
         .collect();
-    if ahead.is_empty() {
-        return false;
-    }
-    let mid = ahead.len() / 2;
-    let (_, median, _) = ahead.select_nth_unstable_by(mid, f64::total_cmp);
-    *median <= reach
+    let n = points.len();
+    (0..n.saturating_sub(DESPECKLE_BEAMS - 1)).filter_map(move |k| {
+        let window: Vec<[f64; 2]> = points[k..k + DESPECKLE_BEAMS]
+            .iter()
+            .flatten()
+            .copied()
+            .collect();
+        if 2 * window.len() < DESPECKLE_BEAMS {
+            return None;
+        }
+        let median = |axis: usize| {
+            let mut v: Vec<f64> = window.iter().map(|p| p[axis]).collect();
+            let mid = v.len() / 2;
+            *v.select_nth_unstable_by(mid, f64::total_cmp).1
+        };
+        Some([median(0), median(1)])
+    })
 }
 
 /// How often a robot spinning because its route found no path plans again, s: a turn of about
@@ -873,10 +888,10 @@ const SPIN_REPLAN_PERIOD: f64 = 0.5;
 const ROUTE_BUMP_LIMIT: usize = 3;
 /// How many route points ahead a route driver tries when the next cannot be reached.
 const ROUTE_LOOKAHEAD: usize = 5;
-/// The share of the robot's radius each side of its centre line through which the laser's
-/// beams count as looking at the wall a route point lies against
-/// ([`NavigationConfig::route_wall_margin`]): the middle half of the bumper. A wall the lane
-/// ends against crosses it; a wall alongside, which the route passes at its clearance (3 cm)
+/// The share of the robot's radius each side of its centre line in which a laser return
+/// counts as the wall a route point lies against ([`NavigationConfig::route_wall_margin`]):
+/// the middle half of the bumper. A wall the lane ends against crosses it, and so does the
+/// corner of a pillar the point lies beside; a wall alongside, which the route passes at its clearance (3 cm)
 /// less one map cell and the pose's error, lies nearer than the robot's radius to its centre
 /// line and, counted across the whole bumper, ended lanes along walls up to `goal_tolerance`
 /// short (`office-coverage-bcd-truth` seed 1: the robot turned 13 cm short of the corner at
@@ -946,6 +961,26 @@ mod tests {
             range_min: 0.02,
             range_max: 30.0,
             ranges: vec![f32::INFINITY, distance as f32, f32::INFINITY],
+        }
+    }
+
+    /// A wall square across the way `distance` ahead, as a laser at the robot's centre sees
+    /// it with 1° beams over the front half.
+    fn wall_ahead_scan(distance: f64) -> LaserScan {
+        LaserScan {
+            angle_min: -std::f64::consts::FRAC_PI_2,
+            angle_increment: 1f64.to_radians(),
+            ranges: (0..181)
+                .map(|k| {
+                    let c = (k as f64 - 90.0).to_radians().cos();
+                    if c > 0.05 {
+                        (distance / c) as f32
+                    } else {
+                        f32::INFINITY
+                    }
+                })
+                .collect(),
+            ..scan_with_return_at(1.0)
         }
     }
 
@@ -1072,7 +1107,7 @@ mod tests {
         let lag = 0.05;
         for k in 0..4000 {
             let estimate = Pose2::new(truth.x - lag, truth.y, truth.theta);
-            let scan = scan_with_return_at(wall_x - truth.x);
+            let scan = wall_ahead_scan(wall_x - truth.x);
             let input = NavInput {
                 scan: Some((&scan, Pose2::IDENTITY)),
                 ..plain_input(k, dt, estimate)
@@ -1098,8 +1133,9 @@ mod tests {
     /// error): only the first ends the lane. Counted across the whole bumper, the wall
     /// alongside ended lanes up to `goal_tolerance` (15 cm) short of their corners, leaving
     /// their floor unswept (`office-coverage-bcd-truth` lost 2.8 % of its promise). Through
-    /// seed 000's laser noise (σ = 3 cm, 0.25° beams) the wall ahead is read at its distance,
-    /// not at the nearest of its noisy returns.
+    /// seed 000's laser noise (σ = 3 cm, 0.25° beams) the wall ahead is read near its
+    /// distance, not at the nearest of its noisy returns, and a pillar's corner in the way
+    /// still counts.
     #[test]
     fn only_a_wall_ahead_ends_a_lane_not_one_alongside() {
         use rand::SeedableRng;
@@ -1149,10 +1185,21 @@ mod tests {
             let (s20, c20) = 20f64.to_radians().sin_cos();
             let skew = scan_of_wall([0.19, 0.0], [s20, c20], sigma);
             assert!(wall_ends_lane(&skew, &mount, &c), "σ × {sigma}");
-            // 2 cm further (the planned lane end may lie up to a map cell short of the true
+            // 5 cm further (the planned lane end may lie up to a map cell short of the true
             // wall) it does not yet.
-            let far = scan_of_wall([0.22, 0.0], [0.0, 1.0], sigma);
+            let far = scan_of_wall([0.25, 0.0], [0.0, 1.0], sigma);
             assert!(!wall_ends_lane(&far, &mount, &c), "σ × {sigma}");
+            // A pillar's face ahead of the bumper's right, its corner 5 cm right of the centre
+            // line: the robot would bump it (`hall-scan3d-frontier` seed 1, at (30.35, 0.96)
+            // beside the pillar at (30, 0.5)).
+            let mut corner = scan_of_wall([0.19, 0.0], [0.0, 1.0], sigma);
+            for (k, r) in corner.ranges.iter_mut().enumerate() {
+                let a = corner.angle_min + k as f64 * corner.angle_increment;
+                if (*r as f64 * a.sin()) > -0.05 {
+                    *r = f32::INFINITY;
+                }
+            }
+            assert!(wall_ends_lane(&corner, &mount, &c), "σ × {sigma}");
         }
     }
 
