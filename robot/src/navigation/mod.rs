@@ -891,11 +891,11 @@ const ROUTE_LOOKAHEAD: usize = 5;
 /// The share of the robot's radius each side of its centre line in which a laser return
 /// counts as the wall a route point lies against ([`NavigationConfig::route_wall_margin`]):
 /// the middle half of the bumper. A wall the lane ends against crosses it, and so does the
-/// corner of a pillar the point lies beside; a wall alongside, which the route passes at its clearance (3 cm)
-/// less one map cell and the pose's error, lies nearer than the robot's radius to its centre
-/// line and, counted across the whole bumper, ended lanes along walls up to `goal_tolerance`
-/// short (`office-coverage-bcd-truth` seed 1: the robot turned 13 cm short of the corner at
-/// (16.375, 15.675), the wall beside it).
+/// corner of a pillar the point lies beside; a wall alongside, which the route passes at its
+/// clearance (3 cm) less one map cell and the pose's error, lies nearer than the robot's
+/// radius to its centre line and, counted across the whole bumper, ended lanes along walls up
+/// to `goal_tolerance` short (`office-coverage-bcd-truth` seed 1: the robot turned 13 cm short
+/// of the corner at (16.375, 15.675), the wall beside it).
 const ROUTE_WALL_BAND: f64 = 0.5;
 /// Least clearance of a grid path to a route point, m: the Create's radius and 1 cm.
 const ROUTE_CLEARANCE: f64 = 0.18;
