@@ -861,21 +861,19 @@ fn despeckled<'a>(scan: &'a LaserScan, mount: &'a Pose2) -> impl Iterator<Item =
         })
         .collect();
     let n = points.len();
+    // Each window's coordinates in fixed arrays: no allocation per beam.
     (0..n.saturating_sub(DESPECKLE_BEAMS - 1)).filter_map(move |k| {
-        let window: Vec<[f64; 2]> = points[k..k + DESPECKLE_BEAMS]
-            .iter()
-            .flatten()
-            .copied()
-            .collect();
-        if 2 * window.len() < DESPECKLE_BEAMS {
+        let (mut xs, mut ys) = ([0.0; DESPECKLE_BEAMS], [0.0; DESPECKLE_BEAMS]);
+        let mut m = 0;
+        for p in points[k..k + DESPECKLE_BEAMS].iter().flatten() {
+            (xs[m], ys[m]) = (p[0], p[1]);
+            m += 1;
+        }
+        if 2 * m < DESPECKLE_BEAMS {
             return None;
         }
-        let median = |axis: usize| {
-            let mut v: Vec<f64> = window.iter().map(|p| p[axis]).collect();
-            let mid = v.len() / 2;
-            *v.select_nth_unstable_by(mid, f64::total_cmp).1
-        };
-        Some([median(0), median(1)])
+        let median = |v: &mut [f64]| *v.select_nth_unstable_by(v.len() / 2, f64::total_cmp).1;
+        Some([median(&mut xs[..m]), median(&mut ys[..m])])
     })
 }
 
