@@ -849,6 +849,10 @@ fn coverage_section(picture: Option<&[u8]>, summary: &Value) -> String {
             "coverage.camera.regions.walls_min",
             "camera: walls of the worst region",
         ),
+        (
+            "coverage.camera.regions.walls_observable",
+            "camera: walls it can see at all",
+        ),
         ("coverage.route.length_m", "route (m)"),
         ("coverage.route.time_s", "time model (s)"),
         ("coverage.driven_m", "driven (m)"),

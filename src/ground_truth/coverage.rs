@@ -38,10 +38,11 @@ pub const CLASSES: [&str; 3] = ["floor", "walls", "furniture"];
 pub struct Surfaces {
     area: FxHashMap<[i32; 3], [f64; 3]>,
     total: [f64; 3],
-    /// Each class's area per (voxel, region).
-    regional: FxHashMap<([i32; 3], u32), [f64; 3]>,
-    /// Each region's area of each class.
-    region_total: Vec<[f64; 3]>,
+    /// Each class's area per (voxel, region): all of it, and the part the camera can see
+    /// from some reachable pose ([`super::observable`]).
+    regional: FxHashMap<([i32; 3], u32), [[f64; 3]; 2]>,
+    /// Each region's area of each class: all of it, and the observable part.
+    region_total: Vec<[[f64; 3]; 2]>,
 }
 
 /// How far from a face, along its outward normal, its region is looked up, m: into the free
@@ -56,12 +57,15 @@ impl Surfaces {
     /// The world's static surfaces at or below `top` (m) where `keep(x, y)` holds (the area
     /// to cover): the floor slab's upper face, the walls' upright faces and the other static
     /// objects' upright faces. `region(x, y)` labels each piece with the region of the floor
-    /// it faces (looked up a little way out along its normal), or none.
+    /// it faces (looked up a little way out along its normal), or none; `sees(p, normal)`
+    /// tells whether the camera can see a labelled upright piece at all (the floor counts as
+    /// observable).
     pub fn from_world(
         world: &World,
         top: f64,
         keep: impl Fn([f64; 2]) -> bool,
         region: impl Fn([f64; 2]) -> Option<usize>,
+        sees: impl Fn([f64; 3], [f64; 2]) -> bool,
     ) -> Surfaces {
         let mut s = Surfaces::empty();
         for o in &world.objects {
@@ -93,7 +97,9 @@ impl Surfaces {
                     let probe = [n.x as f64 / area2 as f64, n.y as f64 / area2 as f64]
                         .map(|u| u * REGION_PROBE);
                     let label = |p: [f64; 2]| region([p[0] + probe[0], p[1] + probe[1]]);
-                    s.add_triangle(a, b, c, class, top, &keep, &label);
+                    let normal = [n.x as f64, n.y as f64];
+                    let observable = |p: [f64; 3]| class == 0 || sees(p, normal);
+                    s.add_triangle(a, b, c, class, top, &keep, &label, &observable);
                 }
             }
         }
@@ -106,7 +112,16 @@ impl Surfaces {
     pub(crate) fn from_triangles(triangles: &[([[f64; 3]; 3], usize)]) -> Surfaces {
         let mut s = Surfaces::empty();
         for ([a, b, c], class) in triangles {
-            s.add_triangle(*a, *b, *c, *class, f64::INFINITY, &|_| true, &|_| None);
+            s.add_triangle(
+                *a,
+                *b,
+                *c,
+                *class,
+                f64::INFINITY,
+                &|_| true,
+                &|_| None,
+                &|_| true,
+            );
         }
         s
     }
@@ -121,7 +136,8 @@ impl Surfaces {
     }
 
     /// Samples a triangle every [`SAMPLE_STEP`] and adds its area below `top` to `class`, and
-    /// to the region `label` gives each sample.
+    /// to the region `label` gives each sample (and to its observable part where
+    /// `observable` holds).
     #[allow(clippy::too_many_arguments)]
     fn add_triangle(
         &mut self,
@@ -132,6 +148,7 @@ impl Surfaces {
         top: f64,
         keep: &impl Fn([f64; 2]) -> bool,
         label: &impl Fn([f64; 2]) -> Option<usize>,
+        observable: &impl Fn([f64; 3]) -> bool,
     ) {
         let e = |p: [f64; 3], q: [f64; 3]| {
             ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2)).sqrt()
@@ -172,11 +189,15 @@ impl Surfaces {
                     self.area.entry(k).or_insert([0.0; 3])[class] += each;
                     self.total[class] += each;
                     if let Some(r) = label([p[0], p[1]]) {
-                        self.regional.entry((k, r as u32)).or_insert([0.0; 3])[class] += each;
+                        let parts = if observable(p) { 2 } else { 1 };
+                        let entry = self.regional.entry((k, r as u32)).or_insert([[0.0; 3]; 2]);
                         if self.region_total.len() <= r {
-                            self.region_total.resize(r + 1, [0.0; 3]);
+                            self.region_total.resize(r + 1, [[0.0; 3]; 2]);
                         }
-                        self.region_total[r][class] += each;
+                        for (e, t) in entry.iter_mut().zip(&mut self.region_total[r]).take(parts) {
+                            e[class] += each;
+                            t[class] += each;
+                        }
                     }
                 }
             }
@@ -217,13 +238,22 @@ impl Surfaces {
     }
 
     /// Per region (by number, up to the highest labelled): each class's area, and the area
-    /// of it in the voxels of `seen`, m².
-    pub fn region_areas(&self, seen: &CameraCoverage) -> Vec<([f64; 3], [f64; 3])> {
-        let mut out: Vec<([f64; 3], [f64; 3])> =
-            self.region_total.iter().map(|t| (*t, [0.0; 3])).collect();
+    /// of it in the voxels of `seen`, m². With `observable`, of the part of each class the
+    /// camera can see at all.
+    pub fn region_areas(
+        &self,
+        seen: &CameraCoverage,
+        observable: bool,
+    ) -> Vec<([f64; 3], [f64; 3])> {
+        let part = usize::from(observable);
+        let mut out: Vec<([f64; 3], [f64; 3])> = self
+            .region_total
+            .iter()
+            .map(|t| (t[part], [0.0; 3]))
+            .collect();
         for ((k, r), a) in &self.regional {
             if seen.voxels.contains(k) {
-                for (o, x) in out[*r as usize].1.iter_mut().zip(a) {
+                for (o, x) in out[*r as usize].1.iter_mut().zip(&a[part]) {
                     *o += x;
                 }
             }
@@ -392,8 +422,10 @@ mod tests {
             [2.0, 1.0, 0.0],
             [0.0, 1.0, 0.0],
         );
-        s.add_triangle(a, b, c, 0, 1.0, &|_| true, &left_right);
-        s.add_triangle(a, c, d, 0, 1.0, &|_| true, &left_right);
+        // Observable: x < 1.5 m only.
+        let observable = |p: [f64; 3]| p[0] < 1.5;
+        s.add_triangle(a, b, c, 0, 1.0, &|_| true, &left_right, &observable);
+        s.add_triangle(a, c, d, 0, 1.0, &|_| true, &left_right, &observable);
         assert!((s.total()[0] - 2.0).abs() < 1e-9, "{:?}", s.total());
         // Seen: every voxel whose centre has x < 1.
         let mut seen = CameraCoverage::default();
@@ -415,7 +447,7 @@ mod tests {
         assert!((1.0 - 1e-9..=1.0 + 0.0137 + 1e-6).contains(&got), "{got}");
         // By region: the left 0.5 m (0.5 m²) all seen; of the rest (1.5 m²), the 0.5 m up to
         // x = 1 m (and the straddling column).
-        let by = s.region_areas(&seen);
+        let by = s.region_areas(&seen, false);
         assert_eq!(by.len(), 2);
         assert!(
             (by[0].0[0] - 0.5).abs() < 1e-9 && (by[0].1[0] - 0.5).abs() < 1e-9,
@@ -426,6 +458,12 @@ mod tests {
             (0.5 - 1e-9..=0.5 + 0.0137 + 1e-6).contains(&by[1].1[0]),
             "{by:?}"
         );
+        // Of the observable part, the right region holds 1 m² (x from 0.5 to 1.5 m), of which
+        // the same 0.5 m² was seen; the left region is all observable.
+        let ob = s.region_areas(&seen, true);
+        assert!((ob[0].0[0] - 0.5).abs() < 1e-9, "{ob:?}");
+        assert!((ob[1].0[0] - 1.0).abs() < 1e-6, "{ob:?}");
+        assert!((ob[1].1[0] - by[1].1[0]).abs() < 1e-9, "{ob:?}");
         // A wall below `top` only: a 1 m high face cut at 0.5 m counts half.
         let mut w = Surfaces::empty();
         w.add_triangle(
@@ -436,6 +474,7 @@ mod tests {
             0.5,
             &|_| true,
             &|_| None,
+            &|_| true,
         );
         w.add_triangle(
             [0.0, 0.0, 0.0],
@@ -445,6 +484,7 @@ mod tests {
             0.5,
             &|_| true,
             &|_| None,
+            &|_| true,
         );
         assert!((w.total()[1] - 0.5).abs() < 0.02, "{:?}", w.total());
     }

@@ -12,6 +12,7 @@ pub mod detection;
 pub mod leg_scans;
 pub mod map;
 pub mod mot;
+pub mod observable;
 pub mod planes;
 pub mod pollution;
 pub mod regions;

@@ -19,6 +19,7 @@ use super::driver::{ControllerConfig, controller, controller_type};
 use super::{Bus, CameraFrame, FrameTruth, Node, Report, Streams, TrueState, Truth};
 use crate::ground_truth::Metrics;
 use crate::ground_truth::coverage::{CLASSES, CameraCoverage, Footprint, Surfaces};
+use crate::ground_truth::observable::{CameraReach, Observability};
 use crate::ground_truth::regions::{CORRIDOR_WIDTH, Kind, MIN_AREA_FACTOR, Regions};
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
@@ -140,8 +141,10 @@ struct Figures {
     /// The camera's seen share of the walls, and of every surface.
     walls: f64,
     all: f64,
-    /// The camera's seen share of the scored regions' walls.
+    /// The camera's seen share of the scored regions' walls, and of the part of them it can
+    /// see at all.
     regions_walls: f64,
+    observable_walls: f64,
     /// The true footprint's share of what the first route promised.
     footprint: f64,
 }
@@ -168,20 +171,44 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
     // Corridors and rooms, on the whole map (the region to cover would narrow the space
     // where its edge cuts it).
     let regions = Regions::new(&map, CORRIDOR_WIDTH);
-    let surfaces = cam.map(|c| {
-        let half_vfov = (c.depth.height as f64 / (2.0 * c.depth.fy)).atan();
-        let top = c.mount.translation.z as f64 + c.range_max * half_vfov.tan();
-        let region = &s.spec.coverage.region;
-        Surfaces::from_world(
-            &s.world,
-            top,
-            |p| region.is_empty() || coverage::inside_polygon(region, p),
-            |p| regions.at(p),
-        )
-    });
     // The floor to cover: the world's, less what the user left out (the region's outside and
     // the annotations).
     let floor = coverage::restricted(&map, &s.spec.coverage);
+    let surfaces = cam
+        .map(|c| -> Result<Surfaces> {
+            let half_vfov = (c.depth.height as f64 / (2.0 * c.depth.fy)).atan();
+            let half_hfov = (c.depth.width as f64 / (2.0 * c.depth.fx)).atan();
+            let height = c.mount.translation.z as f64;
+            let top = height + c.range_max * half_vfov.tan();
+            let region = &s.spec.coverage.region;
+            // What the camera can see at all: from the cells the robot's centre can reach on
+            // the floor to cover, past what stands at the camera's height.
+            let reach = Field::new(&floor, s.spec.coverage.clearance, start)
+                .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
+            let sight = super::world_map(s, s.spec.navigation.map_resolution, height)
+                .context("navigation.map_resolution")?;
+            let observability = Observability::new(
+                sight,
+                reach.reachable,
+                CameraReach {
+                    height,
+                    forward: c.mount.translation.x as f64,
+                    near: c.range_min,
+                    far: c.range_max,
+                    half_hfov,
+                    half_vfov,
+                },
+            )
+            .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
+            Ok(Surfaces::from_world(
+                &s.world,
+                top,
+                |p| region.is_empty() || coverage::inside_polygon(region, p),
+                |p| regions.at(p),
+                |p, n| observability.sees(p, n),
+            ))
+        })
+        .transpose()?;
     let footprint = Footprint::new(&floor, ROBOT_RADIUS, s.spec.coverage.clearance, start)
         .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
     // What the route would sweep if driven exactly.
@@ -341,12 +368,17 @@ pub fn metric_names(s: &ScenarioSpec) -> Vec<String> {
             }
         }
         names.push("coverage.camera.regions.walls_min".into());
+        // The walls the camera can see at all from the floor the robot can reach (the
+        // denominator, as the reachable floor is the footprint's), and their share of the walls.
+        names.push("coverage.camera.regions.walls_observable".into());
+        names.push("coverage.camera.regions.walls_observable_share".into());
         if s.coverage.second_pass.enabled {
             names.extend(
                 [
                     "walls_before",
                     "all_before",
                     "regions_walls_before",
+                    "walls_observable_before",
                     "walls_gain",
                     "extra_m",
                     "views",
@@ -545,7 +577,7 @@ impl CoverageNode {
         Option<f64>,
     )> {
         let s = self.surfaces.as_ref()?;
-        let areas = s.region_areas(&self.seen);
+        let areas = s.region_areas(&self.seen, false);
         let mut kinds = Vec::new();
         for kind in [Some(Kind::Room), Some(Kind::Corridor), None] {
             let (mut total, mut got) = ([0.0; 2], [0.0; 2]);
@@ -579,6 +611,27 @@ impl CoverageNode {
         Some((areas, kinds, worst))
     }
 
+    /// The scored regions' walls the camera can see from some reachable pose: the seen share
+    /// of them, and their share of all the scored regions' walls.
+    fn observable_walls(&self) -> Option<(f64, f64)> {
+        let s = self.surfaces.as_ref()?;
+        let (mut all, mut observable, mut seen) = (0.0, 0.0, 0.0);
+        let every = s.region_areas(&self.seen, false);
+        for (r, (t, g)) in s.region_areas(&self.seen, true).iter().enumerate() {
+            if self.scored_regions[r] {
+                all += every[r].0[1];
+                observable += t[1];
+                seen += g[1];
+            }
+        }
+        // As for the other shares: no such surface, nothing of it missed.
+        Some(if observable > 0.0 {
+            (seen / observable, observable / all)
+        } else {
+            (1.0, if all > 0.0 { 0.0 } else { 1.0 })
+        })
+    }
+
     /// The figures now: driven length, the camera's shares and the footprint's.
     fn figures(&self) -> Figures {
         let (walls, all) = match &self.surfaces {
@@ -597,6 +650,7 @@ impl CoverageNode {
             walls,
             all,
             regions_walls,
+            observable_walls: self.observable_walls().map_or(0.0, |(seen, _)| seen),
             footprint: self.footprint.share_of(&self.planned),
         }
     }
@@ -958,6 +1012,10 @@ impl Node for CoverageNode {
                     m.insert("coverage.camera.regions.walls_min", w);
                 }
             }
+            if let Some((seen, observable)) = self.observable_walls() {
+                m.insert("coverage.camera.regions.walls_observable", seen);
+                m.insert("coverage.camera.regions.walls_observable_share", observable);
+            }
             if let Some(second) = &self.second {
                 // Without a second route (nothing missed, or the first never finished), the
                 // figures before it are those at the end.
@@ -967,6 +1025,10 @@ impl Node for CoverageNode {
                 m.insert(
                     "coverage.second_pass.regions_walls_before",
                     before.regions_walls,
+                );
+                m.insert(
+                    "coverage.second_pass.walls_observable_before",
+                    before.observable_walls,
                 );
                 m.insert(
                     "coverage.second_pass.walls_gain",
