@@ -90,16 +90,29 @@ fn local_thickness(free: &[bool], r: &[f64], w: usize, h: usize) -> Vec<f64> {
             }
             let width = 2.0 * rq - 1.0;
             let reach = rq.ceil() as i64;
+            let inside = |di: i64, dj: i64| ((di * di + dj * dj) as f64) < rq * rq;
+            // Row by row, the disc's span of columns: the half-width from the square root,
+            // then settled on the same test a cell at a time.
             for dj in -reach..=reach {
-                for di in -reach..=reach {
-                    let (a, b) = (i as i64 + di, j as i64 + dj);
-                    if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
-                        continue;
-                    }
-                    if ((di * di + dj * dj) as f64) < rq * rq {
-                        let m = b as usize * w + a as usize;
-                        thick[m] = thick[m].max(width);
-                    }
+                let b = j as i64 + dj;
+                if b < 0 || b >= h as i64 {
+                    continue;
+                }
+                let mut half = ((rq * rq - (dj * dj) as f64).max(0.0).sqrt().ceil() as i64).max(0);
+                while half > 0 && !inside(half, dj) {
+                    half -= 1;
+                }
+                while inside(half + 1, dj) {
+                    half += 1;
+                }
+                if !inside(half, dj) {
+                    continue;
+                }
+                let lo = (i as i64 - half).max(0) as usize;
+                let hi = (i as i64 + half).min(w as i64 - 1) as usize;
+                let row = b as usize * w;
+                for t in &mut thick[row + lo..=row + hi] {
+                    *t = t.max(width);
                 }
             }
         }
@@ -303,6 +316,43 @@ impl Regions {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The row-span painting of the local thickness gives each cell the widest disc that
+    /// holds it, as painting every disc cell by cell does: on a room with pillars and a
+    /// diagonal wall, where discs of every size and their edges at every row meet.
+    #[test]
+    fn local_thickness_paints_each_disc_whole() {
+        let (w, h) = (90usize, 70usize);
+        let free: Vec<bool> = (0..w * h)
+            .map(|k| {
+                let (i, j) = ((k % w) as i64, (k / w) as i64);
+                let border = i == 0 || j == 0 || i == w as i64 - 1 || j == h as i64 - 1;
+                let pillar = (i - 30).pow(2) + (j - 25).pow(2) < 20
+                    || (60..64).contains(&i) && (40..47).contains(&j);
+                let diagonal = (i + 2 * j - 150).abs() < 2 && i > 40;
+                !(border || pillar || diagonal)
+            })
+            .collect();
+        let blocked: Vec<bool> = free.iter().map(|f| !f).collect();
+        let r: Vec<f64> = squared_edt(&blocked, w, h)
+            .into_iter()
+            .map(f64::sqrt)
+            .collect();
+        let got = local_thickness(&free, &r, w, h);
+        // Every free cell's disc, cell by cell.
+        let mut expected = vec![0.0f64; w * h];
+        for k in (0..w * h).filter(|&k| free[k]) {
+            let (i, j) = ((k % w) as i64, (k / w) as i64);
+            for m in 0..w * h {
+                let (a, b) = ((m % w) as i64, (m / w) as i64);
+                if (((a - i).pow(2) + (b - j).pow(2)) as f64) < r[k] * r[k] {
+                    expected[m] = expected[m].max(2.0 * r[k] - 1.0);
+                }
+            }
+        }
+        assert_eq!(got, expected);
+        assert!(got.iter().any(|&t| t > 30.0), "some disc is wide");
+    }
 
     /// Two 4 × 4 m rooms joined by a 1 m wide, 4 m long corridor, a 1 m wide dead-end
     /// corridor 4 m long leaving the second room, a third room behind the first one's 0.1 m
