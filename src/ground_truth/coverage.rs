@@ -59,10 +59,12 @@ impl Surfaces {
     /// objects' upright faces. `region(x, y)` labels each piece with the region of the floor
     /// it faces (looked up a little way out along its normal), or none; `sees(p, normal)`
     /// tells whether the camera can see a labelled upright piece at all (the floor counts as
-    /// observable).
+    /// observable). `bounds` (lower and upper corners, m), where given, holds every point
+    /// `keep` takes: the rest of the world is not sampled.
     pub fn from_world(
         world: &World,
         top: f64,
+        bounds: Option<[[f64; 2]; 2]>,
         keep: impl Fn([f64; 2]) -> bool,
         region: impl Fn([f64; 2]) -> Option<usize>,
         sees: impl Fn([f64; 3], [f64; 2]) -> bool,
@@ -99,6 +101,19 @@ impl Surfaces {
                     let label = |p: [f64; 2]| region([p[0] + probe[0], p[1] + probe[1]]);
                     let normal = [n.x as f64, n.y as f64];
                     let observable = |p: [f64; 3]| class == 0 || sees(p, normal);
+                    if let Some([lo, hi]) = bounds {
+                        let outside = (0..2).any(|d| {
+                            a[d].min(b[d]).min(c[d]) > hi[d] || a[d].max(b[d]).max(c[d]) < lo[d]
+                        });
+                        if outside {
+                            continue;
+                        }
+                    }
+                    let keep = |p: [f64; 2]| {
+                        bounds.is_none_or(|[lo, hi]| {
+                            (lo[0]..=hi[0]).contains(&p[0]) && (lo[1]..=hi[1]).contains(&p[1])
+                        }) && keep(p)
+                    };
                     s.add_triangle(a, b, c, class, top, &keep, &label, &observable);
                 }
             }

@@ -200,9 +200,22 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
                 },
             )
             .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
+            // The region's bounding box (none: the whole world).
+            let bounds = (!region.is_empty()).then(|| {
+                region.iter().fold(
+                    [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]],
+                    |[lo, hi], p| {
+                        [
+                            [lo[0].min(p[0]), lo[1].min(p[1])],
+                            [hi[0].max(p[0]), hi[1].max(p[1])],
+                        ]
+                    },
+                )
+            });
             Ok(Surfaces::from_world(
                 &s.world,
                 top,
+                bounds,
                 |p| region.is_empty() || coverage::inside_polygon(region, p),
                 |p| regions.at(p),
                 |p, n| observability.sees(p, n),

@@ -334,7 +334,7 @@ fn surfaces_to_map(s: &Scenario, region: &[[f64; 2]]) -> Result<Completeness> {
             reach[j * grid.width + i].sqrt() * INTERIOR_CELL <= INTERIOR_REACH
         })
     };
-    let surfaces = Surfaces::from_world(&s.world, f64::INFINITY, near, |_| None, |_, _| true);
+    let surfaces = Surfaces::from_world(&s.world, f64::INFINITY, None, near, |_| None, |_, _| true);
     Ok(Completeness::new(&surfaces, COVERAGE_TOLERANCE))
 }
 
