@@ -343,10 +343,10 @@ mod tests {
         let mut expected = vec![0.0f64; w * h];
         for k in (0..w * h).filter(|&k| free[k]) {
             let (i, j) = ((k % w) as i64, (k / w) as i64);
-            for m in 0..w * h {
+            for (m, e) in expected.iter_mut().enumerate() {
                 let (a, b) = ((m % w) as i64, (m / w) as i64);
                 if (((a - i).pow(2) + (b - j).pow(2)) as f64) < r[k] * r[k] {
-                    expected[m] = expected[m].max(2.0 * r[k] - 1.0);
+                    *e = e.max(2.0 * r[k] - 1.0);
                 }
             }
         }

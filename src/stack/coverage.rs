@@ -30,6 +30,7 @@ use futago_robot::localization::covariance::position_sigma;
 use futago_robot::navigation::coverage::second_pass::{self, SecondPassConfig, WallSight};
 use futago_robot::navigation::coverage::swept::Swept;
 use futago_robot::navigation::coverage::{self, Field, ROBOT_RADIUS, Route, RouteStats};
+use futago_sim::kinect::KinectSpec;
 use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Instant;
@@ -149,6 +150,61 @@ struct Figures {
     footprint: f64,
 }
 
+/// The world's surfaces the camera is scored on: those up to the highest it can see, in the
+/// region to cover, labelled by region, with what it can see at all from the reachable floor.
+fn camera_surfaces(
+    s: &Scenario,
+    c: &KinectSpec,
+    floor: &futago_msgs::grid::OccupancyGrid,
+    regions: &Regions,
+    start: [f64; 2],
+) -> Result<Surfaces> {
+    let half_vfov = (c.depth.height as f64 / (2.0 * c.depth.fy)).atan();
+    let half_hfov = (c.depth.width as f64 / (2.0 * c.depth.fx)).atan();
+    let height = c.mount.translation.z as f64;
+    let top = height + c.range_max * half_vfov.tan();
+    let region = &s.spec.coverage.region;
+    // What the camera can see at all: from the cells the robot's centre can reach on the
+    // floor to cover, past what stands at the camera's height.
+    let reach = Field::new(floor, s.spec.coverage.clearance, start)
+        .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
+    let sight = super::world_map(s, s.spec.navigation.map_resolution, height)
+        .context("navigation.map_resolution")?;
+    let observability = Observability::new(
+        sight,
+        reach.reachable,
+        CameraReach {
+            height,
+            forward: c.mount.translation.x as f64,
+            near: c.range_min,
+            far: c.range_max,
+            half_hfov,
+            half_vfov,
+        },
+    )
+    .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
+    // The region's bounding box (none: the whole world).
+    let bounds = (!region.is_empty()).then(|| {
+        region.iter().fold(
+            [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]],
+            |[lo, hi], p| {
+                [
+                    [lo[0].min(p[0]), lo[1].min(p[1])],
+                    [hi[0].max(p[0]), hi[1].max(p[1])],
+                ]
+            },
+        )
+    });
+    Ok(Surfaces::from_world(
+        &s.world,
+        top,
+        bounds,
+        |p| region.is_empty() || coverage::inside_polygon(region, p),
+        |p| regions.at(p),
+        |p, n| observability.sees(p, n),
+    ))
+}
+
 /// The node when the scenario's controller is `coverage`.
 pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
     let ControllerConfig::Coverage(control) = controller(s) else {
@@ -175,52 +231,7 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
     // the annotations).
     let floor = coverage::restricted(&map, &s.spec.coverage);
     let surfaces = cam
-        .map(|c| -> Result<Surfaces> {
-            let half_vfov = (c.depth.height as f64 / (2.0 * c.depth.fy)).atan();
-            let half_hfov = (c.depth.width as f64 / (2.0 * c.depth.fx)).atan();
-            let height = c.mount.translation.z as f64;
-            let top = height + c.range_max * half_vfov.tan();
-            let region = &s.spec.coverage.region;
-            // What the camera can see at all: from the cells the robot's centre can reach on
-            // the floor to cover, past what stands at the camera's height.
-            let reach = Field::new(&floor, s.spec.coverage.clearance, start)
-                .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
-            let sight = super::world_map(s, s.spec.navigation.map_resolution, height)
-                .context("navigation.map_resolution")?;
-            let observability = Observability::new(
-                sight,
-                reach.reachable,
-                CameraReach {
-                    height,
-                    forward: c.mount.translation.x as f64,
-                    near: c.range_min,
-                    far: c.range_max,
-                    half_hfov,
-                    half_vfov,
-                },
-            )
-            .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
-            // The region's bounding box (none: the whole world).
-            let bounds = (!region.is_empty()).then(|| {
-                region.iter().fold(
-                    [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]],
-                    |[lo, hi], p| {
-                        [
-                            [lo[0].min(p[0]), lo[1].min(p[1])],
-                            [hi[0].max(p[0]), hi[1].max(p[1])],
-                        ]
-                    },
-                )
-            });
-            Ok(Surfaces::from_world(
-                &s.world,
-                top,
-                bounds,
-                |p| region.is_empty() || coverage::inside_polygon(region, p),
-                |p| regions.at(p),
-                |p, n| observability.sees(p, n),
-            ))
-        })
+        .map(|c| camera_surfaces(s, c, &floor, &regions, start))
         .transpose()?;
     let footprint = Footprint::new(&floor, ROBOT_RADIUS, s.spec.coverage.clearance, start)
         .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
