@@ -822,6 +822,41 @@ fn rgbd_section(slice: Option<&[u8]>, summary: &Value) -> String {
     out
 }
 
+/// The coverage table's figures: metric and what the row says.
+const COVERAGE_FIGURES: &[(&str, &str)] = &[
+    ("coverage.footprint", "footprint (driven)"),
+    ("coverage.route.footprint", "footprint (planned)"),
+    (
+        "coverage.footprint_of_route",
+        "footprint (driven, of the planned)",
+    ),
+    ("coverage.camera.walls", "camera: walls"),
+    ("coverage.camera.floor", "camera: floor"),
+    ("coverage.camera.furniture", "camera: furniture"),
+    ("coverage.camera.rooms.walls", "camera: walls of rooms"),
+    (
+        "coverage.camera.corridors.walls",
+        "camera: walls of corridors",
+    ),
+    (
+        "coverage.camera.regions.walls_min",
+        "camera: walls of the worst region",
+    ),
+    (
+        "coverage.camera.regions.walls_observable",
+        "camera: walls it can see at all",
+    ),
+    ("coverage.route.length_m", "route (m)"),
+    ("coverage.route.time_s", "time model (s)"),
+    ("coverage.driven_m", "driven (m)"),
+    (
+        "coverage.second_pass.walls_before",
+        "walls before the second pass",
+    ),
+    ("coverage.second_pass.walls_gain", "walls gained by it"),
+    ("coverage.second_pass.extra_m", "its extra distance (m)"),
+];
+
 /// The coverage section: the route's and the second pass's figures, the painted map
 /// (`coverage.png`, from the coverage node's report) and coverage over time; empty for a run without a coverage route.
 fn coverage_section(picture: Option<&[u8]>, summary: &Value) -> String {
@@ -830,39 +865,6 @@ fn coverage_section(picture: Option<&[u8]>, summary: &Value) -> String {
         return String::new();
     }
     let metrics = &summary["metrics"];
-    let keys = [
-        ("coverage.footprint", "footprint (driven)"),
-        ("coverage.route.footprint", "footprint (planned)"),
-        (
-            "coverage.footprint_of_route",
-            "footprint (driven, of the planned)",
-        ),
-        ("coverage.camera.walls", "camera: walls"),
-        ("coverage.camera.floor", "camera: floor"),
-        ("coverage.camera.furniture", "camera: furniture"),
-        ("coverage.camera.rooms.walls", "camera: walls of rooms"),
-        (
-            "coverage.camera.corridors.walls",
-            "camera: walls of corridors",
-        ),
-        (
-            "coverage.camera.regions.walls_min",
-            "camera: walls of the worst region",
-        ),
-        (
-            "coverage.camera.regions.walls_observable",
-            "camera: walls it can see at all",
-        ),
-        ("coverage.route.length_m", "route (m)"),
-        ("coverage.route.time_s", "time model (s)"),
-        ("coverage.driven_m", "driven (m)"),
-        (
-            "coverage.second_pass.walls_before",
-            "walls before the second pass",
-        ),
-        ("coverage.second_pass.walls_gain", "walls gained by it"),
-        ("coverage.second_pass.extra_m", "its extra distance (m)"),
-    ];
     // A kind of region the area holds none of scores 1; the table says so instead.
     let scored = |kind: &str| {
         c["regions"].as_array().is_some_and(|r| {
@@ -870,7 +872,7 @@ fn coverage_section(picture: Option<&[u8]>, summary: &Value) -> String {
                 .any(|x| x["kind"] == kind && x["scored"].as_bool() == Some(true))
         })
     };
-    let rows: Vec<Vec<String>> = keys
+    let rows: Vec<Vec<String>> = COVERAGE_FIGURES
         .iter()
         .filter(|(k, _)| metrics.get(*k).is_some())
         .map(|(k, name)| {

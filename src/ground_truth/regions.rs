@@ -60,6 +60,15 @@ pub struct Regions {
 
 const NONE: u32 = u32::MAX;
 
+/// Distance from each cell's centre to the nearest cell's centre that is not free, in cells.
+fn clearance(free: &[bool], w: usize, h: usize) -> Vec<f64> {
+    let blocked: Vec<bool> = free.iter().map(|f| !f).collect();
+    squared_edt(&blocked, w, h)
+        .into_iter()
+        .map(f64::sqrt)
+        .collect()
+}
+
 /// Local thickness, in cells, of a `w` × `h` grid's free cells, given each cell's distance
 /// `r` to the nearest blocked cell's centre (cells): every free cell's disc (clear of blocked
 /// centres) paints its width, 2r − 1 (the disc reaches half a cell short of the blocked
@@ -169,12 +178,7 @@ impl Regions {
             .iter()
             .map(|&c| (0..OCCUPIED).contains(&c))
             .collect();
-        let blocked: Vec<bool> = free.iter().map(|f| !f).collect();
-        // Distance from each cell's centre to the nearest blocked cell's centre, in cells.
-        let r: Vec<f64> = squared_edt(&blocked, w, h)
-            .into_iter()
-            .map(f64::sqrt)
-            .collect();
+        let r = clearance(&free, w, h);
         let thick = local_thickness(&free, &r, w, h);
         let narrow = |k: usize| thick[k] * res <= corridor_width + 1e-9;
         let mut label = vec![NONE; w * h];
@@ -333,11 +337,7 @@ mod tests {
                 !(border || pillar || diagonal)
             })
             .collect();
-        let blocked: Vec<bool> = free.iter().map(|f| !f).collect();
-        let r: Vec<f64> = squared_edt(&blocked, w, h)
-            .into_iter()
-            .map(f64::sqrt)
-            .collect();
+        let r = clearance(&free, w, h);
         let got = local_thickness(&free, &r, w, h);
         // Every free cell's disc, cell by cell.
         let mut expected = vec![0.0f64; w * h];
