@@ -151,13 +151,13 @@ struct Figures {
 }
 
 /// The world's surfaces the camera is scored on: those up to the highest it can see, in the
-/// region to cover, labelled by region, with what it can see at all from the reachable floor.
+/// region to cover, labelled by region, with what it can see at all from the reachable cells
+/// of `field` (the floor to cover).
 fn camera_surfaces(
     s: &Scenario,
     c: &KinectSpec,
-    floor: &futago_msgs::grid::OccupancyGrid,
+    field: &Field,
     regions: &Regions,
-    start: [f64; 2],
 ) -> Result<Surfaces> {
     let half_vfov = (c.depth.height as f64 / (2.0 * c.depth.fy)).atan();
     let half_hfov = (c.depth.width as f64 / (2.0 * c.depth.fx)).atan();
@@ -166,13 +166,11 @@ fn camera_surfaces(
     let region = &s.spec.coverage.region;
     // What the camera can see at all: from the cells the robot's centre can reach on the
     // floor to cover, past what stands at the camera's height.
-    let reach = Field::new(floor, s.spec.coverage.clearance, start)
-        .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
     let sight = super::world_map(s, s.spec.navigation.map_resolution, height)
         .context("navigation.map_resolution")?;
     let observability = Observability::new(
         sight,
-        reach.reachable,
+        field.reachable.clone(),
         CameraReach {
             height,
             forward: c.mount.translation.x as f64,
@@ -230,8 +228,11 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
     // The floor to cover: the world's, less what the user left out (the region's outside and
     // the annotations).
     let floor = coverage::restricted(&map, &s.spec.coverage);
+    // Where the robot's centre can go on it.
+    let field = Field::new(&floor, s.spec.coverage.clearance, start)
+        .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
     let surfaces = cam
-        .map(|c| camera_surfaces(s, c, &floor, &regions, start))
+        .map(|c| camera_surfaces(s, c, &field, &regions))
         .transpose()?;
     let footprint = Footprint::new(&floor, ROBOT_RADIUS, s.spec.coverage.clearance, start)
         .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
@@ -266,26 +267,22 @@ pub fn node(s: &Scenario) -> Result<Option<CoverageNode>> {
         .map(|(&s, &a)| s >= MIN_REACHABLE_SHARE || a >= min_reachable_m2)
         .collect();
     let second = match (&camera, s.spec.coverage.second_pass.enabled) {
-        (Some(_), true) => {
-            let field = Field::new(&floor, s.spec.coverage.clearance, start)
-                .map_err(|e| anyhow::anyhow!("coverage: {e}"))?;
-            Some(SecondPass {
-                config: s.spec.coverage.second_pass.clone(),
-                swept: Swept::new(&field, &route.points),
-                field,
-                sight: WallSight::new(&floor),
-                pose_source: control.pose_source,
-                time_model: s.spec.coverage.time_model,
-                started: None,
-                gaps: 0,
-                views: 0,
-                unseeable: 0,
-                floor_gaps: 0,
-                floor_stops: 0,
-                before: None,
-                planning_s: 0.0,
-            })
-        }
+        (Some(_), true) => Some(SecondPass {
+            config: s.spec.coverage.second_pass.clone(),
+            swept: Swept::new(&field, &route.points),
+            field,
+            sight: WallSight::new(&floor),
+            pose_source: control.pose_source,
+            time_model: s.spec.coverage.time_model,
+            started: None,
+            gaps: 0,
+            views: 0,
+            unseeable: 0,
+            floor_gaps: 0,
+            floor_stops: 0,
+            before: None,
+            planning_s: 0.0,
+        }),
         (None, true) => anyhow::bail!(
             "coverage.second_pass.enabled: the second pass needs a camera off any joint ([[camera]])"
         ),
