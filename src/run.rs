@@ -548,6 +548,7 @@ pub fn simulate_with(
     out: Option<&Path>,
     extra: Vec<Box<dyn Node>>,
 ) -> Result<(Outcome, Vec<Box<dyn Node>>)> {
+    let setup = Instant::now();
     let seed = opts.seed.unwrap_or(s.spec.seed);
     let duration = opts.duration.unwrap_or(s.spec.duration);
     let spec = &s.spec;
@@ -572,6 +573,9 @@ pub fn simulate_with(
     let mut prev_truth = s.start;
     let mut sim_seconds = 0.0;
     let started = Instant::now();
+    // Building the nodes (their maps and scorers), the cameras and the simulation: outside
+    // the loop's wall time and real-time factor.
+    let setup_s = (started - setup).as_secs_f64();
     let bar = progress_bar(opts.progress, duration, &spec.name);
 
     // The first command, from the start pose alone, before any node has started.
@@ -681,6 +685,7 @@ pub fn simulate_with(
         truth: truth_track,
         lags,
         performance: json!({
+            "setup_s": setup_s,
             "simulation_s": sim_seconds,
             "rendering_s": cameras.cameras.seconds,
             "nodes": finished.per_node,

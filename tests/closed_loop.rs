@@ -597,6 +597,10 @@ fn coverage_lanes_are_replanned_for_the_localisations_covariance() {
         "the robot had not moved by {at} s"
     );
     assert_ne!(s["coverage"]["route"], lanes["first_route"], "{lanes}");
+    // The time spent building the nodes (the coverage scorer's surfaces among them) is
+    // reported apart from the loop's.
+    let setup = s["performance"]["setup_s"].as_f64().unwrap_or(-1.0);
+    assert!(setup > 0.0, "{}", s["performance"]);
     // The filter's account of its own spread, beside its errors.
     let l = &s["localization"];
     assert!(l["mean_sigma_m"].as_f64().unwrap() > 0.0, "{l}");
