@@ -541,6 +541,24 @@ fn new_bus(s: &Scenario, streams: &[stack::Streams]) -> Bus {
     bus
 }
 
+/// The scheduled nodes, their lags, their streams and their bus ([`wire`]).
+type Wired = (
+    Vec<Scheduled>,
+    Vec<stack::schedule::Lag>,
+    Vec<stack::Streams>,
+    Bus,
+);
+
+/// The stack's nodes, with `extra` after them, in their schedule; the streams each consumes
+/// and publishes (every consumed stream checked for a publisher); and the bus they share.
+fn wire(s: &Scenario, seed: u64, out: Option<&Path>, extra: Vec<Box<dyn Node>>) -> Result<Wired> {
+    let (nodes, lags) = schedule(stack::build(s, seed, out)?.into_iter().chain(extra));
+    let streams: Vec<stack::Streams> = nodes.iter().map(|n| n.node.streams()).collect();
+    check_publishers(&nodes, &streams)?;
+    let bus = new_bus(s, &streams);
+    Ok((nodes, lags, streams, bus))
+}
+
 /// [`simulate`] with `extra` nodes after the stack's (a collector of training data, say).
 pub fn simulate_with(
     s: &Scenario,
@@ -552,10 +570,7 @@ pub fn simulate_with(
     let seed = opts.seed.unwrap_or(s.spec.seed);
     let duration = opts.duration.unwrap_or(s.spec.duration);
     let spec = &s.spec;
-    let (mut nodes, lags) = schedule(stack::build(s, seed, out)?.into_iter().chain(extra));
-    let streams: Vec<stack::Streams> = nodes.iter().map(|n| n.node.streams()).collect();
-    check_publishers(&nodes, &streams)?;
-    let mut bus = new_bus(s, &streams);
+    let (mut nodes, lags, streams, mut bus) = wire(s, seed, out, extra)?;
     let (has_agents, has_joints) = (!s.movers.agents.is_empty(), !s.movers.joints.is_empty());
     let has_people = !s.movers.people.is_empty() || !s.movers.flows.is_empty();
     let movers = (has_agents, has_people);
