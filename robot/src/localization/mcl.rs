@@ -259,42 +259,89 @@ impl MclMap {
         }
     }
 
-    /// Range to the first occupied cell along a ray, up to `max`: the first of the points
-    /// one cell apart along the ray that lies in an occupied cell or off the grid.
+    /// Ranges to the first occupied cell along the rays from (x, y) at each of `angles`, up
+    /// to `max`, into `out`: for each ray, the first of the points one cell apart along it
+    /// that lies in an occupied cell or off the grid.
     ///
     /// The points are not all visited: from a point, those within the clear distance around
     /// it are skipped (the distance field's value, less its chamfer overestimate and a cell's
     /// diagonal, and no farther than the grid's edge), so a ray through open space costs a
     /// few steps instead of one per cell. The result is that of visiting every point.
-    fn cast(&self, x: f64, y: f64, a: f64, max: f64) -> f64 {
+    ///
+    /// A ray's steps form a chain (a point, its cell, that cell's byte, the next point), each
+    /// waiting on the last one's load. [`CAST_LANES`] rays advance side by side, a step of
+    /// each in turn, so that their loads overlap, and a ray that ends hands its lane to the
+    /// next: 1.32 → 0.95 ms an update with 500 particles (`futago bench mcl`, office).
+    fn cast_each(&self, x: f64, y: f64, angles: &[f64], max: f64, out: &mut [f64]) {
+        #[derive(Clone, Copy)]
+        struct Ray {
+            beam: usize,
+            k: usize,
+            c: f64,
+            s: f64,
+        }
         let g = &self.grid;
         let step = g.resolution;
-        let (c, s) = (a.cos(), a.sin());
         let n = (max / step) as usize;
         let (x0, y0) = (g.origin[0], g.origin[1]);
         let (x1, y1) = (x0 + g.width as f64 * step, y0 + g.height as f64 * step);
-        // Multiplications, not divisions, in the skip: its rounding cannot matter, as the
-        // margin (a whole cell's diagonal where half would do) is far wider.
         let per_step = 1.0 / step;
-        let mut k = 1;
-        while k <= n {
-            let r = k as f64 * step;
-            let (px, py) = (x + r * c, y + r * s);
-            let Some((i, j)) = g.cell_of(px, py) else {
-                return r;
-            };
-            let clear = self.skip[j * g.width + i];
-            if clear == BLOCKED {
-                return r;
+        let start = |beam: usize| {
+            let a = angles[beam];
+            let (c, s) = (a.cos(), a.sin());
+            Ray { beam, k: 1, c, s }
+        };
+        let mut next = 0;
+        let mut lanes = [None; CAST_LANES];
+        for lane in &mut lanes {
+            if next < angles.len() {
+                *lane = Some(start(next));
+                next += 1;
             }
-            let edge = ((px - x0).min(x1 - px).min(py - y0).min(y1 - py) - step) * per_step;
-            // Whole points to skip (truncation is the floor here: at least one).
-            let skip = (clear as f64).min(edge);
-            k += if skip >= 1.0 { skip as usize } else { 1 };
         }
-        max
+        let mut live = lanes.iter().flatten().count();
+        while live > 0 {
+            for lane in &mut lanes {
+                let Some(ray) = lane else {
+                    continue;
+                };
+                // One step of `cast`'s loop: the range where the ray ends, if it ends here.
+                let end = if ray.k > n {
+                    Some(max)
+                } else {
+                    let r = ray.k as f64 * step;
+                    let (px, py) = (x + r * ray.c, y + r * ray.s);
+                    match g.cell_of(px, py) {
+                        None => Some(r),
+                        Some((i, j)) if self.skip[j * g.width + i] == BLOCKED => Some(r),
+                        Some((i, j)) => {
+                            let clear = self.skip[j * g.width + i];
+                            let edge = ((px - x0).min(x1 - px).min(py - y0).min(y1 - py)
+                                - step)
+                                * per_step;
+                            let skip = (clear as f64).min(edge);
+                            ray.k += if skip >= 1.0 { skip as usize } else { 1 };
+                            None
+                        }
+                    }
+                };
+                if let Some(range) = end {
+                    out[ray.beam] = range;
+                    if next < angles.len() {
+                        *lane = Some(start(next));
+                        next += 1;
+                    } else {
+                        *lane = None;
+                        live -= 1;
+                    }
+                }
+            }
+        }
     }
 }
+
+/// Rays [`MclMap::cast_each`] advances side by side (8 were no faster).
+const CAST_LANES: usize = 4;
 
 /// A pose estimate: the weighted mean and the covariance of (x, y, θ).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -316,6 +363,12 @@ pub struct Mcl {
     w_fast: f64,
     /// The odometry and the estimate at the last scan the filter took (`update_min_d`).
     last_update: Option<(Pose2, Estimate)>,
+}
+
+/// A beam's log-likelihood from its likelihood `p` (floored, so a beam the map cannot explain
+/// costs a bounded amount), with its consistency.
+fn log_term(p: f64, consistent: bool) -> (f64, bool) {
+    (p.max(1e-12).ln(), consistent)
 }
 
 fn gauss(rng: &mut ChaCha8Rng) -> f64 {
@@ -404,51 +457,65 @@ impl Mcl {
         }
     }
 
-    /// A used beam's log-likelihood from the laser pose `laser` (beam angle `a` from the
-    /// laser's heading, reading `z`), and whether the beam is consistent with the map there
-    /// (beam skipping's test, see [`MclConfig::beam_skip`]; always for the likelihood field).
-    fn beam_term(&self, laser: &Pose2, a: f64, z: f64) -> (f64, bool) {
+    /// The used beams' log-likelihoods from the laser pose `laser` (each beam's angle from
+    /// the laser's heading and its reading), and whether each beam is consistent with the
+    /// map there (beam skipping's test, see [`MclConfig::beam_skip`]; always for the
+    /// likelihood field).
+    fn beam_terms(&self, laser: &Pose2, beams: &[(f64, f64)]) -> Vec<(f64, bool)> {
         let c = &self.config;
-        let (p, consistent) = match c.model {
-            SensorModel::LikelihoodField => {
-                if z >= c.max_range {
-                    (1.0, true)
-                } else {
+        match c.model {
+            SensorModel::LikelihoodField => beams
+                .iter()
+                .map(|&(a, z)| {
+                    if z >= c.max_range {
+                        return log_term(1.0, true);
+                    }
                     let th = laser.theta + a;
                     let (x, y) = (laser.x + z * th.cos(), laser.y + z * th.sin());
                     let d = self.map.distance_at(x, y);
                     let p = c.z_hit * (-d * d / (2.0 * c.sigma_hit * c.sigma_hit)).exp()
                         + c.z_rand / c.max_range;
-                    (p, true)
-                }
-            }
+                    log_term(p, true)
+                })
+                .collect(),
             SensorModel::Beam => {
-                let expected = self
-                    .map
-                    .cast(laser.x, laser.y, laser.theta + a, c.max_range);
-                let hit = if z < c.max_range {
-                    (-(z - expected).powi(2) / (2.0 * c.sigma_hit * c.sigma_hit)).exp()
-                        / (c.sigma_hit * (2.0 * std::f64::consts::PI).sqrt())
-                } else {
-                    0.0
-                };
-                let short = if z < expected {
-                    let eta = 1.0 / (1.0 - (-c.lambda_short * expected).exp());
-                    eta * c.lambda_short * (-c.lambda_short * z).exp()
-                } else {
-                    0.0
-                };
-                let max = if z >= c.max_range { 1.0 } else { 0.0 };
-                let rand = if z < c.max_range {
-                    1.0 / c.max_range
-                } else {
-                    0.0
-                };
-                let p = c.z_hit * hit + c.z_short * short + c.z_max * max + c.z_rand * rand;
-                (p, (z - expected).abs() < c.beam_skip_distance)
+                let angles: Vec<f64> = beams.iter().map(|&(a, _)| laser.theta + a).collect();
+                let mut expected = vec![0.0; beams.len()];
+                self.map
+                    .cast_each(laser.x, laser.y, &angles, c.max_range, &mut expected);
+                beams
+                    .iter()
+                    .zip(expected)
+                    .map(|(&(_, z), expected)| self.beam_model_term(z, expected))
+                    .collect()
             }
+        }
+    }
+
+    /// The beam model's log-likelihood of reading `z` where the map gives `expected`, and
+    /// whether the two are consistent (within `beam_skip_distance`).
+    fn beam_model_term(&self, z: f64, expected: f64) -> (f64, bool) {
+        let c = &self.config;
+        let hit = if z < c.max_range {
+            (-(z - expected).powi(2) / (2.0 * c.sigma_hit * c.sigma_hit)).exp()
+                / (c.sigma_hit * (2.0 * std::f64::consts::PI).sqrt())
+        } else {
+            0.0
         };
-        (p.max(1e-12).ln(), consistent)
+        let short = if z < expected {
+            let eta = 1.0 / (1.0 - (-c.lambda_short * expected).exp());
+            eta * c.lambda_short * (-c.lambda_short * z).exp()
+        } else {
+            0.0
+        };
+        let max = if z >= c.max_range { 1.0 } else { 0.0 };
+        let rand = if z < c.max_range {
+            1.0 / c.max_range
+        } else {
+            0.0
+        };
+        let p = c.z_hit * hit + c.z_short * short + c.z_max * max + c.z_rand * rand;
+        log_term(p, (z - expected).abs() < c.beam_skip_distance)
     }
 
     /// Whether this filter skips beams: asked to, and on the beam model.
@@ -457,7 +524,7 @@ impl Mcl {
     }
 
     /// Which beams to weight by: all, or with beam skipping those enough particles find
-    /// consistent (`terms`: each particle's [`Mcl::beam_term`]s, `None` inside a wall).
+    /// consistent (`terms`: each particle's [`Mcl::beam_terms`], `None` inside a wall).
     fn beams_kept(&self, terms: &[Option<Vec<(f64, bool)>>], beams: usize) -> Vec<bool> {
         let c = &self.config;
         if !self.skips_beams() {
@@ -534,12 +601,8 @@ impl Mcl {
             let terms: Vec<Option<Vec<(f64, bool)>>> =
                 map_on_cores(&self.particles, SERIAL_BELOW, |p| {
                     let laser = laser_of(p);
-                    (!this.map.occupied_or_outside(p.x, p.y)).then(|| {
-                        beams
-                            .iter()
-                            .map(|&(a, z)| this.beam_term(&laser, a, z))
-                            .collect()
-                    })
+                    (!this.map.occupied_or_outside(p.x, p.y))
+                        .then(|| this.beam_terms(&laser, &beams))
                 });
             let keep = self.beams_kept(&terms, beams.len());
             let logs: Vec<f64> = terms
@@ -561,10 +624,7 @@ impl Mcl {
                     return f64::NEG_INFINITY;
                 }
                 let laser = laser_of(p);
-                beams
-                    .iter()
-                    .map(|&(a, z)| this.beam_term(&laser, a, z).0)
-                    .sum()
+                this.beam_terms(&laser, &beams).iter().map(|t| t.0).sum()
             });
             (logs, beams.len())
         };
@@ -915,7 +975,12 @@ mod tests {
             range_min: 0.02,
             range_max: 30.0,
             ranges: (0..n)
-                .map(|k| map.cast(pose.x, pose.y, pose.theta + amin + k as f64 * inc, 30.0) as f32)
+                .map(|k| {
+                    let mut range = [0.0];
+                    let a = pose.theta + amin + k as f64 * inc;
+                    map.cast_each(pose.x, pose.y, &[a], 30.0, &mut range);
+                    range[0] as f32
+                })
                 .collect(),
         }
     }
@@ -969,8 +1034,9 @@ mod tests {
         assert!(mcl.estimate().pose.distance(&b) < 0.05);
     }
 
-    /// The cast that skips open space finds the same range as one that visits every point
-    /// along the ray, from everywhere in the room and beyond its walls, in every direction.
+    /// The casts that skip open space, several rays side by side, find the same ranges as
+    /// one that visits every point along each ray, from everywhere in the room and beyond
+    /// its walls, in every direction, for fans of one ray to more than the lanes.
     #[test]
     fn skipping_open_space_casts_the_same_ranges() {
         let map = MclMap::new(room());
@@ -985,21 +1051,24 @@ mod tests {
             max
         };
         let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let mut long = 0;
-        for _ in 0..20_000 {
+        let (mut long, mut rays) = (0, 0);
+        for _ in 0..4_000 {
             let (x, y) = (rng.random_range(-1.0..11.0), rng.random_range(-1.0..7.0));
-            let a = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
             let max = rng.random_range(0.5..30.0);
-            let want = every(x, y, a, max);
-            assert_eq!(
-                map.cast(x, y, a, max),
-                want,
-                "from ({x}, {y}) at {a} up to {max}"
-            );
-            long += usize::from(want > 2.0);
+            let fan: Vec<f64> = (0..rng.random_range(1..=3 * CAST_LANES))
+                .map(|_| rng.random_range(-std::f64::consts::PI..std::f64::consts::PI))
+                .collect();
+            let mut got = vec![f64::NAN; fan.len()];
+            map.cast_each(x, y, &fan, max, &mut got);
+            for (&a, &got) in fan.iter().zip(&got) {
+                let want = every(x, y, a, max);
+                assert_eq!(got, want, "from ({x}, {y}) at {a} up to {max}");
+                long += usize::from(want > 2.0);
+                rays += 1;
+            }
         }
         // The rays were not all short ones.
-        assert!(long > 5_000, "{long}");
+        assert!(long > rays / 4, "{long} of {rays}");
     }
 
     /// Scans that fit the map worse than usual (every 7th beam blocked short by something
