@@ -316,8 +316,7 @@ impl MclMap {
                         Some((i, j)) if self.skip[j * g.width + i] == BLOCKED => Some(r),
                         Some((i, j)) => {
                             let clear = self.skip[j * g.width + i];
-                            let edge = ((px - x0).min(x1 - px).min(py - y0).min(y1 - py)
-                                - step)
+                            let edge = ((px - x0).min(x1 - px).min(py - y0).min(y1 - py) - step)
                                 * per_step;
                             let skip = (clear as f64).min(edge);
                             ray.k += if skip >= 1.0 { skip as usize } else { 1 };
