@@ -5,6 +5,7 @@
 //! Grouped by concern, each group depending only on those listed before it:
 //!
 //! - [`config`]: range checks shared by every module's options;
+//! - [`cores`]: work split over the machine's cores, its results in order;
 //! - [`geometry`]: distance transforms and plane fits;
 //! - [`perception`]: image features, floor levelling, legs in laser scans;
 //! - [`tracking`]: optimal assignment and the people tracker;
@@ -15,6 +16,7 @@
 
 pub mod config;
 pub mod control;
+pub mod cores;
 pub mod geometry;
 pub mod localization;
 pub mod mapping;

@@ -573,9 +573,11 @@ impl DepthMcl {
             let sensor = &self.sensor.as_ref().expect("made above").1;
             let points = field_points(intr, measured, c.independent_pixels);
             let scale = c.independent_pixels / points.len().max(1) as f64;
-            return Ok(super::mcl::map_on_cores(states, FIELD_SERIAL_BELOW, |s| {
-                scale * field_log_likelihood(field, sensor, &s.pose(), &points)
-            }));
+            return Ok(crate::cores::map_on_cores(
+                states,
+                FIELD_SERIAL_BELOW,
+                |s| scale * field_log_likelihood(field, sensor, &s.pose(), &points),
+            ));
         }
         self.poses.clear();
         self.poses.extend(states.iter().map(|p| p.pose()));

@@ -8,6 +8,7 @@
 //!
 //! Seed 000's configuration is the default: 500 particles, the beam model, one beam every 15°.
 
+use crate::cores::map_on_cores;
 use crate::geometry::grid::{CHAMFER_OVERESTIMATE, OCCUPIED, obstacle_distance};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2, wrap_angle};
@@ -836,35 +837,6 @@ impl Mcl {
     }
 }
 
-/// `f` of each of `items`, in their order, computed on the machine's cores in contiguous
-/// chunks. Each result depends on its item alone, so the output is the same whatever the
-/// number of threads; fewer than `serial_below` items stay on this thread, where starting
-/// threads would cost more than it saves. Weighting the particles is most of a filter's
-/// time (here a ray cast and a likelihood for each beam of each particle; in the depth
-/// camera's likelihood field, thousands of points for each).
-pub(crate) fn map_on_cores<T: Sync, R: Send>(
-    items: &[T],
-    serial_below: usize,
-    f: impl Fn(&T) -> R + Sync,
-) -> Vec<R> {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if threads < 2 || items.len() < serial_below {
-        return items.iter().map(f).collect();
-    }
-    let chunk = items.len().div_ceil(threads);
-    let f = &f;
-    std::thread::scope(|scope| {
-        let parts: Vec<_> = items
-            .chunks(chunk)
-            .map(|part| scope.spawn(move || part.iter().map(f).collect::<Vec<R>>()))
-            .collect();
-        parts
-            .into_iter()
-            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .collect()
-    })
-}
-
 /// Below this many particles the filter weighs them on one thread.
 const SERIAL_BELOW: usize = 256;
 
@@ -981,21 +953,6 @@ mod tests {
                     range[0] as f32
                 })
                 .collect(),
-        }
-    }
-
-    /// Mapping on the cores gives every result in the items' order, for inputs below, at and
-    /// well above the size that starts threads, with chunks that do not divide it evenly.
-    #[test]
-    fn mapping_on_the_cores_keeps_the_order() {
-        for n in [0, 1, SERIAL_BELOW - 1, SERIAL_BELOW, 1001, 5000] {
-            let items: Vec<u64> = (0..n as u64).collect();
-            let want: Vec<u64> = items.iter().map(|k| k * k + 1).collect();
-            assert_eq!(
-                map_on_cores(&items, SERIAL_BELOW, |k| k * k + 1),
-                want,
-                "{n} items"
-            );
         }
     }
 

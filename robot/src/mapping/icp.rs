@@ -6,6 +6,7 @@
 //! point with the nearest map point within a correspondence distance that shrinks over the
 //! iterations, and minimises the Huber-weighted point-to-line distances.
 
+use crate::cores::map_on_cores;
 use futago_msgs::{LaserScan, Pose2, wrap_angle};
 use rustc_hash::FxHashMap;
 use serde::Deserialize;
@@ -504,13 +505,17 @@ fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) 
         c.rotation_search_step
     };
     let steps = (c.rotation_search / step).round() as i64;
-    let mut best = (score(&guess), guess);
-    for k in -steps..=steps {
-        if k == 0 {
-            continue;
-        }
-        let p = Pose2::new(guess.x, guess.y, wrap_angle(guess.theta + k as f64 * step));
-        let sc = score(&p);
+    // The guess, then the other headings in turn; scored on the cores, chosen in order.
+    let poses: Vec<Pose2> = std::iter::once(guess)
+        .chain(
+            (-steps..=steps)
+                .filter(|&k| k != 0)
+                .map(|k| Pose2::new(guess.x, guess.y, wrap_angle(guess.theta + k as f64 * step))),
+        )
+        .collect();
+    let scores = map_on_cores(&poses, HEADINGS_SERIAL_BELOW, score);
+    let mut best = (scores[0], guess);
+    for (&sc, &p) in scores.iter().zip(&poses).skip(1) {
         // Prefer the guess on ties: a heading must score clearly better to replace it.
         if sc > best.0 * 1.05 {
             best = (sc, p);
@@ -518,6 +523,10 @@ fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) 
     }
     best.1
 }
+
+/// Below this many headings the search scores them on one thread (some 30 µs of scoring a
+/// heading against starting threads).
+const HEADINGS_SERIAL_BELOW: usize = 8;
 
 /// Points scored per heading in the search, at least (where the scan has them).
 const HEADING_POINTS: usize = 64;
