@@ -472,6 +472,18 @@ pub fn fit_score(map: &PointMap, scan: &[Oriented], pose: &Pose2, sigma: f64) ->
 /// The heading within `rotation_search` of the guess whose points (every 4th) land closest to
 /// map points (Gaussian score, σ = the final correspondence distance).
 fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) -> Pose2 {
+    heading_search(map, scan, guess, c, true)
+}
+
+/// [`best_heading`], giving up the headings that cannot be chosen when `give_up` (always but
+/// in the test that checks it changes nothing).
+fn heading_search(
+    map: &PointMap,
+    scan: &[Oriented],
+    guess: Pose2,
+    c: &IcpConfig,
+    give_up: bool,
+) -> Pose2 {
     if c.rotation_search <= 0.0 || c.rotation_search_step <= 0.0 {
         return guess;
     }
@@ -480,17 +492,23 @@ fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) 
     // Every 4th point of a dense scan; all of a sparse one, whose few points would otherwise
     // let a chance alignment win.
     let stride = (scan.len() / HEADING_POINTS).clamp(1, 4);
-    let score = |pose: &Pose2| -> f64 {
-        scan.iter()
-            .step_by(stride)
-            .filter_map(|o| {
-                let q = pose.transform_point(o.p);
-                map.nearest(q, reach).map(|m| {
-                    let d2 = (m.p[0] - q[0]).powi(2) + (m.p[1] - q[1]).powi(2);
-                    (-d2 / (2.0 * sigma * sigma)).exp()
-                })
-            })
-            .sum()
+    // A heading's score, the sum over its points of each one's term (at most 1); `None` as
+    // soon as the terms still to come could not lift it above `floor`.
+    let points = scan.len().div_ceil(stride);
+    let score = |pose: &Pose2, floor: f64| -> Option<f64> {
+        let mut sum = -0.0;
+        for (k, o) in scan.iter().step_by(stride).enumerate() {
+            let q = pose.transform_point(o.p);
+            if let Some(m) = map.nearest(q, reach) {
+                let d2 = (m.p[0] - q[0]).powi(2) + (m.p[1] - q[1]).powi(2);
+                sum += (-d2 / (2.0 * sigma * sigma)).exp();
+            }
+            // A micrometre of margin over the sums' rounding (some 1e-12 here).
+            if sum + (points - k - 1) as f64 + 1e-6 <= floor {
+                return None;
+            }
+        }
+        Some(sum)
     };
     // A step turns the farthest point by at most the final correspondence distance, so that
     // no heading between two steps is missed however far the points reach.
@@ -505,19 +523,30 @@ fn best_heading(map: &PointMap, scan: &[Oriented], guess: Pose2, c: &IcpConfig) 
         c.rotation_search_step
     };
     let steps = (c.rotation_search / step).round() as i64;
-    // The guess, then the other headings in turn; scored on the cores, chosen in order.
-    let poses: Vec<Pose2> = std::iter::once(guess)
-        .chain(
-            (-steps..=steps)
-                .filter(|&k| k != 0)
-                .map(|k| Pose2::new(guess.x, guess.y, wrap_angle(guess.theta + k as f64 * step))),
-        )
+    // The guess, then the other headings in turn, chosen in order. A heading must score
+    // clearly better than the best so far to replace it (the guess is preferred on ties), and
+    // the best so far is never below the guess: a heading whose score cannot pass 1.05 times
+    // the guess's is never chosen, and is given up once its points left cannot get it there
+    // (most of them, a few points in).
+    // (No floor: the guess is scored whole.)
+    let Some(first) = score(&guess, f64::NEG_INFINITY) else {
+        return guess;
+    };
+    let floor = if give_up {
+        first * 1.05
+    } else {
+        f64::NEG_INFINITY
+    };
+    let poses: Vec<Pose2> = (-steps..=steps)
+        .filter(|&k| k != 0)
+        .map(|k| Pose2::new(guess.x, guess.y, wrap_angle(guess.theta + k as f64 * step)))
         .collect();
-    let scores = map_on_cores(&poses, HEADINGS_SERIAL_BELOW, score);
-    let mut best = (scores[0], guess);
-    for (&sc, &p) in scores.iter().zip(&poses).skip(1) {
-        // Prefer the guess on ties: a heading must score clearly better to replace it.
-        if sc > best.0 * 1.05 {
+    let scores = map_on_cores(&poses, HEADINGS_SERIAL_BELOW, |p| score(p, floor));
+    let mut best = (first, guess);
+    for (sc, &p) in scores.into_iter().zip(&poses) {
+        if let Some(sc) = sc
+            && sc > best.0 * 1.05
+        {
             best = (sc, p);
         }
     }
@@ -700,6 +729,40 @@ mod tests {
                 || wrap_angle(a.pose.theta - truth.theta).abs() > 1f64.to_radians()),
             "ICP alone should not reach the truth from 35° off: {plain:?}"
         );
+    }
+
+    /// Giving up the headings that cannot beat the guess chooses what scoring every heading
+    /// whole chooses: from guesses up to 35° and 0.2 m off, where the search must move the
+    /// heading, and near the truth, where it must keep the guess.
+    #[test]
+    fn giving_up_hopeless_headings_keeps_the_search_s_choice() {
+        use rand::{Rng, SeedableRng};
+        let c = IcpConfig {
+            rotation_search: 40f64.to_radians(),
+            ..IcpConfig::default()
+        };
+        let origin = Pose2::IDENTITY;
+        let mut map = PointMap::new(c.voxel, c.max_distance_start);
+        map.insert(&origin, &room_points(&origin, &c));
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let mut moved = 0;
+        for _ in 0..40 {
+            let truth = Pose2::new(
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.5..0.5),
+            );
+            let pts = room_points(&truth, &c);
+            let guess = Pose2::new(
+                truth.x + rng.random_range(-0.2..0.2),
+                truth.y + rng.random_range(-0.2..0.2),
+                truth.theta + rng.random_range(-0.6..0.6),
+            );
+            let whole = heading_search(&map, &pts, guess, &c, false);
+            assert_eq!(heading_search(&map, &pts, guess, &c, true), whole);
+            moved += usize::from(whole != guess);
+        }
+        assert!(moved > 10 && moved < 40, "{moved} of 40 moved");
     }
 
     #[test]
