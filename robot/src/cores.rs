@@ -4,12 +4,12 @@
 /// `f` of each of `items`, in their order, computed on the machine's cores in contiguous
 /// chunks, a thread for each. Each result depends on its item alone, so the output is the
 /// same whatever the number of threads; fewer than `serial_below` items stay on this thread,
-/// where starting threads (some 50 µs) would cost more than it saves. Weighting the
-/// particles is most of a particle filter's time (a ray cast and a likelihood for each beam
-/// of each particle; in the depth camera's likelihood field, thousands of points for each),
-/// and scoring the candidate headings most of a scan match's. (Rayon's pool, whose threads
-/// wait spinning for work, doubled `hall-scan3d`'s SLAM time on two cores: its spinning
-/// took the cores from the thread that had the work.)
+/// where starting threads would cost more than it saves. Weighting the particles is most of
+/// a particle filter's time (a ray cast and a likelihood for each beam of each particle; in
+/// the depth camera's likelihood field, thousands of points for each), and scoring the
+/// candidate headings most of a scan match's. (Rayon's pool, whose threads wait spinning for
+/// work, doubled `hall-scan3d`'s SLAM time on two cores: its spinning took the cores from the
+/// thread that had the work.)
 pub fn map_on_cores<T: Sync, R: Send>(
     items: &[T],
     serial_below: usize,

@@ -286,6 +286,8 @@ impl MclMap {
         let n = (max / step) as usize;
         let (x0, y0) = (g.origin[0], g.origin[1]);
         let (x1, y1) = (x0 + g.width as f64 * step, y0 + g.height as f64 * step);
+        // Multiplications, not divisions, in the skip: its rounding cannot matter, as the
+        // margin (a whole cell's diagonal where half would do) is far wider.
         let per_step = 1.0 / step;
         let start = |beam: usize| {
             let a = angles[beam];
@@ -306,7 +308,7 @@ impl MclMap {
                 let Some(ray) = lane else {
                     continue;
                 };
-                // One step of `cast`'s loop: the range where the ray ends, if it ends here.
+                // One step along this ray: the range where it ends, if it ends here.
                 let end = if ray.k > n {
                     Some(max)
                 } else {
@@ -319,6 +321,7 @@ impl MclMap {
                             let clear = self.skip[j * g.width + i];
                             let edge = ((px - x0).min(x1 - px).min(py - y0).min(y1 - py) - step)
                                 * per_step;
+                            // Whole points to skip (truncation is the floor: at least one).
                             let skip = (clear as f64).min(edge);
                             ray.k += if skip >= 1.0 { skip as usize } else { 1 };
                             None

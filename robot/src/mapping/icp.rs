@@ -538,12 +538,11 @@ fn heading_search(
         c.rotation_search_step
     };
     let steps = (c.rotation_search / step).round() as i64;
-    // The guess, then the other headings in turn, chosen in order. A heading must score
-    // clearly better than the best so far to replace it (the guess is preferred on ties), and
-    // the best so far is never below the guess: a heading whose score cannot pass 1.05 times
-    // the guess's is never chosen, and is given up once its points left cannot get it there
-    // (most of them, a few points in).
-    // (No floor: the guess is scored whole.)
+    // The guess, scored whole (no floor), then the other headings in turn, chosen in order.
+    // A heading must score clearly better than the best so far to replace it (the guess is
+    // preferred on ties), and the best so far is never below the guess: a heading whose score
+    // cannot pass 1.05 times the guess's is never chosen, and is given up once its points
+    // left cannot get it there.
     let Some(first) = score(&guess, f64::NEG_INFINITY) else {
         return guess;
     };
@@ -568,8 +567,8 @@ fn heading_search(
     best.1
 }
 
-/// Below this many headings the search scores them on one thread (some 30 µs of scoring a
-/// heading against starting threads).
+/// Below this many headings the search scores them on one thread, where starting threads
+/// would cost more than it saves.
 const HEADINGS_SERIAL_BELOW: usize = 8;
 
 /// Points scored per heading in the search, at least (where the scan has them).
