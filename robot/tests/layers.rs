@@ -6,8 +6,9 @@
 use std::path::{Path, PathBuf};
 
 /// The groups in dependency order, as `lib.rs` lists them.
-const LAYERS: [&str; 8] = [
+const LAYERS: [&str; 9] = [
     "config",
+    "cores",
     "geometry",
     "perception",
     "tracking",
