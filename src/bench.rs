@@ -296,6 +296,33 @@ pub fn bench_sensors(world: &World, poses: Option<Vec<Pose>>, b: &SensorBench) -
             .filter(|&&z| z > 0.0)
             .count())
     })?;
+    // Seed 000's camera (320×240 depth) with Nguyen et al.'s noise: the noise alone, on the
+    // renders of the poses, as each coverage and people frame pays it.
+    {
+        use futago_sim::kinect::{KinectConfig, KinectPreset, NoiseModel};
+        let mut cam = KinectConfig::preset(KinectPreset::Seed000);
+        cam.noise.model = NoiseModel::Nguyen;
+        let spec = cam
+            .resolve(Path::new("bench"), "camera")
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let clean = poses
+            .iter()
+            .map(|p| r.render_depth(&spec.depth, p))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut rng = futago_sim::noise::stream(1, "bench");
+        let t = Instant::now();
+        let mut n = 0;
+        for i in 0..frames {
+            let mut d = clean[i % clean.len()].clone();
+            spec.apply_noise(&mut d, &mut rng);
+            n += d.data.iter().filter(|&&z| z > 0.0).count();
+        }
+        let secs = t.elapsed().as_secs_f64();
+        out.insert(
+            format!("nguyen_noise_{}x{}", spec.depth.width, spec.depth.height),
+            json!({ "frames": frames, "seconds": secs, "frames_per_second": frames as f64 / secs, "ms_per_frame": secs * 1e3 / frames as f64, "valid_pixels": n }),
+        );
+    }
     let views: Vec<Pose> = (0..b.batch.max(1))
         .map(|i| poses[i % poses.len()])
         .collect();
