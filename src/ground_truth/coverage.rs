@@ -49,8 +49,24 @@ pub struct Surfaces {
 /// cell beside a wall's face rather than the wall's own.
 const REGION_PROBE: f64 = 0.03;
 
+#[inline]
 fn key(p: [f64; 3]) -> [i32; 3] {
-    [0, 1, 2].map(|k| ((p[k] - OFFSET[k]) / VOXEL).floor() as i32)
+    let at = |k: usize| floor_i32((p[k] - OFFSET[k]) / VOXEL);
+    [at(0), at(1), at(2)]
+}
+
+/// `x.floor() as i32` (saturating, NaN to 0) without the maths library's call that baseline
+/// x86-64 makes for `floor`: truncation, one less where it rounded up. Every surface sample
+/// of a world is keyed by it.
+#[inline]
+fn floor_i32(x: f64) -> i32 {
+    let t = x as i64;
+    let t = if (t as f64) > x {
+        t.saturating_sub(1)
+    } else {
+        t
+    };
+    t.clamp(i32::MIN as i64, i32::MAX as i64) as i32
 }
 
 impl Surfaces {
@@ -191,12 +207,14 @@ impl Surfaces {
         let nf = n as f64;
         for i in 0..n {
             for j in 0..n - i {
-                let mut centres =
-                    vec![at((i as f64 + 1.0 / 3.0) / nf, (j as f64 + 1.0 / 3.0) / nf)];
-                if i + j + 1 < n {
-                    centres.push(at((i as f64 + 2.0 / 3.0) / nf, (j as f64 + 2.0 / 3.0) / nf));
-                }
-                for p in centres {
+                // The upright small triangle's centre, and the inverted one's beside it where
+                // there is one.
+                let centres = [
+                    at((i as f64 + 1.0 / 3.0) / nf, (j as f64 + 1.0 / 3.0) / nf),
+                    at((i as f64 + 2.0 / 3.0) / nf, (j as f64 + 2.0 / 3.0) / nf),
+                ];
+                let count = if i + j + 1 < n { 2 } else { 1 };
+                for p in centres.into_iter().take(count) {
                     if p[2] > top || !keep([p[0], p[1]]) {
                         continue;
                     }
@@ -423,6 +441,35 @@ impl Footprint {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The floor without the maths library is the maths library's, cast as it casts: on
+    /// integers, halves, values a hair either side of an integer, negatives, zeros of both
+    /// signs, values past `i32`'s range and past `i64`'s, infinities and NaN.
+    #[test]
+    fn floor_i32_equals_the_float_floor_cast() {
+        let mut xs = vec![
+            0.0,
+            -0.0,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            3e9,
+            -3e9,
+            1e300,
+            -1e300,
+            -9.3e18,
+            (i64::MIN as f64),
+            4.5e15 + 0.5,
+            -4.5e15 - 0.5,
+        ];
+        for k in -3000..3000 {
+            let x = k as f64 * 0.25;
+            xs.extend([x, x + 1e-9, x - 1e-9, k as f64 - f64::EPSILON]);
+        }
+        for x in xs {
+            assert_eq!(floor_i32(x), x.floor() as i32, "{x}");
+        }
+    }
 
     /// A 2 × 1 m rectangle of floor: its area is found, and a camera that sees its left half
     /// covers half of it.

@@ -107,7 +107,9 @@ fn local_thickness(free: &[bool], r: &[f64], w: usize, h: usize) -> Vec<f64> {
                 if b < 0 || b >= h as i64 {
                     continue;
                 }
-                let mut half = ((rq * rq - (dj * dj) as f64).max(0.0).sqrt().ceil() as i64).max(0);
+                // Truncated, not rounded up (a call to the maths library): the loops below
+                // settle any start on the same span.
+                let mut half = (rq * rq - (dj * dj) as f64).max(0.0).sqrt() as i64;
                 while half > 0 && !inside(half, dj) {
                     half -= 1;
                 }
@@ -120,8 +122,10 @@ fn local_thickness(free: &[bool], r: &[f64], w: usize, h: usize) -> Vec<f64> {
                 let lo = (i as i64 - half).max(0) as usize;
                 let hi = (i as i64 + half).min(w as i64 - 1) as usize;
                 let row = b as usize * w;
+                // Widths are finite: a comparison, not `f64::max`'s care for NaNs, which
+                // kept the loop from the vector instructions.
                 for t in &mut thick[row + lo..=row + hi] {
-                    *t = t.max(width);
+                    *t = if *t > width { *t } else { width };
                 }
             }
         }
@@ -294,6 +298,14 @@ impl Regions {
     pub fn at(&self, p: [f64; 2]) -> Option<usize> {
         let i = ((p[0] - self.origin[0]) / self.resolution).floor() as i64;
         let j = ((p[1] - self.origin[1]) / self.resolution).floor() as i64;
+        // The cell's own label, where it has one, is the nearest (most points asked about
+        // lie off a face, in free space).
+        if (0..self.width as i64).contains(&i) && (0..self.height as i64).contains(&j) {
+            let l = self.label[j as usize * self.width + i as usize];
+            if l != NONE {
+                return Some(l as usize);
+            }
+        }
         let mut best: Option<(i64, u32)> = None;
         for dj in -2i64..=2 {
             for di in -2i64..=2 {
