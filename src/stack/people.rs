@@ -54,6 +54,7 @@ use crate::ground_truth::mot::{Frame, clear_mot};
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Pose2, Time};
+use futago_robot::geometry::closer_than;
 use futago_robot::perception::depth_people::{DepthPeople, DepthPeopleConfig};
 use futago_robot::perception::legs::{AdaBoost, LegConfig, Segment, segments};
 use futago_robot::tracking::laser_people::{Detections, LaserPeople};
@@ -731,7 +732,7 @@ impl Tracking {
                     .iter()
                     .filter(|e| {
                         legs.iter()
-                            .any(|q| (e[0] - q[0]).hypot(e[1] - q[1]) < SEEN_WITHIN)
+                            .any(|q| closer_than(e[0] - q[0], e[1] - q[1], SEEN_WITHIN))
                     })
                     .count();
                 on_legs >= t.min_points
