@@ -12,8 +12,8 @@ pub mod plane;
 /// Whether (dx, dy) lies closer than `radius` to the origin: `dx.hypot(dy) < radius`, decided
 /// by the squares where they clear the boundary by far more than either's rounding, and by
 /// `hypot` itself only near it. (The maths library's `hypot` was a tenth of SLAM's time in
-/// the scan normals' neighbour tests, and of `hall-crowd`'s in scoring which people a scan
-/// saw.)
+/// the scan normals' neighbour tests, and 4.5 % of `hall-crowd`'s samples in scoring which
+/// people a scan saw.)
 pub fn closer_than(dx: f64, dy: f64, radius: f64) -> bool {
     let (d2, r2) = (dx * dx + dy * dy, radius * radius);
     if d2 < r2 * (1.0 - 1e-9) {
