@@ -50,8 +50,7 @@ impl<'a> Grid<'a> {
     /// Its own cell first, then each of the 26 around it unless the cell's nearest face lies
     /// farther than the nearest point found so far (or than the cap): none of its points could
     /// be nearer. A nanometre of margin covers the roundings of the keys and faces, so the
-    /// nearest distance is the one all 27 cells give (in a voxelised cloud one or two cells
-    /// are read instead of 27).
+    /// nearest distance is the one all 27 cells give.
     fn nearest(&self, p: &[f64; 3]) -> f64 {
         let k = key(p);
         let mut best = f64::INFINITY;
