@@ -122,8 +122,8 @@ fn local_thickness(free: &[bool], r: &[f64], w: usize, h: usize) -> Vec<f64> {
                 let lo = (i as i64 - half).max(0) as usize;
                 let hi = (i as i64 + half).min(w as i64 - 1) as usize;
                 let row = b as usize * w;
-                // Widths are finite: a comparison, not `f64::max`'s care for NaNs, which
-                // kept the loop from the vector instructions.
+                // Widths are finite: a comparison, not `f64::max`, whose care for NaNs (an
+                // unordered compare and a blend a cell) was most of this loop's time.
                 for t in &mut thick[row + lo..=row + hi] {
                     *t = if *t > width { *t } else { width };
                 }
@@ -298,8 +298,8 @@ impl Regions {
     pub fn at(&self, p: [f64; 2]) -> Option<usize> {
         let i = ((p[0] - self.origin[0]) / self.resolution).floor() as i64;
         let j = ((p[1] - self.origin[1]) / self.resolution).floor() as i64;
-        // The cell's own label, where it has one, is the nearest (most points asked about
-        // lie off a face, in free space).
+        // The cell's own label, where it has one, is the nearest (the coverage scorer asks
+        // about points probed off a face, into the free space).
         if (0..self.width as i64).contains(&i) && (0..self.height as i64).contains(&j) {
             let l = self.label[j as usize * self.width + i as usize];
             if l != NONE {
