@@ -94,7 +94,24 @@ fn push_millis(out: &mut String, r: f32) {
         let frac = x - whole;
         if frac != 0.5 {
             let n = whole as u64 + u64::from(frac > 0.5);
-            let _ = write!(out, "{}.{:03}", n / 1000, n % 1000);
+            // The digits by hand: the formatter's machinery for two integers took about as
+            // long as the rest of a log's writing (issue 48).
+            let mut digits = [0u8; 24];
+            let mut k = digits.len();
+            let mut rest = n;
+            for place in 0.. {
+                if place == 3 {
+                    k -= 1;
+                    digits[k] = b'.';
+                }
+                k -= 1;
+                digits[k] = b'0' + (rest % 10) as u8;
+                rest /= 10;
+                if rest == 0 && place >= 3 {
+                    break;
+                }
+            }
+            out.push_str(std::str::from_utf8(&digits[k..]).unwrap_or_default());
             return;
         }
     }
