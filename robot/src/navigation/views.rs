@@ -394,23 +394,53 @@ fn predict(
     let rays = (360.0 / config.ray_step_deg).round().max(1.0) as usize;
     let steps = (config.range / (0.5 * res)).ceil() as usize;
     let (mut count, mut sum) = (0usize, 0.0);
-    for r in 0..rays {
-        let a = r as f64 * std::f64::consts::TAU / rays as f64;
-        let (dx, dy) = (a.cos() * 0.5 * res, a.sin() * 0.5 * res);
-        let mut s = 1;
-        while s <= steps {
-            let (x, y) = (at[0] + dx * s as f64, at[1] + dy * s as f64);
-            let Some((i, j)) = grid.cell_of(x, y) else {
-                break;
-            };
-            let k = j * grid.width + i;
-            let c = grid.cells[k];
-            let here = s;
-            s += (run[k] as usize).max(1);
-            if c >= OCCUPIED {
-                break;
+    // A ray's steps form a chain (a point, its cell, the cell's skip, the next point), each
+    // waiting on the last one's division and loads. `RAY_LANES` rays advance side by side, a
+    // step of each in turn, so that their chains overlap (issue 48), and note the unknown
+    // cells they cross (the cell and the step it was met at); the notes are then counted ray
+    // by ray in order, so that each cell is counted at the step of the first ray to meet it,
+    // as one ray after another would count it.
+    let mut notes: [Vec<(usize, usize)>; RAY_LANES] = Default::default();
+    for first in (0..rays).step_by(RAY_LANES) {
+        let mut lanes = [None; RAY_LANES];
+        for (l, lane) in lanes.iter_mut().enumerate() {
+            let r = first + l;
+            if r < rays {
+                let a = r as f64 * std::f64::consts::TAU / rays as f64;
+                *lane = Some((a.cos() * 0.5 * res, a.sin() * 0.5 * res, 1usize));
             }
-            if c < 0 && seen[k] != stamp {
+            notes[l].clear();
+        }
+        let mut live = lanes.iter().flatten().count();
+        while live > 0 {
+            for (lane, notes) in lanes.iter_mut().zip(notes.iter_mut()) {
+                let Some((dx, dy, s)) = lane else {
+                    continue;
+                };
+                let cell = if *s <= steps {
+                    grid.cell_of(at[0] + *dx * *s as f64, at[1] + *dy * *s as f64)
+                } else {
+                    None
+                };
+                let Some((i, j)) = cell else {
+                    *lane = None;
+                    live -= 1;
+                    continue;
+                };
+                let k = j * grid.width + i;
+                let c = grid.cells[k];
+                let here = *s;
+                *s += (run[k] as usize).max(1);
+                if c >= OCCUPIED {
+                    *lane = None;
+                    live -= 1;
+                } else if c < 0 {
+                    notes.push((k, here));
+                }
+            }
+        }
+        for &(k, here) in notes.iter().flatten() {
+            if seen[k] != stamp {
                 seen[k] = stamp;
                 let d = (here as f64 * 0.5 * res).max(res);
                 let h = match config.weight {
@@ -425,6 +455,9 @@ fn predict(
     }
     (count, sum)
 }
+
+/// Rays [`predict`] advances side by side.
+const RAY_LANES: usize = 4;
 
 #[cfg(test)]
 mod tests {
@@ -453,6 +486,103 @@ mod tests {
         ViewPlanningConfig {
             planner,
             ..ViewPlanningConfig::default()
+        }
+    }
+
+    /// One ray after another, each to its end: the definition [`predict`]'s rays side by
+    /// side must reproduce to the bit.
+    fn predict_one_ray_at_a_time(
+        grid: &OccupancyGrid,
+        run: &[f32],
+        at: [f64; 2],
+        config: &ViewPlanningConfig,
+        seen: &mut [u32],
+        stamp: u32,
+    ) -> (usize, f64) {
+        let res = grid.resolution;
+        let rays = (360.0 / config.ray_step_deg).round().max(1.0) as usize;
+        let steps = (config.range / (0.5 * res)).ceil() as usize;
+        let (mut count, mut sum) = (0usize, 0.0);
+        for r in 0..rays {
+            let a = r as f64 * std::f64::consts::TAU / rays as f64;
+            let (dx, dy) = (a.cos() * 0.5 * res, a.sin() * 0.5 * res);
+            let mut s = 1;
+            while s <= steps {
+                let (x, y) = (at[0] + dx * s as f64, at[1] + dy * s as f64);
+                let Some((i, j)) = grid.cell_of(x, y) else {
+                    break;
+                };
+                let k = j * grid.width + i;
+                let c = grid.cells[k];
+                let here = s;
+                s += (run[k] as usize).max(1);
+                if c >= OCCUPIED {
+                    break;
+                }
+                if c < 0 && seen[k] != stamp {
+                    seen[k] = stamp;
+                    let d = (here as f64 * 0.5 * res).max(res);
+                    let h = match config.weight {
+                        DistanceWeight::Falloff => (1.0 - d / config.range).max(0.0),
+                        DistanceWeight::Inverse => 1.0 / d,
+                        DistanceWeight::Distance => d,
+                    };
+                    count += 1;
+                    sum += h.powf(config.exponent);
+                }
+            }
+        }
+        (count, sum)
+    }
+
+    /// Rays side by side count the cells and sum the weights one ray at a time does, to the
+    /// bit: on grids of random blobs, from every free cell of a coarse lattice, with and
+    /// without skipping, for ray counts that do and do not fill the last group of lanes.
+    #[test]
+    fn rays_side_by_side_predict_what_one_at_a_time_does() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(48);
+        for step in [1.0, 7.0, 45.0, 360.0] {
+            let c = ViewPlanningConfig {
+                ray_step_deg: step,
+                ..config(ViewPlanner::Seed)
+            };
+            let mut g = OccupancyGrid::new(0.05, [-1.0, 0.5], 160, 120);
+            g.cells.fill(0);
+            for _ in 0..40 {
+                let (ci, cj, r) = (
+                    rng.random_range(0..160i64),
+                    rng.random_range(0..120i64),
+                    rng.random_range(1..8i64),
+                );
+                let v = [-1i8, 100, 60, 30][rng.random_range(0..4)];
+                for j in (cj - r).max(0)..(cj + r).min(120) {
+                    for i in (ci - r).max(0)..(ci + r).min(160) {
+                        g.set(i as usize, j as usize, v);
+                    }
+                }
+            }
+            let run = free_run(&g, &c);
+            let none = vec![0f32; run.len()];
+            let (mut a, mut b) = (vec![0; g.width * g.height], vec![0; g.width * g.height]);
+            let mut stamp = 0;
+            let mut counted = 0;
+            for j in (0..120).step_by(11) {
+                for i in (0..160).step_by(11) {
+                    if g.get(i, j) != 0 {
+                        continue;
+                    }
+                    let at = g.cell_center(i, j);
+                    for r in [&run, &none] {
+                        stamp += 1;
+                        let lanes = predict(&g, r, at, &c, &mut a, stamp);
+                        let one = predict_one_ray_at_a_time(&g, r, at, &c, &mut b, stamp);
+                        assert_eq!(lanes.0, one.0, "from {at:?}, {step}°");
+                        assert_eq!(lanes.1.to_bits(), one.1.to_bits(), "from {at:?}, {step}°");
+                        counted += lanes.0;
+                    }
+                }
+            }
+            assert!(counted > 0, "{step}°: nothing unknown counted");
         }
     }
 
