@@ -22,12 +22,13 @@ pub const CHAMFER_OVERESTIMATE: f64 = 1.09;
 /// `cap`. Row-major like the grid.
 ///
 /// Each pass takes a row in two sweeps: first every cell against the three neighbours in the
-/// row already done (independent cells, which the compiler vectorises), then along the row
-/// against the cell before. A minimum is exact whatever order its terms are taken in, so the
-/// values are those of the textbook's one sweep per row (`chamfer_reference` in the tests),
-/// while the chain of dependent operations per cell is one addition and one minimum instead
-/// of four minima behind a store (issue 48: the people tracker recomputes it for each map
-/// SLAM publishes).
+/// row already done (cells independent of each other, whose work the processor overlaps),
+/// then along the row against the cell before. A minimum is exact whatever order its terms
+/// are taken in, so the values are those of the textbook's one sweep per row
+/// (`chamfer_reference` in the tests), while the chain of dependent operations per cell is
+/// one addition and one minimum instead of four minima behind a store (issue 48: the people
+/// tracker recomputes it for each map SLAM publishes; the build's code for the first sweep is
+/// scalar, not vectorised).
 pub fn obstacle_distance(
     grid: &OccupancyGrid,
     obstacle: impl Fn(i8) -> bool,
