@@ -325,9 +325,8 @@ impl PointMap {
         let (li, lj) = Self::key(q[0] - reach, q[1] - reach, self.bucket);
         let (hi, hj) = Self::key(q[0] + reach, q[1] + reach, self.bucket);
         // The closest so far and its squared distance, `max²` while there is none: most
-        // points lie further and fail the first comparison alone, a branch the processor
-        // predicts (issue 48: office-explore's SLAM 19.0 -> 14.4 s, from a test of `best`
-        // and a closure for each point).
+        // points lie further and fail the first comparison alone (issue 48: office-explore's
+        // SLAM 18.7 -> 13.9 s alone, from a test of `best` and a closure for each point).
         let mut best: Option<&Oriented> = None;
         let mut bd = max * max;
         for i in li.max(bi - 1)..=hi.min(bi + 1) {
