@@ -489,6 +489,27 @@ mod tests {
         }
     }
 
+    /// A 160 × 120 grid of free floor at 5 cm with 40 random square blobs of unknown,
+    /// occupied and in-between cells.
+    fn blob_grid(rng: &mut rand_chacha::ChaCha8Rng) -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(0.05, [-1.0, 0.5], 160, 120);
+        g.cells.fill(0);
+        for _ in 0..40 {
+            let (ci, cj, r) = (
+                rng.random_range(0..160i64),
+                rng.random_range(0..120i64),
+                rng.random_range(1..8i64),
+            );
+            let v = [-1i8, 100, 60, 30][rng.random_range(0..4)];
+            for j in (cj - r).max(0)..(cj + r).min(120) {
+                for i in (ci - r).max(0)..(ci + r).min(160) {
+                    g.set(i as usize, j as usize, v);
+                }
+            }
+        }
+        g
+    }
+
     /// One ray after another, each to its end: the definition [`predict`]'s rays side by
     /// side must reproduce to the bit.
     fn predict_one_ray_at_a_time(
@@ -546,21 +567,7 @@ mod tests {
                 ray_step_deg: step,
                 ..config(ViewPlanner::Seed)
             };
-            let mut g = OccupancyGrid::new(0.05, [-1.0, 0.5], 160, 120);
-            g.cells.fill(0);
-            for _ in 0..40 {
-                let (ci, cj, r) = (
-                    rng.random_range(0..160i64),
-                    rng.random_range(0..120i64),
-                    rng.random_range(1..8i64),
-                );
-                let v = [-1i8, 100, 60, 30][rng.random_range(0..4)];
-                for j in (cj - r).max(0)..(cj + r).min(120) {
-                    for i in (ci - r).max(0)..(ci + r).min(160) {
-                        g.set(i as usize, j as usize, v);
-                    }
-                }
-            }
+            let g = blob_grid(&mut rng);
             let run = free_run(&g, &c);
             let none = vec![0f32; run.len()];
             let (mut a, mut b) = (vec![0; g.width * g.height], vec![0; g.width * g.height]);
@@ -593,21 +600,7 @@ mod tests {
         let c = config(ViewPlanner::Seed);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         for _ in 0..4 {
-            let mut g = OccupancyGrid::new(0.05, [-1.0, 0.5], 160, 120);
-            g.cells.fill(0);
-            for _ in 0..40 {
-                let (ci, cj, r) = (
-                    rng.random_range(0..160i64),
-                    rng.random_range(0..120i64),
-                    rng.random_range(1..8i64),
-                );
-                let v = [-1i8, 100, 60, 30][rng.random_range(0..4)];
-                for j in (cj - r).max(0)..(cj + r).min(120) {
-                    for i in (ci - r).max(0)..(ci + r).min(160) {
-                        g.set(i as usize, j as usize, v);
-                    }
-                }
-            }
+            let g = blob_grid(&mut rng);
             let run = free_run(&g, &c);
             assert!(run.iter().any(|&r| r >= 4.0), "nothing to skip");
             let none = vec![0f32; run.len()];
