@@ -51,7 +51,7 @@ pub fn bench(path: &Path, s: &Scenario, duration: Option<f64>, rays: usize) -> R
         .iter()
         .map(|p| p.translation)
         .collect();
-    let rates = laser_rates(&sim, &origins, rays);
+    let rates = laser_rates(&mut sim, &origins, rays);
     Ok(json!({
         "scenario": s.spec.name,
         "sim_time_s": full.sim_time,
@@ -137,8 +137,10 @@ fn free_poses(sim: &Simulation, world: &World, n: usize, z: f32) -> Vec<Pose> {
 }
 
 /// Single-thread ray casts per second with 682-beam fans (the URG-04LX's) from `origins`, at
-/// the URG's 5.6 m and at 30 m.
-fn laser_rates(sim: &Simulation, origins: &[Vec3], rays: usize) -> Value {
+/// the URG's 5.6 m and at 30 m: by the lasers' plan grid ([`Simulation::cast_beam`], what
+/// every laser casts with) and by rapier's query pipeline ([`Simulation::cast_ray`]), with
+/// each one's count of beams that hit (the same where both agree).
+fn laser_rates(sim: &mut Simulation, origins: &[Vec3], rays: usize) -> Value {
     let mut rates = serde_json::Map::new();
     for (label, max) in [
         ("urg04lx_5.6m", LidarPreset::Urg04lx.spec().range_max as f32),
@@ -151,22 +153,24 @@ fn laser_rates(sim: &Simulation, origins: &[Vec3], rays: usize) -> Value {
                 Vec3::new(a.cos(), a.sin(), 0.0)
             })
             .collect();
-        let t = Instant::now();
-        let mut hits = 0usize;
-        let mut n = 0usize;
-        while n < rays && !origins.is_empty() {
-            let o = origins[(n / beams) % origins.len()];
-            for d in &dirs {
-                if sim.cast_ray(o, *d, max).is_some() {
-                    hits += 1;
-                }
+        let time = |cast: &mut dyn FnMut(Vec3, Vec3) -> bool| {
+            let t = Instant::now();
+            let (mut hits, mut n) = (0usize, 0usize);
+            while n < rays && !origins.is_empty() {
+                let o = origins[(n / beams) % origins.len()];
+                hits += dirs.iter().filter(|d| cast(o, **d)).count();
+                n += beams;
             }
-            n += beams;
-        }
-        let secs = t.elapsed().as_secs_f64();
+            (n, hits, t.elapsed().as_secs_f64())
+        };
+        let (n, hits, secs) = time(&mut |o, d| sim.cast_beam(o, d, max).is_some());
+        let (_, rapier_hits, rapier_secs) = time(&mut |o, d| sim.cast_ray(o, d, max).is_some());
         rates.insert(
             label.into(),
-            json!({ "rays": n, "hits": hits, "seconds": secs, "rays_per_second": n as f64 / secs.max(1e-9) }),
+            json!({
+                "rays": n, "hits": hits, "seconds": secs, "rays_per_second": n as f64 / secs.max(1e-9),
+                "rapier_query_pipeline": { "hits": rapier_hits, "seconds": rapier_secs, "rays_per_second": n as f64 / rapier_secs.max(1e-9) },
+            }),
         );
     }
     Value::Object(rates)
@@ -340,7 +344,10 @@ pub fn bench_sensors(world: &World, poses: Option<Vec<Pose>>, b: &SensorBench) -
         json!({ "batch": views.len(), "batches": b.batches.max(1), "seconds": secs, "images_per_second": images as f64 / secs, "ms_per_batch": secs * 1e3 / b.batches.max(1) as f64, "valid_pixels": valid }),
     );
     let origins: Vec<Vec3> = poses.iter().map(|p| p.translation).collect();
-    out.insert("laser_one_core".into(), laser_rates(&sim, &origins, b.rays));
+    out.insert(
+        "laser_one_core".into(),
+        laser_rates(&mut sim, &origins, b.rays),
+    );
     Ok(Value::Object(out))
 }
 

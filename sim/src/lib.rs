@@ -12,6 +12,7 @@
 //! - [`lidar`]: ray-cast laser range finders, and [`beam`]: their readings' errors beyond the
 //!   hit's noise (short, random and lost readings, mixed pixels);
 //! - [`noise`]: seeded random streams per noise source;
+//! - [`ray_grid`]: the lasers' ray casts, over the world's colliders binned in plan;
 //! - [`twin`]: a real log's drive replayed: its laser cast along a given path, its odometry made
 //!   from the path with a robot profile's errors;
 //! - [`render`]: the wgpu camera renderer (the `futago-render` crate, re-exported);
@@ -29,6 +30,7 @@ pub mod kinect;
 pub mod lidar;
 pub mod noise;
 pub mod people;
+pub mod ray_grid;
 pub mod rig;
 pub mod sim;
 pub mod sway;

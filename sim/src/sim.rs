@@ -14,6 +14,7 @@ use crate::noise::stream;
 use crate::people::{
     Body, Crowd, CrowdConfig, FlowConfig, PARKED_Z, PersonConfig, PersonTruth, Surroundings,
 };
+use crate::ray_grid::RayGrid;
 use crate::render::Scene;
 use crate::world::mesh::{TriMesh, UvMap};
 use crate::world::{Material, Motion, World};
@@ -112,8 +113,8 @@ pub struct Simulation {
     /// The people, and each slot's bodies: torso with head, left leg, right leg.
     crowd: Crowd,
     people_bodies: Vec<[RigidBodyHandle; 3]>,
-    /// What a beam that hits each agent's or person's body hit.
-    movers: std::collections::HashMap<RigidBodyHandle, BeamHit>,
+    /// The lasers' ray casts: the world's colliders binned in plan.
+    rays: RayGrid,
     /// Whether the robot touched a person in the last step.
     touching_person: bool,
     /// Rigid body of each world object (fixed bodies for static ones).
@@ -315,7 +316,7 @@ impl Simulation {
             .collect();
         // Note: rapier fills its broad phase (which ray casts use) in the first step; wheel
         // drops are therefore first sampled with the first sensor packet.
-        let movers = agents
+        let movers: std::collections::HashMap<RigidBodyHandle, BeamHit> = agents
             .iter()
             .enumerate()
             .map(|(i, (_, h))| (*h, BeamHit::Agent(i as u32)))
@@ -326,8 +327,9 @@ impl Simulation {
                     .flat_map(|(i, hs)| hs.iter().map(move |h| (*h, BeamHit::Person(i as u32)))),
             )
             .collect();
+        let rays = RayGrid::new(&p.bodies, &p.colliders, robot_body, &movers);
         Simulation {
-            movers,
+            rays,
             physics: p,
             dt,
             time: Time::ZERO,
@@ -504,6 +506,20 @@ impl Simulation {
             .query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
         qp.cast_ray(&Ray::new(origin, dir), max, true)
             .map(|(_, d)| d)
+    }
+
+    /// Casts a ray as the lasers do (the same distances as [`Simulation::cast_ray`], by the
+    /// plan grid of [`RayGrid`]), against the colliders as they are now; distance to the first
+    /// hit and what was hit. Unlike [`Simulation::cast_ray`], sees the world before the first
+    /// step too.
+    pub fn cast_beam(&mut self, origin: Vec3, dir: Vec3, max: f32) -> Option<(f32, BeamHit)> {
+        self.rays.cast(
+            &self.physics.colliders,
+            self.counters.steps,
+            origin,
+            dir,
+            max,
+        )
     }
 
     /// Which wheels (left, right, caster) have no floor within their drop travel.
@@ -740,22 +756,16 @@ impl Simulation {
             .iter()
             .map(|&f| self.frame_pose(f))
             .collect();
-        let qp = self
-            .physics
-            .query_pipeline_with_filter(QueryFilter::default().exclude_rigid_body(self.robot));
         let mut rays = 0u64;
+        let step = self.counters.steps;
         for (i, l) in self.lidars.iter_mut().enumerate() {
             let laser_pose = frames[i] * l.mount;
-            let movers = &self.movers;
+            let grid = &mut self.rays;
             let colliders = &self.physics.colliders;
             let wanted = |stamp| wanted(i, stamp);
             if let Some((scan, hits)) = l.update(self.time, &laser_pose, wanted, |o, d, max| {
                 rays += 1;
-                qp.cast_ray(&Ray::new(o, d), max, true).map(|(c, t)| {
-                    let body = colliders.get(c).and_then(|c| c.parent());
-                    let what = body.and_then(|b| movers.get(&b).copied());
-                    (t, what.unwrap_or(BeamHit::Static))
-                })
+                grid.cast(colliders, step, o, d, max)
             }) {
                 out.scans.push((i, scan));
                 out.hits.push(hits);
