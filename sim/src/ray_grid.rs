@@ -39,6 +39,9 @@ struct Entry {
     /// Its world box, grown by [`PAD`] (refreshed each step for moving ones).
     lo: Vec3,
     hi: Vec3,
+    /// Its shape's box in the collider's frame, turned into a (looser) world box each step
+    /// for moving ones: a person's hull has tens of vertices to transform, its box eight.
+    local: Aabb,
 }
 
 /// Cell lists in compressed rows: cell `c`'s entries are `items[start[c]..start[c + 1]]`.
@@ -136,6 +139,7 @@ impl RayGrid {
                 hit,
                 lo,
                 hi,
+                local: co.shape().compute_local_aabb(),
             };
             if is_fixed {
                 fixed.push(e);
@@ -251,7 +255,7 @@ impl RayGrid {
         }
         for e in &mut self.entries[self.fixed..] {
             (e.lo, e.hi) = match colliders.get(e.collider) {
-                Some(co) => grown(&co.compute_aabb()),
+                Some(co) => grown(&e.local.transform_by(co.position())),
                 // Removed: a box no beam meets.
                 None => (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
             };
