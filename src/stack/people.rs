@@ -54,7 +54,7 @@ use crate::ground_truth::mot::{Frame, clear_mot};
 use crate::scenario::{Scenario, ScenarioSpec};
 use anyhow::{Context, Result};
 use futago_msgs::{LaserScan, Pose2, Time};
-use futago_robot::geometry::closer_than;
+use futago_robot::geometry::{closer_than, within};
 use futago_robot::perception::depth_people::{DepthPeople, DepthPeopleConfig};
 use futago_robot::perception::legs::{AdaBoost, LegConfig, Segment, segments};
 use futago_robot::tracking::laser_people::{Detections, LaserPeople};
@@ -289,7 +289,7 @@ impl DepthTracking {
                     continue;
                 }
                 for (p, set) in truth.people.iter().zip(cells.iter_mut()) {
-                    if (w[0] - p.pose.x).hypot(w[1] - p.pose.y) <= BODY_REACH {
+                    if within(w[0] - p.pose.x, w[1] - p.pose.y, BODY_REACH) {
                         set.insert(w.map(|x| (x / voxel).floor() as i64));
                     }
                 }

@@ -15,38 +15,64 @@ pub mod plane;
 /// the scan normals' neighbour tests, and 4.5 % of `hall-crowd`'s samples in scoring which
 /// people a scan saw.)
 pub fn closer_than(dx: f64, dy: f64, radius: f64) -> bool {
+    match by_squares(dx, dy, radius) {
+        Some(inside) => inside,
+        None => dx.hypot(dy) < radius,
+    }
+}
+
+/// Whether (dx, dy) lies within `radius` of the origin: `dx.hypot(dy) <= radius`, decided as
+/// [`closer_than`] is.
+pub fn within(dx: f64, dy: f64, radius: f64) -> bool {
+    match by_squares(dx, dy, radius) {
+        Some(inside) => inside,
+        None => dx.hypot(dy) <= radius,
+    }
+}
+
+/// Whether (dx, dy) lies inside the circle of `radius`, where the squares say so beyond any
+/// rounding of theirs or of `hypot` (a relative 10⁻⁹, some ten million roundings); none near
+/// the circle, for a radius whose square is not a normal number, and for NaN.
+fn by_squares(dx: f64, dy: f64, radius: f64) -> Option<bool> {
     let (d2, r2) = (dx * dx + dy * dy, radius * radius);
-    if d2 < r2 * (1.0 - 1e-9) {
-        return true;
+    if r2.is_nan() || r2 <= 1e-290 {
+        None
+    } else if d2 < r2 * (1.0 - 1e-9) {
+        Some(true)
+    } else if d2 > r2 * (1.0 + 1e-9) {
+        Some(false)
+    } else {
+        None
     }
-    if d2 > r2 * (1.0 + 1e-9) {
-        return false;
-    }
-    dx.hypot(dy) < radius
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// The neighbour test by squares agrees with `hypot`: at random, on the boundary and a
-    /// rounding either side of it, and for infinite and NaN offsets.
+    /// The neighbour tests by squares agree with `hypot`: at random, on the boundary and a
+    /// rounding either side of it, for tiny radii, and for infinite and NaN offsets.
     #[test]
-    fn closer_than_agrees_with_hypot() {
+    fn closer_than_and_within_agree_with_hypot() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
         let mut near = 0;
-        for _ in 0..200_000 {
-            let r: f64 = rng.random_range(0.001..2.0);
+        for k in 0..200_000 {
+            let r: f64 = if k % 10 == 0 {
+                1e-150 * rng.random_range(0.001..2.0)
+            } else {
+                rng.random_range(0.001..2.0)
+            };
             let a: f64 = rng.random_range(-3.2..3.2);
             // Half the offsets at the radius to a few roundings, half anywhere.
             let d = if rng.random_bool(0.5) {
                 r * (1.0 + rng.random_range(-4i32..=4) as f64 * f64::EPSILON)
             } else {
-                rng.random_range(0.0..3.0)
+                r * rng.random_range(0.0..1.5)
             };
             let (dx, dy) = (d * a.cos(), d * a.sin());
             assert_eq!(closer_than(dx, dy, r), dx.hypot(dy) < r, "{dx} {dy} {r}");
+            assert_eq!(within(dx, dy, r), dx.hypot(dy) <= r, "{dx} {dy} {r}");
             near += usize::from((dx.hypot(dy) - r).abs() <= 4.0 * f64::EPSILON * r);
         }
         assert!(near > 10_000, "{near} on the boundary");
@@ -54,8 +80,10 @@ mod tests {
             (f64::INFINITY, 0.0),
             (f64::NAN, 0.1),
             (0.0, f64::NEG_INFINITY),
+            (0.1, 0.0),
         ] {
             assert_eq!(closer_than(dx, dy, 0.1), dx.hypot(dy) < 0.1);
+            assert_eq!(within(dx, dy, 0.1), dx.hypot(dy) <= 0.1);
         }
     }
 }

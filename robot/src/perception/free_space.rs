@@ -15,6 +15,7 @@ use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{ConfigError, check_counts, check_ranges};
+use crate::geometry::within;
 
 /// The free-space grid's settings (`people.free_space`).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
@@ -163,10 +164,13 @@ impl FreeSpace {
                     last = Some(cell);
                 }
             }
-            let by_person = people
-                .iter()
-                .any(|q| (q[0] - end[0]).hypot(q[1] - end[1]) <= c.person_radius);
-            if hit && !by_person {
+            // (Asked only of a hit.)
+            let by_person = || {
+                people
+                    .iter()
+                    .any(|q| within(q[0] - end[0], q[1] - end[1], c.person_radius))
+            };
+            if hit && !by_person() {
                 self.add(end_cell, c.hit);
             }
         }

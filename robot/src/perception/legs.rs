@@ -16,6 +16,7 @@
 //!   [0, 1] by the logistic link of Friedman, Hastie & Tibshirani (2000).
 
 use crate::config::{ConfigError, check_counts, check_ranges};
+use crate::geometry::within;
 use futago_msgs::LaserScan;
 use serde::{Deserialize, Serialize};
 
@@ -93,13 +94,18 @@ pub fn segments(scan: &LaserScan, c: &LegConfig) -> Vec<Segment> {
         })
     };
     let dist = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+    let within_of = |a: [f64; 2], b: [f64; 2], r: f64| within(a[0] - b[0], a[1] - b[1], r);
     // Runs of valid consecutive points.
     let mut runs: Vec<(usize, Vec<[f64; 2]>)> = Vec::new();
     let mut current: Option<(usize, Vec<[f64; 2]>)> = None;
     for i in 0..scan.ranges.len() {
         match (point(i), current.as_mut()) {
             (Some(p), Some((_, pts)))
-                if dist(*pts.last().expect("runs are not empty"), p) <= c.cluster_distance =>
+                if within_of(
+                    *pts.last().expect("runs are not empty"),
+                    p,
+                    c.cluster_distance,
+                ) =>
             {
                 pts.push(p)
             }

@@ -23,6 +23,7 @@
 
 use crate::config::{ConfigError, check_counts, check_ranges};
 use crate::geometry::grid::{OCCUPIED, obstacle_distance};
+use crate::geometry::within;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2, Time};
 use serde::{Deserialize, Serialize};
@@ -263,7 +264,7 @@ impl TemporalDifference {
                 (-1..=1).any(|dj| {
                     cells.get(&(i + di, j + dj)).is_some_and(|v| {
                         v.iter()
-                            .any(|q| (q[0] - p[0]).hypot(q[1] - p[1]) <= c.same_place)
+                            .any(|q| within(q[0] - p[0], q[1] - p[1], c.same_place))
                     })
                 })
             })
