@@ -5,8 +5,9 @@
 //!
 //! A laser's beams are long and nearly horizontal, and a building is a plan of thin walls: a
 //! beam crosses few cells of a plan grid, each holding a few walls, where rapier's query
-//! pipeline descends a tree of every collider's box for each beam (three quarters of a
-//! laser-only run's time went there). What a beam hits is decided by the same call rapier
+//! pipeline descends a tree of every collider's box for each beam (three quarters of an
+//! office run's time went there; in an open hall of few colliders the tree is as fast). What
+//! a beam hits is decided by the same call rapier
 //! makes on each candidate (`Shape::cast_ray` at the collider's pose, solid), so the
 //! distance of the first hit is the same to the bit; only between two surfaces at exactly the
 //! same distance may the one reported differ (rapier's choice follows its tree's order).
