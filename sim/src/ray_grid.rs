@@ -58,6 +58,13 @@ struct Bins {
     items: Vec<u32>,
 }
 
+impl Bins {
+    /// The entries of cell `c`.
+    fn cell(&self, c: usize) -> &[u32] {
+        &self.items[self.start[c] as usize..self.start[c + 1] as usize]
+    }
+}
+
 /// The plan grid of a world's colliders for laser ray casts (see the module's doc).
 pub struct RayGrid {
     /// Plan corner of cell (0, 0), m.
@@ -370,28 +377,12 @@ impl RayGrid {
             if enter > best.t * (1.0 + 1e-5) + PAD {
                 break;
             }
-            let (a, z) = (fixed_bins.start[cell], fixed_bins.start[cell + 1]);
-            for j in a..z {
-                test(
-                    entries,
-                    tested,
-                    beam,
-                    colliders,
-                    fixed_bins.items[j as usize],
-                    &mut best,
-                );
+            for &i in fixed_bins.cell(cell) {
+                test(entries, tested, beam, colliders, i, &mut best);
             }
             if moving {
-                let (a, z) = (moving_bins.start[cell], moving_bins.start[cell + 1]);
-                for j in a..z {
-                    test(
-                        entries,
-                        tested,
-                        beam,
-                        colliders,
-                        moving_bins.items[j as usize],
-                        &mut best,
-                    );
+                for &i in moving_bins.cell(cell) {
+                    test(entries, tested, beam, colliders, i, &mut best);
                 }
             }
             let k = if next[0] < next[1] { 0 } else { 1 };
