@@ -326,6 +326,8 @@ pub struct Lidar {
     surfaces: Vec<Option<f64>>,
     /// Unit beam directions in the laser frame.
     directions: Vec<Vec3>,
+    /// The origin and direction of each beam due in this update (reused).
+    rays: Vec<(Vec3, Vec3)>,
     /// The time and laser pose of the previous update, to interpolate each beam's pose from;
     /// none before the first and after a jump ([`Lidar::forget_motion`]).
     last: Option<(Time, Pose)>,
@@ -352,6 +354,7 @@ impl Lidar {
             hits: Vec::new(),
             surfaces: Vec::new(),
             directions,
+            rays: Vec::new(),
             spec,
             last: None,
         }
@@ -450,11 +453,21 @@ impl Lidar {
             self.spec.beams
         };
         let max = self.spec.range_max as f32;
-        for i in scan.ranges.len()..due {
+        // Where each beam due starts and points, all before any is cast: each beam's
+        // interpolation is a chain of a division, a square root and another division that
+        // the processor overlaps with the next beam's only when no ray cast stands between
+        // them (`Lidar::update` was 18 % of `office-tour`, mostly waiting on that chain;
+        // its simulation time 1.82 → 1.70 s).
+        let first = scan.ranges.len();
+        self.rays.clear();
+        self.rays.extend((first..due).map(|i| {
             let at = scan.stamp + Duration::from_secs(i as f64 * scan.time_increment);
             let pose = pose_at(at);
-            let dir = pose.rotation * self.directions[i];
-            let hit = cast(pose.translation, dir, max);
+            (pose.translation, pose.rotation * self.directions[i])
+        }));
+        for k in 0..self.rays.len() {
+            let (origin, dir) = self.rays[k];
+            let hit = cast(origin, dir, max);
             // Draw the same random numbers whatever the beam hits, so streams stay aligned.
             let n: f64 = StandardNormal.sample(&mut self.rng);
             let drop = self.rng.random::<f64>() < self.dropout;
