@@ -404,7 +404,7 @@ fn incidence_cos(d: &DepthImage, rays: &PixelRays, u: u32, v: u32) -> Option<f64
 /// (all but a few percent of pixels).
 fn lateral_shift(at: f64, draw: f64, cos: f64, theta: &mut Option<f64>) -> i64 {
     let lo = round_to_i64(at + LATERAL_SIGMA_AT_0 * draw);
-    let hi = round_to_i64(at + *LATERAL_SIGMA_PAST_60 * draw);
+    let hi = round_to_i64(at + LATERAL_SIGMA_PAST_60 * draw);
     if lo == hi {
         return lo;
     }
@@ -412,12 +412,11 @@ fn lateral_shift(at: f64, draw: f64, cos: f64, theta: &mut Option<f64>) -> i64 {
     round_to_i64(at + nguyen_lateral_sigma(theta) * draw)
 }
 
-/// The lateral deviation at normal incidence: 0.8 px exactly.
-const LATERAL_SIGMA_AT_0: f64 = 0.8;
+/// The lateral deviation at normal incidence (0.8 px).
+const LATERAL_SIGMA_AT_0: f64 = nguyen_lateral_sigma(0.0);
 
 /// The lateral deviation just past π/3 (by 10⁻⁹ rad): no less than at any incidence up to π/3.
-static LATERAL_SIGMA_PAST_60: std::sync::LazyLock<f64> =
-    std::sync::LazyLock::new(|| nguyen_lateral_sigma(std::f64::consts::FRAC_PI_3 + 1e-9));
+const LATERAL_SIGMA_PAST_60: f64 = nguyen_lateral_sigma(std::f64::consts::FRAC_PI_3 + 1e-9);
 
 /// `x.round() as i64` (half away from zero) without the maths library's call, which baseline
 /// x86-64 makes for `round`: truncation, then the fraction (exact below 2^52) decides, added
@@ -448,7 +447,7 @@ pub fn nguyen_axial_sigma(z: f64, theta: f64) -> f64 {
 }
 
 /// Nguyen et al. 2012 lateral standard deviation, pixels.
-pub fn nguyen_lateral_sigma(theta: f64) -> f64 {
+pub const fn nguyen_lateral_sigma(theta: f64) -> f64 {
     0.8 + 0.035 * theta / (std::f64::consts::FRAC_PI_2 - theta)
 }
 
@@ -474,7 +473,7 @@ fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng) {
             let n = draws[i];
             let cos = incidence_cos(&src, &rays, u as u32, v as u32);
             // Below π/3 (by a margin far beyond the arc cosine's rounding) only the lateral
-            // shifts hang on the angle, and rarely on more than that it is below π/3; the
+            // shifts depend on the angle, and most of them only on its being below π/3; the
             // axial deviation is the same for every angle there (0 stands for them all).
             let (theta, su, sv) = match cos {
                 Some(c) if c > 0.5 + 1e-9 => {
