@@ -26,7 +26,7 @@
 
 use crate::config::ConfigError;
 use futago_msgs::grid::OccupancyGrid;
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the voxel map (`…voxels.*`).
@@ -131,27 +131,67 @@ fn logit(p: f64) -> f64 {
 /// Integer coordinates of a voxel.
 pub type Key = [i64; 3];
 
+/// A block of the map's store holds `2^BLOCK_BITS` voxels along each axis (4: 64 voxels).
+const BLOCK_BITS: u32 = 2;
+const BLOCK_MASK: i64 = (1 << BLOCK_BITS) - 1;
+const BLOCK_CELLS: usize = 1 << (3 * BLOCK_BITS);
+
+/// The block holding voxel `k` (its key shifted: the floor for negative keys too) and the
+/// voxel's place in it.
+fn split(k: Key) -> (Key, usize) {
+    let b = k.map(|c| c >> BLOCK_BITS);
+    let i = (k[0] & BLOCK_MASK)
+        | ((k[1] & BLOCK_MASK) << BLOCK_BITS)
+        | ((k[2] & BLOCK_MASK) << (2 * BLOCK_BITS));
+    (b, i as usize)
+}
+
 /// The map: log-odds of the voxels measured so far.
+///
+/// The voxels are stored in blocks of 4×4×4, found by the block's key in a hash map, so that
+/// the voxels one beam crosses share a few lookups and lie together in memory: a map keyed
+/// by each voxel spent most of a turntable survey's insertion in its lookups' cache misses
+/// (issue 48). The store only changes where a voxel lives, not what it holds: a voxel is
+/// measured when a scan has hit or passed through it.
 #[derive(Debug, Clone)]
 pub struct VoxelMap {
     config: VoxelConfig,
-    cells: FxHashMap<Key, Cell>,
+    /// Each block's index in `blocks` and `block_keys`, by its key.
+    index: FxHashMap<Key, u32>,
+    blocks: Vec<[Cell; BLOCK_CELLS]>,
+    block_keys: Vec<Key>,
+    /// Voxels measured.
+    measured: usize,
+    /// The number of the scan being inserted (0 before the first): a voxel's `scan` says
+    /// whether this scan has updated it already.
+    scan: u32,
 }
 
-/// A measured voxel: its clamped log-odds, and the scans that ended in it (hits) and that
-/// passed through it (misses).
+/// A voxel: its clamped log-odds, the scans that ended in it (hits) and that passed through
+/// it (misses), and the last scan that updated it. Unmeasured while both counts are 0.
 #[derive(Debug, Clone, Copy, Default)]
 struct Cell {
     log_odds: f32,
     hits: u32,
     misses: u32,
+    scan: u32,
+}
+
+impl Cell {
+    fn measured(&self) -> bool {
+        self.hits > 0 || self.misses > 0
+    }
 }
 
 impl VoxelMap {
     pub fn new(config: VoxelConfig) -> VoxelMap {
         VoxelMap {
             config,
-            cells: FxHashMap::default(),
+            index: FxHashMap::default(),
+            blocks: Vec::new(),
+            block_keys: Vec::new(),
+            measured: 0,
+            scan: 0,
         }
     }
 
@@ -164,9 +204,55 @@ impl VoxelMap {
         p.map(|c| (c / self.config.voxel).floor() as i64)
     }
 
+    /// Voxel `k`, if measured.
+    fn cell(&self, k: Key) -> Option<&Cell> {
+        let (b, i) = split(k);
+        self.index
+            .get(&b)
+            .map(|&n| &self.blocks[n as usize][i])
+            .filter(|c| c.measured())
+    }
+
+    /// The index of block `b`, made (unmeasured) if new. `last` caches the last block asked
+    /// for: a beam's voxels come a few to a block.
+    fn block(&mut self, b: Key, last: &mut Option<(Key, u32)>) -> usize {
+        if let Some((key, n)) = *last
+            && key == b
+        {
+            return n as usize;
+        }
+        let next = self.blocks.len() as u32;
+        let n = *self.index.entry(b).or_insert(next);
+        if n == next {
+            self.blocks.push([Cell::default(); BLOCK_CELLS]);
+            self.block_keys.push(b);
+        }
+        *last = Some((b, n));
+        n as usize
+    }
+
+    /// Every measured voxel with its key, block by block.
+    fn measured_cells(&self) -> impl Iterator<Item = (Key, &Cell)> {
+        self.block_keys
+            .iter()
+            .zip(&self.blocks)
+            .flat_map(|(b, cells)| {
+                cells.iter().enumerate().map(move |(i, c)| {
+                    let i = i as i64;
+                    let k = [
+                        (b[0] << BLOCK_BITS) | (i & BLOCK_MASK),
+                        (b[1] << BLOCK_BITS) | ((i >> BLOCK_BITS) & BLOCK_MASK),
+                        (b[2] << BLOCK_BITS) | (i >> (2 * BLOCK_BITS)),
+                    ];
+                    (k, c)
+                })
+            })
+            .filter(|(_, c)| c.measured())
+    }
+
     /// What voxel `k` holds.
     pub fn state(&self, k: Key) -> Voxel {
-        match self.cells.get(&k) {
+        match self.cell(k) {
             None => Voxel::Unknown,
             Some(c) if c.log_odds > 0.0 => Voxel::Occupied,
             Some(_) => Voxel::Free,
@@ -175,25 +261,24 @@ impl VoxelMap {
 
     /// How many scans ended in voxel `k` (hits) and passed through it (misses).
     pub fn counts(&self, k: Key) -> (u32, u32) {
-        self.cells.get(&k).map_or((0, 0), |c| (c.hits, c.misses))
+        self.cell(k).map_or((0, 0), |c| (c.hits, c.misses))
     }
 
     /// Voxels measured (free or occupied).
     pub fn len(&self) -> usize {
-        self.cells.len()
+        self.measured
     }
 
     pub fn is_empty(&self) -> bool {
-        self.cells.is_empty()
+        self.measured == 0
     }
 
     /// The occupied voxels, in key order.
     pub fn occupied(&self) -> Vec<Key> {
         let mut v: Vec<Key> = self
-            .cells
-            .iter()
+            .measured_cells()
             .filter(|(_, c)| c.log_odds > 0.0)
-            .map(|(k, _)| *k)
+            .map(|(k, _)| k)
             .collect();
         v.sort_unstable();
         v
@@ -202,39 +287,20 @@ impl VoxelMap {
     /// Inserts one scan's beams from `origin` (the sensor's position, map frame): each beam
     /// as its end point and whether it hit something there (false: nothing within range, the
     /// end being the range's limit along the beam). Non-finite beams are skipped.
+    ///
+    /// The voxels the beams end in take a hit, then the others they cross a miss, each voxel
+    /// once: a voxel's `scan` marks it updated by this scan.
     pub fn insert_scan(&mut self, origin: [f64; 3], beams: &[([f64; 3], bool)]) {
         if !origin.iter().all(|c| c.is_finite()) {
             return;
         }
-        let mut hits: FxHashSet<Key> = FxHashSet::default();
-        let mut misses: FxHashSet<Key> = FxHashSet::default();
-        let floor_top = (self.config.floor_clearance / self.config.voxel).floor() as i64;
-        for (end, hit) in beams {
-            if !end.iter().all(|c| c.is_finite()) {
-                continue;
+        self.scan = self.scan.wrapping_add(1);
+        if self.scan == 0 {
+            // After 2³² scans: no voxel may keep a mark that a new scan's number repeats.
+            for c in self.blocks.iter_mut().flatten() {
+                c.scan = 0;
             }
-            let last = self.key(*end);
-            let (margin, v) = (self.config.miss_margin, self.config.voxel);
-            for k in traverse(origin, *end, self.config.voxel) {
-                if k == last {
-                    break;
-                }
-                if *hit && margin > 0.0 {
-                    let c = [0, 1, 2].map(|i| (k[i] as f64 + 0.5) * v - end[i]);
-                    if (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt() < margin {
-                        continue;
-                    }
-                }
-                // A voxel whose top is under the clearance lies wholly below it.
-                if k[2] + 1 > floor_top {
-                    misses.insert(k);
-                }
-            }
-            if *hit {
-                hits.insert(last);
-            } else if last[2] + 1 > floor_top {
-                misses.insert(last);
-            }
+            self.scan = 1;
         }
         let (l_hit, l_miss) = (
             logit(self.config.p_hit) as f32,
@@ -244,15 +310,53 @@ impl VoxelMap {
             logit(self.config.p_min) as f32,
             logit(self.config.p_max) as f32,
         );
-        for k in &hits {
-            let c = self.cells.entry(*k).or_default();
-            c.log_odds = (c.log_odds + l_hit).clamp(lo, hi);
-            c.hits += 1;
+        let finite = |end: &[f64; 3]| end.iter().all(|c| c.is_finite());
+        let mut cached = None;
+        for (end, _) in beams.iter().filter(|(end, hit)| *hit && finite(end)) {
+            let (b, i) = split(self.key(*end));
+            let n = self.block(b, &mut cached);
+            let c = &mut self.blocks[n][i];
+            if c.scan != self.scan {
+                self.measured += usize::from(!c.measured());
+                c.scan = self.scan;
+                c.log_odds = (c.log_odds + l_hit).clamp(lo, hi);
+                c.hits += 1;
+            }
         }
-        for k in misses.difference(&hits) {
-            let c = self.cells.entry(*k).or_default();
-            c.log_odds = (c.log_odds + l_miss).clamp(lo, hi);
-            c.misses += 1;
+        let mut miss = |map: &mut VoxelMap, k: Key| {
+            let (b, i) = split(k);
+            let n = map.block(b, &mut cached);
+            let c = &mut map.blocks[n][i];
+            if c.scan != map.scan {
+                map.measured += usize::from(!c.measured());
+                c.scan = map.scan;
+                c.log_odds = (c.log_odds + l_miss).clamp(lo, hi);
+                c.misses += 1;
+            }
+        };
+        let floor_top = (self.config.floor_clearance / self.config.voxel).floor() as i64;
+        let (margin, v) = (self.config.miss_margin, self.config.voxel);
+        for (end, hit) in beams.iter().filter(|(end, _)| finite(end)) {
+            let last = self.key(*end);
+            traverse_each(origin, *end, v, |k| {
+                if k == last {
+                    return false;
+                }
+                if *hit && margin > 0.0 {
+                    let c = [0, 1, 2].map(|i| (k[i] as f64 + 0.5) * v - end[i]);
+                    if (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt() < margin {
+                        return true;
+                    }
+                }
+                // A voxel whose top is under the clearance lies wholly below it.
+                if k[2] + 1 > floor_top {
+                    miss(self, k);
+                }
+                true
+            });
+            if !*hit && last[2] + 1 > floor_top {
+                miss(self, last);
+            }
         }
     }
 
@@ -260,8 +364,7 @@ impl VoxelMap {
     pub fn keeps(&self, k: Key) -> bool {
         match self.config.carving {
             Carving::Majority => self
-                .cells
-                .get(&k)
+                .cell(k)
                 .is_some_and(|c| c.hits >= c.misses && c.hits > 0),
             Carving::LogOdds => self.state(k) == Voxel::Occupied,
         }
@@ -287,21 +390,19 @@ impl VoxelMap {
     pub fn project(&self, z_min: f64, z_max: f64) -> Option<OccupancyGrid> {
         let v = self.config.voxel;
         let (k0, k1) = ((z_min / v).floor() as i64, (z_max / v).ceil() as i64 - 1);
-        let band: Vec<(&Key, f32)> = self
-            .cells
-            .iter()
+        let band: Vec<(Key, f32)> = self
+            .measured_cells()
             .filter(|(k, _)| k[2] >= k0 && k[2] <= k1)
             .map(|(k, c)| (k, c.log_odds))
             .collect();
         // The floor: occupied voxels up to two below the band.
-        let floor: Vec<&Key> = self
-            .cells
-            .iter()
+        let floor: Vec<Key> = self
+            .measured_cells()
             .filter(|(k, c)| k[2] < k0 && k[2] >= k0 - 2 && c.log_odds > 0.0)
             .map(|(k, _)| k)
             .collect();
         let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
-        for k in band.iter().map(|(k, _)| *k).chain(floor.iter().copied()) {
+        for k in band.iter().map(|(k, _)| k).chain(&floor) {
             for d in 0..2 {
                 lo[d] = lo[d].min(k[d]);
                 hi[d] = hi[d].max(k[d]);
@@ -334,6 +435,17 @@ impl VoxelMap {
 /// to `b`'s (Amanatides and Woo's traversal). Consecutive voxels share a face. A segment
 /// longer than a million voxels is cut there (a corrupt point, not a measurement).
 pub fn traverse(a: [f64; 3], b: [f64; 3], size: f64) -> Vec<Key> {
+    let mut out = Vec::new();
+    traverse_each(a, b, size, |k| {
+        out.push(k);
+        true
+    });
+    out
+}
+
+/// [`traverse`]'s voxels handed to `visit` in order, with no list made; `visit` returning
+/// false stops the walk.
+pub fn traverse_each(a: [f64; 3], b: [f64; 3], size: f64, mut visit: impl FnMut(Key) -> bool) {
     const MAX_STEPS: usize = 1_000_000;
     let key = |p: [f64; 3]| p.map(|c| (c / size).floor() as i64);
     let (mut k, last) = (key(a), key(b));
@@ -352,8 +464,11 @@ pub fn traverse(a: [f64; 3], b: [f64; 3], size: f64) -> Vec<Key> {
             t_delta[i] = -size / d[i];
         }
     }
-    let mut out = vec![k];
-    while k != last && out.len() < MAX_STEPS {
+    if !visit(k) {
+        return;
+    }
+    let mut visited = 1;
+    while k != last && visited < MAX_STEPS {
         let i = if t_max[0] <= t_max[1] && t_max[0] <= t_max[2] {
             0
         } else if t_max[1] <= t_max[2] {
@@ -363,14 +478,16 @@ pub fn traverse(a: [f64; 3], b: [f64; 3], size: f64) -> Vec<Key> {
         };
         if t_max[i] > 1.0 {
             // Rounding: the end's voxel was missed by a hair; it is the next one.
-            out.push(last);
-            break;
+            visit(last);
+            return;
         }
         k[i] += step[i];
         t_max[i] += t_delta[i];
-        out.push(k);
+        visited += 1;
+        if !visit(k) {
+            return;
+        }
     }
-    out
 }
 
 #[cfg(test)]
@@ -431,6 +548,118 @@ mod tests {
                 .map(|i| ((b[i] / 0.1).floor() as i64 - (a[i] / 0.1).floor() as i64).abs())
                 .sum();
             assert_eq!(ks.len() as i64, crossed + 1);
+        }
+    }
+
+    /// The store in blocks holds what a map keyed by each voxel holds: random scans from
+    /// origins on both sides of zero (blocks of negative keys), with and without the margin
+    /// and the floor's clearance, against the rule written out with sets, voxel by voxel
+    /// over the whole volume, and the occupied list, the count and the projected grid.
+    #[test]
+    fn the_blocks_hold_what_a_map_of_each_voxel_holds() {
+        let mut state = 99u64;
+        let mut r = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for config in [
+            VoxelConfig::default(),
+            VoxelConfig {
+                miss_margin: 0.0,
+                floor_clearance: 0.0,
+                voxel: 0.13,
+                ..VoxelConfig::default()
+            },
+        ] {
+            let mut m = VoxelMap::new(config);
+            // The reference: log-odds, hits, misses by voxel.
+            let mut reference: std::collections::HashMap<Key, (f32, u32, u32)> = Default::default();
+            let v = config.voxel;
+            let (l_hit, l_miss) = (logit(config.p_hit) as f32, logit(config.p_miss) as f32);
+            let (lo, hi) = (logit(config.p_min) as f32, logit(config.p_max) as f32);
+            let floor_top = (config.floor_clearance / v).floor() as i64;
+            for _ in 0..60 {
+                let origin = [r() * 4.0 - 2.0, r() * 4.0 - 2.0, r() * 1.5];
+                let beams: Vec<([f64; 3], bool)> = (0..40)
+                    .map(|_| {
+                        let end = [r() * 8.0 - 4.0, r() * 8.0 - 4.0, r() * 2.5 - 0.2];
+                        (end, r() < 0.8)
+                    })
+                    .collect();
+                m.insert_scan(origin, &beams);
+                let (mut hits, mut misses) = (
+                    std::collections::HashSet::new(),
+                    std::collections::HashSet::new(),
+                );
+                for (end, hit) in &beams {
+                    let last = m.key(*end);
+                    for k in traverse(origin, *end, v) {
+                        if k == last {
+                            break;
+                        }
+                        let c = [0, 1, 2].map(|i| (k[i] as f64 + 0.5) * v - end[i]);
+                        let near =
+                            (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt() < config.miss_margin;
+                        if !(*hit && config.miss_margin > 0.0 && near) && k[2] + 1 > floor_top {
+                            misses.insert(k);
+                        }
+                    }
+                    if *hit {
+                        hits.insert(last);
+                    } else if last[2] + 1 > floor_top {
+                        misses.insert(last);
+                    }
+                }
+                for k in &hits {
+                    let c = reference.entry(*k).or_default();
+                    c.0 = (c.0 + l_hit).clamp(lo, hi);
+                    c.1 += 1;
+                }
+                for k in misses.difference(&hits) {
+                    let c = reference.entry(*k).or_default();
+                    c.0 = (c.0 + l_miss).clamp(lo, hi);
+                    c.2 += 1;
+                }
+            }
+            assert_eq!(m.len(), reference.len());
+            let n = (4.5 / v).ceil() as i64;
+            for i in -n..=n {
+                for j in -n..=n {
+                    for k in -3..=(3.0 / v) as i64 {
+                        let key = [i, j, k];
+                        let want = reference.get(&key);
+                        assert_eq!(
+                            m.counts(key),
+                            want.map_or((0, 0), |c| (c.1, c.2)),
+                            "{key:?}"
+                        );
+                        let state = match want {
+                            None => Voxel::Unknown,
+                            Some(c) if c.0 > 0.0 => Voxel::Occupied,
+                            Some(_) => Voxel::Free,
+                        };
+                        assert_eq!(m.state(key), state, "{key:?}");
+                    }
+                }
+            }
+            let mut occupied: Vec<Key> = reference
+                .iter()
+                .filter(|(_, c)| c.0 > 0.0)
+                .map(|(k, _)| *k)
+                .collect();
+            occupied.sort_unstable();
+            assert!(occupied.iter().any(|k| k[0] < 0 && k[1] < 0));
+            assert_eq!(m.occupied(), occupied);
+            let g = m.project(0.1, 1.0).unwrap();
+            for (k, c) in &reference {
+                if k[2] >= (0.1 / v).floor() as i64 && k[2] < (1.0 / v).ceil() as i64 && c.0 > 0.0 {
+                    let (x, y) = ((k[0] as f64 + 0.5) * v, (k[1] as f64 + 0.5) * v);
+                    let (ci, cj) = g.cell_of(x, y).unwrap();
+                    assert_eq!(g.get(ci, cj), 100, "{k:?}");
+                }
+            }
         }
     }
 
