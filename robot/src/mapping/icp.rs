@@ -7,7 +7,7 @@
 //! iterations, and minimises the Huber-weighted point-to-line distances.
 
 use crate::cores::map_on_cores;
-use crate::geometry::closer_than;
+use crate::geometry::{closer_than, floor_i64};
 use futago_msgs::{LaserScan, Pose2, wrap_angle};
 use rustc_hash::FxHashMap;
 use serde::Deserialize;
@@ -323,7 +323,7 @@ impl PointMap {
     }
 
     fn key(x: f64, y: f64, s: f64) -> (i64, i64) {
-        ((x / s).floor() as i64, (y / s).floor() as i64)
+        (floor_i64(x / s), floor_i64(y / s))
     }
 
     /// Adds points (robot frame) seen from `pose`; voxels already filled keep their point.

@@ -22,6 +22,7 @@
 //! than the thirty lines below.
 
 use crate::config::ConfigError;
+use crate::geometry::floor_i64;
 use futago_msgs::{LaserScan, Pose2};
 use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
@@ -214,7 +215,7 @@ impl Reference {
     }
 
     fn key(p: [f64; 2], size: f64) -> [i64; 2] {
-        [(p[0] / size).floor() as i64, (p[1] / size).floor() as i64]
+        [floor_i64(p[0] / size), floor_i64(p[1] / size)]
     }
 
     /// Adds the points, one per cell (a cell already holding a point takes no more).

@@ -2,6 +2,7 @@
 //! *Probabilistic Robotics*, ch. 9): each beam lowers the log-odds of the cells it crosses and
 //! raises that of the cell it ends in. The grid grows to fit whatever is inserted.
 
+use crate::geometry::floor_i64;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2};
 use serde::Deserialize;
@@ -107,7 +108,7 @@ impl OccupancyMap {
 
     fn cell(&self, x: f64, y: f64) -> [i64; 2] {
         let r = self.config.resolution;
-        [(x / r).floor() as i64, (y / r).floor() as i64]
+        [floor_i64(x / r), floor_i64(y / r)]
     }
 
     /// Grows the bounding box to hold cells `lo..=hi` (with a margin); false when it would

@@ -25,6 +25,7 @@
 //! C++ OctoMap.
 
 use crate::config::ConfigError;
+use crate::geometry::floor_i64;
 use futago_msgs::grid::OccupancyGrid;
 use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
@@ -201,7 +202,7 @@ impl VoxelMap {
 
     /// The voxel holding `p`.
     pub fn key(&self, p: [f64; 3]) -> Key {
-        p.map(|c| (c / self.config.voxel).floor() as i64)
+        p.map(|c| floor_i64(c / self.config.voxel))
     }
 
     /// Voxel `k`, if measured.
@@ -447,7 +448,7 @@ pub fn traverse(a: [f64; 3], b: [f64; 3], size: f64) -> Vec<Key> {
 /// false stops the walk.
 pub fn traverse_each(a: [f64; 3], b: [f64; 3], size: f64, mut visit: impl FnMut(Key) -> bool) {
     const MAX_STEPS: usize = 1_000_000;
-    let key = |p: [f64; 3]| p.map(|c| (c / size).floor() as i64);
+    let key = |p: [f64; 3]| p.map(|c| floor_i64(c / size));
     let (mut k, last) = (key(a), key(b));
     let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     let mut step = [0i64; 3];
