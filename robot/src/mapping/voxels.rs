@@ -312,29 +312,27 @@ impl VoxelMap {
             logit(self.config.p_max) as f32,
         );
         let finite = |end: &[f64; 3]| end.iter().all(|c| c.is_finite());
+        // A hit or a miss in voxel `k`, unless this scan has updated it already.
         let mut cached = None;
-        for (end, _) in beams.iter().filter(|(end, hit)| *hit && finite(end)) {
-            let (b, i) = split(self.key(*end));
-            let n = self.block(b, &mut cached);
-            let c = &mut self.blocks[n][i];
-            if c.scan != self.scan {
-                self.measured += usize::from(!c.measured());
-                c.scan = self.scan;
-                c.log_odds = (c.log_odds + l_hit).clamp(lo, hi);
-                c.hits += 1;
-            }
-        }
-        let mut miss = |map: &mut VoxelMap, k: Key| {
+        let mut update = |map: &mut VoxelMap, k: Key, hit: bool| {
             let (b, i) = split(k);
             let n = map.block(b, &mut cached);
             let c = &mut map.blocks[n][i];
             if c.scan != map.scan {
                 map.measured += usize::from(!c.measured());
                 c.scan = map.scan;
-                c.log_odds = (c.log_odds + l_miss).clamp(lo, hi);
-                c.misses += 1;
+                c.log_odds = (c.log_odds + if hit { l_hit } else { l_miss }).clamp(lo, hi);
+                if hit {
+                    c.hits += 1;
+                } else {
+                    c.misses += 1;
+                }
             }
         };
+        for (end, _) in beams.iter().filter(|(end, hit)| *hit && finite(end)) {
+            let k = self.key(*end);
+            update(self, k, true);
+        }
         let floor_top = (self.config.floor_clearance / self.config.voxel).floor() as i64;
         let (margin, v) = (self.config.miss_margin, self.config.voxel);
         for (end, hit) in beams.iter().filter(|(end, _)| finite(end)) {
@@ -351,12 +349,12 @@ impl VoxelMap {
                 }
                 // A voxel whose top is under the clearance lies wholly below it.
                 if k[2] + 1 > floor_top {
-                    miss(self, k);
+                    update(self, k, false);
                 }
                 true
             });
             if !*hit && last[2] + 1 > floor_top {
-                miss(self, last);
+                update(self, last, false);
             }
         }
     }
