@@ -467,21 +467,37 @@ pub fn traverse_each(a: [f64; 3], b: [f64; 3], size: f64, mut visit: impl FnMut(
         return;
     }
     let mut visited = 1;
+    // Each axis's next face apart, and each step's axis as a constant index: with an index
+    // only known at run time, the three were kept in memory, and each step waited on the
+    // store and load of the last (a third of a scan's insertion).
+    let [mut tx, mut ty, mut tz] = t_max;
     while k != last && visited < MAX_STEPS {
-        let i = if t_max[0] <= t_max[1] && t_max[0] <= t_max[2] {
-            0
-        } else if t_max[1] <= t_max[2] {
-            1
+        let (i, t) = if tx <= ty && tx <= tz {
+            (0, tx)
+        } else if ty <= tz {
+            (1, ty)
         } else {
-            2
+            (2, tz)
         };
-        if t_max[i] > 1.0 {
+        if t > 1.0 {
             // Rounding: the end's voxel was missed by a hair; it is the next one.
             visit(last);
             return;
         }
-        k[i] += step[i];
-        t_max[i] += t_delta[i];
+        match i {
+            0 => {
+                k[0] += step[0];
+                tx += t_delta[0];
+            }
+            1 => {
+                k[1] += step[1];
+                ty += t_delta[1];
+            }
+            _ => {
+                k[2] += step[2];
+                tz += t_delta[2];
+            }
+        }
         visited += 1;
         if !visit(k) {
             return;
