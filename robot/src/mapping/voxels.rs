@@ -157,10 +157,9 @@ fn split(k: Key) -> (Key, usize) {
 #[derive(Debug, Clone)]
 pub struct VoxelMap {
     config: VoxelConfig,
-    /// Each block's index in `blocks` and `block_keys`, by its key.
+    /// Each block's index in `blocks`, by its key.
     index: FxHashMap<Key, u32>,
     blocks: Vec<[Cell; BLOCK_CELLS]>,
-    block_keys: Vec<Key>,
     /// Voxels measured.
     measured: usize,
     /// The number of the scan being inserted (0 before the first): a voxel's `scan` says
@@ -190,7 +189,6 @@ impl VoxelMap {
             config,
             index: FxHashMap::default(),
             blocks: Vec::new(),
-            block_keys: Vec::new(),
             measured: 0,
             scan: 0,
         }
@@ -226,17 +224,16 @@ impl VoxelMap {
         let n = *self.index.entry(b).or_insert(next);
         if n == next {
             self.blocks.push([Cell::default(); BLOCK_CELLS]);
-            self.block_keys.push(b);
         }
         *last = Some((b, n));
         n as usize
     }
 
-    /// Every measured voxel with its key, block by block.
+    /// Every measured voxel with its key, block by block (in the index's order).
     fn measured_cells(&self) -> impl Iterator<Item = (Key, &Cell)> {
-        self.block_keys
+        self.index
             .iter()
-            .zip(&self.blocks)
+            .map(|(b, &n)| (b, &self.blocks[n as usize]))
             .flat_map(|(b, cells)| {
                 cells.iter().enumerate().map(move |(i, c)| {
                     let i = i as i64;
