@@ -73,8 +73,14 @@ fn clearance(free: &[bool], w: usize, h: usize) -> Vec<f64> {
 /// `r` to the nearest blocked cell's centre (cells): every free cell's disc (clear of blocked
 /// centres) paints its width, 2r − 1 (the disc reaches half a cell short of the blocked
 /// cells' faces), onto the cells it holds. A disc held in a neighbour's disc adds nothing.
+///
+/// A cell's thickness is the widest disc that holds it, so the discs are painted widest
+/// first and each cell only by the first disc to reach it: a row's unpainted cells are
+/// linked, each to the next one right of it (a union-find with path halving), so that a
+/// disc's span of a row skips what wider discs painted. Painting every disc cell by cell
+/// took 2.5 s of the Intel map's 8 s of scoring set-up; the result is the same.
 fn local_thickness(free: &[bool], r: &[f64], w: usize, h: usize) -> Vec<f64> {
-    let mut thick = vec![0.0f64; w * h];
+    let mut discs: Vec<(f64, usize)> = Vec::new();
     for j in 0..h {
         for i in 0..w {
             let k = j * w + i;
@@ -94,39 +100,58 @@ fn local_thickness(free: &[bool], r: &[f64], w: usize, h: usize) -> Vec<f64> {
                             >= rq + ((di * di + dj * dj) as f64).sqrt() - 1e-9
                 })
             });
-            if inside_neighbour {
+            if !inside_neighbour {
+                discs.push((rq, k));
+            }
+        }
+    }
+    // Widest first; the order among equal widths does not change what is painted.
+    discs.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    let mut thick = vec![0.0f64; w * h];
+    // `next[j * (w + 1) + i]`: towards the first unpainted cell at or right of column `i` of
+    // row `j`; column `w` of each row is a sentinel, never painted.
+    let row_len = w + 1;
+    let mut next: Vec<usize> = (0..h * row_len).collect();
+    let find = |next: &mut [usize], mut k: usize| -> usize {
+        while next[k] != k {
+            let up = next[next[k]];
+            next[k] = up;
+            k = up;
+        }
+        k
+    };
+    for (rq, k) in discs {
+        let (i, j) = (k % w, k / w);
+        let width = 2.0 * rq - 1.0;
+        let reach = rq.ceil() as i64;
+        let inside = |di: i64, dj: i64| ((di * di + dj * dj) as f64) < rq * rq;
+        // Row by row, the disc's span of columns: the half-width from the square root, then
+        // settled on the same test a cell at a time.
+        for dj in -reach..=reach {
+            let b = j as i64 + dj;
+            if b < 0 || b >= h as i64 {
                 continue;
             }
-            let width = 2.0 * rq - 1.0;
-            let reach = rq.ceil() as i64;
-            let inside = |di: i64, dj: i64| ((di * di + dj * dj) as f64) < rq * rq;
-            // Row by row, the disc's span of columns: the half-width from the square root,
-            // then settled on the same test a cell at a time.
-            for dj in -reach..=reach {
-                let b = j as i64 + dj;
-                if b < 0 || b >= h as i64 {
-                    continue;
-                }
-                // Truncated, not rounded up (a call to the maths library): the loops below
-                // settle any start on the same span.
-                let mut half = (rq * rq - (dj * dj) as f64).max(0.0).sqrt() as i64;
-                while half > 0 && !inside(half, dj) {
-                    half -= 1;
-                }
-                while inside(half + 1, dj) {
-                    half += 1;
-                }
-                if !inside(half, dj) {
-                    continue;
-                }
-                let lo = (i as i64 - half).max(0) as usize;
-                let hi = (i as i64 + half).min(w as i64 - 1) as usize;
-                let row = b as usize * w;
-                // Widths are finite: a comparison, not `f64::max`, whose care for NaNs (an
-                // unordered compare and a blend a cell) was most of this loop's time.
-                for t in &mut thick[row + lo..=row + hi] {
-                    *t = if *t > width { *t } else { width };
-                }
+            // Truncated, not rounded up (a call to the maths library): the loops below
+            // settle any start on the same span.
+            let mut half = (rq * rq - (dj * dj) as f64).max(0.0).sqrt() as i64;
+            while half > 0 && !inside(half, dj) {
+                half -= 1;
+            }
+            while inside(half + 1, dj) {
+                half += 1;
+            }
+            if !inside(half, dj) {
+                continue;
+            }
+            let lo = (i as i64 - half).max(0) as usize;
+            let hi = (i as i64 + half).min(w as i64 - 1) as usize;
+            let (row, links) = (b as usize * w, b as usize * row_len);
+            let mut c = find(&mut next, links + lo) - links;
+            while c <= hi {
+                thick[row + c] = width;
+                next[links + c] = links + c + 1;
+                c = find(&mut next, links + c + 1) - links;
             }
         }
     }
