@@ -36,11 +36,16 @@ pub const CLASSES: [&str; 3] = ["floor", "walls", "furniture"];
 /// The true surfaces, voxelised, with each class's area per voxel, and per region of the
 /// floor where the surfaces were labelled by region.
 pub struct Surfaces {
-    area: FxHashMap<[i32; 3], [f64; 3]>,
+    /// Each voxel's place in `area`.
+    voxel: FxHashMap<[i32; 3], u32>,
+    /// Each class's area per voxel.
+    area: Vec<[f64; 3]>,
     total: [f64; 3],
+    /// Each (voxel, region)'s place in `regional`.
+    voxel_region: FxHashMap<([i32; 3], u32), u32>,
     /// Each class's area per (voxel, region): all of it, and the part the camera can see
     /// from some reachable pose ([`super::observable`]).
-    regional: FxHashMap<([i32; 3], u32), [[f64; 3]; 2]>,
+    regional: Vec<[[f64; 3]; 2]>,
     /// Each region's area of each class: all of it, and the observable part.
     region_total: Vec<[[f64; 3]; 2]>,
 }
@@ -159,9 +164,11 @@ impl Surfaces {
 
     fn empty() -> Surfaces {
         Surfaces {
-            area: FxHashMap::default(),
+            voxel: FxHashMap::default(),
+            area: Vec::new(),
             total: [0.0; 3],
-            regional: FxHashMap::default(),
+            voxel_region: FxHashMap::default(),
+            regional: Vec::new(),
             region_total: Vec::new(),
         }
     }
@@ -205,6 +212,10 @@ impl Surfaces {
             [0, 1, 2].map(|k| a[k] + s * (b[k] - a[k]) + t * (c[k] - a[k]))
         };
         let nf = n as f64;
+        // Neighbouring samples mostly share a voxel: the last one's places, looked up again
+        // only when the voxel (or region) changes.
+        let mut last_voxel: Option<([i32; 3], usize)> = None;
+        let mut last_region: Option<(([i32; 3], u32), usize)> = None;
         for i in 0..n {
             for j in 0..n - i {
                 // The upright small triangle's centre, and the inverted one's beside it where
@@ -219,11 +230,33 @@ impl Surfaces {
                         continue;
                     }
                     let k = key(p);
-                    self.area.entry(k).or_insert([0.0; 3])[class] += each;
+                    let at = match last_voxel {
+                        Some((l, at)) if l == k => at,
+                        _ => {
+                            let at = place(&mut self.voxel, &mut self.area, k, [0.0; 3]);
+                            last_voxel = Some((k, at));
+                            at
+                        }
+                    };
+                    self.area[at][class] += each;
                     self.total[class] += each;
                     if let Some(r) = label([p[0], p[1]]) {
                         let parts = if observable(p) { 2 } else { 1 };
-                        let entry = self.regional.entry((k, r as u32)).or_insert([[0.0; 3]; 2]);
+                        let kr = (k, r as u32);
+                        let at = match last_region {
+                            Some((l, at)) if l == kr => at,
+                            _ => {
+                                let at = place(
+                                    &mut self.voxel_region,
+                                    &mut self.regional,
+                                    kr,
+                                    [[0.0; 3]; 2],
+                                );
+                                last_region = Some((kr, at));
+                                at
+                            }
+                        };
+                        let entry = &mut self.regional[at];
                         if self.region_total.len() <= r {
                             self.region_total.resize(r + 1, [[0.0; 3]; 2]);
                         }
@@ -246,7 +279,7 @@ impl Surfaces {
     pub fn seen_area(&self, seen: &CameraCoverage) -> [f64; 3] {
         let mut out = [0.0; 3];
         for k in &seen.voxels {
-            if let Some(a) = self.area.get(k) {
+            if let Some(a) = self.voxel.get(k).map(|&at| &self.area[at as usize]) {
                 for c in 0..3 {
                     out[c] += a[c];
                 }
@@ -284,9 +317,10 @@ impl Surfaces {
             .iter()
             .map(|t| (t[part], [0.0; 3]))
             .collect();
-        for ((k, r), a) in &self.regional {
-            if seen.voxels.contains(k) {
-                for (o, x) in out[*r as usize].1.iter_mut().zip(&a[part]) {
+        for (&(k, r), &at) in &self.voxel_region {
+            let a = &self.regional[at as usize];
+            if seen.voxels.contains(&k) {
+                for (o, x) in out[r as usize].1.iter_mut().zip(&a[part]) {
                     *o += x;
                 }
             }
@@ -297,18 +331,67 @@ impl Surfaces {
     /// Every voxel holding surface: its centre (m) and each class's area in it (m²), in no
     /// particular order.
     pub fn voxels(&self) -> impl Iterator<Item = ([f64; 3], [f64; 3])> + '_ {
-        self.area.iter().map(|(k, a)| {
+        self.voxel.iter().map(|(k, &at)| {
             (
                 [0, 1, 2].map(|d| OFFSET[d] + (k[d] as f64 + 0.5) * VOXEL),
-                *a,
+                self.area[at as usize],
             )
         })
     }
 
+    /// Per column of voxels (by [`column`]), which of the voxels at the heights `zs` (m, at
+    /// most 64) hold surface of `class`: bit `b` for `zs[b]`. One pass over the voxels, for
+    /// a picture that asks about every column of a map.
+    pub fn levels_held(&self, zs: &[f64], class: usize) -> FxHashMap<[i32; 2], u64> {
+        let bits = level_bits(zs);
+        let mut out = FxHashMap::default();
+        for (k, &at) in &self.voxel {
+            if self.area[at as usize][class] > 0.0
+                && let Some(&b) = bits.get(&k[2])
+            {
+                *out.entry([k[0], k[1]]).or_insert(0) |= b;
+            }
+        }
+        out
+    }
+
     /// Whether voxel `k` holds surface of `class`.
     pub fn holds(&self, p: [f64; 3], class: usize) -> bool {
-        self.area.get(&key(p)).is_some_and(|a| a[class] > 0.0)
+        self.voxel
+            .get(&key(p))
+            .is_some_and(|&at| self.area[at as usize][class] > 0.0)
     }
+}
+
+/// The column of voxels holding the point `(x, y)`.
+pub fn column(p: [f64; 2]) -> [i32; 2] {
+    let k = key([p[0], p[1], 0.0]);
+    [k[0], k[1]]
+}
+
+/// For each voxel level (its z index), the bits of the heights of `zs` that fall in it.
+fn level_bits(zs: &[f64]) -> FxHashMap<i32, u64> {
+    assert!(zs.len() <= 64, "at most 64 heights fit a mask");
+    let mut bits = FxHashMap::default();
+    for (b, &z) in zs.iter().enumerate() {
+        *bits.entry(key([0.0, 0.0, z])[2]).or_insert(0) |= 1u64 << b;
+    }
+    bits
+}
+
+/// The place of `key` in `values` by `index`, a new one holding `empty` where it had none.
+fn place<K: std::hash::Hash + Eq, V>(
+    index: &mut FxHashMap<K, u32>,
+    values: &mut Vec<V>,
+    key: K,
+    empty: V,
+) -> usize {
+    let next = values.len() as u32;
+    let at = *index.entry(key).or_insert(next);
+    if at == next {
+        values.push(empty);
+    }
+    at as usize
 }
 
 /// The voxels the camera saw.
@@ -328,16 +411,39 @@ impl CameraCoverage {
         range: (f64, f64),
         stride: u32,
     ) {
+        // Neighbouring pixels mostly land in one voxel: a key the last pixel inserted is not
+        // looked up again (the set's probing was most of this loop). Its room for one more is
+        // still asked for, as inserting does first, so that the set grows when it did before
+        // and is iterated, and its areas summed, in the same order.
+        let mut last = None;
         for v in (0..depth.height).step_by(stride.max(1) as usize) {
             for u in (0..depth.width).step_by(stride.max(1) as usize) {
                 let z = depth.at(u, v) as f64;
                 if !(z.is_finite() && z >= range.0 && z <= range.1) {
                     continue;
                 }
-                let w = optical.transform_point(k.back_project(u as f64, v as f64, z));
-                self.voxels.insert(key(w));
+                let w = key(optical.transform_point(k.back_project(u as f64, v as f64, z)));
+                if last == Some(w) {
+                    self.voxels.reserve(1);
+                } else {
+                    self.voxels.insert(w);
+                    last = Some(w);
+                }
             }
         }
+    }
+
+    /// Per column of voxels (by [`column`]), which of the voxels at the heights `zs` (m, at
+    /// most 64) were seen: bit `b` for `zs[b]`.
+    pub fn levels_seen(&self, zs: &[f64]) -> FxHashMap<[i32; 2], u64> {
+        let bits = level_bits(zs);
+        let mut out = FxHashMap::default();
+        for k in &self.voxels {
+            if let Some(&b) = bits.get(&k[2]) {
+                *out.entry([k[0], k[1]]).or_insert(0) |= b;
+            }
+        }
+        out
     }
 
     /// Whether the voxel of `p` was seen.
@@ -549,6 +655,49 @@ mod tests {
             &|_| true,
         );
         assert!((w.total()[1] - 0.5).abs() < 0.02, "{:?}", w.total());
+    }
+
+    /// The column masks say, level by level, what `holds` and `saw` say voxel by voxel: on
+    /// a wall (class 1) and a desk's side (class 2) in one column, half seen.
+    #[test]
+    fn the_columns_hold_and_saw_what_their_voxels_do() {
+        let mut s = Surfaces::empty();
+        let face = |s: &mut Surfaces, x: f64, z1: f64, class: usize| {
+            let (a, b, c, d) = ([x, 0.0, 0.0], [x, 0.2, 0.0], [x, 0.2, z1], [x, 0.0, z1]);
+            for (p, q, r) in [(a, b, c), (a, c, d)] {
+                s.add_triangle(p, q, r, class, 2.0, &|_| true, &|_| None, &|_| true);
+            }
+        };
+        face(&mut s, 0.3, 2.0, 1);
+        face(&mut s, 1.1, 0.7, 2);
+        let mut seen = CameraCoverage::default();
+        for k in 0..=40 {
+            seen.voxels.insert(key([0.3, 0.1, k as f64 * 0.025]));
+        }
+        let zs: Vec<f64> = (0..60).map(|k| k as f64 * 0.05).collect();
+        let seen_levels = seen.levels_seen(&zs);
+        for class in [1, 2] {
+            let held = s.levels_held(&zs, class);
+            for x in [0.3, 0.5, 1.1] {
+                for y in [0.05, 0.1, 0.3] {
+                    let c = column([x, y]);
+                    let (h, v) = (
+                        held.get(&c).copied().unwrap_or(0),
+                        seen_levels.get(&c).copied().unwrap_or(0),
+                    );
+                    for (b, &z) in zs.iter().enumerate() {
+                        let p = [x, y, z];
+                        assert_eq!(h >> b & 1 == 1, s.holds(p, class), "{p:?} {class}");
+                        assert_eq!(v >> b & 1 == 1, seen.saw(p), "{p:?}");
+                    }
+                }
+            }
+        }
+        // The wall's column is held up to 2 m and seen up to 1 m; the desk's up to 0.7 m.
+        let wall = s.levels_held(&zs, 1)[&column([0.3, 0.1])];
+        assert_eq!(wall.count_ones(), 41, "{wall:b}");
+        assert_eq!((wall & seen_levels[&column([0.3, 0.1])]).count_ones(), 21);
+        assert_eq!(s.levels_held(&zs, 2)[&column([1.1, 0.1])].count_ones(), 15);
     }
 
     /// A `w` × `h` grid of 5 cm cells, free inside a one-cell wall.

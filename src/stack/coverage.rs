@@ -695,20 +695,18 @@ impl CoverageNode {
         let (w, h) = (g.width as u32 * scale, g.height as u32 * scale);
         let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([235, 235, 235]));
         let states = self.footprint.states();
+        // A wall's or furniture's column: seen where some voxel of it up to 3 m that holds
+        // the class was seen, missed where none was, none where it holds none.
+        let zs: Vec<f64> = (0..60).map(|k| k as f64 * 0.05).collect();
+        let held = self
+            .surfaces
+            .as_ref()
+            .map(|s| [1, 2].map(|class| s.levels_held(&zs, class)));
+        let seen = self.seen.levels_seen(&zs);
         let column_seen = |p: [f64; 2], class: usize| -> Option<bool> {
-            let s = self.surfaces.as_ref()?;
-            let zs = (0..60).map(|k| k as f64 * 0.05);
-            let mut held = false;
-            for z in zs {
-                let q = [p[0], p[1], z];
-                if s.holds(q, class) {
-                    held = true;
-                    if self.seen.saw(q) {
-                        return Some(true);
-                    }
-                }
-            }
-            held.then_some(false)
+            let c = crate::ground_truth::coverage::column(p);
+            let held = held.as_ref()?[class - 1].get(&c).copied().unwrap_or(0);
+            (held != 0).then(|| held & seen.get(&c).copied().unwrap_or(0) != 0)
         };
         for j in 0..g.height {
             for i in 0..g.width {
