@@ -173,7 +173,7 @@ impl Observability {
 /// one below, one above, and so on; every index below `n` once.
 fn centre_out(m: usize, n: usize) -> usize {
     let mid = n / 2;
-    if m % 2 == 0 {
+    if m.is_multiple_of(2) {
         mid + m / 2
     } else {
         mid - m.div_ceil(2)
