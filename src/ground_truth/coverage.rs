@@ -343,16 +343,11 @@ impl Surfaces {
     /// most 64) hold surface of `class`: bit `b` for `zs[b]`. One pass over the voxels, for
     /// a picture that asks about every column of a map.
     pub fn levels_held(&self, zs: &[f64], class: usize) -> FxHashMap<[i32; 2], u64> {
-        let bits = level_bits(zs);
-        let mut out = FxHashMap::default();
-        for (k, &at) in &self.voxel {
-            if self.area[at as usize][class] > 0.0
-                && let Some(&b) = bits.get(&k[2])
-            {
-                *out.entry([k[0], k[1]]).or_insert(0) |= b;
-            }
-        }
-        out
+        let held = self
+            .voxel
+            .iter()
+            .filter(|&(_, &at)| self.area[at as usize][class] > 0.0);
+        level_masks(held.map(|(k, _)| k), zs)
     }
 
     /// Whether voxel `k` holds surface of `class`.
@@ -369,14 +364,25 @@ pub fn column(p: [f64; 2]) -> [i32; 2] {
     [k[0], k[1]]
 }
 
-/// For each voxel level (its z index), the bits of the heights of `zs` that fall in it.
-fn level_bits(zs: &[f64]) -> FxHashMap<i32, u64> {
+/// Per column of the voxels `keys`, the bits of the heights of `zs` (at most 64) whose
+/// voxel level is among them: bit `b` for `zs[b]`.
+fn level_masks<'a>(
+    keys: impl Iterator<Item = &'a [i32; 3]>,
+    zs: &[f64],
+) -> FxHashMap<[i32; 2], u64> {
     assert!(zs.len() <= 64, "at most 64 heights fit a mask");
+    // Each voxel level's bits: the heights that fall in it.
     let mut bits = FxHashMap::default();
     for (b, &z) in zs.iter().enumerate() {
-        *bits.entry(key([0.0, 0.0, z])[2]).or_insert(0) |= 1u64 << b;
+        *bits.entry(key([0.0, 0.0, z])[2]).or_insert(0u64) |= 1 << b;
     }
-    bits
+    let mut out = FxHashMap::default();
+    for k in keys {
+        if let Some(&b) = bits.get(&k[2]) {
+            *out.entry([k[0], k[1]]).or_insert(0) |= b;
+        }
+    }
+    out
 }
 
 /// The place of `key` in `values` by `index`, a new one holding `empty` where it had none.
@@ -436,14 +442,7 @@ impl CameraCoverage {
     /// Per column of voxels (by [`column`]), which of the voxels at the heights `zs` (m, at
     /// most 64) were seen: bit `b` for `zs[b]`.
     pub fn levels_seen(&self, zs: &[f64]) -> FxHashMap<[i32; 2], u64> {
-        let bits = level_bits(zs);
-        let mut out = FxHashMap::default();
-        for k in &self.voxels {
-            if let Some(&b) = bits.get(&k[2]) {
-                *out.entry([k[0], k[1]]).or_insert(0) |= b;
-            }
-        }
-        out
+        level_masks(self.voxels.iter(), zs)
     }
 
     /// Whether the voxel of `p` was seen.
