@@ -48,7 +48,7 @@ pub struct Observability {
     /// The greatest depth found per (cell in front of the face, direction bin), m; 0 for none.
     cache: RefCell<FxHashMap<(usize, i32), f64>>,
     /// The last normal asked about, with its length and direction bin: a face's samples
-    /// all share one, and its arc tangent was a fifth of the scoring's set-up.
+    /// all share one, which cost a square root, an arc tangent and a rounding each.
     last_normal: Cell<Option<([f64; 2], f64, i32)>>,
 }
 
