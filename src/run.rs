@@ -311,7 +311,13 @@ impl CameraRig {
                 .iter()
                 .filter(active)
                 .any(|&i| nodes[i].node.wants_rgb(&name));
-            let shot = cameras.capture(c, sim, rgb)?;
+            // The grid every taker reads: the strides' greatest common divisor.
+            let depth_stride = wanting
+                .iter()
+                .map(|&i| nodes[i].node.depth_stride(&name).max(1))
+                .reduce(gcd)
+                .unwrap_or(1);
+            let shot = cameras.capture(c, sim, rgb, depth_stride)?;
             let frame = CameraFrame {
                 frame: shot.frame,
                 on_base: shot.on_base,
@@ -330,6 +336,11 @@ impl CameraRig {
         }
         Ok(())
     }
+}
+
+/// The greatest common divisor of two positive integers.
+fn gcd(a: u32, b: u32) -> u32 {
+    if b == 0 { a } else { gcd(b, a % b) }
 }
 
 /// The live progress bar of a run of `duration` s, when shown.

@@ -306,9 +306,20 @@ const ICL_DISPARITY_CM: f64 = 35130.0;
 impl KinectSpec {
     /// Applies the noise model and the valid range to a noise-free depth image in place.
     pub fn apply_noise(&self, depth: &mut DepthImage, rng: &mut ChaCha8Rng) {
+        self.apply_noise_on_grid(depth, rng, 1);
+    }
+
+    /// As [`KinectSpec::apply_noise`], for a consumer that reads only the pixels of every
+    /// `stride`-th column and row (from 0): those pixels get the very values `apply_noise`
+    /// would give them, the noise stream advances as far, and every other pixel is left
+    /// invalid (0). The Nguyen model's work per pixel (its incidence, shifts and axial
+    /// noise: more than half its time) is spent on the grid alone; the other models noise
+    /// every pixel, as their draws depend on the pixels. A stride of 0 or 1 is every pixel.
+    pub fn apply_noise_on_grid(&self, depth: &mut DepthImage, rng: &mut ChaCha8Rng, stride: u32) {
+        let stride = stride.max(1);
         match self.noise.model {
             NoiseModel::None => {}
-            NoiseModel::Nguyen => nguyen(depth, &self.depth, rng),
+            NoiseModel::Nguyen => nguyen(depth, &self.depth, rng, stride),
             NoiseModel::IclNuim => icl_nuim(depth, &self.depth, &self.noise, rng),
             NoiseModel::Gaussian => {
                 for z in &mut depth.data {
@@ -319,9 +330,31 @@ impl KinectSpec {
             }
         }
         let (lo, hi) = (self.range_min as f32, self.range_max as f32);
-        for z in &mut depth.data {
+        let in_range = |z: &mut f32| {
             if !(*z >= lo && *z <= hi) {
                 *z = 0.0;
+            }
+        };
+        if stride == 1 {
+            depth.data.iter_mut().for_each(in_range);
+            return;
+        }
+        let stride = stride as usize;
+        for (v, row) in depth
+            .data
+            .chunks_mut(depth.width.max(1) as usize)
+            .enumerate()
+        {
+            if !v.is_multiple_of(stride) {
+                row.fill(0.0);
+                continue;
+            }
+            for (u, z) in row.iter_mut().enumerate() {
+                if u.is_multiple_of(stride) {
+                    in_range(z);
+                } else {
+                    *z = 0.0;
+                }
             }
         }
     }
@@ -454,7 +487,9 @@ pub const fn nguyen_lateral_sigma(theta: f64) -> f64 {
 /// Largest incidence angle the Nguyen model is evaluated at (its terms diverge at π/2).
 const MAX_INCIDENCE: f64 = 1.48;
 
-fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng) {
+/// The Nguyen model's noise on the pixels of every `stride`-th column and row (the others
+/// are left for the caller to clear).
+fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng, stride: u32) {
     let src = depth.clone();
     let rays = PixelRays::new(&src, intr);
     let (w, h) = (src.width as i64, src.height as i64);
@@ -464,8 +499,12 @@ fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng) {
     let draws: Vec<[f64; 3]> = (0..src.data.len())
         .map(|_| [normal(rng), normal(rng), normal(rng)])
         .collect();
+    let stride = stride as usize;
     rows_on_cores(&mut depth.data, src.width as usize, |v, row| {
-        for (u, out) in row.iter_mut().enumerate() {
+        if !v.is_multiple_of(stride) {
+            return;
+        }
+        for (u, out) in row.iter_mut().enumerate().step_by(stride) {
             let i = v * src.width as usize + u;
             if src.data[i] <= 0.0 {
                 continue;
@@ -668,12 +707,15 @@ impl Kinect {
 
     /// Renders a frame from the camera on a robot whose base frame has pose `base`, with the
     /// scene's bodies already posed in `renderer`; adds noise. `rgb`: also render colour.
+    /// `depth_stride`: the measured depth is wanted on every `depth_stride`-th column and row
+    /// alone (see [`KinectSpec::apply_noise_on_grid`]); 1 is every pixel.
     pub fn capture(
         &mut self,
         renderer: &mut Renderer,
         base: &Pose,
         stamp: Time,
         rgb: bool,
+        depth_stride: u32,
     ) -> Result<RgbdFrame, RenderError> {
         let camera = *base * self.spec.mount;
         self.noiseless = None;
@@ -689,7 +731,8 @@ impl Kinect {
             self.noiseless = Some((stamp, *base, d.clone()));
             (c, d)
         };
-        self.spec.apply_noise(&mut depth, &mut self.rng);
+        self.spec
+            .apply_noise_on_grid(&mut depth, &mut self.rng, depth_stride);
         let mut rgb = rgb;
         if let Some(c) = rgb.as_mut() {
             self.spec.apply_rgb_noise(c, &mut self.rng);
@@ -938,6 +981,68 @@ mod tests {
             s.apply_noise(&mut b, &mut stream(5, "kinect"));
             let differ = a.data.iter().zip(&b.data).filter(|(x, y)| x != y).count();
             assert!(differ <= 100, "{model:?}: {differ} pixels changed");
+        }
+    }
+
+    /// Noised on a grid, a depth image holds on the grid's pixels exactly what noising every
+    /// pixel gives them (their shifted neighbours off the grid included), 0 elsewhere, and
+    /// the noise stream ends where it would have: the next frame's noise is the same too.
+    #[test]
+    fn noise_on_a_grid_is_the_full_noise_on_its_pixels() {
+        // A slanted floor and a nearer box, so that incidences, shifts and edges vary.
+        let (w, h) = (160u32, 120u32);
+        let mut scene = plane(2.0, w, h);
+        for v in 0..h {
+            for u in 0..w {
+                let z = if (50..90).contains(&u) && (30..70).contains(&v) {
+                    1.2
+                } else {
+                    1.0 + 3.0 * v as f32 / h as f32
+                };
+                scene.data[(v * w + u) as usize] = if (u + 3 * v) % 97 == 0 { 0.0 } else { z };
+            }
+        }
+        for model in [
+            NoiseModel::Nguyen,
+            NoiseModel::IclNuim,
+            NoiseModel::Gaussian,
+        ] {
+            let s = spec(model);
+            let mut full = scene.clone();
+            let mut rng_full = stream(7, "kinect");
+            s.apply_noise(&mut full, &mut rng_full);
+            for stride in [2u32, 3, 5] {
+                let mut grid = scene.clone();
+                let mut rng_grid = stream(7, "kinect");
+                s.apply_noise_on_grid(&mut grid, &mut rng_grid, stride);
+                for v in 0..h {
+                    for u in 0..w {
+                        let i = (v * w + u) as usize;
+                        let want = if u % stride == 0 && v % stride == 0 {
+                            full.data[i]
+                        } else {
+                            0.0
+                        };
+                        assert_eq!(grid.data[i], want, "{model:?}, stride {stride}, ({u}, {v})");
+                    }
+                }
+                let valid = grid.data.iter().filter(|&&z| z > 0.0).count();
+                assert!(
+                    valid > (w * h / (stride * stride) / 8) as usize,
+                    "{model:?}, stride {stride}: {valid} valid"
+                );
+                assert_eq!(
+                    rng_grid.random::<u64>(),
+                    rng_full.clone().random::<u64>(),
+                    "{model:?}: the stream moved on differently"
+                );
+            }
+            // Strides 0 and 1 are every pixel.
+            for stride in [0, 1] {
+                let mut all = scene.clone();
+                s.apply_noise_on_grid(&mut all, &mut stream(7, "kinect"), stride);
+                assert_eq!(all.data, full.data, "{model:?}, stride {stride}");
+            }
         }
     }
 

@@ -128,7 +128,15 @@ impl Cameras {
     /// Renders the frame of camera `c` that is due now (poses the scene first, once a
     /// step), with its noise; counts it and times it. `rgb`: the colour image too (without
     /// it the frame holds depth alone, and is cheaper: a depth render and its noise).
-    pub fn capture(&mut self, c: usize, sim: &Simulation, rgb: bool) -> Result<Shot, RenderError> {
+    /// `depth_stride`: the measured depth is wanted on every `depth_stride`-th column and row
+    /// alone, the other pixels left 0 ([`crate::kinect::KinectSpec::apply_noise_on_grid`]).
+    pub fn capture(
+        &mut self,
+        c: usize,
+        sim: &Simulation,
+        rgb: bool,
+        depth_stride: u32,
+    ) -> Result<Shot, RenderError> {
         let Some(r) = self.renderer.as_mut() else {
             return Err(RenderError::Config(
                 "no renderer: the cameras were built without one".into(),
@@ -156,7 +164,7 @@ impl Cameras {
             cam.optical_pose(&(planar.inverse() * carrier))
         });
         cam.take();
-        let frame = cam.capture(r, &carrier, now, rgb)?;
+        let frame = cam.capture(r, &carrier, now, rgb, depth_stride)?;
         let optical = cam.optical_pose(&carrier);
         self.seconds += t0.elapsed().as_secs_f64();
         self.frames[c] += 1;

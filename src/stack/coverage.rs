@@ -816,6 +816,12 @@ impl Node for CoverageNode {
         false
     }
 
+    /// The second pass reads every `PIXEL_STRIDE`-th pixel of the measured depth (the scoring
+    /// reads the true depth).
+    fn depth_stride(&self, _camera: &str) -> u32 {
+        PIXEL_STRIDE
+    }
+
     fn on_frame(
         &mut self,
         camera: &str,

@@ -124,6 +124,14 @@ pub trait Node {
         true
     }
 
+    /// Every how many columns and rows of `camera`'s measured depth the node reads, from
+    /// pixel (0, 0). Where every node taking a frame reads a coarser grid, the camera noises
+    /// the pixels of the grid they share alone and leaves the others 0: the same values on
+    /// the grid and the same noise stream, for less work. 1 (the default): every pixel.
+    fn depth_stride(&self, _camera: &str) -> u32 {
+        1
+    }
+
     /// Whether the node takes only the frames rendered for other nodes: a recorder that must
     /// change neither which frames are rendered, nor their form, nor (through the cameras'
     /// noise streams) what the other nodes see. Its wants alone render nothing.

@@ -416,6 +416,15 @@ impl Node for PeopleNode {
         false
     }
 
+    /// The detector and the truth it is scored on read every `stride`-th pixel.
+    fn depth_stride(&self, camera: &str) -> u32 {
+        self.tracking
+            .as_ref()
+            .and_then(|t| t.depth.as_ref())
+            .filter(|d| d.camera == camera)
+            .map_or(1, |d| d.config.stride)
+    }
+
     fn on_frame(
         &mut self,
         camera: &str,
