@@ -134,6 +134,25 @@ pub struct Pose2 {
     pub theta: f64,
 }
 
+/// A planar rigid transform with its rotation's cosine and sine at hand ([`Pose2::transform`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transform2 {
+    pub x: f64,
+    pub y: f64,
+    pub cos: f64,
+    pub sin: f64,
+}
+
+impl Transform2 {
+    /// The point `p` of the child frame in the parent frame.
+    pub fn apply(&self, p: [f64; 2]) -> [f64; 2] {
+        [
+            self.x + self.cos * p[0] - self.sin * p[1],
+            self.y + self.sin * p[0] + self.cos * p[1],
+        ]
+    }
+}
+
 impl Pose2 {
     /// The identity pose.
     pub const IDENTITY: Pose2 = Pose2 {
@@ -173,8 +192,20 @@ impl Pose2 {
 
     /// Transforms a point from this pose's frame to the parent frame.
     pub fn transform_point(&self, p: [f64; 2]) -> [f64; 2] {
+        self.transform().apply(p)
+    }
+
+    /// The transform from this pose's frame to the parent frame, its heading's sine and
+    /// cosine taken once: for many points, the same values as
+    /// [`transform_point`](Self::transform_point) on each.
+    pub fn transform(&self) -> Transform2 {
         let (s, c) = self.theta.sin_cos();
-        [self.x + c * p[0] - s * p[1], self.y + s * p[0] + c * p[1]]
+        Transform2 {
+            x: self.x,
+            y: self.y,
+            cos: c,
+            sin: s,
+        }
     }
 
     /// Turns a vector (a velocity, a direction) from this pose's frame to the parent frame:

@@ -332,6 +332,8 @@ pub struct Navigator {
     route_at: usize,
     /// Bumps since the route last passed a point.
     route_bumps: usize,
+    /// The laser beams' directions, for the scans' checks at every control tick.
+    beams: BeamDirections,
     stats: NavStats,
 }
 
@@ -359,6 +361,7 @@ impl Navigator {
             route_next: 0,
             route_at: 1,
             route_bumps: 0,
+            beams: BeamDirections::default(),
             stats: NavStats::default(),
         }
     }
@@ -502,7 +505,7 @@ impl Navigator {
             && let Some(&goal) = f.path().get(f.target())
             && (goal[0] - input.pose.x).hypot(goal[1] - input.pose.y) <= c.goal_tolerance
             && let Some((scan, mount)) = input.scan
-            && wall_ends_lane(scan, &mount, &c)
+            && wall_ends_lane(scan, self.beams.of(scan), &mount, &c)
         {
             f.advance();
         }
@@ -548,6 +551,7 @@ impl Navigator {
             return DriveCommand::STOP;
         }
         if forward && let Some((scan, mount)) = input.scan {
+            self.beams.of(scan);
             if self.blocked(scan, &mount, &input.pose) {
                 match self.mode {
                     Mode::Blocked(since) => {
@@ -663,8 +667,11 @@ impl Navigator {
     /// Whether a laser return the map does not explain lies in the strip ahead the robot is
     /// about to sweep (seed 000 compares the scan with the map to find obstacles that are not
     /// in it; walls that are in it are the planner's business).
+    /// (`self.beams` holds the scan's beam directions.)
     fn blocked(&self, scan: &LaserScan, mount: &Pose2, pose: &Pose2) -> bool {
         let c = &self.config;
+        let dirs = &self.beams.dirs;
+        let mount = mount.transform();
         let ahead = c.robot_radius + c.stop_distance;
         let half = c.robot_radius + c.stop_margin;
         let map = self
@@ -672,13 +679,12 @@ impl Navigator {
             .as_ref()
             .map(|r| r.grid())
             .or(self.map.as_ref());
-        scan.ranges.iter().enumerate().any(|(k, &r)| {
+        scan.ranges.iter().zip(dirs).any(|(&r, &[cos, sin])| {
             let r = r as f64;
             if !r.is_finite() || r < scan.range_min {
                 return false;
             }
-            let a = scan.angle(k);
-            let p = mount.transform_point([r * a.cos(), r * a.sin()]);
+            let p = mount.apply([r * cos, r * sin]);
             if !(p[0] > 0.0 && p[0] < ahead && p[1].abs() < half) {
                 return false;
             }
@@ -833,17 +839,66 @@ impl Navigator {
 /// raw nearest return read a wall ahead short by the laser's noise (the nearest of some 300
 /// returns of σ = 3 cm on seed 000's laser, 8 cm short), ending lanes 5 cm before their
 /// corners, and took a few noisy readings of a wall alongside for one ahead.
-fn wall_ends_lane(scan: &LaserScan, mount: &Pose2, c: &NavigationConfig) -> bool {
+fn wall_ends_lane(
+    scan: &LaserScan,
+    dirs: &[[f64; 2]],
+    mount: &Pose2,
+    c: &NavigationConfig,
+) -> bool {
     let half_width = c.robot_radius * ROUTE_WALL_BAND;
     let reach = c.robot_radius + c.route_wall_margin;
-    // A window's median x is within `reach` only where more than half its returns are: the
-    // other windows (most of a scan, which lies farther) are passed over without taking
-    // their medians, a tenth of a coverage run's time.
-    despeckled(scan, mount, |xs| {
-        2 * xs.iter().filter(|&&x| x <= reach).count() > xs.len()
-    })
-    .filter(|p| p[0] > 0.0 && p[1].abs() < half_width)
-    .any(|p| p[0] <= reach)
+    // Windows whose median x is not ahead within `reach` (most of a scan, which lies farther
+    // or behind) are passed over without taking their medians, a tenth of a coverage run's
+    // time.
+    despeckled(scan, dirs, mount, |xs| median_within(xs, 0.0, reach))
+        .filter(|p| p[0] > 0.0 && p[1].abs() < half_width)
+        .any(|p| p[0] <= reach)
+}
+
+/// The directions `[cos a, sin a]` of a scan's beams (`a` its k-th beam's angle), kept while
+/// the scans' geometry (first angle, increment, count) stays: the navigator looks at the scan
+/// at every control tick, and a sine and cosine a beam were a tenth of a coverage run's time.
+#[derive(Debug, Default)]
+struct BeamDirections {
+    /// The geometry the directions are of: the first angle's and the increment's bits, and the
+    /// beam count.
+    geometry: Option<(u64, u64, usize)>,
+    dirs: Vec<[f64; 2]>,
+}
+
+impl BeamDirections {
+    /// The directions of `scan`'s beams, computed again only when its geometry differs from
+    /// the last scan's.
+    fn of(&mut self, scan: &LaserScan) -> &[[f64; 2]] {
+        let geometry = (
+            scan.angle_min.to_bits(),
+            scan.angle_increment.to_bits(),
+            scan.ranges.len(),
+        );
+        if self.geometry != Some(geometry) {
+            self.dirs = beam_directions(scan);
+            self.geometry = Some(geometry);
+        }
+        &self.dirs
+    }
+}
+
+/// The directions `[cos a, sin a]` of `scan`'s beams.
+fn beam_directions(scan: &LaserScan) -> Vec<[f64; 2]> {
+    (0..scan.ranges.len())
+        .map(|k| {
+            let a = scan.angle(k);
+            [a.cos(), a.sin()]
+        })
+        .collect()
+}
+
+/// Whether the median of `xs` (its element at index `len / 2` in order; finite values) lies in
+/// (`lo`, `hi`], by counting rather than selecting: the median is at most `hi` where more than
+/// half the values are, and above `lo` where at most `len / 2` of them are not.
+fn median_within(xs: &[f64], lo: f64, hi: f64) -> bool {
+    2 * xs.iter().filter(|&&x| x <= hi).count() > xs.len()
+        && xs.iter().filter(|&&x| x <= lo).count() <= xs.len() / 2
 }
 
 /// Beams a laser return is despeckled over ([`despeckled`]).
@@ -854,22 +909,23 @@ const DESPECKLE_BEAMS: usize = 9;
 /// along the scan, as ROS's laser_filters' median filter, which keeps an object that spans a
 /// few beams and drops a reading that noise alone throws in. Windows whose valid returns'
 /// x coordinates `wanted` rejects are left out unmedianed: a caller that needs only the
-/// medians within some bound skips the selections that cannot meet it.
+/// medians within some bound skips the selections that cannot meet it. `dirs`: the beams'
+/// directions ([`BeamDirections`]).
 fn despeckled<'a>(
     scan: &'a LaserScan,
+    dirs: &[[f64; 2]],
     mount: &'a Pose2,
     wanted: impl Fn(&[f64]) -> bool + 'a,
 ) -> impl Iterator<Item = [f64; 2]> + 'a {
+    let mount = mount.transform();
     let points: Vec<Option<[f64; 2]>> = scan
         .ranges
         .iter()
-        .enumerate()
-        .map(|(k, &r)| {
+        .zip(dirs)
+        .map(|(&r, &[cos, sin])| {
             let r = r as f64;
-            (r.is_finite() && r >= scan.range_min && r <= scan.range_max).then(|| {
-                let a = scan.angle(k);
-                mount.transform_point([r * a.cos(), r * a.sin()])
-            })
+            (r.is_finite() && r >= scan.range_min && r <= scan.range_max)
+                .then(|| mount.apply([r * cos, r * sin]))
         })
         .collect();
     let n = points.len();
@@ -1183,22 +1239,37 @@ mod tests {
         let mount = Pose2::IDENTITY;
         for sigma in [0.0, 1.0] {
             let alongside = scan_of_wall([0.0, 0.16], [1.0, 0.0], sigma);
-            assert!(!wall_ends_lane(&alongside, &mount, &c), "σ × {sigma}");
+            assert!(
+                !wall_ends_lane(&alongside, &beam_directions(&alongside), &mount, &c),
+                "σ × {sigma}"
+            );
             // The same wall, the robot 5° off the lane towards it.
             let (s5, c5) = 5f64.to_radians().sin_cos();
             let angled = scan_of_wall([0.0, 0.19 / c5], [c5, -s5], sigma);
-            assert!(!wall_ends_lane(&angled, &mount, &c), "σ × {sigma}");
+            assert!(
+                !wall_ends_lane(&angled, &beam_directions(&angled), &mount, &c),
+                "σ × {sigma}"
+            );
             // The wall the lane ends against, 3 cm ahead of the bumper less 1 cm, square or
             // 20° off.
             let ahead = scan_of_wall([0.19, 0.0], [0.0, 1.0], sigma);
-            assert!(wall_ends_lane(&ahead, &mount, &c), "σ × {sigma}");
+            assert!(
+                wall_ends_lane(&ahead, &beam_directions(&ahead), &mount, &c),
+                "σ × {sigma}"
+            );
             let (s20, c20) = 20f64.to_radians().sin_cos();
             let skew = scan_of_wall([0.19, 0.0], [s20, c20], sigma);
-            assert!(wall_ends_lane(&skew, &mount, &c), "σ × {sigma}");
+            assert!(
+                wall_ends_lane(&skew, &beam_directions(&skew), &mount, &c),
+                "σ × {sigma}"
+            );
             // 5 cm further (the planned lane end may lie up to a map cell short of the true
             // wall) it does not yet.
             let far = scan_of_wall([0.25, 0.0], [0.0, 1.0], sigma);
-            assert!(!wall_ends_lane(&far, &mount, &c), "σ × {sigma}");
+            assert!(
+                !wall_ends_lane(&far, &beam_directions(&far), &mount, &c),
+                "σ × {sigma}"
+            );
             // A pillar's face ahead of the bumper's right, its corner 5 cm right of the centre
             // line: the robot would bump it (`hall-scan3d-frontier` seed 1, at (30.35, 0.96)
             // beside the pillar at (30, 0.5)).
@@ -1209,8 +1280,36 @@ mod tests {
                     *r = f32::INFINITY;
                 }
             }
-            assert!(wall_ends_lane(&corner, &mount, &c), "σ × {sigma}");
+            assert!(
+                wall_ends_lane(&corner, &beam_directions(&corner), &mount, &c),
+                "σ × {sigma}"
+            );
         }
+    }
+
+    /// Counting finds the median's interval as selecting it does: on windows of every length
+    /// a despeckled window can have, with values on, about and between the interval's ends.
+    #[test]
+    fn counting_places_the_median_as_selecting_it_does() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let (lo, hi) = (0.0, 0.2);
+        let values = [-0.1, -0.0, 0.0, 0.05, 0.2, 0.3];
+        let mut inside = 0;
+        for _ in 0..20_000 {
+            let n = rng.random_range(DESPECKLE_BEAMS.div_ceil(2)..=DESPECKLE_BEAMS);
+            let mut xs: Vec<f64> = (0..n)
+                .map(|_| match rng.random_range(0..2) {
+                    0 => values[rng.random_range(0..values.len())],
+                    _ => rng.random_range(-0.3..0.5),
+                })
+                .collect();
+            let got = median_within(&xs, lo, hi);
+            let m = *xs.select_nth_unstable_by(n / 2, f64::total_cmp).1;
+            assert_eq!(got, m > lo && m <= hi, "{xs:?}");
+            inside += usize::from(got);
+        }
+        assert!((4_000..16_000).contains(&inside), "{inside}");
     }
 
     /// Passing over the windows whose median cannot come within reach gives the answer that
@@ -1223,7 +1322,7 @@ mod tests {
         let reach = c.robot_radius + c.route_wall_margin;
         let half_width = c.robot_radius * ROUTE_WALL_BAND;
         let every = |scan: &LaserScan, mount: &Pose2| {
-            despeckled(scan, mount, |_| true)
+            despeckled(scan, &beam_directions(scan), mount, |_| true)
                 .filter(|p| p[0] > 0.0 && p[1].abs() < half_width)
                 .any(|p| p[0] <= reach)
         };
@@ -1233,10 +1332,17 @@ mod tests {
             let d = rng.random_range(0.1..0.4);
             let tilt: f64 = rng.random_range(-0.6..0.6);
             let step = 0.25f64.to_radians();
-            let ranges = (0..721)
+            // A URG-04LX's 240°: the beams that miss the wall ahead see one behind.
+            let (first, behind) = (-120f64.to_radians(), rng.random_range(0.05..0.5));
+            let ranges = (0..961)
                 .map(|k| {
-                    let t = -std::f64::consts::FRAC_PI_2 + k as f64 * step;
-                    let s = d / (t - tilt).cos();
+                    let t = first + k as f64 * step;
+                    let ahead = d / (t - tilt).cos();
+                    let s = if ahead > 0.0 {
+                        ahead
+                    } else {
+                        behind / (t - std::f64::consts::PI).cos()
+                    };
                     let r = s + rng.random_range(-0.05..0.05);
                     if !(0.0..30.0).contains(&s) || rng.random_bool(0.2) {
                         f32::INFINITY
@@ -1246,13 +1352,13 @@ mod tests {
                 })
                 .collect();
             let scan = LaserScan {
-                angle_min: -std::f64::consts::FRAC_PI_2,
+                angle_min: first,
                 angle_increment: step,
                 ranges,
                 ..scan_with_return_at(1.0)
             };
             let mount = Pose2::new(rng.random_range(-0.1..0.1), 0.0, 0.0);
-            let got = wall_ends_lane(&scan, &mount, &c);
+            let got = wall_ends_lane(&scan, &beam_directions(&scan), &mount, &c);
             assert_eq!(got, every(&scan, &mount), "{d} {tilt}");
             ended += usize::from(got);
         }
