@@ -376,7 +376,7 @@ fn seed000_kinect_gives_qvga_depth_registered_to_vga_colour_within_its_range() {
     let mut cam = Kinect::new(spec.clone(), futago_sim::noise::stream(1, "camera.kinect"));
     let base = Pose::from_translation(Vec3::new(1.0, 2.0, 0.0));
     let f = cam
-        .capture(&mut r, &base, futago_msgs::Time::ZERO, true)
+        .capture(&mut r, &base, futago_msgs::Time::ZERO, true, 1)
         .unwrap();
     let rgb = f.rgb.as_ref().unwrap();
     assert_eq!((rgb.width, rgb.height), (640, 480));
@@ -436,7 +436,7 @@ fn true_depth_after_a_capture_is_the_noiseless_render_of_that_view() {
     };
     let t = futago_msgs::Time::from_secs(1.0);
     for (rgb, base) in [(true, pose(1.0, 0.3)), (false, pose(1.5, -0.4))] {
-        let f = cam.capture(&mut r, &base, t, rgb).unwrap();
+        let f = cam.capture(&mut r, &base, t, rgb, 1).unwrap();
         assert_eq!(f.rgb.is_some(), rgb);
         let truth = cam.true_depth(&mut r, &base, t).unwrap();
         let fresh = r.render_depth(&spec.depth, &(base * spec.mount)).unwrap();

@@ -18,7 +18,7 @@ use futago_msgs::Pose2;
 use futago_msgs::camera::{DepthImage, Intrinsics};
 use futago_msgs::grid::OccupancyGrid;
 use futago_sim::World;
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 
 /// Voxel side of the surface samples, m.
 pub const VOXEL: f64 = 0.05;
@@ -278,8 +278,8 @@ impl Surfaces {
     /// Each class's area in the voxels of `seen`, m².
     pub fn seen_area(&self, seen: &CameraCoverage) -> [f64; 3] {
         let mut out = [0.0; 3];
-        for k in &seen.voxels {
-            if let Some(a) = self.voxel.get(k).map(|&at| &self.area[at as usize]) {
+        for &at in seen.voxels.values() {
+            if let Some(a) = self.area.get(at as usize) {
                 for c in 0..3 {
                     out[c] += a[c];
                 }
@@ -319,7 +319,7 @@ impl Surfaces {
             .collect();
         for (&(k, r), &at) in &self.voxel_region {
             let a = &self.regional[at as usize];
-            if seen.voxels.contains(&k) {
+            if seen.voxels.contains_key(&k) {
                 for (o, x) in out[r as usize].1.iter_mut().zip(&a[part]) {
                     *o += x;
                 }
@@ -403,10 +403,18 @@ fn place<K: std::hash::Hash + Eq, V>(
 /// The voxels the camera saw.
 #[derive(Default)]
 pub struct CameraCoverage {
-    voxels: FxHashSet<[i32; 3]>,
+    /// Each voxel seen, with its place among the surfaces' areas (in [`Surfaces`]), or
+    /// [`NO_SURFACE`]: found once, when the voxel is first seen, rather than each time the
+    /// seen area is summed (every 10 s of a run, over every voxel seen). Iterated in the
+    /// order a set of the same voxels would be: a table's layout does not depend on its
+    /// values.
+    voxels: FxHashMap<[i32; 3], u32>,
     /// The same voxels as bits, for the test of whether a pixel's voxel is new.
     bits: VoxelBits,
 }
+
+/// A seen voxel's place among the surfaces' areas where it holds none.
+const NO_SURFACE: u32 = u32::MAX;
 
 /// A set of voxels as bits in blocks of 8 × 8 × 8, the blocks looked up by key with the last
 /// one at hand. A camera's pixels fall mostly in voxels it saw before, in the block of the
@@ -448,9 +456,10 @@ impl VoxelBits {
 
 impl CameraCoverage {
     /// Adds what a noiseless depth image from `optical` (the optical frame's world pose) saw
-    /// between `range` (min, max, m), every `stride`-th pixel.
+    /// between `range` (min, max, m), every `stride`-th pixel, of `surfaces`.
     pub fn add(
         &mut self,
+        surfaces: &Surfaces,
         depth: &DepthImage,
         k: &Intrinsics,
         optical: &futago_msgs::Pose3,
@@ -469,7 +478,7 @@ impl CameraCoverage {
                 }
                 let w = key(optical.transform_point(k.back_project(u as f64, v as f64, z)));
                 if self.bits.insert(w) {
-                    self.voxels.insert(w);
+                    self.see(surfaces, w);
                 } else {
                     self.voxels.reserve(1);
                 }
@@ -477,15 +486,21 @@ impl CameraCoverage {
         }
     }
 
+    /// Marks voxel `k` of `surfaces` seen.
+    fn see(&mut self, surfaces: &Surfaces, k: [i32; 3]) {
+        let at = surfaces.voxel.get(&k).copied().unwrap_or(NO_SURFACE);
+        self.voxels.insert(k, at);
+    }
+
     /// Per column of voxels (by [`column`]), which of the voxels at the heights `zs` (m, at
     /// most 64) were seen: bit `b` for `zs[b]`.
     pub fn levels_seen(&self, zs: &[f64]) -> FxHashMap<[i32; 2], u64> {
-        level_masks(self.voxels.iter(), zs)
+        level_masks(self.voxels.keys(), zs)
     }
 
     /// Whether the voxel of `p` was seen.
     pub fn saw(&self, p: [f64; 3]) -> bool {
-        self.voxels.contains(&key(p))
+        self.voxels.contains_key(&key(p))
     }
 }
 
@@ -584,6 +599,7 @@ impl Footprint {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rustc_hash::FxHashSet;
 
     /// The floor without the maths library is the maths library's, cast as it casts: on
     /// integers, halves, values a hair either side of an integer, negatives, zeros of both
@@ -642,7 +658,7 @@ mod tests {
                     0.0,
                 ];
                 if p[0] < 1.0 {
-                    seen.voxels.insert(key(p));
+                    seen.see(&s, key(p));
                 }
             }
         }
@@ -709,7 +725,7 @@ mod tests {
         face(&mut s, 1.1, 0.7, 2);
         let mut seen = CameraCoverage::default();
         for k in 0..=40 {
-            seen.voxels.insert(key([0.3, 0.1, k as f64 * 0.025]));
+            seen.see(&s, key([0.3, 0.1, k as f64 * 0.025]));
         }
         let zs: Vec<f64> = (0..60).map(|k| k as f64 * 0.05).collect();
         let seen_levels = seen.levels_seen(&zs);
@@ -844,7 +860,7 @@ mod tests {
                 0.4,
             );
             let (range, stride) = ((1.0, 3.0), 1 + frame % 3);
-            seen.add(&depth, &k, &optical, range, stride);
+            seen.add(&Surfaces::empty(), &depth, &k, &optical, range, stride);
             for v in (0..k.height).step_by(stride as usize) {
                 for u in (0..k.width).step_by(stride as usize) {
                     let z = depth.at(u, v) as f64;
@@ -855,7 +871,7 @@ mod tests {
                     }
                 }
             }
-            let got: Vec<_> = seen.voxels.iter().collect();
+            let got: Vec<_> = seen.voxels.keys().collect();
             let want: Vec<_> = every.iter().collect();
             assert_eq!(got, want, "frame {frame}");
         }

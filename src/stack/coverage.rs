@@ -837,14 +837,17 @@ impl Node for CoverageNode {
         if let Some(second) = &mut self.second {
             second.see(frame, range, bus);
         }
-        let depth = truth.true_depth()?;
-        self.seen.add(
-            &depth,
-            &frame.frame.depth_intrinsics,
-            &truth.optical(),
-            range,
-            PIXEL_STRIDE,
-        );
+        if let Some(surfaces) = &self.surfaces {
+            let depth = truth.true_depth()?;
+            self.seen.add(
+                surfaces,
+                &depth,
+                &frame.frame.depth_intrinsics,
+                &truth.optical(),
+                range,
+                PIXEL_STRIDE,
+            );
+        }
         Ok(())
     }
 
