@@ -495,21 +495,48 @@ fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng, strid
     let (w, h) = (src.width as i64, src.height as i64);
     // Three draws for every pixel, valid or not, in the pixels' order: a pixel that one GPU
     // draws and another misses by a rounding changes that pixel only, not the noise of all
-    // that follow. Drawn first, so that the rows can then be noised on the cores.
-    let draws: Vec<[f64; 3]> = (0..src.data.len())
-        .map(|_| [normal(rng), normal(rng), normal(rng)])
-        .collect();
+    // that follow. Drawn first, so that the rows can then be noised on the cores; those of the
+    // grid's pixels alone are kept (the others' are drawn and dropped).
     let stride = stride as usize;
-    rows_on_cores(&mut depth.data, src.width as usize, |v, row| {
+    let width = src.width as usize;
+    let grid_width = width.div_ceil(stride);
+    let draws: Vec<[f64; 3]> = if stride == 1 {
+        (0..src.data.len())
+            .map(|_| [normal(rng), normal(rng), normal(rng)])
+            .collect()
+    } else {
+        let rows = src.height as usize;
+        let mut kept = Vec::with_capacity(grid_width * rows.div_ceil(stride));
+        for v in 0..rows {
+            let on_grid = v.is_multiple_of(stride);
+            // Columns to the grid's next one.
+            let mut to_next = 0;
+            for _ in 0..width {
+                let n = [normal(rng), normal(rng), normal(rng)];
+                if on_grid && to_next == 0 {
+                    kept.push(n);
+                }
+                to_next = if to_next == 0 {
+                    stride - 1
+                } else {
+                    to_next - 1
+                };
+            }
+        }
+        kept
+    };
+    rows_on_cores(&mut depth.data, width, |v, row| {
         if !v.is_multiple_of(stride) {
             return;
         }
-        for (u, out) in row.iter_mut().enumerate().step_by(stride) {
-            let i = v * src.width as usize + u;
+        // The row's draws: its place on the grid, then each pixel's (`gu`, u / stride).
+        let row_draws = &draws[v / stride * grid_width..];
+        for (gu, (u, out)) in row.iter_mut().enumerate().step_by(stride).enumerate() {
+            let i = v * width + u;
             if src.data[i] <= 0.0 {
                 continue;
             }
-            let n = draws[i];
+            let n = row_draws[gu];
             let cos = incidence_cos(&src, &rays, u as u32, v as u32);
             // Below π/3 (by a margin far beyond the arc cosine's rounding) only the lateral
             // shifts depend on the angle, and most of them only on its being below π/3; the
