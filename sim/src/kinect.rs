@@ -314,7 +314,7 @@ impl KinectSpec {
     /// would give them, the noise stream advances as far, and every other pixel is left
     /// invalid (0). The Nguyen model's work per pixel (its incidence, shifts and axial
     /// noise: more than half its time) is spent on the grid alone; the other models noise
-    /// every pixel, as their draws depend on the pixels. A stride of 0 or 1 is every pixel.
+    /// every pixel, then clear those off the grid. A stride of 0 or 1 is every pixel.
     pub fn apply_noise_on_grid(&self, depth: &mut DepthImage, rng: &mut ChaCha8Rng, stride: u32) {
         let stride = stride.max(1);
         match self.noise.model {
@@ -500,31 +500,24 @@ fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng, strid
     let stride = stride as usize;
     let width = src.width as usize;
     let grid_width = width.div_ceil(stride);
-    let draws: Vec<[f64; 3]> = if stride == 1 {
-        (0..src.data.len())
-            .map(|_| [normal(rng), normal(rng), normal(rng)])
-            .collect()
-    } else {
-        let rows = src.height as usize;
-        let mut kept = Vec::with_capacity(grid_width * rows.div_ceil(stride));
-        for v in 0..rows {
-            let on_grid = v.is_multiple_of(stride);
-            // Columns to the grid's next one.
-            let mut to_next = 0;
-            for _ in 0..width {
-                let n = [normal(rng), normal(rng), normal(rng)];
-                if on_grid && to_next == 0 {
-                    kept.push(n);
-                }
-                to_next = if to_next == 0 {
-                    stride - 1
-                } else {
-                    to_next - 1
-                };
+    let rows = src.height as usize;
+    let mut draws: Vec<[f64; 3]> = Vec::with_capacity(grid_width * rows.div_ceil(stride));
+    for v in 0..rows {
+        let on_grid = v.is_multiple_of(stride);
+        // Columns to the grid's next one.
+        let mut to_next = 0;
+        for _ in 0..width {
+            let n = [normal(rng), normal(rng), normal(rng)];
+            if on_grid && to_next == 0 {
+                draws.push(n);
             }
+            to_next = if to_next == 0 {
+                stride - 1
+            } else {
+                to_next - 1
+            };
         }
-        kept
-    };
+    }
     rows_on_cores(&mut depth.data, width, |v, row| {
         if !v.is_multiple_of(stride) {
             return;

@@ -552,7 +552,7 @@ impl Navigator {
         }
         if forward && let Some((scan, mount)) = input.scan {
             self.beams.of(scan);
-            if self.blocked(scan, &mount, &input.pose) {
+            if self.blocked(scan, self.beams.dirs(), &mount, &input.pose) {
                 match self.mode {
                     Mode::Blocked(since) => {
                         let c = &self.config;
@@ -667,10 +667,14 @@ impl Navigator {
     /// Whether a laser return the map does not explain lies in the strip ahead the robot is
     /// about to sweep (seed 000 compares the scan with the map to find obstacles that are not
     /// in it; walls that are in it are the planner's business).
-    /// (`self.beams` holds the scan's beam directions.)
-    fn blocked(&self, scan: &LaserScan, mount: &Pose2, pose: &Pose2) -> bool {
+    /// `dirs`: the scan's beam directions ([`BeamDirections`]).
+    fn blocked(&self, scan: &LaserScan, dirs: &[[f64; 2]], mount: &Pose2, pose: &Pose2) -> bool {
+        debug_assert_eq!(
+            dirs.len(),
+            scan.ranges.len(),
+            "the directions of another scan"
+        );
         let c = &self.config;
-        let dirs = &self.beams.dirs;
         let mount = mount.transform();
         let ahead = c.robot_radius + c.stop_distance;
         let half = c.robot_radius + c.stop_margin;
@@ -879,6 +883,11 @@ impl BeamDirections {
             self.dirs = beam_directions(scan);
             self.geometry = Some(geometry);
         }
+        &self.dirs
+    }
+
+    /// The directions [`BeamDirections::of`] last gave.
+    fn dirs(&self) -> &[[f64; 2]] {
         &self.dirs
     }
 }
