@@ -150,6 +150,37 @@ pub fn cells_within(grid: &OccupancyGrid, centre: [f64; 2], radius: f64) -> Vec<
     out
 }
 
+/// For each cell of `grid`, the least distance in cells from any point in its square to any
+/// point in the square of a cell whose value `site` holds, and with `rim` to any point off
+/// the grid: what a ray cast may skip from anywhere in the cell.
+///
+/// The squares of two cells `(dx, dy)` cells apart are `hypot((|dx| - 1)⁺, (|dy| - 1)⁺)`
+/// apart: the distance between their centres less up to a cell along each axis, which is the
+/// centre distance to the nearest cell of the sites grown by one cell in each of the eight
+/// directions (which brings the squares just off the grid onto its rim). An exact distance
+/// transform of those gives it. (The chamfer distance less a cell's diagonal, which this
+/// replaced, gave one cell where this gives two three cells off a wall.)
+pub fn clear_distance(grid: &OccupancyGrid, site: impl Fn(i8) -> bool, rim: bool) -> Vec<f64> {
+    let (w, h) = (grid.width, grid.height);
+    let mut grown = vec![false; w * h];
+    for j in 0..h {
+        for i in 0..w {
+            if rim && (i == 0 || j == 0 || i + 1 == w || j + 1 == h) {
+                grown[j * w + i] = true;
+            }
+            if site(grid.get(i, j)) {
+                for row in grown.chunks_mut(w).take(j + 2).skip(j.saturating_sub(1)) {
+                    row[i.saturating_sub(1)..(i + 2).min(w)].fill(true);
+                }
+            }
+        }
+    }
+    squared_edt(&grown, w, h)
+        .into_iter()
+        .map(f64::sqrt)
+        .collect()
+}
+
 /// Squared Euclidean distance transform of a `w × h` grid of sites, in cells².
 pub fn squared_edt(sites: &[bool], w: usize, h: usize) -> Vec<f64> {
     const INF: f64 = 1e20;
@@ -252,6 +283,46 @@ mod tests {
         // Diagonal case: within the chamfer's 8 % of the Euclidean distance.
         let v = d[20 * 200 + 20] as f64; // 1 m from both the left and the bottom border
         assert!((v - 1.0).abs() < 0.08, "{v}");
+    }
+
+    /// The clear distance is the least distance between the cell's square and the sites'
+    /// squares (and the squares just off the grid, with the rim), found by comparing every
+    /// pair of squares on a small grid of scattered sites.
+    #[test]
+    fn clear_distance_is_the_gap_between_squares() {
+        let (w, h) = (23, 17);
+        let mut g = OccupancyGrid::new(1.0, [0.0, 0.0], w, h);
+        for (k, c) in g.cells.iter_mut().enumerate() {
+            *c = if (k * 7919) % 61 == 0 { 100 } else { 0 };
+        }
+        let gap = |a: i64, b: i64| ((a - b).abs() - 1).max(0) as f64;
+        for rim in [false, true] {
+            let got = clear_distance(&g, |c| c >= OCCUPIED, rim);
+            for j in 0..h as i64 {
+                for i in 0..w as i64 {
+                    let mut want = f64::INFINITY;
+                    for jj in -1..=h as i64 {
+                        for ii in -1..=w as i64 {
+                            let off = ii < 0 || jj < 0 || ii >= w as i64 || jj >= h as i64;
+                            let site = if off {
+                                rim
+                            } else {
+                                g.get(ii as usize, jj as usize) >= OCCUPIED
+                            };
+                            if site {
+                                want = want.min(gap(i, ii).hypot(gap(j, jj)));
+                            }
+                        }
+                    }
+                    let k = j as usize * w + i as usize;
+                    assert!(
+                        (got[k] - want).abs() < 1e-9,
+                        "({i}, {j}) rim {rim}: {} {want}",
+                        got[k]
+                    );
+                }
+            }
+        }
     }
 
     /// The textbook's two passes, one sweep per row with the four neighbours taken in turn:

@@ -9,7 +9,7 @@
 //! Seed 000's configuration is the default: 500 particles, the beam model, one beam every 15°.
 
 use crate::cores::map_on_cores;
-use crate::geometry::grid::{OCCUPIED, obstacle_distance, squared_edt};
+use crate::geometry::grid::{OCCUPIED, clear_distance, obstacle_distance};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Pose2, wrap_angle};
 use rand::{Rng, SeedableRng};
@@ -324,45 +324,20 @@ impl MclMap {
 
 /// For each cell of `grid`, how many points one cell apart a ray may advance from any point
 /// in it without passing over a point in an occupied cell or off the grid: [`BLOCKED`] for
-/// an occupied cell.
-///
-/// A point in the cell is at least the cell's square-to-square distance `c` (in cells) from
-/// every occupied cell's square and every square off the grid, and the points a ray passes
-/// over in advancing `n` are at most `n - 1` cells from it, so any `n` with `n - 1 < c` is
-/// safe. The square-to-square distance to a cell `(dx, dy)` cells away is
-/// `hypot((|dx| - 1)⁺, (|dy| - 1)⁺)`: the centre distance to the nearest cell of those
-/// squares grown by one cell in each of the eight directions (which brings the squares off
-/// the grid onto its rim), and an exact distance transform of those gives it. (The field was the
-/// chamfer distance between centres, less its overestimate and a cell's diagonal: three
-/// cells off a wall it allowed one point where this allows two, and nearly half the steps
-/// of an office coverage run's casts were single points.) A thousandth of a cell is kept in
-/// hand against the rounding of the points' coordinates.
+/// an occupied cell. The points passed over in advancing `n` lie within `n - 1` cells of
+/// the point, so any `n` with `n - 1` less than the cell's [`clear_distance`] is safe; a
+/// thousandth of a cell is kept in hand against the rounding of the points' coordinates.
 fn advance_field(grid: &OccupancyGrid) -> Vec<u8> {
-    let (w, h) = (grid.width, grid.height);
-    let occupied = |i: usize, j: usize| grid.get(i, j) >= OCCUPIED;
-    let mut grown = vec![false; w * h];
-    for j in 0..h {
-        for i in 0..w {
-            if i == 0 || j == 0 || i + 1 == w || j + 1 == h {
-                grown[j * w + i] = true;
-            }
-            if occupied(i, j) {
-                for row in grown.chunks_mut(w).take(j + 2).skip(j.saturating_sub(1)) {
-                    row[i.saturating_sub(1)..(i + 2).min(w)].fill(true);
-                }
-            }
-        }
-    }
-    let d2 = squared_edt(&grown, w, h);
-    (0..h)
-        .flat_map(|j| (0..w).map(move |i| (i, j)))
-        .map(|(i, j)| {
-            if occupied(i, j) {
+    let clear = clear_distance(grid, |c| c >= OCCUPIED, true);
+    grid.cells
+        .iter()
+        .zip(clear)
+        .map(|(&c, clear)| {
+            if c >= OCCUPIED {
                 return BLOCKED;
             }
             // The largest n with n - 1 at most the clear distance less the margin.
-            let clear = d2[j * w + i].sqrt() - 1e-3;
-            (clear.max(0.0).floor() + 1.0).min((BLOCKED - 1) as f64) as u8
+            ((clear - 1e-3).max(0.0).floor() + 1.0).min((BLOCKED - 1) as f64) as u8
         })
         .collect()
 }

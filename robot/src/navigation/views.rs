@@ -27,7 +27,7 @@
 //! next-best-view planners commonly do) up to `range`, stopping at obstacles.
 
 use crate::config::ConfigError;
-use crate::geometry::grid::{CHAMFER_OVERESTIMATE, OCCUPIED, obstacle_distance};
+use crate::geometry::grid::{OCCUPIED, clear_distance, obstacle_distance};
 use crate::navigation::coverage::inside_polygon;
 use crate::navigation::exploration::frontiers;
 use crate::navigation::planner::{grid_path, travel_costs};
@@ -364,21 +364,18 @@ fn working_grid(
 
 /// The unknown cells a 360° scan from `at` would measure on `grid`, and their weighted sum
 /// `Σ h(d)^exponent`. `seen` marks cells counted at `stamp` (one count per cell).
-/// For each cell of `grid`, how many of [`predict`]'s half-cell steps a ray may skip from any
-/// point in it: all of them land in known free cells, which count nothing and stop nothing.
-/// The chamfer distance to the nearest unknown or occupied cell, less its overestimate and a
-/// cell's diagonal (the point's offset from its cell's centre and the other cell's extent),
-/// in half cells, rounded down. A prediction's rays then cross open floor in a few steps, and
-/// visit every point that matters, so it counts what visiting every point does.
+/// For each cell of `grid`, how many of [`predict`]'s half-cell steps a ray may advance from
+/// any point in it: the points passed over all lie in known free cells, which count nothing
+/// and stop nothing. Those points lie within `(n - 1) / 2` cells of the point, so any `n`
+/// with that less than the cell's [`clear_distance`] to the unknown and occupied cells is
+/// safe (a thousandth of a cell is kept in hand against rounding). A prediction's rays then
+/// cross open floor in a few steps, and visit every point that matters, so it counts what
+/// visiting every point does.
 fn free_run(grid: &OccupancyGrid, config: &ViewPlanningConfig) -> Vec<f32> {
-    let res = grid.resolution;
-    obstacle_distance(grid, |c| !(0..OCCUPIED).contains(&c), config.range)
+    let longest = (config.range / (0.5 * grid.resolution)).ceil() + 1.0;
+    clear_distance(grid, |c| !(0..OCCUPIED).contains(&c), false)
         .into_iter()
-        .map(|d| {
-            ((d as f64 / (res * CHAMFER_OVERESTIMATE) - std::f64::consts::SQRT_2) * 2.0)
-                .floor()
-                .max(0.0) as f32
-        })
+        .map(|clear| ((2.0 * clear - 1e-3).max(0.0).floor() + 1.0).min(longest) as f32)
         .collect()
 }
 
@@ -594,7 +591,8 @@ mod tests {
     }
 
     /// Skipping open floor counts what visiting every point counts: on grids of random
-    /// blobs of free, unknown and occupied cells, from every free cell of a coarse lattice.
+    /// blobs of free, unknown and occupied cells, from anywhere in every free cell of a
+    /// coarse lattice.
     #[test]
     fn skipping_open_floor_predicts_the_same() {
         let c = config(ViewPlanner::Seed);
@@ -611,7 +609,12 @@ mod tests {
                     if g.get(i, j) != 0 {
                         continue;
                     }
-                    let at = g.cell_center(i, j);
+                    // Anywhere in the cell: the field holds for every point in it.
+                    let centre = g.cell_center(i, j);
+                    let at = [
+                        centre[0] + rng.random_range(-0.5..0.5) * g.resolution,
+                        centre[1] + rng.random_range(-0.5..0.5) * g.resolution,
+                    ];
                     stamp += 2;
                     let fast = predict(&g, &run, at, &c, &mut seen, stamp);
                     let slow = predict(&g, &none, at, &c, &mut seen, stamp + 1);
