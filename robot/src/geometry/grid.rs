@@ -158,8 +158,8 @@ pub fn cells_within(grid: &OccupancyGrid, centre: [f64; 2], radius: f64) -> Vec<
 /// apart: the distance between their centres less up to a cell along each axis, which is the
 /// centre distance to the nearest cell of the sites grown by one cell in each of the eight
 /// directions (which brings the squares just off the grid onto its rim). An exact distance
-/// transform of those gives it. (The chamfer distance less a cell's diagonal, which this
-/// replaced, gave one cell where this gives two three cells off a wall.)
+/// transform of those gives it. (The chamfer distance less a cell's diagonal, which the casts
+/// took before, is 1.34 cells for a cell three cells off a wall, where this is 2.)
 pub fn clear_distance(grid: &OccupancyGrid, site: impl Fn(i8) -> bool, rim: bool) -> Vec<f64> {
     let (w, h) = (grid.width, grid.height);
     let mut grown = vec![false; w * h];

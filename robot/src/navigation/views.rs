@@ -362,8 +362,6 @@ fn working_grid(
     out
 }
 
-/// The unknown cells a 360° scan from `at` would measure on `grid`, and their weighted sum
-/// `Σ h(d)^exponent`. `seen` marks cells counted at `stamp` (one count per cell).
 /// For each cell of `grid`, how many of [`predict`]'s half-cell steps a ray may advance from
 /// any point in it: the points passed over all lie in known free cells, which count nothing
 /// and stop nothing. Those points lie within `(n - 1) / 2` cells of the point, so any `n`
@@ -379,6 +377,8 @@ fn free_run(grid: &OccupancyGrid, config: &ViewPlanningConfig) -> Vec<f32> {
         .collect()
 }
 
+/// The unknown cells a 360° scan from `at` would measure on `grid`, and their weighted sum
+/// `Σ h(d)^exponent`. `seen` marks cells counted at `stamp` (one count per cell).
 fn predict(
     grid: &OccupancyGrid,
     run: &[f32],
