@@ -12,11 +12,6 @@ use futago_msgs::grid::OccupancyGrid;
 /// lies above it; SLAM's and the ground truth's grids are trinary 0/100/−1).
 pub const OCCUPIED: i8 = 50;
 
-/// The most by which [`obstacle_distance`]'s chamfer distance exceeds the Euclidean, as a
-/// factor (1.0824 at 22.5°), rounded up: a distance divided by it is never more than the true
-/// one (the clearances that let ray casts skip open space).
-pub const CHAMFER_OVERESTIMATE: f64 = 1.09;
-
 /// Distance from each cell's centre to the nearest cell for which `obstacle` holds, m
 /// (two-pass chamfer transform with weights 1 and √2, within 8 % of Euclidean), capped at
 /// `cap`. Row-major like the grid.
