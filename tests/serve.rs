@@ -474,7 +474,13 @@ fn serve_to_script(
         .unwrap();
     let status = child.wait().unwrap();
     let err = stderr_of(&mut child);
-    assert_eq!(status.code(), Some(0), "{err}");
+    assert_eq!(
+        status.code(),
+        Some(0),
+        "{err}\nthe script printed: {}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
