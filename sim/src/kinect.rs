@@ -499,19 +499,22 @@ fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng, strid
     // One draw from the camera's stream keys the frame; each pixel's three draws come from a
     // generator of its own keyed by the frame and the pixel's index ([`pixel_draws`]). A
     // pixel's noise is then the same whichever others are noised: a consumer of the grid's
-    // pixels draws for them alone (a sixteenth of the image at a stride of 4, where drawing
-    // for every pixel in the camera's stream took half a coverage frame's time), and a pixel
-    // that one GPU draws and another misses by a rounding changes that pixel only.
+    // pixels draws for them alone (a quarter of the image at the coverage scorer's stride of
+    // 2), and a pixel that one GPU draws and another misses by a rounding changes that pixel
+    // only.
     let frame: u64 = rng.random();
     let stride = stride as usize;
     let width = src.width as usize;
     // The grid's draws first, on this thread: drawn on the cores with the rest, they kept both
     // busy for the whole of the noise, and a DDS subscriber on the same two cores (the serve
     // test's, taking 640×480 depth images) then lost fragments and stalled the link.
-    let draws: Vec<[f64; 3]> = (0..src.data.len())
+    // The grid's pixels row by row, `grid_width` to a row.
+    let grid_width = width.div_ceil(stride);
+    let draws: Vec<[f64; 3]> = (0..src.height as usize)
+        .step_by(stride)
+        .flat_map(|v| (0..width).step_by(stride).map(move |u| v * width + u))
         .map(|i| {
-            let on_grid = (i / width).is_multiple_of(stride) && (i % width).is_multiple_of(stride);
-            if on_grid && src.data[i] > 0.0 {
+            if src.data[i] > 0.0 {
                 pixel_draws(frame, i)
             } else {
                 [0.0; 3]
@@ -522,12 +525,14 @@ fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng, strid
         if !v.is_multiple_of(stride) {
             return;
         }
-        for (u, out) in row.iter_mut().enumerate().step_by(stride) {
+        // The row's draws: its place on the grid, then each pixel's (`gu`, u / stride).
+        let row_draws = &draws[v / stride * grid_width..];
+        for (gu, (u, out)) in row.iter_mut().enumerate().step_by(stride).enumerate() {
             let i = v * width + u;
             if src.data[i] <= 0.0 {
                 continue;
             }
-            let n = draws[i];
+            let n = row_draws[gu];
             let cos = incidence_cos(&src, &rays, u as u32, v as u32);
             // Below π/3 (by a margin far beyond the arc cosine's rounding) only the lateral
             // shifts depend on the angle, and most of them only on its being below π/3; the
