@@ -272,9 +272,9 @@ impl Reference {
     /// order), so the search may visit the buckets in any order: `q`'s own first, whose
     /// points are likely the nearest, then the others, each skipped when its box lies
     /// farther than the second point found so far (or than `max`). Seed 004's localiser
-    /// spends 40 % of `corridor-scan3d`'s time here; the skipping saves 3 % of the run, as a
-    /// query reads few points either way (some 20 ns): the count of queries, one per point
-    /// per evaluation of the simplex, is what costs.
+    /// spends 40 % of `corridor-scan3d`'s time here; the skipping saves 3 % of the run. The
+    /// count of queries is what costs: one per point per evaluation of the simplex, some 160
+    /// evaluations a matched scan.
     pub fn two_nearest(&self, q: [f64; 2], max: f64) -> Option<([f64; 2], [f64; 2])> {
         let r = (max / self.bucket).ceil() as i64;
         let k = Self::key(q, self.bucket);
