@@ -58,6 +58,9 @@ impl OccupancyConfig {
 /// would grow the grid beyond it is refused and counted (see [`OccupancyMap::refused`]).
 pub const MAX_CELLS: usize = 1 << 28;
 
+/// A scan's laser cell, its beams' end cells, and the box of cells they span.
+type BeamEnds = ([i64; 2], Vec<[i64; 2]>, [[i64; 2]; 2]);
+
 /// Side of a tile of the grid, cells.
 const TILE: i64 = 64;
 
@@ -234,11 +237,9 @@ impl OccupancyMap {
         self.index.get(&t).map_or(0.0, |&at| self.tiles[at][k])
     }
 
-    /// Integrates one scan taken from `laser` (the laser's pose in the map frame): the cells
-    /// each beam crosses become freer, the cell it ends in more occupied. Beams without a
-    /// return (+∞ or beyond `max_range`) are skipped. A scan that would grow the grid beyond
-    /// [`MAX_CELLS`] is refused and counted.
-    pub fn insert(&mut self, laser: &Pose2, scan: &LaserScan) {
+    /// The cell of `laser` and those the scan's beams with a return end in (in the beams'
+    /// order), and the corners of the box of cells they span.
+    fn beam_ends(&self, laser: &Pose2, scan: &LaserScan) -> BeamEnds {
         let max = self.config.max_range.min(scan.range_max);
         let start = self.cell(laser.x, laser.y);
         let mut ends = Vec::with_capacity(scan.ranges.len());
@@ -259,6 +260,15 @@ impl OccupancyMap {
             hi = [hi[0].max(e[0]), hi[1].max(e[1])];
             ends.push(e);
         }
+        (start, ends, [lo, hi])
+    }
+
+    /// Integrates one scan taken from `laser` (the laser's pose in the map frame): the cells
+    /// each beam crosses become freer, the cell it ends in more occupied. Beams without a
+    /// return (+∞ or beyond `max_range`) are skipped. A scan that would grow the grid beyond
+    /// [`MAX_CELLS`] is refused and counted.
+    pub fn insert(&mut self, laser: &Pose2, scan: &LaserScan) {
+        let (start, ends, [lo, hi]) = self.beam_ends(laser, scan);
         if !self.reserve(lo, hi) {
             self.refused += 1;
             return;
@@ -334,23 +344,10 @@ mod tests {
         })
     }
 
-    /// Inserts `scan` as the cells of [`line`] one by one, each looked up afresh: the
-    /// reference for [`OccupancyMap::insert`]'s walk.
+    /// Inserts `scan` as the cells of [`line`] one by one, each looked up afresh (the beams'
+    /// ends found as `insert` finds them): the reference for [`OccupancyMap::insert`]'s walk.
     fn insert_cell_by_cell(m: &mut OccupancyMap, laser: &Pose2, scan: &LaserScan) {
-        let start = m.cell(laser.x, laser.y);
-        let mut ends = Vec::new();
-        let (mut lo, mut hi) = (start, start);
-        for (k, &r) in scan.ranges.iter().enumerate() {
-            let r = r as f64;
-            if !(r.is_finite() && r >= scan.range_min && r <= m.config.max_range) {
-                continue;
-            }
-            let a = laser.theta + scan.angle(k);
-            let e = m.cell(laser.x + r * a.cos(), laser.y + r * a.sin());
-            lo = [lo[0].min(e[0]), lo[1].min(e[1])];
-            hi = [hi[0].max(e[0]), hi[1].max(e[1])];
-            ends.push(e);
-        }
+        let (start, ends, [lo, hi]) = m.beam_ends(laser, scan);
         assert!(m.reserve(lo, hi));
         let (min, max) = (m.config.min, m.config.max);
         let add = |m: &mut OccupancyMap, c: [i64; 2], delta: f32| {
