@@ -15,12 +15,29 @@ pub fn map_on_cores<T: Sync, R: Send>(
     serial_below: usize,
     f: impl Fn(&T) -> R + Sync,
 ) -> Vec<R> {
+    map_on_cores_with(items, serial_below, || (), |_, item| f(item))
+}
+
+/// [`map_on_cores`] with scratch state: each thread makes its own with `scratch` and hands it
+/// to `f` with each of its items. The scratch may hold caches of work `f` would otherwise
+/// repeat, but each result must still depend on its item alone (what a cache returns, `f`
+/// would have computed), so that the output is the same whatever the number of threads.
+pub fn map_on_cores_with<T: Sync, S, R: Send>(
+    items: &[T],
+    serial_below: usize,
+    scratch: impl Fn() -> S + Sync,
+    f: impl Fn(&mut S, &T) -> R + Sync,
+) -> Vec<R> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let run = |part: &[T]| {
+        let mut s = scratch();
+        part.iter().map(|item| f(&mut s, item)).collect::<Vec<R>>()
+    };
     if threads < 2 || items.len() < serial_below.max(2) {
-        return items.iter().map(f).collect();
+        return run(items);
     }
     let chunk = items.len().div_ceil(threads);
-    let f = &f;
+    let run = &run;
     // The first chunk on this thread, the others on threads of their own: one thread start
     // fewer than a thread a chunk, and this thread works instead of waiting (`hall-scan3d`'s
     // SLAM started some 37 threads a simulated second for its heading searches, each start a
@@ -28,10 +45,8 @@ pub fn map_on_cores<T: Sync, R: Send>(
     let mut parts = items.chunks(chunk);
     let first = parts.next().unwrap_or(&[]);
     std::thread::scope(|scope| {
-        let rest: Vec<_> = parts
-            .map(|part| scope.spawn(move || part.iter().map(f).collect::<Vec<R>>()))
-            .collect();
-        let mut out: Vec<R> = first.iter().map(f).collect();
+        let rest: Vec<_> = parts.map(|part| scope.spawn(move || run(part))).collect();
+        let mut out: Vec<R> = run(first);
         for h in rest {
             out.extend(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
         }
@@ -53,6 +68,37 @@ mod tests {
             assert_eq!(map_on_cores(&items, 256, |k| k * k + 1), want, "{n} items");
             // Threads asked for whatever the count, even none or one item.
             assert_eq!(map_on_cores(&items, 0, |k| k * k + 1), want, "{n} items");
+        }
+    }
+
+    /// With scratch state (here a cache of a function of each item's residue), the results
+    /// are those computed without it, in order, and each thread makes its own scratch.
+    #[test]
+    fn mapping_with_scratch_keeps_the_results_and_the_order() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let slow = |r: u64| (0..=r).map(|i| i * i).sum::<u64>();
+        for n in [0, 1, 255, 256, 1001, 5000] {
+            let items: Vec<u64> = (0..n as u64).collect();
+            let want: Vec<u64> = items.iter().map(|k| slow(k % 7) + k).collect();
+            let made = AtomicUsize::new(0);
+            let got = map_on_cores_with(
+                &items,
+                256,
+                || {
+                    made.fetch_add(1, Ordering::Relaxed);
+                    [None::<u64>; 7]
+                },
+                |cache: &mut [Option<u64>; 7], k| {
+                    *cache[(k % 7) as usize].get_or_insert_with(|| slow(k % 7)) + k
+                },
+            );
+            assert_eq!(got, want, "{n} items");
+            let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+            let made = made.load(Ordering::Relaxed);
+            assert!(
+                made >= 1 && made <= threads.max(1),
+                "{made} scratches for {n} items"
+            );
         }
     }
 }
