@@ -381,6 +381,15 @@ impl Beam {
         let (sin, cos) = angle.sin_cos();
         Beam { z, cos, sin }
     }
+
+    /// The beam's direction (cosine and sine) from a laser whose heading has sine `sin` and
+    /// cosine `cos`: the beam's own direction rotated by the heading.
+    fn direction(&self, sin: f64, cos: f64) -> (f64, f64) {
+        (
+            cos * self.cos - sin * self.sin,
+            sin * self.cos + cos * self.sin,
+        )
+    }
 }
 
 /// The beam model's terms a thread has computed for one scan, by beam and expected range, to
@@ -555,7 +564,7 @@ impl Mcl {
     fn beam_terms(&self, laser: &Pose2, beams: &[Beam], memo: &mut TermMemo) -> Vec<(f64, bool)> {
         let c = &self.config;
         let (sin, cos) = laser.theta.sin_cos();
-        let dir = |b: &Beam| (cos * b.cos - sin * b.sin, sin * b.cos + cos * b.sin);
+        let dir = |b: &Beam| b.direction(sin, cos);
         match c.model {
             SensorModel::LikelihoodField => beams
                 .iter()
@@ -1074,10 +1083,7 @@ mod tests {
             for p in &particles {
                 let kept = mcl.beam_terms(p, &beams, &mut memo);
                 let (sin, cos) = p.theta.sin_cos();
-                let dirs: Vec<(f64, f64)> = beams
-                    .iter()
-                    .map(|b| (cos * b.cos - sin * b.sin, sin * b.cos + cos * b.sin))
-                    .collect();
+                let dirs: Vec<(f64, f64)> = beams.iter().map(|b| b.direction(sin, cos)).collect();
                 let mut expected = vec![0.0; beams.len()];
                 mcl.map
                     .cast_each(p.x, p.y, &dirs, c.max_range, &mut expected);
