@@ -974,10 +974,11 @@ fn field_log_likelihood(
 /// multiple of 2^(E − 53): a number of at most 53 bits, which an `f64` holds exactly. Then
 /// no addition rounds, the sum is exact in any order, and the running sums side by side
 /// give the in-order sum's bits. A single running sum waits on the last addition at every
-/// pixel; side by side, the terms' divisions and additions overlap (the score of every
-/// particle's render was a fifth of a corridor depth-MCL frame). Where the terms are
-/// smaller (an `alpha` far below the depth differences, or an image of more than 2^15
-/// pixels with terms near 2^-13), or not numbers, the sum is taken in order instead.
+/// pixel; side by side, the terms' divisions and additions overlap (the frame less its
+/// render, mostly this score, was 7–14 ms of a 43–54 ms corridor frame of 200 particles at
+/// 176×144, and 2.5–3.3 ms after). Where a term is smaller than the bound (2^-15 at 176×144,
+/// 2^-13 at 320×240: an `alpha` far below the depth differences), or not a number, the sum
+/// is taken in order instead.
 pub fn score(measured: &[f32], predicted: &[f32], alpha: f64) -> f64 {
     let a = alpha as f32;
     let n = measured.len().min(predicted.len());
@@ -1236,7 +1237,8 @@ mod tests {
     fn the_score_is_the_in_order_sum_to_the_bit() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let mut fast = 0;
+        // All but the last may take the running sums (a score that took them where the bound
+        // does not hold, at α = 1e-9, differed from the in-order sum in its last bits).
         for (n, alpha) in [
             (176 * 144, 0.1),
             (88 * 72, 0.1),
@@ -1273,10 +1275,8 @@ mod tests {
                 let cut = &predicted[..n / 2];
                 let want = score_in_order(&measured, cut, alpha);
                 assert_eq!(score(&measured, cut, alpha).to_bits(), want.to_bits());
-                fast += usize::from(alpha > 1e-3 && n <= 1 << 15);
             }
         }
-        assert!(fast > 0);
         // Nothing measured: the in-order sum's zero, sign and all.
         let none = score(&[0.0; 9], &[1.0; 9], 0.1);
         assert_eq!(
