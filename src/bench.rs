@@ -723,13 +723,15 @@ const SR4000_RANGE: f64 = 5.0;
 /// particle's depth, the re-projection of the measured image, the likelihood, weighting and
 /// resampling) for each particle count and render size, on the SR4000's 43.6° × 34.6°
 /// camera at the Kinect's 0.42 m over `start`, the measured image rendered at the truth:
-/// weighed by the likelihood field in 3D (no render) and by the seed's render-and-compare
-/// (with the render's own time), and the field's build time.
+/// weighed by each of `likelihoods` (the likelihood field in 3D, with no render; the seed's
+/// render-and-compare and the per-pixel sensor model, with the render's own time), and the
+/// field's build time.
 pub fn bench_depth_mcl(
     world: &World,
     start: Pose2,
     particles: &[usize],
     sizes: &[[u32; 2]],
+    likelihoods: &[futago_robot::localization::depth_mcl::Likelihood],
     frames: usize,
 ) -> Result<Value> {
     use crate::stack::depth_localization::{scene_meshes, surface_field};
@@ -768,7 +770,7 @@ pub fn bench_depth_mcl(
         data: measured,
     };
     let mut rows = Vec::new();
-    for likelihood in [Likelihood::Field, Likelihood::Seed] {
+    for &likelihood in likelihoods {
         for &n in particles {
             for &[w, h] in sizes {
                 let k = camera.scaled(w, h);
@@ -826,6 +828,20 @@ pub fn bench_depth_mcl(
         "field": { "build_s": field_build_s, "voxels": field_voxels },
         "rows": rows,
     }))
+}
+
+/// `--likelihoods` of `futago bench depth-mcl`: each a depth MCL likelihood's name.
+pub fn parse_likelihoods(
+    names: &[String],
+) -> Result<Vec<futago_robot::localization::depth_mcl::Likelihood>> {
+    names
+        .iter()
+        .map(|n| {
+            serde_json::from_value(json!(n.trim())).map_err(|_| {
+                anyhow::anyhow!("--likelihoods: `{n}`: expected field, seed or sensor")
+            })
+        })
+        .collect()
 }
 
 /// A bench's world and the pose of its spawn `spawn`.

@@ -386,6 +386,11 @@ enum BenchCommand {
         /// Frames timed per combination.
         #[arg(long, default_value_t = 20)]
         frames: usize,
+        /// Likelihoods timed, comma-separated: `field` (the 3D likelihood field, no render),
+        /// `seed` (seed 002's render-and-compare) or `sensor` (the per-pixel sensor model on
+        /// the render).
+        #[arg(long, value_delimiter = ',', default_value = "field,seed")]
+        likelihoods: Vec<String>,
     },
     /// People detection and tracking per scan (a URG-04LX before walking people) and the
     /// simulator's real-time factor among a crowd.
@@ -1211,15 +1216,17 @@ fn bench(command: BenchCommand) -> Result<i32> {
             particles,
             sizes,
             frames,
+            likelihoods,
         } => {
             let (w, start) = bench::world_at_spawn(&world, &spawn)?;
             let sizes = bench::parse_depth_sizes(&sizes)?;
+            let likelihoods = bench::parse_likelihoods(&likelihoods)?;
             if particles.iter().any(|n| !(1..=100_000).contains(n))
                 || !(1..=100_000).contains(&frames)
             {
                 bail!("expected 1 to 100000 particles and frames");
             }
-            bench::bench_depth_mcl(&w, start, &particles, &sizes, frames)?
+            bench::bench_depth_mcl(&w, start, &particles, &sizes, &likelihoods, frames)?
         }
         BenchCommand::Sensors {
             world,
