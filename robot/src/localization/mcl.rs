@@ -214,13 +214,17 @@ pub struct MclMap {
     free: Vec<(usize, usize)>,
 }
 
+/// The obstacle distance the likelihood field gives a point off the map, m: the distance
+/// field's cap.
+const OFF_GRID_DISTANCE: f64 = 5.0;
+
 /// [`MclMap::skip`]'s value for an occupied cell.
 const BLOCKED: u8 = u8::MAX;
 
 impl MclMap {
     pub fn new(grid: OccupancyGrid) -> MclMap {
         let (w, h) = (grid.width, grid.height);
-        let distance = obstacle_distance(&grid, |c| c >= OCCUPIED, 5.0);
+        let distance = obstacle_distance(&grid, |c| c >= OCCUPIED, OFF_GRID_DISTANCE);
         let free = (0..h)
             .flat_map(|j| (0..w).map(move |i| (i, j)))
             .filter(|&(i, j)| grid.get(i, j) == 0)
@@ -234,11 +238,12 @@ impl MclMap {
         }
     }
 
-    fn distance_at(&self, x: f64, y: f64) -> f64 {
-        match self.grid.cell_of(x, y) {
-            Some((i, j)) => self.distance[j * self.grid.width + i] as f64,
-            None => 5.0,
-        }
+    /// The likelihood field's log-likelihood term for each cell (a function of the cell's
+    /// obstacle distance alone) and for a point off the grid, computed once: each beam then
+    /// reads its cell's term instead of an exponential and a logarithm of the distance.
+    fn field_terms(&self, term: impl Fn(f64) -> f64) -> (Vec<f64>, f64) {
+        let cells = self.distance.iter().map(|&d| term(d as f64)).collect();
+        (cells, term(OFF_GRID_DISTANCE))
     }
 
     fn occupied_or_outside(&self, x: f64, y: f64) -> bool {
@@ -365,6 +370,10 @@ pub struct Mcl {
     w_fast: f64,
     /// The odometry and the estimate at the last scan the filter took (`update_min_d`).
     last_update: Option<(Pose2, Estimate)>,
+    /// The likelihood field's log-likelihood term of each cell of the map and off it
+    /// ([`MclMap::field_terms`]); none for the beam model.
+    field_terms: Vec<f64>,
+    field_off_grid: f64,
 }
 
 /// A beam of a scan as the filter uses it: its reading, m, and the cosine and sine of its
@@ -483,7 +492,17 @@ impl Mcl {
             w_slow: 0.0,
             w_fast: 0.0,
             last_update: None,
+            field_terms: Vec::new(),
+            field_off_grid: 0.0,
         };
+        if config.model == SensorModel::LikelihoodField {
+            let c = &m.config;
+            (m.field_terms, m.field_off_grid) = m.map.field_terms(|d| {
+                let p = c.z_hit * (-d * d / (2.0 * c.sigma_hit * c.sigma_hit)).exp()
+                    + c.z_rand / c.max_range;
+                log_term(p, true).0
+            });
+        }
         m.particles = (0..config.particles).map(|_| m.random_pose()).collect();
         m.weights = vec![1.0 / config.particles as f64; config.particles];
         m
@@ -575,10 +594,11 @@ impl Mcl {
                     }
                     let (dx, dy) = dir(b);
                     let (x, y) = (laser.x + z * dx, laser.y + z * dy);
-                    let d = self.map.distance_at(x, y);
-                    let p = c.z_hit * (-d * d / (2.0 * c.sigma_hit * c.sigma_hit)).exp()
-                        + c.z_rand / c.max_range;
-                    log_term(p, true)
+                    let term = match self.map.grid.cell_of(x, y) {
+                        Some((i, j)) => self.field_terms[j * self.map.grid.width + i],
+                        None => self.field_off_grid,
+                    };
+                    (term, true)
                 })
                 .collect(),
             SensorModel::Beam => {
@@ -1099,6 +1119,64 @@ mod tests {
     }
 
     /// A 240°, 0.5° scan of `grid` from `pose` (cast on the grid itself).
+    /// The likelihood field's terms read from the cells' table are the model's formula at the
+    /// beam end's obstacle distance, to the bit, on the map and off it (particles spread
+    /// metres about a pose by the room's edge, so that some beams end off the grid).
+    #[test]
+    fn likelihood_field_terms_are_the_formula_at_the_cells_distance() {
+        let map = MclMap::new(room());
+        let truth = Pose2::new(1.0, 1.0, 2.5);
+        let scan = scan(&map, &truth);
+        let c = MclConfig {
+            model: SensorModel::LikelihoodField,
+            ..MclConfig::default()
+        };
+        let mcl = Mcl::new(c, map, 5);
+        let beams: Vec<Beam> = (0..scan.ranges.len())
+            .step_by(10)
+            .map(|k| Beam::new(scan.angle(k), (scan.ranges[k] as f64).min(c.max_range)))
+            .collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut memo = TermMemo::with_slots(beams.len(), c.max_range, 0.05, 1);
+        let (mut on, mut off) = (0, 0);
+        for _ in 0..200 {
+            let p = Pose2::new(
+                truth.x + 2.0 * gauss(&mut rng),
+                truth.y + 2.0 * gauss(&mut rng),
+                truth.theta + 2.0 * gauss(&mut rng),
+            );
+            let terms = mcl.beam_terms(&p, &beams, &mut memo);
+            let (sin, cos) = p.theta.sin_cos();
+            for (b, t) in beams.iter().zip(terms) {
+                let want = if b.z >= c.max_range {
+                    0.0
+                } else {
+                    let (dx, dy) = b.direction(sin, cos);
+                    let grid = &mcl.map.grid;
+                    let d = match grid.cell_of(p.x + b.z * dx, p.y + b.z * dy) {
+                        Some((i, j)) => {
+                            on += 1;
+                            mcl.map.distance[j * grid.width + i] as f64
+                        }
+                        None => {
+                            off += 1;
+                            5.0
+                        }
+                    };
+                    let p = c.z_hit * (-d * d / (2.0 * c.sigma_hit * c.sigma_hit)).exp()
+                        + c.z_rand / c.max_range;
+                    p.max(1e-12).ln()
+                };
+                assert_eq!(t.0.to_bits(), want.to_bits(), "{p:?}");
+                assert!(t.1);
+            }
+        }
+        assert!(
+            on > 100 && off > 100,
+            "{on} beams end on the grid, {off} off it"
+        );
+    }
+
     fn scan(map: &MclMap, pose: &Pose2) -> LaserScan {
         let n = 481;
         let inc = 0.5f64.to_radians();
