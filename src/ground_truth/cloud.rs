@@ -30,19 +30,52 @@ pub struct CloudScore {
     pub truth_points: usize,
 }
 
-/// Nearest-point queries within [`CAP_M`] over a hashed grid of cells of that size.
-struct Grid<'a> {
-    points: &'a [[f64; 3]],
-    cells: FxHashMap<[i64; 3], Vec<u32>>,
+/// Nearest-point queries within [`CAP_M`] over a hashed grid of cells of that size: a cloud
+/// indexed once and queried by every map scored against it (each RGB-D method's map against
+/// the same true surfaces).
+pub struct CloudIndex {
+    /// The cloud's points grouped by cell, each cell's side by side (a query reads its cells'
+    /// points in a run, not scattered over the cloud).
+    points: Vec<[f64; 3]>,
+    /// Each cell's run of `points`.
+    cells: FxHashMap<[i64; 3], (u32, u32)>,
 }
 
-impl<'a> Grid<'a> {
-    fn new(points: &'a [[f64; 3]]) -> Grid<'a> {
-        let mut cells: FxHashMap<[i64; 3], Vec<u32>> = FxHashMap::default();
-        for (i, p) in points.iter().enumerate() {
-            cells.entry(key(p)).or_default().push(i as u32);
+/// Queries below this many stay on the calling thread.
+const SERIAL_BELOW: usize = 4096;
+
+impl CloudIndex {
+    /// The index of `points` (at most 2³² − 1 of them: the runs are kept in 32 bits).
+    pub fn new(points: &[[f64; 3]]) -> CloudIndex {
+        let mut keyed: Vec<([i64; 3], u32)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (key(p), i as u32))
+            .collect();
+        keyed.sort_unstable();
+        let mut cells: FxHashMap<[i64; 3], (u32, u32)> = FxHashMap::default();
+        let mut sorted = Vec::with_capacity(points.len());
+        for (k, i) in keyed {
+            let at = sorted.len() as u32;
+            cells.entry(k).or_insert((at, at)).1 = at + 1;
+            sorted.push(points[i as usize]);
         }
-        Grid { points, cells }
+        CloudIndex {
+            points: sorted,
+            cells,
+        }
+    }
+
+    /// Whether the cloud has no points.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// The distance of each of `points` to the nearest point of the cloud, or infinity
+    /// beyond [`CAP_M`], in `points`' order; computed on the machine's cores (each distance
+    /// its own, so the same whatever their number).
+    fn nearest_each(&self, points: &[[f64; 3]]) -> Vec<f64> {
+        futago_robot::cores::map_on_cores(points, SERIAL_BELOW, |p| self.nearest(p))
     }
 
     /// Distance to the nearest point if it is within [`CAP_M`], else infinity.
@@ -55,9 +88,8 @@ impl<'a> Grid<'a> {
         let k = key(p);
         let mut best = f64::INFINITY;
         let scan = |cell: [i64; 3], best: &mut f64| {
-            if let Some(ids) = self.cells.get(&cell) {
-                for &i in ids {
-                    let q = self.points[i as usize];
+            if let Some(&(from, to)) = self.cells.get(&cell) {
+                for q in &self.points[from as usize..to as usize] {
                     let d = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
                     *best = best.min(d);
                 }
@@ -114,17 +146,20 @@ impl CloudScore {
     }
 }
 
-/// The distance of each of `points` to the nearest of `truth`, capped at [`CAP_M`].
-pub fn distances(points: &[[f64; 3]], truth: &[[f64; 3]]) -> Vec<f64> {
-    let grid = Grid::new(truth);
-    points.iter().map(|p| grid.nearest(p).min(CAP_M)).collect()
+/// The distance of each of `points` to the nearest point of `truth`, capped at [`CAP_M`].
+pub fn distances(points: &[[f64; 3]], truth: &CloudIndex) -> Vec<f64> {
+    let mut d = truth.nearest_each(points);
+    for x in &mut d {
+        *x = x.min(CAP_M);
+    }
+    d
 }
 
 /// The thickness of a trace of points along true surfaces: twice the 90th percentile of their
 /// distances to the surfaces (the width of the band about the surface that holds 90 % of
 /// them); `None` without points. A map whose keyframes disagree draws each wall twice, a few
 /// centimetres apart, and its trace thickens (seed 000's Fig. 3.7, method ②).
-pub fn thickness(points: &[[f64; 3]], truth: &[[f64; 3]]) -> Option<f64> {
+pub fn thickness(points: &[[f64; 3]], truth: &CloudIndex) -> Option<f64> {
     let mut d = distances(points, truth);
     if d.is_empty() {
         return None;
@@ -134,14 +169,15 @@ pub fn thickness(points: &[[f64; 3]], truth: &[[f64; 3]]) -> Option<f64> {
     Some(2.0 * d[k])
 }
 
-/// Scores `map` against `truth`; `None` when either is empty.
-pub fn score(map: &[[f64; 3]], truth: &[[f64; 3]]) -> Option<CloudScore> {
+/// Scores `map` against the cloud `truth`; `None` when either is empty.
+pub fn score(map: &[[f64; 3]], truth: &CloudIndex) -> Option<CloudScore> {
     if map.is_empty() || truth.is_empty() {
         return None;
     }
-    let (to_truth, to_map) = (Grid::new(truth), Grid::new(map));
-    let mut d_map: Vec<f64> = map.iter().map(|p| to_truth.nearest(p)).collect();
-    let d_truth: Vec<f64> = truth.iter().map(|p| to_map.nearest(p)).collect();
+    let to_map = CloudIndex::new(map);
+    let mut d_map: Vec<f64> = truth.nearest_each(map);
+    // Completeness counts the true points near the map, in any order: the index's.
+    let d_truth: Vec<f64> = to_map.nearest_each(&truth.points);
     let share = |d: &[f64], t: f64| d.iter().filter(|&&x| x <= t).count() as f64 / d.len() as f64;
     let accuracy = TOLERANCES.map(|t| share(&d_map, t));
     let completeness = TOLERANCES.map(|t| share(&d_truth, t));
@@ -172,7 +208,7 @@ pub fn score(map: &[[f64; 3]], truth: &[[f64; 3]]) -> Option<CloudScore> {
         mean_distance,
         median_distance,
         map_points: map.len(),
-        truth_points: truth.len(),
+        truth_points: truth.points.len(),
     })
 }
 
@@ -181,23 +217,17 @@ mod tests {
     use super::*;
 
     /// The nearest distance read from the cells that may hold a nearer point is the one read
-    /// from all 27 round the point: for clouds voxelised finely and coarsely, with points on
+    /// from every point of the cloud: for clouds voxelised finely and coarsely, with points on
     /// the cells' faces and a rounding either side of them, far from the origin too, and with
-    /// queries beyond the cap.
+    /// queries beyond the cap; and the queries on the cores give each query's own.
     #[test]
     fn skipping_cells_beyond_the_nearest_keeps_the_nearest() {
         use rand::{Rng, SeedableRng};
-        let all_27 = |g: &Grid, p: &[f64; 3]| {
-            let k = key(p);
-            let mut best = f64::INFINITY;
-            for o in 0..27i64 {
-                let c = [k[0] + o % 3 - 1, k[1] + o / 3 % 3 - 1, k[2] + o / 9 - 1];
-                for &i in g.cells.get(&c).into_iter().flatten() {
-                    let q = g.points[i as usize];
-                    best = best
-                        .min((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2));
-                }
-            }
+        let every = |cloud: &[[f64; 3]], p: &[f64; 3]| {
+            let best = cloud
+                .iter()
+                .map(|q| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2))
+                .fold(f64::INFINITY, f64::min);
             if best <= CAP_M * CAP_M {
                 best.sqrt()
             } else {
@@ -219,10 +249,13 @@ mod tests {
             let points: Vec<[f64; 3]> = (0..n)
                 .map(|_| [0; 3].map(|_| coordinate(&mut rng, origin)))
                 .collect();
-            let g = Grid::new(&points);
-            for _ in 0..3000 {
-                let p = [0; 3].map(|_| coordinate(&mut rng, origin));
-                let (fast, slow) = (g.nearest(&p), all_27(&g, &p));
+            let g = CloudIndex::new(&points);
+            let queries: Vec<[f64; 3]> = (0..3000)
+                .map(|_| [0; 3].map(|_| coordinate(&mut rng, origin)))
+                .collect();
+            let each = g.nearest_each(&queries);
+            for (p, fast) in queries.iter().zip(each) {
+                let slow = every(&points, p);
                 assert_eq!(
                     fast.to_bits(),
                     slow.to_bits(),
@@ -241,6 +274,7 @@ mod tests {
         let once = wall(0.002, 20);
         let mut twice = once.clone();
         twice.extend(wall(0.03, 20));
+        let truth = CloudIndex::new(&truth);
         let t1 = thickness(&once, &truth).unwrap();
         let t2 = thickness(&twice, &truth).unwrap();
         assert!((t1 - 0.004).abs() < 1e-9, "{t1}");
@@ -262,9 +296,10 @@ mod tests {
 
     #[test]
     fn scores_of_hand_made_clouds() {
-        let truth = wall(0.0, 200);
+        let points = wall(0.0, 200);
+        let truth = CloudIndex::new(&points);
         // The same wall: perfect.
-        let s = score(&truth, &truth).unwrap();
+        let s = score(&points, &truth).unwrap();
         assert_eq!(
             (s.accuracy, s.completeness, s.f1),
             ([1.0; 4], [1.0; 4], [1.0; 4])

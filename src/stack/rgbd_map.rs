@@ -449,9 +449,18 @@ impl Node for RgbdMapNode {
                 paths.cloud_share(&points, &world).unwrap_or(0.0),
             );
         }
+        // The true surfaces indexed once for every method's map.
         let points = self.truth_points();
+        let truth = crate::ground_truth::cloud::CloudIndex::new(&points);
         for (k, map) in self.maps.iter().enumerate() {
-            let found = score_map(map, &points, &self.truth_poses, &self.walls, self.slice_z);
+            let found = score_map(
+                map,
+                &points,
+                &truth,
+                &self.truth_poses,
+                &self.walls,
+                self.slice_z,
+            );
             if k == 0 {
                 for (name, v) in &found {
                     metrics.insert(format!("rgbd_map.{name}"), *v);
@@ -466,19 +475,20 @@ impl Node for RgbdMapNode {
 }
 
 /// One RGB-D map's scores (metric names below `rgbd_map.`): the cloud against the true
-/// surfaces, the laser-height slice against the true walls (seed 000 judged its methods by how
+/// surfaces (`truth`, and `index` of them), the laser-height slice against the true walls (seed 000 judged its methods by how
 /// thin and true this trace was), the keyframes' poses against the truth and the planes
 /// against the true surfaces.
 fn score_map(
     map: &RgbdMap,
     truth: &[[f64; 3]],
+    index: &crate::ground_truth::cloud::CloudIndex,
     truth_poses: &[Pose2],
     walls: &OccupancyGrid,
     z: f64,
 ) -> Vec<(String, f64)> {
     let mut out = Vec::new();
     let points: Vec<[f64; 3]> = map.points.iter().map(|p| p.0).collect();
-    if let Some(score) = crate::ground_truth::cloud::score(&points, truth) {
+    if let Some(score) = crate::ground_truth::cloud::score(&points, index) {
         out.extend(score.named());
     }
     let band: Vec<[f64; 3]> = points
@@ -486,7 +496,7 @@ fn score_map(
         .filter(|p| (p[2] - z).abs() <= SLICE_HALF_WIDTH)
         .copied()
         .collect();
-    if let Some(t) = crate::ground_truth::cloud::thickness(&band, truth) {
+    if let Some(t) = crate::ground_truth::cloud::thickness(&band, index) {
         out.push(("slice_thickness_m".into(), t));
     }
     let slice: Vec<[f64; 2]> = band.iter().map(|p| [p[0], p[1]]).collect();
