@@ -380,5 +380,12 @@ mod tests {
             DistanceField::new(&floor(), 0.0, 0.5, 1000).unwrap_err(),
             FieldError::Cell(_)
         ));
+        // A sliver wider than a lookup's 32-bit index along x, within any voxel budget: refused
+        // before its grid is allocated.
+        let sliver = [[[0.0, 0.0, 0.0], [5e9, 0.0, 0.0], [0.0, 0.5, 0.0]]];
+        assert!(matches!(
+            DistanceField::new(&sliver, 1.0, 0.0, u64::MAX).unwrap_err(),
+            FieldError::TooLarge { .. }
+        ));
     }
 }

@@ -1068,23 +1068,30 @@ mod tests {
         g
     }
 
+    /// A filter of sensor model `model` on the room, and every `every`-th beam of the room's
+    /// scan from `truth` as the filter takes them.
+    fn filter_and_beams(model: SensorModel, truth: &Pose2, every: usize) -> (Mcl, Vec<Beam>) {
+        let map = MclMap::new(room());
+        let scan = scan(&map, truth);
+        let c = MclConfig {
+            model,
+            ..MclConfig::default()
+        };
+        let beams = (0..scan.ranges.len())
+            .step_by(every)
+            .map(|k| Beam::new(scan.angle(k), (scan.ranges[k] as f64).min(c.max_range)))
+            .collect();
+        (Mcl::new(c, map, 5), beams)
+    }
+
     /// The beam model's terms through a thread's memo are those computed afresh, for
     /// particles scattered over the room (wide and narrow of the scan's pose), with memos
     /// of every slot, of a few slots that many (beam, range) pairs share, and of one.
     #[test]
     fn kept_beam_terms_are_the_models_terms() {
-        let map = MclMap::new(room());
         let truth = Pose2::new(3.0, 2.0, 0.4);
-        let scan = scan(&map, &truth);
-        let c = MclConfig {
-            model: SensorModel::Beam,
-            ..MclConfig::default()
-        };
-        let mcl = Mcl::new(c, map, 5);
-        let beams: Vec<Beam> = (0..scan.ranges.len())
-            .step_by(30)
-            .map(|k| Beam::new(scan.angle(k), (scan.ranges[k] as f64).min(c.max_range)))
-            .collect();
+        let (mcl, beams) = filter_and_beams(SensorModel::Beam, &truth, 30);
+        let c = mcl.config;
         let mut rng = ChaCha8Rng::seed_from_u64(9);
         let particles: Vec<Pose2> = (0..400)
             .map(|k| {
@@ -1118,24 +1125,14 @@ mod tests {
         }
     }
 
-    /// A 240°, 0.5° scan of `grid` from `pose` (cast on the grid itself).
     /// The likelihood field's terms read from the cells' table are the model's formula at the
     /// beam end's obstacle distance, to the bit, on the map and off it (particles spread
     /// metres about a pose by the room's edge, so that some beams end off the grid).
     #[test]
     fn likelihood_field_terms_are_the_formula_at_the_cells_distance() {
-        let map = MclMap::new(room());
         let truth = Pose2::new(1.0, 1.0, 2.5);
-        let scan = scan(&map, &truth);
-        let c = MclConfig {
-            model: SensorModel::LikelihoodField,
-            ..MclConfig::default()
-        };
-        let mcl = Mcl::new(c, map, 5);
-        let beams: Vec<Beam> = (0..scan.ranges.len())
-            .step_by(10)
-            .map(|k| Beam::new(scan.angle(k), (scan.ranges[k] as f64).min(c.max_range)))
-            .collect();
+        let (mcl, beams) = filter_and_beams(SensorModel::LikelihoodField, &truth, 10);
+        let c = mcl.config;
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let mut memo = TermMemo::with_slots(beams.len(), c.max_range, 0.05, 1);
         let (mut on, mut off) = (0, 0);
@@ -1177,6 +1174,7 @@ mod tests {
         );
     }
 
+    /// A 240°, 0.5° scan of `grid` from `pose` (cast on the grid itself).
     fn scan(map: &MclMap, pose: &Pose2) -> LaserScan {
         let n = 481;
         let inc = 0.5f64.to_radians();
