@@ -471,7 +471,7 @@ pub fn bench_rgbd(s: &Scenario, duration: Option<f64>) -> Result<Value> {
     }))
 }
 
-/// Seed 001's monocular localisation per frame, on the scenario's own run (one core): SIFT,
+/// Seed 001's monocular localisation per frame, on the scenario's own run: SIFT,
 /// and for each localiser the selection, the matching (the seed's timed step) and the pose
 /// search, their sum, and the delegates' matching speed-up over all landmarks.
 pub fn bench_visual(s: &Scenario, duration: Option<f64>) -> Result<Value> {

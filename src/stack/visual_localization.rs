@@ -156,6 +156,8 @@ pub struct VisualLocalizationNode {
     /// Each frame's estimates, in [`LOCALISERS`] order.
     records: Vec<[Estimate; 4]>,
     sift_s: f64,
+    /// The detector's memory, kept from frame to frame.
+    sift_buffers: sift::SiftBuffers,
     bumps: u64,
     bumped: bool,
     summary: Option<serde_json::Value>,
@@ -202,6 +204,7 @@ pub fn node(s: &Scenario) -> Result<Option<VisualLocalizationNode>> {
         track: Trajectory::new("visual localisation"),
         records: Vec::new(),
         sift_s: 0.0,
+        sift_buffers: Default::default(),
         bumps: 0,
         bumped: false,
         summary: None,
@@ -259,7 +262,11 @@ impl Node for VisualLocalizationNode {
         self.next = bus.now + self.period;
         let truth = super::visual_map::planar_of_optical(&truth_view.optical());
         let t0 = std::time::Instant::now();
-        let keypoints = sift::detect(&grey(rgb.width, rgb.height, &rgb.data), &self.spec.sift);
+        let keypoints = sift::detect_with(
+            &grey(rgb.width, rgb.height, &rgb.data),
+            &self.spec.sift,
+            &mut self.sift_buffers,
+        );
         self.sift_s += t0.elapsed().as_secs_f64();
         let k = &self.camera.intrinsics;
         let f = Frame::new(keypoints, k.width, k.height);
@@ -308,7 +315,14 @@ impl Node for VisualLocalizationNode {
                 ),
             }
         };
-        let estimates: [Estimate; 4] = std::array::from_fn(|i| run(LOCALISERS[i], &priors[i]));
+        // The four localisers are independent: each on a core where there are several, each
+        // estimate the same whichever thread makes it.
+        let order: [usize; 4] = std::array::from_fn(|i| i);
+        let made =
+            futago_robot::cores::map_on_cores(&order, 2, |&i| run(LOCALISERS[i], &priors[i]));
+        let Ok(estimates) = <[Estimate; 4]>::try_from(made) else {
+            anyhow::bail!("visual localisation: not one estimate for each of the four localisers");
+        };
         let poses = std::array::from_fn(|i| estimates[i].pose);
         self.poses = Some(poses);
         let drive = LOCALISERS

@@ -34,6 +34,7 @@ use futago_robot::perception::sift::{self, Keypoint, SiftConfig};
 use futago_robot::perception::trinocular::{self, Rig, StereoConfig};
 use futago_sim::config::SpecError;
 use glam::{DQuat, DVec3};
+use image::GrayImage;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 use std::any::Any;
@@ -223,6 +224,7 @@ pub fn node(s: &Scenario, seed: u64) -> Result<Option<VisualMapNode>> {
         frames: Vec::new(),
         first_truth: Vec::new(),
         sift_s: 0.0,
+        sift_buffers: Default::default(),
         stereo_s: 0.0,
         mapping_s: 0.0,
         summary: None,
@@ -265,13 +267,17 @@ pub struct VisualMapNode {
     made_by: String,
     period: Duration,
     next: Time,
-    /// This instant's keypoints of right, left, top, and the right camera's true pose.
-    pending: [Option<(Time, Vec<Keypoint>)>; 3],
+    /// This instant's grey images of right, left and top (their keypoints found together,
+    /// on the cores, once all three are in), and the right camera's true pose.
+    pending: [Option<(Time, GrayImage)>; 3],
     true_depth: Option<(Time, Pose2, futago_msgs::camera::DepthImage)>,
     frames: Vec<FrameRecord>,
     /// Per landmark, the true point of its first keypoint (none where the truth had no depth).
     first_truth: Vec<Option<DVec3>>,
     sift_s: f64,
+    /// The detector's memory for each camera, kept from frame to frame (each behind a lock
+    /// its own image's thread takes alone).
+    sift_buffers: [std::sync::Mutex<sift::SiftBuffers>; 3],
     stereo_s: f64,
     mapping_s: f64,
     summary: Option<serde_json::Value>,
@@ -313,6 +319,24 @@ impl VisualMapNode {
         let [Some((_, right)), Some((_, left)), Some((_, top))] = std::mem::take(&mut self.pending)
         else {
             return Ok(());
+        };
+        // The three images' keypoints, each image on a core where there are several: each
+        // image's keypoints are its own whichever thread finds them.
+        let t0 = std::time::Instant::now();
+        let sift = &self.spec.sift;
+        let images = [
+            (right, &self.sift_buffers[0]),
+            (left, &self.sift_buffers[1]),
+            (top, &self.sift_buffers[2]),
+        ];
+        let found = futago_robot::cores::map_on_cores(&images, 2, |(img, buffers)| {
+            // A lock poisoned by a panic elsewhere still holds buffers `detect_with` may use.
+            let mut buffers = buffers.lock().unwrap_or_else(|e| e.into_inner());
+            sift::detect_with(img, sift, &mut buffers)
+        });
+        self.sift_s += t0.elapsed().as_secs_f64();
+        let Ok([right, left, top]) = <[Vec<Keypoint>; 3]>::try_from(found) else {
+            anyhow::bail!("visual map: not one set of keypoints for each of the three images");
         };
         let Some((_, truth, depth)) = self.true_depth.take() else {
             return Ok(());
@@ -406,15 +430,12 @@ impl Node for VisualMapNode {
         let Some(rgb) = &frame.frame.rgb else {
             return Ok(());
         };
-        let t0 = std::time::Instant::now();
         let img = grey(rgb.width, rgb.height, &rgb.data);
-        let keypoints = sift::detect(&img, &self.spec.sift);
-        self.sift_s += t0.elapsed().as_secs_f64();
         if i == 0 {
             let depth = truth.true_depth()?;
             self.true_depth = Some((bus.now, planar_of_optical(&truth.optical()), depth));
         }
-        self.pending[i] = Some((bus.now, keypoints));
+        self.pending[i] = Some((bus.now, img));
         if self
             .pending
             .iter()

@@ -319,6 +319,55 @@ pub fn grid_search(
     best
 }
 
+/// [`grid_search`]'s pose and cost, the window's poses visited from the prior outwards
+/// (in shells of growing steps from it, the largest of the three axes' counts) so that the
+/// least cost so far, handed to `cost` as its bound, is small from the first poses on: the
+/// pose of a frame's least cost lies near the last frame's, and the poses far from it then
+/// stop after a few terms. `cost(pose, bound)` may stop adding once its sum exceeds `bound`
+/// (not merely reaches it) and return what it has; among poses of equal least cost the one
+/// first in [`SearchConfig::poses`]'s order is kept, so the result is [`grid_search`]'s.
+pub fn grid_search_outward(
+    config: &SearchConfig,
+    prior: &Pose2,
+    mut cost: impl FnMut(&Pose2, f64) -> f64,
+) -> (Pose2, f64) {
+    let xy = SearchConfig::steps(config.half_xy, config.step_xy);
+    let yaw = SearchConfig::steps(
+        config.half_yaw_deg.to_radians(),
+        config.step_yaw_deg.to_radians(),
+    );
+    let (nxy, nyaw) = ((xy.len() / 2) as i64, (yaw.len() / 2) as i64);
+    let mut best = (*prior, f64::INFINITY);
+    let mut best_index: Option<usize> = None;
+    let mut visit = |t: i64, x: i64, y: i64| {
+        let (it, ix, iy) = ((t + nyaw) as usize, (x + nxy) as usize, (y + nxy) as usize);
+        let p = Pose2::new(prior.x + xy[ix], prior.y + xy[iy], prior.theta + yaw[it]);
+        let index = (it * xy.len() + ix) * xy.len() + iy;
+        let c = cost(&p, best.1);
+        if c < best.1 || (c == best.1 && best_index.is_some_and(|b| index < b)) {
+            best = (p, c);
+            best_index = Some(index);
+        }
+    };
+    for r in 0..=nxy.max(nyaw) {
+        let (rt, rxy) = (r.min(nyaw), r.min(nxy));
+        for t in -rt..=rt {
+            for x in -rxy..=rxy {
+                if t.abs() == r || x.abs() == r {
+                    for y in -rxy..=rxy {
+                        visit(t, x, y);
+                    }
+                } else if r <= nxy {
+                    // Only the shell's two faces across y.
+                    visit(t, x, -r);
+                    visit(t, x, r);
+                }
+            }
+        }
+    }
+    best
+}
+
 /// The seed's delegate selection (§3.2, eq. 23).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -697,11 +746,12 @@ pub fn reprojection_cost(camera: &Camera, pose: &Pose2, m: &[Prepared], outlier:
     reprojection_cost_below(camera, pose, m, outlier, f64::INFINITY)
 }
 
-/// [`reprojection_cost`], which stops adding once the sum reaches `bound` and returns the sum
+/// [`reprojection_cost`], which stops adding once the sum exceeds `bound` and returns the sum
 /// so far: each term is a Mahalanobis distance (the information is positive definite, the
 /// pixel noise's variance added to every covariance) or the cap, never negative, so the whole
-/// sum would be no less, and [`grid_search`] keeps the same pose. Most of the search's poses
-/// are far from the least cost, and stop after a few of the matches.
+/// sum would be more, and [`grid_search`] and [`grid_search_outward`] keep the same pose.
+/// Most of the search's poses are far from the least cost, and stop after a few of the
+/// matches.
 pub fn reprojection_cost_below(
     camera: &Camera,
     pose: &Pose2,
@@ -725,7 +775,7 @@ pub fn reprojection_cost_below(
             e.dot(p.information * e).min(outlier)
         };
         sum += d;
-        if sum >= bound {
+        if sum > bound {
             return sum;
         }
     }
@@ -791,7 +841,7 @@ pub fn localise(
     } else {
         match solver {
             Solver::Search => {
-                let (best, cost) = grid_search(&config.search, prior, |p, bound| {
+                let (best, cost) = grid_search_outward(&config.search, prior, |p, bound| {
                     reprojection_cost_below(camera, p, &prepared, config.outlier, bound)
                 });
                 if config.refine {
@@ -1049,6 +1099,61 @@ mod tests {
         assert!((r.theta - truth.theta).abs() < 0.2f64.to_radians());
         // The search visits 21³ poses, each once.
         assert_eq!(cfg.search.poses(&prior).count(), 9261);
+    }
+
+    /// Searching from the prior outwards visits every pose of the window once and keeps
+    /// [`grid_search`]'s pose and cost, ties included (the first in the window's order),
+    /// with windows whose heading and position counts differ either way, and with costs
+    /// that stop early at the bound.
+    #[test]
+    fn the_outward_search_keeps_the_window_s_first_least_cost() {
+        use rand::{Rng, SeedableRng};
+        let prior = Pose2::new(1.0, -2.0, 0.4);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        for config in [
+            SearchConfig::default(),
+            SearchConfig {
+                half_yaw_deg: 3.0,
+                ..Default::default()
+            },
+            SearchConfig {
+                half_xy: 0.02,
+                ..Default::default()
+            },
+            SearchConfig {
+                half_xy: 0.0,
+                half_yaw_deg: 0.0,
+                ..Default::default()
+            },
+        ] {
+            let n = config.poses(&prior).count();
+            // Costs of a few levels, so that many poses tie, as terms summed up to the bound.
+            let table: Vec<Vec<f64>> = (0..n)
+                .map(|_| (0..3).map(|_| rng.random_range(0..4) as f64).collect())
+                .collect();
+            let index = |p: &Pose2| {
+                config
+                    .poses(&prior)
+                    .position(|q| q == *p)
+                    .unwrap_or_else(|| panic!("{p:?} is not in the window"))
+            };
+            let full = |p: &Pose2, _: f64| table[index(p)].iter().sum::<f64>();
+            let mut seen = vec![0u32; n];
+            let outward = grid_search_outward(&config, &prior, |p, bound| {
+                let i = index(p);
+                seen[i] += 1;
+                let mut sum = 0.0;
+                for t in &table[i] {
+                    sum += t;
+                    if sum > bound {
+                        break;
+                    }
+                }
+                sum
+            });
+            assert!(seen.iter().all(|&k| k == 1), "{config:?}: each pose once");
+            assert_eq!(outward, grid_search(&config, &prior, full), "{config:?}");
+        }
     }
 
     fn landmark(observed: u32, missed: u32, contrast: f32) -> Landmark {

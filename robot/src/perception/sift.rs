@@ -107,16 +107,21 @@ impl Keypoint {
 
 /// Euclidean distance between the unit descriptors that `a` and `b` store.
 pub fn distance(a: &Descriptor, b: &Descriptor) -> f32 {
-    let mut s = 0i32;
-    for (x, y) in a.iter().zip(b) {
-        let d = *x as i32 - *y as i32;
-        s += d * d;
+    // Sixteen running sums of whole numbers, so the order does not matter: each square of a
+    // byte's difference fits 16 bits (255² < 2¹⁶), which the compiler multiplies eight to a
+    // register.
+    let mut sums = [0u32; 16];
+    for (ca, cb) in a.chunks_exact(16).zip(b.chunks_exact(16)) {
+        for ((s, x), y) in sums.iter_mut().zip(ca).zip(cb) {
+            let d = x.abs_diff(*y) as u16;
+            *s += (d * d) as u32;
+        }
     }
-    (s as f32).sqrt() / 512.0
+    (sums.iter().sum::<u32>() as f32).sqrt() / 512.0
 }
 
 /// A grey image of f32 levels.
-#[derive(Clone)]
+#[derive(Clone, Default)]
 struct Plane {
     w: usize,
     h: usize,
@@ -128,61 +133,92 @@ impl Plane {
         self.v[y * self.w + x]
     }
 
-    /// Separable Gaussian blur of `sigma` px, edges extended.
-    fn blur(&self, sigma: f64) -> Plane {
+    /// Makes this a `w` × `h` plane, its levels to be written, keeping its memory.
+    fn reshape(&mut self, w: usize, h: usize) {
+        self.w = w;
+        self.h = h;
+        self.v.clear();
+        self.v.resize(w * h, 0.0);
+    }
+
+    /// Separable Gaussian blur of `sigma` px, edges extended, into `out`; `tmp` and `padded`
+    /// are working memory.
+    fn blur_into(&self, sigma: f64, out: &mut Plane, tmp: &mut Vec<f32>, padded: &mut Vec<f32>) {
         let r = (3.0 * sigma).ceil().max(1.0) as isize;
         let mut k: Vec<f32> = (-r..=r)
             .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp() as f32)
             .collect();
         let sum: f32 = k.iter().sum();
         k.iter_mut().for_each(|x| *x /= sum);
-        let (w, h) = (self.w as isize, self.h as isize);
-        let mut tmp = vec![0f32; self.v.len()];
-        // Each row extended by its edge pixels, so that the taps run over whole rows (which
-        // the compiler vectorises) in the same order for every pixel: the sums are those of
-        // taking each pixel's taps in turn.
+        let (w, h) = (self.w, self.h);
+        tmp.clear();
+        tmp.resize(self.v.len(), 0.0);
+        // Each row extended by its edge pixels, so that the taps run over whole rows in the
+        // same order for every pixel. Pixels are summed a block at a time, the block's sums
+        // held in registers over the taps (the compiler vectorises the block) instead of
+        // stored and reloaded at each tap: each pixel's sum is still its taps added in turn
+        // from zero, so the result is the same to the bit.
         let ru = r as usize;
-        let mut padded = vec![0f32; self.w + 2 * ru];
+        padded.clear();
+        padded.resize(w + 2 * ru, 0.0);
         for y in 0..h {
-            let row = &self.v[(y * w) as usize..((y + 1) * w) as usize];
+            let row = &self.v[y * w..(y + 1) * w];
             padded[..ru].fill(row[0]);
-            padded[ru..ru + self.w].copy_from_slice(row);
-            padded[ru + self.w..].fill(row[self.w - 1]);
-            let dst = &mut tmp[(y * w) as usize..((y + 1) * w) as usize];
-            for (j, kj) in k.iter().enumerate() {
-                for (d, s) in dst.iter_mut().zip(&padded[j..j + self.w]) {
-                    *d += kj * s;
-                }
-            }
+            padded[ru..ru + w].copy_from_slice(row);
+            padded[ru + w..].fill(row[w - 1]);
+            let dst = &mut tmp[y * w..(y + 1) * w];
+            convolve_row(dst, &k, |j, x0, n| &padded[j + x0..j + x0 + n]);
         }
-        let mut out = vec![0f32; self.v.len()];
+        out.reshape(w, h);
         for y in 0..h {
-            for (j, kj) in k.iter().enumerate() {
-                let yy = (y + j as isize - r).clamp(0, h - 1);
-                let src = &tmp[(yy * w) as usize..((yy + 1) * w) as usize];
-                let dst = &mut out[(y * w) as usize..((y + 1) * w) as usize];
-                for (d, s) in dst.iter_mut().zip(src) {
-                    *d += kj * s;
-                }
-            }
-        }
-        Plane {
-            w: self.w,
-            h: self.h,
-            v: out,
+            let dst = &mut out.v[y * w..(y + 1) * w];
+            convolve_row(dst, &k, |j, x0, n| {
+                let yy = (y as isize + j as isize - r).clamp(0, h as isize - 1) as usize;
+                &tmp[yy * w + x0..yy * w + x0 + n]
+            });
         }
     }
 
-    /// Every other pixel.
-    fn halve(&self) -> Plane {
+    /// Every other pixel, into `out`.
+    fn halve_into(&self, out: &mut Plane) {
         let (w, h) = (self.w / 2, self.h / 2);
-        let mut v = Vec::with_capacity(w * h);
+        out.reshape(w, h);
         for y in 0..h {
             for x in 0..w {
-                v.push(self.at(2 * x, 2 * y));
+                out.v[y * w + x] = self.at(2 * x, 2 * y);
             }
         }
-        Plane { w, h, v }
+    }
+}
+
+/// Pixels summed together in [`convolve_row`]: four SSE registers' worth.
+const BLOCK: usize = 16;
+
+/// `dst[x] = Σ_j k[j] · src(j)[x]`, the taps added in order from zero, where `src(j, x0, n)`
+/// gives tap `j`'s inputs for pixels `x0..x0 + n`.
+fn convolve_row<'a>(dst: &mut [f32], k: &[f32], src: impl Fn(usize, usize, usize) -> &'a [f32]) {
+    let w = dst.len();
+    let mut x0 = 0;
+    while x0 + BLOCK <= w {
+        let mut acc = [0f32; BLOCK];
+        for (j, kj) in k.iter().enumerate() {
+            let s = &src(j, x0, BLOCK)[..BLOCK];
+            for (a, v) in acc.iter_mut().zip(s) {
+                *a += kj * v;
+            }
+        }
+        dst[x0..x0 + BLOCK].copy_from_slice(&acc);
+        x0 += BLOCK;
+    }
+    if x0 < w {
+        let n = w - x0;
+        let tail = &mut dst[x0..];
+        tail.fill(0.0);
+        for (j, kj) in k.iter().enumerate() {
+            for (a, v) in tail.iter_mut().zip(src(j, x0, n)) {
+                *a += kj * v;
+            }
+        }
     }
 }
 
@@ -202,48 +238,161 @@ const DIR_BINS: usize = 8;
 const CELL_SCALE: f32 = 3.0;
 const CLAMP: f32 = 0.2;
 
+/// Found extrema fewer than this are described on this thread: each takes some tens of
+/// microseconds, about what starting a thread costs.
+const DESCRIBE_SERIAL_BELOW: usize = 32;
+
 /// SIFT keypoints of `image`, highest contrast first (ties by position), at most
 /// `config.max_features`.
+///
+/// The extrema of every octave are found first and then described (their orientations and
+/// descriptors, most of the detector's time) on the machine's cores, in their order, so
+/// the keypoints are the same whatever the number of threads.
 pub fn detect(image: &GrayImage, config: &SiftConfig) -> Vec<Keypoint> {
+    detect_with(image, config, &mut SiftBuffers::default())
+}
+
+/// The memory of the detector's scale space (its Gaussian levels, their differences and the
+/// blur's working rows), kept from one image to the next by [`detect_with`]. Made afresh
+/// for each image, its megabytes came new from the system each time, and the first touch of
+/// each page cost a tenth of a visual mapping run's time.
+#[derive(Default)]
+pub struct SiftBuffers {
+    base: Plane,
+    /// Per octave, its Gaussian levels.
+    pyramid: Vec<Vec<Plane>>,
+    dog: Vec<Plane>,
+    tmp: Vec<f32>,
+    padded: Vec<f32>,
+}
+
+/// [`detect`] in `buffers`' memory: the same keypoints, whatever the buffers held before.
+pub fn detect_with(
+    image: &GrayImage,
+    config: &SiftConfig,
+    buffers: &mut SiftBuffers,
+) -> Vec<Keypoint> {
+    let Some(found) = extrema_of(image, config, buffers) else {
+        return Vec::new();
+    };
+    let pyramid = &buffers.pyramid[..];
+    let described = crate::cores::map_on_cores_with(
+        &found,
+        DESCRIBE_SERIAL_BELOW,
+        // Each thread's own gradients of each Gaussian level, computed as its keypoints'
+        // windows read them: a pixel's gradient is the same whichever thread computes it.
+        || no_gradients(pyramid),
+        |grads, e| describe_extremum(grads, pyramid, e, config.scales),
+    );
+    ranked(described.into_iter().flatten().collect(), config)
+}
+
+/// The refined extrema of the differences of Gaussians of every octave, in order of octave,
+/// level, row and column, with the octaves' Gaussian levels left in `b.pyramid` (one entry
+/// an octave); none for an image too small to search.
+fn extrema_of(
+    image: &GrayImage,
+    config: &SiftConfig,
+    b: &mut SiftBuffers,
+) -> Option<Vec<Extremum>> {
     let (w, h) = (image.width() as usize, image.height() as usize);
     if w < 2 * BORDER + 3 || h < 2 * BORDER + 3 {
-        return Vec::new();
+        return None;
     }
     let s = config.scales;
-    let base = Plane {
-        w,
-        h,
-        v: image.as_raw().iter().map(|&p| p as f32 / 255.0).collect(),
-    };
+    let levels = s + 3;
+    b.base.reshape(w, h);
+    for (d, &p) in b.base.v.iter_mut().zip(image.as_raw()) {
+        *d = p as f32 / 255.0;
+    }
     let sigma0 = config.sigma;
-    let mut first = base.blur((sigma0 * sigma0 - INPUT_BLUR * INPUT_BLUR).max(0.01).sqrt());
-    let mut out = Vec::new();
-    let mut octave = 0usize;
+    let level_planes = |pyramid: &mut Vec<Vec<Plane>>, octave: usize| {
+        if pyramid.len() <= octave {
+            pyramid.push(Vec::new());
+        }
+        pyramid[octave].resize_with(levels, Plane::default);
+    };
+    level_planes(&mut b.pyramid, 0);
+    b.base.blur_into(
+        (sigma0 * sigma0 - INPUT_BLUR * INPUT_BLUR).max(0.01).sqrt(),
+        &mut b.pyramid[0][0],
+        &mut b.tmp,
+        &mut b.padded,
+    );
+    let mut found = Vec::new();
+    let mut octaves = 0;
     loop {
+        let octave = octaves;
         // Gaussians at σ0·2^(i/s), i = 0..s+2, in this octave's pixels.
-        let mut gauss = vec![first.clone()];
-        for i in 1..s + 3 {
+        let gauss = &mut b.pyramid[octave];
+        for i in 1..levels {
             let prev = sigma0 * 2f64.powf((i - 1) as f64 / s as f64);
             let next = sigma0 * 2f64.powf(i as f64 / s as f64);
-            let g = gauss[i - 1].blur((next * next - prev * prev).sqrt());
-            gauss.push(g);
+            let (done, rest) = gauss.split_at_mut(i);
+            done[i - 1].blur_into(
+                (next * next - prev * prev).sqrt(),
+                &mut rest[0],
+                &mut b.tmp,
+                &mut b.padded,
+            );
         }
-        let dog: Vec<Plane> = gauss
-            .windows(2)
-            .map(|p| Plane {
-                w: p[0].w,
-                h: p[0].h,
-                v: p[1].v.iter().zip(&p[0].v).map(|(a, b)| a - b).collect(),
-            })
-            .collect();
-        extrema(&dog, &gauss, octave, config, &mut out);
-        let next = gauss[s].halve();
-        octave += 1;
-        if next.w < 2 * BORDER + 3 || next.h < 2 * BORDER + 3 || octave > 12 {
+        b.dog.resize_with(levels - 1, Plane::default);
+        for (d, p) in b.dog.iter_mut().zip(gauss.windows(2)) {
+            d.reshape(p[0].w, p[0].h);
+            for ((o, a), c) in d.v.iter_mut().zip(&p[1].v).zip(&p[0].v) {
+                *o = a - c;
+            }
+        }
+        extrema(&b.dog, octave, config, &mut found);
+        octaves += 1;
+        let (nw, nh) = (gauss[s].w / 2, gauss[s].h / 2);
+        if nw < 2 * BORDER + 3 || nh < 2 * BORDER + 3 || octaves > 12 {
             break;
         }
-        first = next;
+        level_planes(&mut b.pyramid, octaves);
+        let (this, next) = b.pyramid.split_at_mut(octaves);
+        this[octave][s].halve_into(&mut next[0][0]);
     }
+    b.pyramid.truncate(octaves);
+    Some(found)
+}
+
+/// A cache of gradients for each Gaussian level of `pyramid`, none computed yet.
+fn no_gradients(pyramid: &[Vec<Plane>]) -> Vec<Vec<Option<Gradients<'_>>>> {
+    pyramid
+        .iter()
+        .map(|g| g.iter().map(|_| None).collect())
+        .collect()
+}
+
+/// The keypoints of extremum `e`: one for each of its dominant orientations, described.
+fn describe_extremum<'a>(
+    grads: &mut [Vec<Option<Gradients<'a>>>],
+    pyramid: &'a [Vec<Plane>],
+    e: &Extremum,
+    scales: usize,
+) -> Vec<Keypoint> {
+    let g =
+        grads[e.octave][e.level].get_or_insert_with(|| Gradients::new(&pyramid[e.octave][e.level]));
+    let d_s = (1u32 << e.octave) as f32;
+    orientations(g, e.x, e.y, e.scale)
+        .into_iter()
+        .map(|angle| Keypoint {
+            x: e.x * d_s,
+            y: e.y * d_s,
+            sigma: e.scale * d_s,
+            octave: e.octave as u8,
+            level: (e.octave * scales + e.level) as f32 + e.offset,
+            angle,
+            contrast: e.contrast,
+            descriptor: describe(g, e.x, e.y, e.scale, angle),
+        })
+        .collect()
+}
+
+/// Keypoints highest contrast first (ties by position and angle), at most
+/// `config.max_features`.
+fn ranked(mut out: Vec<Keypoint>, config: &SiftConfig) -> Vec<Keypoint> {
     out.sort_by(|a, b| {
         b.contrast
             .total_cmp(&a.contrast)
@@ -255,19 +404,28 @@ pub fn detect(image: &GrayImage, config: &SiftConfig) -> Vec<Keypoint> {
     out
 }
 
-/// Finds, refines and describes the extrema of one octave's DoG stack.
-fn extrema(
-    dog: &[Plane],
-    gauss: &[Plane],
+/// A refined extremum of the difference of Gaussians, to be described.
+struct Extremum {
     octave: usize,
-    config: &SiftConfig,
-    out: &mut Vec<Keypoint>,
-) {
+    /// The Gaussian level it lies nearest, and its offset from it in levels.
+    level: usize,
+    offset: f32,
+    /// Position, octave pixels.
+    x: f32,
+    y: f32,
+    /// Scale σ, octave pixels.
+    scale: f32,
+    /// |D| at the extremum.
+    contrast: f32,
+}
+
+/// Finds and refines the extrema of one octave's DoG stack, in order of level, row and
+/// column.
+fn extrema(dog: &[Plane], octave: usize, config: &SiftConfig, out: &mut Vec<Extremum>) {
     let s = config.scales;
     let (w, h) = (dog[0].w, dog[0].h);
     let threshold = config.contrast as f32;
     let pre = 0.8 * threshold;
-    let mut grads: Vec<Option<Gradients>> = gauss.iter().map(|_| None).collect();
     for level in 1..=s {
         for y in BORDER..h - BORDER {
             for x in BORDER..w - BORDER {
@@ -281,25 +439,15 @@ fn extrema(
                 if contrast.abs() < threshold {
                     continue;
                 }
-                let scale_in_octave =
-                    config.sigma as f32 * 2f32.powf((pl as f32 + off[2]) / s as f32);
-                let d_s = (1u32 << octave) as f32;
-                let g = grads[pl].get_or_insert_with(|| Gradients::new(&gauss[pl]));
-                let fx = px as f32 + off[0];
-                let fy = py as f32 + off[1];
-                for angle in orientations(g, fx, fy, scale_in_octave) {
-                    let descriptor = describe(g, fx, fy, scale_in_octave, angle);
-                    out.push(Keypoint {
-                        x: fx * d_s,
-                        y: fy * d_s,
-                        sigma: scale_in_octave * d_s,
-                        octave: octave as u8,
-                        level: (octave * s + pl) as f32 + off[2],
-                        angle,
-                        contrast: contrast.abs(),
-                        descriptor,
-                    });
-                }
+                out.push(Extremum {
+                    octave,
+                    level: pl,
+                    offset: off[2],
+                    x: px as f32 + off[0],
+                    y: py as f32 + off[1],
+                    scale: config.sigma as f32 * 2f32.powf((pl as f32 + off[2]) / s as f32),
+                    contrast: contrast.abs(),
+                });
             }
         }
     }
@@ -394,20 +542,27 @@ fn refine(
     None
 }
 
+/// A pixel's gradient: magnitude and angle (rad).
+type Gradient = (f32, f32);
+
 /// The gradients (magnitude, angle) of one Gaussian level, each computed the first time a
 /// keypoint's window reads it: the windows of neighbouring keypoints overlap, and the angle's
-/// arc tangent was a third of the detector's time when every window computed its own.
+/// arc tangent was a third of the detector's time when every window computed its own. Rows
+/// are made as the windows reach them: a cache of the whole level at once (0.6 MB at 320 ×
+/// 240) came fresh from the system on every image, and its pages' first touches were a tenth
+/// of a visual mapping run's time.
 struct Gradients<'a> {
     g: &'a Plane,
-    /// (magnitude, angle) per pixel; NaN magnitude: not computed yet.
-    cache: Vec<(f32, f32)>,
+    /// Per row, (magnitude, angle) per pixel, NaN magnitude where not computed yet; none
+    /// where no pixel of the row has been.
+    rows: Vec<Option<Box<[Gradient]>>>,
 }
 
 impl<'a> Gradients<'a> {
     fn new(g: &'a Plane) -> Gradients<'a> {
         Gradients {
             g,
-            cache: vec![(f32::NAN, 0.0); g.w * g.h],
+            rows: vec![None; g.h],
         }
     }
 
@@ -418,7 +573,8 @@ impl<'a> Gradients<'a> {
             return None;
         }
         let (x, y) = (x as usize, y as usize);
-        let slot = &mut self.cache[y * g.w + x];
+        let row = self.rows[y].get_or_insert_with(|| vec![(f32::NAN, 0.0); g.w].into());
+        let slot = &mut row[x];
         if slot.0.is_nan() {
             let dx = g.at(x + 1, y) - g.at(x - 1, y);
             let dy = g.at(x, y + 1) - g.at(x, y - 1);
@@ -485,10 +641,69 @@ fn floor_small(x: f32) -> f32 {
     if t > x { t - 1.0 } else { t }
 }
 
+/// The columns `dx` (offsets from `cx`, within ±`radius`) of image row `row` where the
+/// square of half-width `reach` cells about (x, y), turned by the angle whose cosine and sine
+/// are `c` and `s`, may lie: the interval where both rotated coordinates lie within `reach`,
+/// worked in `f64` and widened by a pixel at each end, so that it holds every pixel the
+/// descriptor's own test in `f32` accepts. Empty where `from > to`.
+#[allow(clippy::too_many_arguments)]
+fn square_columns(
+    x: f32,
+    y: f32,
+    cx: isize,
+    row: isize,
+    cell: f32,
+    c: f32,
+    s: f32,
+    reach: f32,
+    radius: isize,
+) -> (isize, isize) {
+    let (c, s) = (c as f64, s as f64);
+    let fy = row as f64 - y as f64;
+    let r = reach as f64 * cell as f64;
+    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+    // −r < c·fx + s·fy < r and −r < −s·fx + c·fy < r, each an interval of fx where its
+    // factor is not near zero (there the window's own bound is the only one kept).
+    for (a, b) in [(c, s * fy), (-s, c * fy)] {
+        if a.abs() > 1e-6 {
+            let (p, q) = ((-r - b) / a, (r - b) / a);
+            lo = lo.max(p.min(q));
+            hi = hi.min(p.max(q));
+        }
+    }
+    let shift = x as f64 - cx as f64;
+    let from = if lo.is_finite() {
+        ((lo + shift).floor() as isize - 1).max(-radius)
+    } else {
+        -radius
+    };
+    let to = if hi.is_finite() {
+        ((hi + shift).ceil() as isize + 1).min(radius)
+    } else {
+        radius
+    };
+    (from, to)
+}
+
 /// The 4 × 4 × 8 descriptor at (x, y), scale `sigma`, orientation `angle` (octave pixels),
 /// with trilinear interpolation, a Gaussian window of half the descriptor's width, and the
 /// clamp at 0.2.
 fn describe(g: &mut Gradients, x: f32, y: f32, sigma: f32, angle: f32) -> Descriptor {
+    describe_scanning(g, x, y, sigma, angle, true)
+}
+
+/// [`describe`], scanning each row of the window only over the columns the rotated square
+/// may cover (`narrow`) or over the whole row. The square's pixels are found by the same
+/// test either way, so the two give the same descriptor: the narrow scan skips the half of
+/// the window outside the square, whose rotations were a third of the time.
+fn describe_scanning(
+    g: &mut Gradients,
+    x: f32,
+    y: f32,
+    sigma: f32,
+    angle: f32,
+    narrow: bool,
+) -> Descriptor {
     let cell = CELL_SCALE * sigma;
     let radius = (cell * std::f32::consts::SQRT_2 * (CELLS as f32 + 1.0) * 0.5).round() as isize;
     let (c, s) = (angle.cos(), angle.sin());
@@ -497,7 +712,12 @@ fn describe(g: &mut Gradients, x: f32, y: f32, sigma: f32, angle: f32) -> Descri
     let half = CELLS as f32 / 2.0;
     let bins_per_rad = DIR_BINS as f32 / (2.0 * PI);
     for dy in -radius..=radius {
-        for dx in -radius..=radius {
+        let (from, to) = if narrow {
+            square_columns(x, y, cx, cy + dy, cell, c, s, half + 0.5, radius)
+        } else {
+            (-radius, radius)
+        };
+        for dx in from..=to {
             let (fx, fy) = ((cx + dx) as f32 - x, (cy + dy) as f32 - y);
             // Rotated into the keypoint's frame, in cells.
             let rx = (c * fx + s * fy) / cell;
@@ -705,6 +925,37 @@ mod tests {
         );
     }
 
+    /// The distance is the Euclidean distance of the stored bytes over 512, as the plain sum
+    /// gives it, for random descriptors and the extremes (every byte 0 against every byte
+    /// 255, whose squares are the largest).
+    #[test]
+    fn distance_is_that_of_the_stored_bytes() {
+        let plain = |a: &Descriptor, b: &Descriptor| {
+            let s: i64 = a
+                .iter()
+                .zip(b)
+                .map(|(x, y)| (*x as i64 - *y as i64).pow(2))
+                .sum();
+            (s as f32).sqrt() / 512.0
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let mut pairs = vec![([0u8; 128], [255u8; 128]), ([255u8; 128], [0u8; 128])];
+        for _ in 0..200 {
+            let mut a = [0u8; 128];
+            let mut b = [0u8; 128];
+            rng.fill(&mut a[..]);
+            rng.fill(&mut b[..]);
+            pairs.push((a, b));
+        }
+        for (a, b) in &pairs {
+            assert_eq!(distance(a, b), plain(a, b));
+        }
+        assert_eq!(
+            distance(&pairs[0].0, &pairs[0].1),
+            255.0 * 128f32.sqrt() / 512.0
+        );
+    }
+
     #[test]
     fn distances_are_between_unit_vectors_and_detection_repeats() {
         let img = draw(200, 150, &blobs(200, 150, 60, 9), 0.0, 1.0);
@@ -725,5 +976,80 @@ mod tests {
         assert!(d > 0.05 && d <= 1.42, "{d}");
         // Too small an image has none, without a panic.
         assert!(detect(&GrayImage::new(8, 8), &SiftConfig::default()).is_empty());
+    }
+
+    /// Buffers kept from image to image, of other sizes (more octaves, then fewer, then an
+    /// image too small to search) and other contents, give each image the keypoints that
+    /// fresh ones give.
+    #[test]
+    fn kept_buffers_give_each_image_its_own_keypoints() {
+        let config = SiftConfig::default();
+        let mut buffers = SiftBuffers::default();
+        for (w, h, seed) in [
+            (320, 240, 1),
+            (160, 200, 2),
+            (8, 8, 3),
+            (240, 180, 4),
+            (320, 240, 1),
+        ] {
+            let img = draw(w, h, &blobs(w, h, (w * h / 600) as usize, seed), 0.2, 1.0);
+            let fresh = detect(&img, &config);
+            assert_eq!(detect_with(&img, &config, &mut buffers), fresh, "{w} × {h}");
+            assert_eq!(fresh.is_empty(), w < 20, "{w} × {h}");
+        }
+    }
+
+    /// Scanning each row of a descriptor's window only where the turned square may lie gives
+    /// the descriptor of the whole window, at every angle (the axes, the diagonals and
+    /// between) and at sub-pixel positions and scales of several octaves' sizes.
+    #[test]
+    fn the_narrow_scan_gives_the_whole_window_s_descriptor() {
+        let (w, h) = (120usize, 100usize);
+        let plane = Plane {
+            w,
+            h,
+            v: (0..w * h)
+                .map(|k| (((k % w) as f32 * 0.37).sin() + ((k / w) as f32 * 0.23).cos()) * 0.5)
+                .collect(),
+        };
+        let mut g = Gradients::new(&plane);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut angles: Vec<f32> = (-8..=8).map(|i| i as f32 * PI / 8.0).collect();
+        angles.extend((0..40).map(|_| rng.random_range(-PI..PI)));
+        for (i, angle) in angles.into_iter().enumerate() {
+            let x = 60.0 + rng.random_range(-0.5f32..0.5);
+            let y = 50.0 + rng.random_range(-0.5f32..0.5);
+            let sigma = [1.6f32, 2.3, 3.9][i % 3];
+            assert_eq!(
+                describe_scanning(&mut g, x, y, sigma, angle, true),
+                describe_scanning(&mut g, x, y, sigma, angle, false),
+                "angle {angle}, ({x}, {y}), σ {sigma}"
+            );
+        }
+    }
+
+    /// The keypoints do not depend on how the extrema are shared among threads, each with its
+    /// own gradients: describing every extremum with none computed before gives the same
+    /// keypoints, bit for bit, as `detect`, whose threads share theirs over many extrema.
+    #[test]
+    fn keypoints_are_the_same_however_the_extrema_are_split() {
+        let img = draw(320, 240, &blobs(320, 240, 300, 5), 0.3, 1.0);
+        let config = SiftConfig::default();
+        let mut buffers = SiftBuffers::default();
+        let Some(found) = extrema_of(&img, &config, &mut buffers) else {
+            panic!("an image of 320 × 240 is searched");
+        };
+        let pyramid = &buffers.pyramid[..];
+        // Enough to be described on several threads where the machine has them.
+        assert!(
+            found.len() > 4 * DESCRIBE_SERIAL_BELOW,
+            "{} extrema",
+            found.len()
+        );
+        let alone: Vec<Keypoint> = found
+            .iter()
+            .flat_map(|e| describe_extremum(&mut no_gradients(pyramid), pyramid, e, 3))
+            .collect();
+        assert_eq!(detect(&img, &config), ranked(alone, &config));
     }
 }
