@@ -297,7 +297,7 @@ impl KinectSpec {
         }
         for v in rgb.data.iter_mut() {
             let n: f64 = StandardNormal.sample(rng);
-            *v = (*v as f64 + s * n).round().clamp(0.0, 255.0) as u8;
+            *v = round_to_i64(*v as f64 + s * n).clamp(0, 255) as u8;
         }
     }
 }

@@ -16,7 +16,7 @@
 
 use crate::localization::landmarks::{
     Camera, InView, Landmark, LandmarkMap, MonocularConfig, SearchConfig, View, direction_bin,
-    grid_search, in_view, optical_rotation,
+    grid_search_outward, in_view, optical_rotation,
 };
 use crate::perception::sift::{self, Keypoint};
 use crate::perception::trinocular::{StereoPoint, passes_ratio};
@@ -294,9 +294,9 @@ impl LandmarkMapper {
     }
 
     /// Eq. 11's sum at `pose`, each match's distance capped (see the module); or `Err` with
-    /// the sum so far once it reaches `bound`: every term is a Mahalanobis distance or the
+    /// the sum so far once it exceeds `bound`: every term is a Mahalanobis distance or the
     /// cap, never negative, and the search's prediction term is one too, so the pose's whole
-    /// cost would be no less, and [`grid_search`] keeps the same pose.
+    /// cost would be more, and [`grid_search_outward`] keeps the same pose.
     fn cost_below(
         &self,
         pose: &Pose2,
@@ -308,7 +308,7 @@ impl LandmarkMapper {
         let mut sum: f64 = std::iter::empty::<f64>().sum();
         for d in self.distances(pose, points, m) {
             sum += d.min(self.config.outlier);
-            if sum >= bound {
+            if sum > bound {
                 return Err(sum);
             }
         }
@@ -415,14 +415,19 @@ impl LandmarkMapper {
                         })
                         .collect()
                 };
+                // Each heading's, made the first time the search reaches it (it visits the
+                // window from the prior outwards, the headings in turn).
                 let mut cache: Vec<(i64, Vec<(PointMatch, DMat3)>)> = Vec::new();
-                let grid = grid_search(&self.config.search, &prior, |p, bound| {
+                let grid = grid_search_outward(&self.config.search, &prior, |p, bound| {
                     let key = (p.theta * 1e6).round() as i64;
-                    if cache.last().is_none_or(|(k, _)| *k != key) {
-                        cache.clear();
-                        cache.push((key, infos(p.theta)));
-                    }
-                    match self.cost_below(p, points, &cache[0].1, bound) {
+                    let slot = match cache.iter().position(|(k, _)| *k == key) {
+                        Some(i) => i,
+                        None => {
+                            cache.push((key, infos(p.theta)));
+                            cache.len() - 1
+                        }
+                    };
+                    match self.cost_below(p, points, &cache[slot].1, bound) {
                         Ok(sum) => sum + predicted_cost(p, prediction.as_ref()),
                         Err(partial) => partial,
                     }
