@@ -304,6 +304,8 @@ impl SearchConfig {
 /// order), and that cost. `cost(pose, bound)` is handed the least cost so far: a cost that
 /// is a sum of non-negative terms may stop adding once it reaches `bound` and return what it
 /// has, since that pose can no longer be the least, and the search's result is the same.
+/// The stack searches with [`grid_search_outward`], which finds the same pose with fewer
+/// terms; this, the window in order, is its definition.
 pub fn grid_search(
     config: &SearchConfig,
     prior: &Pose2,

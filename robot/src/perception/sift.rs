@@ -254,8 +254,9 @@ pub fn detect(image: &GrayImage, config: &SiftConfig) -> Vec<Keypoint> {
 
 /// The memory of the detector's scale space (its Gaussian levels, their differences and the
 /// blur's working rows), kept from one image to the next by [`detect_with`]. Made afresh
-/// for each image, its megabytes came new from the system each time, and the first touch of
-/// each page cost a tenth of a visual mapping run's time.
+/// for each image, its megabytes came new from the system each time: `lab-visual-map` took
+/// 1.1 million page faults and 2.7–3.1 s of system time, against 0.34 million and 1.3 s
+/// with the memory kept.
 #[derive(Default)]
 pub struct SiftBuffers {
     base: Plane,
@@ -549,8 +550,8 @@ type Gradient = (f32, f32);
 /// keypoint's window reads it: the windows of neighbouring keypoints overlap, and the angle's
 /// arc tangent was a third of the detector's time when every window computed its own. Rows
 /// are made as the windows reach them: a cache of the whole level at once (0.6 MB at 320 ×
-/// 240) came fresh from the system on every image, and its pages' first touches were a tenth
-/// of a visual mapping run's time.
+/// 240) came fresh from the system for each level of each image (`lab-visual-map`: 1.5
+/// million page faults, 1.1 million with rows).
 struct Gradients<'a> {
     g: &'a Plane,
     /// Per row, (magnitude, angle) per pixel, NaN magnitude where not computed yet; none
