@@ -356,7 +356,8 @@ fn advance_field(grid: &OccupancyGrid) -> Vec<u8> {
         .collect()
 }
 
-/// Rays [`MclMap::cast_each`] advances side by side (8 were no faster).
+/// Rays [`MclMap::cast_each`] advances side by side (8 were no faster, and with the
+/// branchless step slower: 3.4–3.6 → 5.0–5.2 ms an update with 3,000 particles).
 const CAST_LANES: usize = 4;
 
 /// A pose estimate: the weighted mean and the covariance of (x, y, θ).
@@ -819,8 +820,8 @@ impl Mcl {
             0.0
         };
         let mut out = Vec::with_capacity(self.particles.len());
-        // Only the bins' number is read, so the hasher is the fast one (std's SipHash
-        // was a few per cent of an update at thousands of particles).
+        // Only the bins' number is read, so the hasher is the fast one (std's SipHash and
+        // the maths library's `floor` were about 1 % of `office-coverage-bcd`'s samples).
         let mut bins = rustc_hash::FxHashSet::default();
         let z = normal_quantile(c.kld_z);
         let target = |k: usize| -> usize {
