@@ -153,7 +153,8 @@ enum Command {
         /// Scenario files and folders of them (their *.toml files).
         #[arg(required = true)]
         paths: Vec<PathBuf>,
-        /// Scenarios run at once [default: the number of CPU cores].
+        /// Scenarios run at once, each job held to its own share of the cores (Linux)
+        /// [default: the number of CPU cores].
         #[arg(long)]
         jobs: Option<usize>,
         /// Run only the K-th of N equal parts of the suite (1-based), for CI matrices, indexed
