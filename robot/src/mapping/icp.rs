@@ -282,6 +282,27 @@ struct Bucket {
     points: Vec<Oriented>,
 }
 
+impl Bucket {
+    /// Makes this bucket's (at `key`) first point at its least distance from `q` the closest
+    /// so far (`best`, at squared distance `bd`) where it is closer, or as close and this
+    /// bucket comes first in (column, row) order: the nearest point's ties go to the first
+    /// bucket in that order, then to the point added first.
+    fn offer<'a>(
+        &'a self,
+        q: [f64; 2],
+        key: (i64, i64),
+        best: &mut Option<(&'a Oriented, (i64, i64))>,
+        bd: &mut f64,
+    ) {
+        let m = least_squared_distance(&self.xy, q);
+        let better = m < *bd || (m == *bd && best.is_none_or(|(_, at)| key < at));
+        if better && let Some(k) = self.xy.iter().position(|p| squared_distance(p, q) == m) {
+            *best = Some((&self.points[k], key));
+            *bd = m;
+        }
+    }
+}
+
 /// The squared distance from `q` to `p`, as [`PointMap::nearest`] compares them.
 fn squared_distance(p: &[f64; 2], q: [f64; 2]) -> f64 {
     (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)
@@ -346,39 +367,60 @@ impl PointMap {
         }
     }
 
-    /// The nearest map point to `q` within `max` (≤ the bucket size).
+    /// The nearest map point to `q` within `max` (≤ the bucket size): the closest, and of
+    /// points at the same distance the one in the first bucket in (column, row) order, then
+    /// the one added to it first.
     pub fn nearest(&self, q: [f64; 2], max: f64) -> Option<&Oriented> {
         let (bi, bj) = Self::key(q[0], q[1], self.bucket);
         // Only the buckets that the square round the disk of radius `max` reaches, widened by
         // a micrometre for the rounding of the distances below: no other holds a point within
-        // `max`, and those left are visited in the same order, so the nearest (ties too) is
-        // the one all nine would give. Late iterations look 0.1 m round a point in 0.5 m
-        // buckets: one to four buckets instead of nine (most of SLAM's time).
+        // `max`. Late iterations look 0.1 m round a point in 0.5 m buckets: one to four
+        // buckets instead of nine (most of SLAM's time).
         let reach = max * (1.0 + 1e-9) + 1e-6;
         let (li, lj) = Self::key(q[0] - reach, q[1] - reach, self.bucket);
         let (hi, hj) = Self::key(q[0] + reach, q[1] + reach, self.bucket);
-        // The closest so far and its squared distance, `max²` while there is none. The
-        // nearest is the first point, in the order visited, at the least distance within
-        // `max`: each bucket's least distance is found first (no branch on each point), and
-        // only a bucket that holds a closer point than those before it (or the first within
-        // `max`) is searched again for the first point at that distance (issue 48).
-        let mut best: Option<&Oriented> = None;
+        // The closest so far, its bucket and its squared distance (`max²` while there is
+        // none). Each bucket's least distance is found first (no branch on each point), and
+        // only a bucket that holds a closer point than those before it, or one as close in a
+        // bucket that comes first in (column, row) order, is searched again for the first
+        // point at that distance (issue 48).
+        let mut best: Option<(&Oriented, (i64, i64))> = None;
         let mut bd = max * max;
+        // The query's own bucket first: its closest point is most often the nearest, and
+        // then the buckets beside it lie farther than that and are passed over.
+        if let Some(b) = self.buckets.get(&(bi, bj)) {
+            b.offer(q, (bi, bj), &mut best, &mut bd);
+        }
+        let side = self.bucket;
+        // How far `q` lies from the side of its own bucket that faces bucket `i` (0 for its
+        // own), less a nanometre for the rounding of the keys: no point of bucket `i` lies
+        // nearer along this axis.
+        let gap = |i: i64, own: i64, x: f64| -> f64 {
+            let g = match i.cmp(&own) {
+                std::cmp::Ordering::Less => x - own as f64 * side,
+                std::cmp::Ordering::Equal => 0.0,
+                std::cmp::Ordering::Greater => (own + 1) as f64 * side - x,
+            };
+            (g - 1e-9).max(0.0)
+        };
         for i in li.max(bi - 1)..=hi.min(bi + 1) {
+            let gx = gap(i, bi, q[0]);
             for j in lj.max(bj - 1)..=hj.min(bj + 1) {
-                let Some(b) = self.buckets.get(&(i, j)) else {
+                if (i, j) == (bi, bj) {
                     continue;
-                };
-                let m = least_squared_distance(&b.xy, q);
-                if (m < bd || (m <= bd && best.is_none()))
-                    && let Some(k) = b.xy.iter().position(|p| squared_distance(p, q) == m)
-                {
-                    best = Some(&b.points[k]);
-                    bd = m;
+                }
+                let gy = gap(j, bj, q[1]);
+                // Every point of the bucket lies farther than the closest so far: none is
+                // the nearest, nor ties with it.
+                if gx * gx + gy * gy > bd {
+                    continue;
+                }
+                if let Some(b) = self.buckets.get(&(i, j)) {
+                    b.offer(q, (i, j), &mut best, &mut bd);
                 }
             }
         }
-        best
+        best.map(|(o, _)| o)
     }
 
     /// Every point (for export and tests).
