@@ -13,7 +13,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// the processes it spawns (a suite's `--isolate` runs) inherit the share. A run on two cores
 /// splits its heavier steps over both (`futago_robot::cores`, Mesa llvmpipe's rasteriser
 /// threads), and two such runs side by side on two cores waited on each other's threads:
-/// held to a core each, they start no threads, and the shipped suite took 526.9 s instead of
+/// held to a core each, they split nothing (Mesa sizes llvmpipe's pool by the affinity of the
+/// thread that starts its first renderer in a process, so an `--isolate` run's starts no
+/// threads), and the shipped suite took 526.9 s instead of
 /// 631.7 s (its runs 1,005 s summed instead of 1,205 s; stop 94, `futago suite scenarios/
 /// --jobs 2 --isolate`, in the same hour). What a run computes does not depend on its
 /// threads, so the outputs stay the same.
