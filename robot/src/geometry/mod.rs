@@ -1,7 +1,8 @@
 //! Geometry the stack's modules share: distance transforms of occupancy grids ([`grid`]), their
 //! iso-lines ([`contour`]), distance fields of 3D surfaces ([`distance_field`]) and
-//! plane fits in point clouds ([`plane`]), and a distance test without the maths library's
-//! `hypot` ([`closer_than`]). Pose arithmetic and interpolation live with the pose
+//! plane fits in point clouds ([`plane`]), a distance test without the maths library's
+//! `hypot` ([`closer_than`]) and the least distance from a point to a run of points
+//! ([`least_squared_distance`]). Pose arithmetic and interpolation live with the pose
 //! type itself, in [`futago_msgs`], where the command's metrics and the log readers use them too.
 
 pub mod contour;
@@ -22,6 +23,39 @@ pub fn floor_i64(x: f64) -> i64 {
     } else {
         t
     }
+}
+
+/// The squared distance from `q` to `p`: the squares of the differences summed in axis order
+/// (the value [`least_squared_distance`] compares, so a search can find the point it came
+/// from by equality).
+#[inline]
+pub fn squared_distance<const K: usize>(p: &[f64; K], q: &[f64; K]) -> f64 {
+    let mut d = (p[0] - q[0]).powi(2);
+    for k in 1..K {
+        d += (p[k] - q[k]).powi(2);
+    }
+    d
+}
+
+/// The least [`squared_distance`] from `q` to `points` (infinite for none), over four running
+/// minima, one for each of four points in turn, that the compiler can keep in vector
+/// registers: one running minimum made each comparison wait for the one before, and a minimum
+/// is exact in any order. The inner loop of the matchers' nearest-point searches (the ICP's
+/// point map, the 3D maps' scores), where a lookup cell holds tens to hundreds of points.
+pub fn least_squared_distance<const K: usize>(points: &[[f64; K]], q: &[f64; K]) -> f64 {
+    let mut m = [f64::INFINITY; 4];
+    let quads = points.chunks_exact(4);
+    for p in quads.remainder() {
+        let d = squared_distance(p, q);
+        m[0] = if d < m[0] { d } else { m[0] };
+    }
+    for quad in quads {
+        for (m, p) in m.iter_mut().zip(quad) {
+            let d = squared_distance(p, q);
+            *m = if d < *m { d } else { *m };
+        }
+    }
+    m[0].min(m[1]).min(m[2].min(m[3]))
 }
 
 /// Whether (dx, dy) lies closer than `radius` to the origin: `dx.hypot(dy) < radius`, decided

@@ -7,7 +7,7 @@
 //! iterations, and minimises the Huber-weighted point-to-line distances.
 
 use crate::cores::map_on_cores;
-use crate::geometry::{closer_than, floor_i64};
+use crate::geometry::{closer_than, floor_i64, least_squared_distance, squared_distance};
 use futago_msgs::{LaserScan, Pose2, wrap_angle};
 use rustc_hash::FxHashMap;
 use serde::Deserialize;
@@ -294,36 +294,13 @@ impl Bucket {
         best: &mut Option<(&'a Oriented, (i64, i64))>,
         bd: &mut f64,
     ) {
-        let m = least_squared_distance(&self.xy, q);
+        let m = least_squared_distance(&self.xy, &q);
         let better = m < *bd || (m == *bd && best.is_none_or(|(_, at)| key < at));
-        if better && let Some(k) = self.xy.iter().position(|p| squared_distance(p, q) == m) {
+        if better && let Some(k) = self.xy.iter().position(|p| squared_distance(p, &q) == m) {
             *best = Some((&self.points[k], key));
             *bd = m;
         }
     }
-}
-
-/// The squared distance from `q` to `p`, as [`PointMap::nearest`] compares them.
-fn squared_distance(p: &[f64; 2], q: [f64; 2]) -> f64 {
-    (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)
-}
-
-/// The least squared distance from `q` to the points of `xy` (infinite for none), over four
-/// lanes that the compiler can keep in vector registers: a minimum is exact in any order.
-fn least_squared_distance(xy: &[[f64; 2]], q: [f64; 2]) -> f64 {
-    let mut m = [f64::INFINITY; 4];
-    let quads = xy.chunks_exact(4);
-    for p in quads.remainder() {
-        let d = squared_distance(p, q);
-        m[0] = if d < m[0] { d } else { m[0] };
-    }
-    for quad in quads {
-        for (m, p) in m.iter_mut().zip(quad) {
-            let d = squared_distance(p, q);
-            *m = if d < *m { d } else { *m };
-        }
-    }
-    m[0].min(m[1]).min(m[2].min(m[3]))
 }
 
 impl PointMap {
