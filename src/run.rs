@@ -23,6 +23,7 @@ use futago_sim::rig::Cameras;
 use futago_sim::sim::scene;
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -108,29 +109,78 @@ impl FrameTruth for TrueDepth<'_> {
     }
 }
 
-/// Each node with the wall time spent in it.
+/// Each node with the wall time spent in it, in all and by callback.
 struct Scheduled {
     node: Box<dyn Node>,
     seconds: f64,
+    callbacks: BTreeMap<String, Calls>,
+}
+
+/// The calls of one of a node's callbacks (one stream's messages, or its control ticks):
+/// how many, their summed and their longest wall time. The longest is the latency a real
+/// robot's computer would have to absorb within the stream's period, which a mean hides.
+#[derive(Default)]
+struct Calls {
+    calls: u64,
+    seconds: f64,
+    longest_s: f64,
 }
 
 impl Scheduled {
-    fn call<T>(&mut self, f: impl FnOnce(&mut dyn Node) -> Result<T>) -> Result<T> {
+    fn new(node: Box<dyn Node>) -> Scheduled {
+        Scheduled {
+            node,
+            seconds: 0.0,
+            callbacks: BTreeMap::new(),
+        }
+    }
+
+    /// Runs callback `what` of the node (`scan/front`, `frame/kinect`, `control`, …), timed.
+    fn call<T>(&mut self, what: &str, f: impl FnOnce(&mut dyn Node) -> Result<T>) -> Result<T> {
         let t0 = Instant::now();
         let r = f(self.node.as_mut()).with_context(|| format!("node `{}`", self.node.name()));
-        self.seconds += t0.elapsed().as_secs_f64();
+        let dt = t0.elapsed().as_secs_f64();
+        self.seconds += dt;
+        let c = match self.callbacks.get_mut(what) {
+            Some(c) => c,
+            None => self.callbacks.entry(what.to_string()).or_default(),
+        };
+        c.calls += 1;
+        c.seconds += dt;
+        c.longest_s = c.longest_s.max(dt);
         r
+    }
+
+    /// The callbacks' calls for `performance`: for each, how many, the mean and the longest
+    /// in milliseconds.
+    fn callbacks_json(&self) -> Value {
+        let by: serde_json::Map<String, Value> = self
+            .callbacks
+            .iter()
+            .map(|(what, c)| {
+                (
+                    what.clone(),
+                    json!({
+                        "calls": c.calls,
+                        "mean_ms": 1e3 * c.seconds / c.calls.max(1) as f64,
+                        "max_ms": 1e3 * c.longest_s,
+                    }),
+                )
+            })
+            .collect();
+        Value::Object(by)
     }
 
     /// A callback that takes the bus, then the node's look at the truth of the same instant
     /// ([`Node::observe`], its scorer's; not timed as the node's work).
     fn call_observed(
         &mut self,
+        what: &str,
         truth: &TrueState,
         bus: &mut Bus,
         f: impl FnOnce(&mut dyn Node, &mut Bus) -> Result<()>,
     ) -> Result<()> {
-        self.call(|node| f(node, bus))?;
+        self.call(what, |node| f(node, bus))?;
         self.node.observe(truth, bus);
         Ok(())
     }
@@ -330,7 +380,9 @@ impl CameraRig {
                     camera: c,
                     carrier: shot.carrier,
                 };
-                nodes[i].call(|node| node.on_frame(&name, &frame, &mut truth, bus))?;
+                nodes[i].call(&format!("frame/{name}"), |node| {
+                    node.on_frame(&name, &frame, &mut truth, bus)
+                })?;
                 nodes[i].node.observe(state, bus);
             }
         }
@@ -395,7 +447,7 @@ fn finish_nodes(
             trajectories: t,
             pictures,
             performance,
-        } = n.call(|node| node.finish(bus, out))?;
+        } = n.call("finish", |node| node.finish(bus, out))?;
         f.entries.extend(summary);
         f.files.extend(written);
         f.map = f.map.or(m);
@@ -403,6 +455,7 @@ fn finish_nodes(
         f.pictures.extend(pictures);
         let mut p = performance;
         p.insert("wall_s".into(), json!(n.seconds));
+        p.insert("callbacks".into(), n.callbacks_json());
         f.per_node
             .insert(n.node.name().to_string(), Value::Object(p));
     }
@@ -445,21 +498,23 @@ fn deliver_truth(
     bus: &mut Bus,
 ) -> Result<()> {
     for &i in to {
-        nodes[i].call(|node| node.on_truth(truth, bus))?;
+        nodes[i].call("truth", |node| node.on_truth(truth, bus))?;
     }
     Ok(())
 }
 
-/// Hands a message to the nodes `to`, in node order, each observing the truth after it.
+/// Hands a message of stream `what` to the nodes `to`, in node order, each observing the
+/// truth after it.
 fn deliver(
     nodes: &mut [Scheduled],
+    what: &str,
     to: &[usize],
     truth: &TrueState,
     bus: &mut Bus,
     mut f: impl FnMut(&mut dyn Node, &mut Bus) -> Result<()>,
 ) -> Result<()> {
     for &i in to {
-        nodes[i].call_observed(truth, bus, &mut f)?;
+        nodes[i].call_observed(what, truth, bus, &mut f)?;
     }
     Ok(())
 }
@@ -472,7 +527,7 @@ fn control(
     sim: &mut Simulation,
 ) -> Result<Option<futago_msgs::DriveCommand>> {
     for n in nodes.iter_mut() {
-        n.call_observed(truth, bus, |node, bus| node.on_control(bus))?;
+        n.call_observed("control", truth, bus, |node, bus| node.on_control(bus))?;
     }
     let cmd = bus.command.take();
     for (name, angle) in bus.joint_commands.drain(..) {
@@ -490,11 +545,11 @@ fn begin(
     bus: &mut Bus,
 ) -> Result<Option<futago_msgs::DriveCommand>> {
     for n in nodes.iter_mut() {
-        n.call_observed(truth, bus, |node, bus| node.on_control(bus))?;
+        n.call_observed("control", truth, bus, |node, bus| node.on_control(bus))?;
     }
     let cmd = bus.command.take();
     for n in nodes.iter_mut() {
-        n.call(|node| node.start(bus))?;
+        n.call("start", |node| node.start(bus))?;
     }
     Ok(cmd)
 }
@@ -509,7 +564,9 @@ fn deliver_scan(
     bus: &mut Bus,
 ) -> Result<()> {
     for &i in to {
-        nodes[i].call(|node| node.on_scan(name, scan, bus))?;
+        nodes[i].call(&format!("scan/{name}"), |node| {
+            node.on_scan(name, scan, bus)
+        })?;
         nodes[i].node.on_scan_truth(name, hits);
         nodes[i].node.observe(truth, bus);
     }
@@ -530,7 +587,7 @@ fn schedule(
         .order
         .iter()
         .filter_map(|&i| slots[i].take())
-        .map(|node| Scheduled { node, seconds: 0.0 })
+        .map(Scheduled::new)
         .collect();
     (ordered, sch.lags)
 }
@@ -654,9 +711,14 @@ pub fn simulate_with(
             }
             odo.integrate(&o);
             bus.push_odometry(now, odo.pose);
-            deliver(&mut nodes, &to.odometry, &truth, &mut bus, |node, bus| {
-                node.on_odometry(&o, bus)
-            })?;
+            deliver(
+                &mut nodes,
+                "odometry",
+                &to.odometry,
+                &truth,
+                &mut bus,
+                |node, bus| node.on_odometry(&o, bus),
+            )?;
         }
         cameras.capture(&sim, &mut nodes, (&truth, &mut bus))?;
         for ((l, scan), hits) in out.scans.into_iter().zip(&out.hits) {

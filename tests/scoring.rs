@@ -3,7 +3,8 @@
 //!
 //! - `run::evaluate` scores a run without writing anything, and gives the same metrics and
 //!   gates as `run::run`, which writes the files after scoring and reads none back;
-//! - the summary lists every file the run wrote, and only those;
+//! - the summary lists every file the run wrote, and only those, and times each node by
+//!   callback (every scan handed to the localiser counted);
 //! - the oracle node (`pose/ground_truth`) runs only where a module asks for the truth, and
 //!   the summary then names it and its consumers.
 
@@ -101,6 +102,32 @@ fn a_run_scored_in_memory_matches_the_run_written_to_disk() {
     // No oracle: the driver steers on the localiser's estimate.
     assert!(summary.get("oracle").is_none());
     assert!(summary["performance"]["nodes"].get("oracle").is_none());
+
+    // Each node's time by callback: the localiser was handed every scan of the laser once,
+    // started and finished once, and its callbacks' times make up its wall time.
+    let loc = &summary["performance"]["nodes"]["localization"];
+    let calls = loc["callbacks"].as_object().unwrap();
+    let laser = &summary["lidar"][0];
+    let scans = &calls[&format!("scan/{}", laser["name"].as_str().unwrap())];
+    assert_eq!(scans["calls"], laser["scans"], "{calls:?}");
+    assert!(laser["scans"].as_u64().unwrap() > 100, "{laser}");
+    assert_eq!(calls["start"]["calls"], 1);
+    assert_eq!(calls["finish"]["calls"], 1);
+    let mut summed = 0.0;
+    for (what, c) in calls {
+        let (n, mean, max) = (
+            c["calls"].as_f64().unwrap(),
+            c["mean_ms"].as_f64().unwrap(),
+            c["max_ms"].as_f64().unwrap(),
+        );
+        assert!(n >= 1.0 && mean >= 0.0 && max >= mean, "{what}: {c}");
+        summed += n * mean / 1e3;
+    }
+    let wall = loc["wall_s"].as_f64().unwrap();
+    assert!(
+        (summed - wall).abs() <= 1e-9 * wall.max(1.0),
+        "callbacks {summed} s, node {wall} s"
+    );
 }
 
 #[test]
