@@ -23,7 +23,6 @@ use futago_sim::rig::Cameras;
 use futago_sim::sim::scene;
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -113,7 +112,10 @@ impl FrameTruth for TrueDepth<'_> {
 struct Scheduled {
     node: Box<dyn Node>,
     seconds: f64,
-    callbacks: BTreeMap<String, Calls>,
+    /// By callback (`scan`, `frame`, `control`, …) and stream (a laser's or camera's name;
+    /// empty for the others), in the order first called: a node has a few, so a scan looks
+    /// its entry up without a map or a key built for it.
+    callbacks: Vec<(&'static str, String, Calls)>,
 }
 
 /// The calls of one of a node's callbacks (one stream's messages, or its control ticks):
@@ -131,35 +133,53 @@ impl Scheduled {
         Scheduled {
             node,
             seconds: 0.0,
-            callbacks: BTreeMap::new(),
+            callbacks: Vec::new(),
         }
     }
 
-    /// Runs callback `what` of the node (`scan/front`, `frame/kinect`, `control`, …), timed.
-    fn call<T>(&mut self, what: &str, f: impl FnOnce(&mut dyn Node) -> Result<T>) -> Result<T> {
+    /// Runs callback `what` of the node (`scan`, `frame`, `control`, …) for `stream` (a
+    /// laser's or a camera's name, or empty), timed.
+    fn call<T>(
+        &mut self,
+        (what, stream): (&'static str, &str),
+        f: impl FnOnce(&mut dyn Node) -> Result<T>,
+    ) -> Result<T> {
         let t0 = Instant::now();
         let r = f(self.node.as_mut()).with_context(|| format!("node `{}`", self.node.name()));
         let dt = t0.elapsed().as_secs_f64();
         self.seconds += dt;
-        let c = match self.callbacks.get_mut(what) {
-            Some(c) => c,
-            None => self.callbacks.entry(what.to_string()).or_default(),
+        let k = match self
+            .callbacks
+            .iter()
+            .position(|(w, s, _)| *w == what && s == stream)
+        {
+            Some(k) => k,
+            None => {
+                self.callbacks
+                    .push((what, stream.to_string(), Calls::default()));
+                self.callbacks.len() - 1
+            }
         };
+        let c = &mut self.callbacks[k].2;
         c.calls += 1;
         c.seconds += dt;
         c.longest_s = c.longest_s.max(dt);
         r
     }
 
-    /// The callbacks' calls for `performance`: for each, how many, the mean and the longest
-    /// in milliseconds.
+    /// The callbacks' calls for `performance`, each under `what/stream` (or `what`): how
+    /// many, the mean and the longest in milliseconds.
     fn callbacks_json(&self) -> Value {
         let by: serde_json::Map<String, Value> = self
             .callbacks
             .iter()
-            .map(|(what, c)| {
+            .map(|(what, stream, c)| {
                 (
-                    what.clone(),
+                    if stream.is_empty() {
+                        what.to_string()
+                    } else {
+                        format!("{what}/{stream}")
+                    },
                     json!({
                         "calls": c.calls,
                         "mean_ms": 1e3 * c.seconds / c.calls.max(1) as f64,
@@ -175,12 +195,12 @@ impl Scheduled {
     /// ([`Node::observe`], its scorer's; not timed as the node's work).
     fn call_observed(
         &mut self,
-        what: &str,
+        what: &'static str,
         truth: &TrueState,
         bus: &mut Bus,
         f: impl FnOnce(&mut dyn Node, &mut Bus) -> Result<()>,
     ) -> Result<()> {
-        self.call(what, |node| f(node, bus))?;
+        self.call((what, ""), |node| f(node, bus))?;
         self.node.observe(truth, bus);
         Ok(())
     }
@@ -380,7 +400,7 @@ impl CameraRig {
                     camera: c,
                     carrier: shot.carrier,
                 };
-                nodes[i].call(&format!("frame/{name}"), |node| {
+                nodes[i].call(("frame", &name), |node| {
                     node.on_frame(&name, &frame, &mut truth, bus)
                 })?;
                 nodes[i].node.observe(state, bus);
@@ -447,7 +467,7 @@ fn finish_nodes(
             trajectories: t,
             pictures,
             performance,
-        } = n.call("finish", |node| node.finish(bus, out))?;
+        } = n.call(("finish", ""), |node| node.finish(bus, out))?;
         f.entries.extend(summary);
         f.files.extend(written);
         f.map = f.map.or(m);
@@ -498,23 +518,24 @@ fn deliver_truth(
     bus: &mut Bus,
 ) -> Result<()> {
     for &i in to {
-        nodes[i].call("truth", |node| node.on_truth(truth, bus))?;
+        nodes[i].call(("truth", ""), |node| node.on_truth(truth, bus))?;
     }
     Ok(())
 }
 
-/// Hands a message of stream `what` to the nodes `to`, in node order, each observing the
-/// truth after it.
-fn deliver(
+/// Hands an odometry message to the nodes `to`, in node order, each observing the truth
+/// after it.
+fn deliver_odometry(
     nodes: &mut [Scheduled],
-    what: &str,
     to: &[usize],
     truth: &TrueState,
     bus: &mut Bus,
-    mut f: impl FnMut(&mut dyn Node, &mut Bus) -> Result<()>,
+    odometry: &futago_msgs::Odometry,
 ) -> Result<()> {
     for &i in to {
-        nodes[i].call_observed(what, truth, bus, &mut f)?;
+        nodes[i].call_observed("odometry", truth, bus, |node, bus| {
+            node.on_odometry(odometry, bus)
+        })?;
     }
     Ok(())
 }
@@ -549,7 +570,7 @@ fn begin(
     }
     let cmd = bus.command.take();
     for n in nodes.iter_mut() {
-        n.call("start", |node| node.start(bus))?;
+        n.call(("start", ""), |node| node.start(bus))?;
     }
     Ok(cmd)
 }
@@ -564,9 +585,7 @@ fn deliver_scan(
     bus: &mut Bus,
 ) -> Result<()> {
     for &i in to {
-        nodes[i].call(&format!("scan/{name}"), |node| {
-            node.on_scan(name, scan, bus)
-        })?;
+        nodes[i].call(("scan", name), |node| node.on_scan(name, scan, bus))?;
         nodes[i].node.on_scan_truth(name, hits);
         nodes[i].node.observe(truth, bus);
     }
@@ -711,14 +730,7 @@ pub fn simulate_with(
             }
             odo.integrate(&o);
             bus.push_odometry(now, odo.pose);
-            deliver(
-                &mut nodes,
-                "odometry",
-                &to.odometry,
-                &truth,
-                &mut bus,
-                |node, bus| node.on_odometry(&o, bus),
-            )?;
+            deliver_odometry(&mut nodes, &to.odometry, &truth, &mut bus, &o)?;
         }
         cameras.capture(&sim, &mut nodes, (&truth, &mut bus))?;
         for ((l, scan), hits) in out.scans.into_iter().zip(&out.hits) {
