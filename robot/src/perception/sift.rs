@@ -773,8 +773,8 @@ fn describe_scanning(
 /// `v.rem_euclid(2π)` (f32), without the maths library's `fmodf` for the usual case of a
 /// gradient's direction less the keypoint's: for `v` in (−2π, 2π), `fmod` returns `v`
 /// itself, which `rem_euclid` then takes as it is or adds 2π to, as here; other values go
-/// to `rem_euclid`. The same bits either way (a tested property); `fmodf` was a twentieth
-/// of a descriptor's time.
+/// to `rem_euclid`. The same bits either way (a tested property); `fmodf` took 1.25 % of
+/// `futago bench visual`'s samples beside the descriptors' own 17.6 %.
 #[inline(always)]
 fn turn_remainder(v: f32) -> f32 {
     const TURN: f32 = 2.0 * PI;
