@@ -331,20 +331,19 @@ impl Node for RgbdMapNode {
         let env = grid
             .as_ref()
             .map(|g| EnvironmentMap::new(g, self.slice_z, futago_robot::geometry::grid::OCCUPIED));
+        // Each method's map built on whichever core is free: each depends on the keyframes
+        // and its method alone (34 s one after another in `office-rgbd-methods`).
+        let built = futago_robot::cores::map_each_on_cores(&self.methods, |method| {
+            let t0 = Instant::now();
+            let map = self.mapper.build(*method, env.as_ref());
+            (map, t0.elapsed().as_secs_f64())
+        });
         let mut build_seconds = serde_json::Map::new();
-        let maps: Vec<RgbdMap> = self
-            .methods
-            .iter()
-            .map(|method| {
-                let t0 = Instant::now();
-                let map = self.mapper.build(*method, env.as_ref());
-                build_seconds.insert(
-                    format!("build_{}_s", method.name()),
-                    json!(t0.elapsed().as_secs_f64()),
-                );
-                map
-            })
-            .collect();
+        let mut maps: Vec<RgbdMap> = Vec::with_capacity(built.len());
+        for (map, seconds) in built {
+            build_seconds.insert(format!("build_{}_s", map.method.name()), json!(seconds));
+            maps.push(map);
+        }
         let mut counts = serde_json::to_value(self.mapper.counts()).unwrap_or_default();
         counts["environment_map_points"] = json!(env.as_ref().map_or(0, |e| e.len()));
         for map in &maps {
