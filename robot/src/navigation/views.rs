@@ -27,6 +27,7 @@
 //! next-best-view planners commonly do) up to `range`, stopping at obstacles.
 
 use crate::config::ConfigError;
+use crate::cores::map_on_cores_with;
 use crate::geometry::grid::{OCCUPIED, clear_distance, obstacle_distance};
 use crate::navigation::coverage::inside_polygon;
 use crate::navigation::exploration::frontiers;
@@ -241,28 +242,41 @@ pub fn next_view(
         }
     };
     let frontier_choice;
-    let mut candidates = Vec::new();
-    let mut seen = vec![0u32; grid.width * grid.height];
-    let mut stamp = 0u32;
-    for j in (0..grid.height).step_by(step) {
-        for i in (0..grid.width).step_by(step) {
+    // The cells a candidate may stand on, one every `step`.
+    let standing: Vec<(usize, usize)> = (0..grid.height)
+        .step_by(step)
+        .flat_map(|j| (0..grid.width).step_by(step).map(move |i| (i, j)))
+        .filter(|&(i, j)| {
             let k = j * grid.width + i;
-            let c = grid.cells[k];
-            if !(0..OCCUPIED).contains(&c)
-                || (distance[k] as f64) < config.clearance
-                || !travel[k].is_finite()
-            {
-                continue;
-            }
+            (0..OCCUPIED).contains(&grid.cells[k])
+                && (distance[k] as f64) >= config.clearance
+                && travel[k].is_finite()
+        })
+        .collect();
+    // Each one's prediction on the cores (most of the planning's time), each thread with its
+    // own marks of the cells counted: a prediction is the same whichever thread makes it.
+    let cells = grid.width * grid.height;
+    let predicted = map_on_cores_with(
+        &standing,
+        PREDICT_SERIAL_BELOW,
+        || (vec![0u32; cells], 0u32),
+        |(seen, stamp), &(i, j)| {
             let position = grid.cell_center(i, j);
-            stamp += 1;
-            let (new_cells, weighted) = predict(&grid, &run, position, config, &mut seen, stamp);
-            if new_cells < config.min_new {
-                continue;
-            }
-            candidates.push(terms(k, position, new_cells, weighted));
+            *stamp += 1;
+            (
+                position,
+                predict(&grid, &run, position, config, seen, *stamp),
+            )
+        },
+    );
+    let mut candidates = Vec::new();
+    for (&(i, j), (position, (new_cells, weighted))) in standing.iter().zip(predicted) {
+        if new_cells >= config.min_new {
+            candidates.push(terms(j * grid.width + i, position, new_cells, weighted));
         }
     }
+    let mut seen = vec![0u32; cells];
+    let mut stamp = 0u32;
     if candidates.is_empty() {
         return None;
     }
@@ -455,6 +469,11 @@ fn predict(
 
 /// Rays [`predict`] advances side by side.
 const RAY_LANES: usize = 4;
+
+/// Candidates fewer than this are predicted on this thread: a prediction casts a ray every
+/// `ray_step_deg` (720 by default) and takes longer than starting a thread, but a handful
+/// is not worth one.
+const PREDICT_SERIAL_BELOW: usize = 8;
 
 #[cfg(test)]
 mod tests {
