@@ -13,7 +13,7 @@ pub use summary::Summary;
 use crate::scenario::Scenario;
 use crate::stack::{self, Bus, CameraFrame, FrameTruth, Node, Report, TrueState};
 use anyhow::{Context, Result, bail};
-use futago_msgs::camera::DepthImage;
+use futago_msgs::camera::{DepthImage, RgbImage};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{Duration, Pose2, Time, tum};
 use futago_robot::localization::odometry::OdometryIntegrator;
@@ -85,18 +85,27 @@ pub struct Outcome {
 }
 
 /// The scorers' view of the frame just taken: the state, the true optical pose, and the true
-/// depth rendered on demand (timed with the rendering).
+/// depth rendered on demand (timed with the rendering); and the frame's colour, its own or
+/// rendered on demand.
 struct TrueDepth<'a> {
     state: &'a TrueState,
     optical: futago_msgs::Pose3,
     cameras: &'a mut Cameras,
     camera: usize,
     carrier: rapier3d::math::Pose,
+    frame: &'a CameraFrame,
 }
 
 impl FrameTruth for TrueDepth<'_> {
     fn true_depth(&mut self) -> Result<DepthImage> {
         Ok(self.cameras.true_depth(self.camera, &self.carrier)?)
+    }
+
+    fn colour(&mut self) -> Result<RgbImage> {
+        match &self.frame.frame.rgb {
+            Some(rgb) => Ok(rgb.clone()),
+            None => Ok(self.cameras.colour(self.camera, &self.carrier)?),
+        }
     }
 
     fn optical(&self) -> futago_msgs::Pose3 {
@@ -377,10 +386,14 @@ impl CameraRig {
             if !wanting.iter().any(|i| active(&i)) {
                 continue;
             }
-            let rgb = wanting
-                .iter()
-                .filter(active)
-                .any(|&i| nodes[i].node.wants_rgb(&name));
+            // Colour where an active node wants it, unless every node taking the frame that
+            // wants colour asks for it frame by frame and the camera can render it then.
+            let wants_rgb = |i: usize| nodes[i].node.wants_rgb(&name);
+            let rgb = wanting.iter().filter(active).any(|&i| wants_rgb(i))
+                && !(cameras.colour_on_demand(c)
+                    && wanting
+                        .iter()
+                        .all(|&i| !wants_rgb(i) || nodes[i].node.colour_on_demand(&name)));
             // The grid every taker reads: the strides' greatest common divisor.
             let depth_stride = wanting
                 .iter()
@@ -399,6 +412,7 @@ impl CameraRig {
                     cameras,
                     camera: c,
                     carrier: shot.carrier,
+                    frame: &frame,
                 };
                 nodes[i].call(("frame", &name), |node| {
                     node.on_frame(&name, &frame, &mut truth, bus)

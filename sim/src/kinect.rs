@@ -17,7 +17,7 @@
 
 use crate::config::{SpecError, check_mount, check_range, mount_pose};
 use crate::render::{RenderError, Renderer, optical_from_body};
-use futago_msgs::camera::{DepthImage, Intrinsics, RgbdFrame};
+use futago_msgs::camera::{DepthImage, Intrinsics, RgbImage, RgbdFrame};
 use futago_msgs::{Pose3, Time};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -719,6 +719,9 @@ pub struct Kinect {
     /// The last capture's depth image before noise, with the stamp and base pose it was
     /// rendered at, when it was rendered alone (the render [`Kinect::true_depth`] makes).
     noiseless: Option<(Time, Pose, DepthImage)>,
+    /// The last capture's stamp and base pose where it was taken without its colour image,
+    /// and that image once [`Kinect::colour`] has rendered it.
+    uncoloured: Option<(Time, Pose, Option<RgbImage>)>,
 }
 
 impl Kinect {
@@ -728,6 +731,7 @@ impl Kinect {
             rng,
             frames: 0,
             noiseless: None,
+            uncoloured: None,
         }
     }
 
@@ -755,6 +759,7 @@ impl Kinect {
     ) -> Result<RgbdFrame, RenderError> {
         let camera = *base * self.spec.mount;
         self.noiseless = None;
+        self.uncoloured = (!rgb).then_some((stamp, *base, None));
         let (rgb, mut depth) = if rgb && self.spec.depth == self.spec.rgb {
             let (c, d) = renderer.render(&self.spec.rgb, &camera)?;
             (Some(c), d)
@@ -780,6 +785,55 @@ impl Kinect {
             depth,
             depth_intrinsics: self.spec.depth,
         })
+    }
+
+    /// Whether a frame captured without colour can have it rendered afterwards by
+    /// [`Kinect::colour`] with the pixels a capture with colour would have given: where the
+    /// colour image has a size of its own, a capture renders it apart from the depth either
+    /// way (of the same size, the two come from one render, whose depth may differ from a
+    /// depth render's where two surfaces meet).
+    pub fn colour_on_demand(&self) -> bool {
+        self.spec.depth != self.spec.rgb
+    }
+
+    /// The colour image of the last capture, taken without it, from `base` at `stamp` (that
+    /// capture's), with the scene's bodies still posed for `stamp` in `renderer`: rendered
+    /// and noised now (its noise draws follow the depth's, as in a capture with colour), and
+    /// kept for the next call. For nodes that need a frame's colour only after looking at
+    /// its depth. An error where the last capture was another or held its colour, or where
+    /// [`Kinect::colour_on_demand`] does not hold.
+    pub fn colour(
+        &mut self,
+        renderer: &mut Renderer,
+        base: &Pose,
+        stamp: Time,
+    ) -> Result<RgbImage, RenderError> {
+        if !self.colour_on_demand() {
+            return Err(RenderError::Config(
+                "a camera whose colour and depth images have the same size renders colour \
+                 with the frame or not at all"
+                    .into(),
+            ));
+        }
+        let Some((t, b, kept)) = &mut self.uncoloured else {
+            return Err(RenderError::Config(
+                "the last frame was captured with its colour image, or none was".into(),
+            ));
+        };
+        if *t != stamp || *b != *base {
+            return Err(RenderError::Config(format!(
+                "colour asked for the frame at {stamp:?}, but the last one was captured at {t:?}"
+            )));
+        }
+        if let Some(c) = kept {
+            return Ok(c.clone());
+        }
+        let mut c = renderer
+            .render(&self.spec.rgb, &(*base * self.spec.mount))?
+            .0;
+        self.spec.apply_rgb_noise(&mut c, &mut self.rng);
+        *kept = Some(c.clone());
+        Ok(c)
     }
 
     /// The depth image this camera would measure without noise (every pixel's true distance

@@ -13,7 +13,7 @@ use crate::kinect::{Kinect, KinectSpec};
 use crate::noise::stream;
 use crate::render::{RenderError, Renderer};
 use crate::sim::{Movers, Simulation};
-use futago_msgs::camera::{DepthImage, RgbdFrame};
+use futago_msgs::camera::{DepthImage, RgbImage, RgbdFrame};
 use futago_msgs::{Pose3, Time};
 use rapier3d::math::Pose;
 use std::time::Instant;
@@ -193,5 +193,30 @@ impl Cameras {
         let d = self.kinects[c].true_depth(r, carrier, stamp)?;
         self.seconds += t0.elapsed().as_secs_f64();
         Ok(d)
+    }
+
+    /// Whether camera `c` can render a frame's colour after capturing it without
+    /// ([`crate::kinect::Kinect::colour_on_demand`]).
+    pub fn colour_on_demand(&self, c: usize) -> bool {
+        self.kinects[c].colour_on_demand()
+    }
+
+    /// The colour image of the frame of camera `c` just captured without it, from `carrier`
+    /// (its [`Shot`]'s), timed with the rendering ([`crate::kinect::Kinect::colour`]).
+    pub fn colour(&mut self, c: usize, carrier: &Pose) -> Result<RgbImage, RenderError> {
+        let Some(r) = self.renderer.as_mut() else {
+            return Err(RenderError::Config(
+                "no renderer: the cameras were built without one".into(),
+            ));
+        };
+        let t0 = Instant::now();
+        let Some(stamp) = self.posed else {
+            return Err(RenderError::Config(
+                "no frame was captured: the scene is not posed".into(),
+            ));
+        };
+        let image = self.kinects[c].colour(r, carrier, stamp)?;
+        self.seconds += t0.elapsed().as_secs_f64();
+        Ok(image)
     }
 }

@@ -452,6 +452,68 @@ fn true_depth_after_a_capture_is_the_noiseless_render_of_that_view() {
     }
 }
 
+/// A frame captured without colour and given it afterwards holds what a capture with colour
+/// holds, and leaves the camera's noise stream where that capture leaves it: two cameras on
+/// the same stream, one capturing with colour and one without and then asking for it, give
+/// the same colour and depth, twice over (the second frames' noise follows the first's
+/// colour noise), and a repeated ask gives the same image without drawing again. Colour is
+/// refused for another frame than the last, for a frame captured with it, and for a camera
+/// whose colour and depth have the same size.
+#[test]
+fn colour_on_demand_is_the_colour_a_capture_would_hold() {
+    use futago_sim::kinect::{Kinect, KinectConfig, KinectPreset, NoiseModel};
+    let world = box_room(6.0, 4.0, "");
+    let mut config = KinectConfig::preset(KinectPreset::Seed000);
+    config.noise.model = NoiseModel::Nguyen;
+    config.noise.rgb_sigma = 2.0;
+    let spec = config.resolve(Path::new("t.toml"), "camera[0]").unwrap();
+    let mut r = Renderer::new(&futago_sim::sim::scene(
+        &world,
+        &CreateConfig::default(),
+        &futago_sim::Movers::default(),
+        Pose2::new(1.0, 2.0, 0.0),
+        1,
+    ))
+    .unwrap();
+    let stream = || futago_sim::noise::stream(1, "camera.kinect");
+    let (mut eager, mut lazy) = (
+        Kinect::new(spec.clone(), stream()),
+        Kinect::new(spec, stream()),
+    );
+    assert!(lazy.colour_on_demand());
+    let pose = |x: f32, yaw: f32| {
+        Pose::from_parts(Vec3::new(x, 2.0, 0.0), glam::Quat::from_rotation_z(yaw))
+    };
+    for (k, base) in [pose(1.0, 0.3), pose(1.5, -0.4)].into_iter().enumerate() {
+        let t = futago_msgs::Time::from_secs(k as f64);
+        let want = eager.capture(&mut r, &base, t, true, 1).unwrap();
+        let got = lazy.capture(&mut r, &base, t, false, 1).unwrap();
+        assert!(got.rgb.is_none());
+        assert_eq!(got.depth.data, want.depth.data, "frame {k}'s depth");
+        let colour = lazy.colour(&mut r, &base, t).unwrap();
+        assert_eq!(Some(&colour), want.rgb.as_ref(), "frame {k}'s colour");
+        assert_eq!(
+            lazy.colour(&mut r, &base, t).unwrap(),
+            colour,
+            "asked again"
+        );
+        let later = futago_msgs::Time::from_secs(k as f64 + 0.5);
+        assert!(lazy.colour(&mut r, &base, later).is_err(), "another frame");
+        assert!(
+            eager.colour(&mut r, &base, t).is_err(),
+            "captured with colour"
+        );
+    }
+    let same = KinectConfig::preset(KinectPreset::Sr4000)
+        .resolve(Path::new("t.toml"), "camera[0]")
+        .unwrap();
+    let mut sr = Kinect::new(same, stream());
+    assert!(!sr.colour_on_demand());
+    let t = futago_msgs::Time::ZERO;
+    sr.capture(&mut r, &pose(1.0, 0.0), t, false, 1).unwrap();
+    assert!(sr.colour(&mut r, &pose(1.0, 0.0), t).is_err());
+}
+
 /// Steps a robot standing at (1, 3) in an 8 m × 6 m room among `movers` three times by
 /// `steps`, renders the depth seen from `p` and checks it against ray casts of the colliders
 /// (99.5 % within 1 mm + 0.1 %), and that at least `min` pixels lie nearer than `near` m.

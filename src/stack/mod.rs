@@ -60,7 +60,7 @@ use crate::ground_truth::Metrics;
 use crate::overlay::Overlay;
 use crate::scenario::{ModuleConfig, Scenario, ScenarioSpec};
 use anyhow::Result;
-use futago_msgs::camera::{DepthImage, RgbdFrame};
+use futago_msgs::camera::{DepthImage, RgbImage, RgbdFrame};
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::{LaserScan, Odometry, Pose2, Pose3, Time, tum};
 use futago_sim::config::SpecError;
@@ -122,6 +122,16 @@ pub trait Node {
     /// form of the frames its nodes take, as it depends on which frames they take).
     fn wants_rgb(&self, _camera: &str) -> bool {
         true
+    }
+
+    /// Whether the node, wanting colour of camera `camera`, asks for it frame by frame
+    /// ([`FrameTruth::colour`]) instead of having it with every frame: for a node that looks
+    /// at a frame's depth first and needs the colour of few frames (the RGB-D map's keyframes
+    /// are the frames in which it finds the floor). Where every node taking a frame that
+    /// wants its colour takes it so, and the camera can render it afterwards
+    /// ([`futago_sim::kinect::Kinect::colour_on_demand`]), the frame comes without colour.
+    fn colour_on_demand(&self, _camera: &str) -> bool {
+        false
     }
 
     /// Every how many columns and rows of `camera`'s measured depth the node reads, from
@@ -218,6 +228,11 @@ pub struct CameraFrame {
 /// `"ground_truth"`, an estimator started at the true pose).
 pub trait FrameTruth {
     fn true_depth(&mut self) -> Result<DepthImage>;
+    /// The frame's colour image, for a node that takes it on demand
+    /// ([`Node::colour_on_demand`]): the frame's own, else rendered now for the frame's instant
+    /// and pose, with the camera's colour noise, once for all the frame's nodes. Not truth,
+    /// but the measurement the frame was taken without.
+    fn colour(&mut self) -> Result<RgbImage>;
     fn optical(&self) -> Pose3;
     fn state(&self) -> &TrueState;
 }

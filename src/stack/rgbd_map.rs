@@ -280,6 +280,10 @@ impl Node for RgbdMapNode {
         Ok(())
     }
 
+    fn colour_on_demand(&self, _camera: &str) -> bool {
+        true
+    }
+
     fn wants_frame(&self, camera: &str, bus: &Bus) -> bool {
         if camera != self.camera || !self.mapper.wants(&self.map_pose(bus)) {
             return false;
@@ -303,10 +307,21 @@ impl Node for RgbdMapNode {
         }
         let pose = self.map_pose(bus);
         let t0 = Instant::now();
+        // The colour is rendered only for the frames that become keyframes (its time is
+        // the rendering's, not the keyframe's).
+        let (mut failed, mut rendering) = (None, 0.0);
         let taken = self
             .mapper
-            .offer_excluding(&frame.frame, &pose, &self.people(bus));
-        self.offer_seconds += t0.elapsed().as_secs_f64();
+            .offer_with_colour(&frame.frame, &pose, &self.people(bus), || {
+                let t1 = Instant::now();
+                let rgb = truth.colour();
+                rendering = t1.elapsed().as_secs_f64();
+                rgb.map_err(|e| failed = Some(e)).ok()
+            });
+        if let Some(e) = failed {
+            return Err(e.context("rendering a keyframe's colour image"));
+        }
+        self.offer_seconds += t0.elapsed().as_secs_f64() - rendering;
         if taken {
             let depth = truth.true_depth()?;
             let state = truth.state();

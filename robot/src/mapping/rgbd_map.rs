@@ -19,7 +19,7 @@ use crate::perception::features::{Detector, grey};
 use crate::perception::floor::{FloorConfig, Level, level, optical_to_body};
 use crate::tracking::exclusion::Exclusion;
 use futago_msgs::Pose2;
-use futago_msgs::camera::RgbdFrame;
+use futago_msgs::camera::{RgbImage, RgbdFrame};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rustc_hash::FxHashMap;
@@ -200,6 +200,21 @@ impl RgbdMapper {
     /// [`Self::offer`], leaving out the points (and features) that lie on the people of
     /// `people` (cylinders in the base frame at the frame's time).
     pub fn offer_excluding(&mut self, frame: &RgbdFrame, pose: &Pose2, people: &Exclusion) -> bool {
+        self.offer_with_colour(frame, pose, people, || None)
+    }
+
+    /// [`Self::offer_excluding`] for a frame that may have been taken without its colour
+    /// image: where `frame.rgb` is `None`, `colour` gives it, and is called only once the
+    /// frame is to become a keyframe (its floor found). Most frames a mapper is offered are
+    /// not taken: `office-rgbd`'s Kinect looked for the floor in 1,216 frames and found it in
+    /// 177, each a 640 × 480 colour render when the colour came with every frame.
+    pub fn offer_with_colour(
+        &mut self,
+        frame: &RgbdFrame,
+        pose: &Pose2,
+        people: &Exclusion,
+        colour: impl FnOnce() -> Option<RgbImage>,
+    ) -> bool {
         self.counts.frames += 1;
         if !self.wants(pose) {
             return false;
@@ -211,9 +226,9 @@ impl RgbdMapper {
             (d.width as usize).div_ceil(step),
             (d.height as usize).div_ceil(step),
         );
-        // The sampled grid: each cell's point, if its depth is valid.
+        // The sampled grid: each cell's point, if its depth is valid, and its pixel.
         let mut grid: Vec<Option<usize>> = vec![None; cols * rows];
-        let mut pts: Vec<([f64; 3], [u8; 3])> = Vec::new();
+        let mut sampled: Vec<([f64; 3], [u32; 2])> = Vec::new();
         for (r, v) in (0..d.height).step_by(step).enumerate() {
             for (c, u) in (0..d.width).step_by(step).enumerate() {
                 let z = d.at(u, v) as f64;
@@ -221,9 +236,30 @@ impl RgbdMapper {
                     self.counts.invalid_pixels += 1;
                     continue;
                 }
-                let colour = frame
-                    .rgb
-                    .as_ref()
+                grid[r * cols + c] = Some(sampled.len());
+                sampled.push((
+                    optical_to_body(k.back_project(u as f64, v as f64, z)),
+                    [u, v],
+                ));
+            }
+        }
+        let body: Vec<[f64; 3]> = sampled.iter().map(|p| p.0).collect();
+        let Some(lv) = level(&body, &cfg.floor, &mut self.rng) else {
+            self.counts.no_floor += 1;
+            return false;
+        };
+        let rendered;
+        let rgb = match &frame.rgb {
+            Some(rgb) => Some(rgb),
+            None => {
+                rendered = colour();
+                rendered.as_ref()
+            }
+        };
+        let pts: Vec<([f64; 3], [u8; 3])> = sampled
+            .into_iter()
+            .map(|(p, [u, v])| {
+                let colour = rgb
                     .map(|rgb| {
                         // Registered images: the colour pixel under the same ray.
                         let cu = ((u as f64 + 0.5) * rgb.width as f64 / d.width as f64) as u32;
@@ -231,18 +267,9 @@ impl RgbdMapper {
                         rgb.at(cu.min(rgb.width - 1), cv.min(rgb.height - 1))
                     })
                     .unwrap_or([200, 200, 200]);
-                grid[r * cols + c] = Some(pts.len());
-                pts.push((
-                    optical_to_body(k.back_project(u as f64, v as f64, z)),
-                    colour,
-                ));
-            }
-        }
-        let body: Vec<[f64; 3]> = pts.iter().map(|p| p.0).collect();
-        let Some(lv) = level(&body, &cfg.floor, &mut self.rng) else {
-            self.counts.no_floor += 1;
-            return false;
-        };
+                (p, colour)
+            })
+            .collect();
         let mount = Pose2::new(self.mount.x, self.mount.y, self.mount.yaw);
         let to_base = |p: [f64; 3]| place(&mount, lv.apply(p));
         // People are cut out: their cells lose their point (so the points beside them are on
@@ -285,7 +312,7 @@ impl RgbdMapper {
         }
         // Features: corners of the colour image with valid depth under them.
         let mut features = Vec::new();
-        if let Some(rgb) = &frame.rgb {
+        if let Some(rgb) = rgb {
             for ([cu, cv], desc) in self
                 .detector
                 .detect(&grey(rgb.width, rgb.height, &rgb.data))
@@ -496,6 +523,56 @@ mod tests {
         assert!(!m.offer(&frame(2.0, 0.0), &pose));
         assert!(m.offer(&frame(1.5, 0.0), &Pose2::new(2.0, 1.5, pose.theta)));
         assert_eq!(m.counts().keyframes, 2);
+    }
+
+    /// A frame offered without its colour and given it on demand becomes the keyframe the
+    /// frame with its colour becomes (the same points, colours and features), and a frame
+    /// without a floor never asks for its colour.
+    #[test]
+    fn colour_on_demand_makes_the_keyframe_the_colour_frame_makes() {
+        let (cfg, mount) = every_pixel();
+        let depth_only = frame(2.0, 0.0);
+        // A chequered colour image of twice the depth's size: corners for the features.
+        let (w, h) = (320u32, 240u32);
+        let data: Vec<u8> = (0..w * h)
+            .flat_map(|i| {
+                let (u, v) = (i % w, i / w);
+                let c = if (u / 20 + v / 20) % 2 == 0 { 40 } else { 210 };
+                [c, (u % 256) as u8, (v % 256) as u8]
+            })
+            .collect();
+        let rgb = RgbImage {
+            width: w,
+            height: h,
+            data,
+        };
+        let mut coloured = depth_only.clone();
+        coloured.rgb = Some(rgb.clone());
+        coloured.rgb_intrinsics =
+            Intrinsics::from_fov(w, h, 57f64.to_radians(), 43f64.to_radians()).unwrap();
+        let mut with = RgbdMapper::new(cfg.clone(), mount, 1);
+        let mut on_demand = RgbdMapper::new(cfg, mount, 1);
+        assert!(with.offer(&coloured, &Pose2::IDENTITY));
+        let mut asked = 0;
+        let none = Exclusion::default();
+        assert!(
+            on_demand.offer_with_colour(&depth_only, &Pose2::IDENTITY, &none, || {
+                asked += 1;
+                Some(rgb.clone())
+            })
+        );
+        assert_eq!(asked, 1);
+        let (a, b) = (&with.keyframes[0], &on_demand.keyframes[0]);
+        assert_eq!(a.points, b.points);
+        assert_eq!(a.colours, b.colours);
+        assert!(a.colours.iter().any(|c| *c != [200, 200, 200]));
+        assert!(!a.features.is_empty());
+        assert_eq!(a.features.len(), b.features.len());
+        // A wall filling the view has no floor: its colour is never asked for.
+        let mut wall = frame(0.5, -0.3);
+        wall.depth.data.iter_mut().for_each(|d| *d = 0.5);
+        let far = Pose2::new(3.0, 0.0, 0.0);
+        assert!(!on_demand.offer_with_colour(&wall, &far, &none, || panic!("colour asked")));
     }
 
     #[test]
