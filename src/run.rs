@@ -108,6 +108,13 @@ impl FrameTruth for TrueDepth<'_> {
         }
     }
 
+    fn full_depth(&mut self) -> Result<DepthImage> {
+        Ok(self
+            .cameras
+            .full_depth(self.camera, &self.carrier)?
+            .unwrap_or_else(|| self.frame.frame.depth.clone()))
+    }
+
     fn optical(&self) -> futago_msgs::Pose3 {
         self.optical
     }
@@ -395,9 +402,18 @@ impl CameraRig {
                         .iter()
                         .all(|&i| !wants_rgb(i) || nodes[i].node.colour_on_demand(&name)));
             // The grid every taker reads: the strides' greatest common divisor.
+            // A node that reads the whole depth on demand reads its grid of the rest, where
+            // the camera can give the whole afterwards.
+            let later = cameras.depth_on_demand(c, rgb);
             let depth_stride = wanting
                 .iter()
-                .map(|&i| nodes[i].node.depth_stride(&name).max(1))
+                .map(|&i| {
+                    let node = &nodes[i].node;
+                    match node.full_depth_on_demand(&name) && !later {
+                        true => 1,
+                        false => node.depth_stride(&name).max(1),
+                    }
+                })
                 .reduce(gcd)
                 .unwrap_or(1);
             let shot = cameras.capture(c, sim, rgb, depth_stride)?;

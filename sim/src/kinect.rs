@@ -319,10 +319,27 @@ impl KinectSpec {
     /// other models noise every pixel, then clear those off the grid. A stride of 0 or 1 is
     /// every pixel.
     pub fn apply_noise_on_grid(&self, depth: &mut DepthImage, rng: &mut ChaCha8Rng, stride: u32) {
+        self.noise_on_grid_keyed(depth, rng, stride);
+    }
+
+    /// [`KinectSpec::apply_noise_on_grid`], giving the Nguyen model's key of the frame (its
+    /// one draw from the stream; see [`nguyen`]), with which [`KinectSpec::complete_noise`]
+    /// noises the rest of the image afterwards.
+    fn noise_on_grid_keyed(
+        &self,
+        depth: &mut DepthImage,
+        rng: &mut ChaCha8Rng,
+        stride: u32,
+    ) -> Option<u64> {
         let stride = stride.max(1);
+        let mut key = None;
         match self.noise.model {
             NoiseModel::None => {}
-            NoiseModel::Nguyen => nguyen(depth, &self.depth, rng, stride),
+            NoiseModel::Nguyen => {
+                let frame: u64 = rng.random();
+                nguyen(depth, &self.depth, frame, stride);
+                key = Some(frame);
+            }
             NoiseModel::IclNuim => icl_nuim(depth, &self.depth, &self.noise, rng),
             NoiseModel::Gaussian => {
                 for z in &mut depth.data {
@@ -340,7 +357,7 @@ impl KinectSpec {
         };
         if stride == 1 {
             depth.data.iter_mut().for_each(in_range);
-            return;
+            return key;
         }
         let stride = stride as usize;
         for (v, row) in depth
@@ -360,6 +377,34 @@ impl KinectSpec {
                 }
             }
         }
+        key
+    }
+
+    /// Whether a frame noised on a grid can be noised whole afterwards by
+    /// [`KinectSpec::complete_noise`]: with no noise, or the Nguyen model's, whose pixels draw
+    /// from generators of their own keyed by the frame (the other models draw every pixel
+    /// from the camera's stream in turn).
+    pub fn noise_completes(&self) -> bool {
+        matches!(self.noise.model, NoiseModel::None | NoiseModel::Nguyen)
+    }
+
+    /// Noises the noise-free `depth` whole, as [`KinectSpec::apply_noise`] would, for the
+    /// frame whose grid [`KinectSpec::noise_on_grid_keyed`] noised with `key`: every pixel of
+    /// that grid gets the value it got then, and nothing is drawn from the stream. `None`
+    /// where the model cannot ([`KinectSpec::noise_completes`]).
+    fn complete_noise(&self, depth: &mut DepthImage, key: Option<u64>) -> Option<()> {
+        match (self.noise.model, key) {
+            (NoiseModel::None, _) => {}
+            (NoiseModel::Nguyen, Some(frame)) => nguyen(depth, &self.depth, frame, 1),
+            _ => return None,
+        }
+        let (lo, hi) = (self.range_min as f32, self.range_max as f32);
+        for z in &mut depth.data {
+            if !(*z >= lo && *z <= hi) {
+                *z = 0.0;
+            }
+        }
+        Some(())
     }
 }
 
@@ -491,18 +536,17 @@ pub const fn nguyen_lateral_sigma(theta: f64) -> f64 {
 const MAX_INCIDENCE: f64 = 1.48;
 
 /// The Nguyen model's noise on the pixels of every `stride`-th column and row (the others
-/// are left for the caller to clear).
-fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, rng: &mut ChaCha8Rng, stride: u32) {
+/// are left for the caller to clear), in the frame keyed by `frame`.
+fn nguyen(depth: &mut DepthImage, intr: &Intrinsics, frame: u64, stride: u32) {
     let src = depth.clone();
     let rays = PixelRays::new(&src, intr);
     let (w, h) = (src.width as i64, src.height as i64);
-    // One draw from the camera's stream keys the frame; each pixel's three draws come from a
-    // generator of its own keyed by the frame and the pixel's index ([`pixel_draws`]). A
-    // pixel's noise is then the same whichever others are noised: a consumer of the grid's
-    // pixels draws for them alone (a quarter of the image at the coverage scorer's stride of
-    // 2), and a pixel that one GPU draws and another misses by a rounding changes that pixel
-    // only.
-    let frame: u64 = rng.random();
+    // One draw from the camera's stream keys the frame (the caller's); each pixel's three
+    // draws come from a generator of its own keyed by the frame and the pixel's index
+    // ([`pixel_draws`]). A pixel's noise is then the same whichever others are noised: a
+    // consumer of the grid's pixels draws for them alone (a quarter of the image at the
+    // coverage scorer's stride of 2), the rest can be noised later with the same key, and a
+    // pixel that one GPU draws and another misses by a rounding changes that pixel only.
     let stride = stride as usize;
     let width = src.width as usize;
     // The grid's draws first, on this thread: drawn on the cores with the rest, they kept both
@@ -722,6 +766,18 @@ pub struct Kinect {
     /// The last capture's stamp and base pose where it was taken without its colour image,
     /// and that image once [`Kinect::colour`] has rendered it.
     uncoloured: Option<(Time, Pose, Option<RgbImage>)>,
+    /// The last capture's depth grid, for [`Kinect::full_depth`].
+    grid: Option<DepthGrid>,
+}
+
+/// How a capture's depth was noised: on which grid, with which key, and the whole image once
+/// [`Kinect::full_depth`] has noised it.
+struct DepthGrid {
+    stamp: Time,
+    base: Pose,
+    stride: u32,
+    key: Option<u64>,
+    whole: Option<DepthImage>,
 }
 
 impl Kinect {
@@ -732,6 +788,7 @@ impl Kinect {
             frames: 0,
             noiseless: None,
             uncoloured: None,
+            grid: None,
         }
     }
 
@@ -772,8 +829,16 @@ impl Kinect {
             self.noiseless = Some((stamp, *base, d.clone()));
             (c, d)
         };
-        self.spec
-            .apply_noise_on_grid(&mut depth, &mut self.rng, depth_stride);
+        let key = self
+            .spec
+            .noise_on_grid_keyed(&mut depth, &mut self.rng, depth_stride);
+        self.grid = Some(DepthGrid {
+            stamp,
+            base: *base,
+            stride: depth_stride.max(1),
+            key,
+            whole: None,
+        });
         let mut rgb = rgb;
         if let Some(c) = rgb.as_mut() {
             self.spec.apply_rgb_noise(c, &mut self.rng);
@@ -785,6 +850,59 @@ impl Kinect {
             depth,
             depth_intrinsics: self.spec.depth,
         })
+    }
+
+    /// Whether a frame captured on a depth grid (with or without colour, `rgb`) can have its
+    /// whole depth afterwards from [`Kinect::full_depth`], as a capture of every pixel would
+    /// have measured it: where the noise model completes ([`KinectSpec::noise_completes`])
+    /// and the depth is rendered alone (a frame whose colour comes with it from one render
+    /// keeps no noise-free depth).
+    pub fn depth_on_demand(&self, rgb: bool) -> bool {
+        self.spec.noise_completes() && !(rgb && self.spec.depth == self.spec.rgb)
+    }
+
+    /// The whole measured depth of the last capture, from `base` at `stamp` (that capture's),
+    /// where it was noised on a grid: every pixel as a capture of every pixel would have
+    /// measured it (the grid's as the frame holds them), nothing drawn from the stream, and
+    /// kept for the next call. `None` where the frame holds its whole depth already. For nodes
+    /// that read a grid of most frames and the whole of a few. An error for another frame
+    /// than the last, or one [`Kinect::depth_on_demand`] did not allow.
+    pub fn full_depth(
+        &mut self,
+        base: &Pose,
+        stamp: Time,
+    ) -> Result<Option<DepthImage>, RenderError> {
+        let Some(g) = self
+            .grid
+            .as_mut()
+            .filter(|g| g.stamp == stamp && g.base == *base)
+        else {
+            return Err(RenderError::Config(format!(
+                "the whole depth asked for the frame at {stamp:?}, which was not the last captured"
+            )));
+        };
+        if g.stride == 1 {
+            return Ok(None);
+        }
+        if let Some(d) = &g.whole {
+            return Ok(Some(d.clone()));
+        }
+        let mut d = match &self.noiseless {
+            Some((t, b, d)) if *t == stamp && b == base => d.clone(),
+            _ => {
+                return Err(RenderError::Config(
+                    "the whole depth of a frame whose depth came with its colour".into(),
+                ));
+            }
+        };
+        self.spec.complete_noise(&mut d, g.key).ok_or_else(|| {
+            RenderError::Config(format!(
+                "the {:?} noise model cannot noise a frame's depth after its grid",
+                self.spec.noise.model
+            ))
+        })?;
+        g.whole = Some(d.clone());
+        Ok(Some(d))
     }
 
     /// Whether a frame captured without colour can have it rendered afterwards by

@@ -195,6 +195,31 @@ impl Cameras {
         Ok(d)
     }
 
+    /// Whether camera `c` can give a frame's whole depth after capturing it on a grid (with
+    /// colour or not, `rgb`; [`crate::kinect::Kinect::depth_on_demand`]).
+    pub fn depth_on_demand(&self, c: usize, rgb: bool) -> bool {
+        self.kinects[c].depth_on_demand(rgb)
+    }
+
+    /// The whole measured depth of the frame of camera `c` just captured on a grid, from
+    /// `carrier` (its [`Shot`]'s), timed with the rendering; `None` where the frame holds it
+    /// ([`crate::kinect::Kinect::full_depth`]).
+    pub fn full_depth(
+        &mut self,
+        c: usize,
+        carrier: &Pose,
+    ) -> Result<Option<DepthImage>, RenderError> {
+        let Some(stamp) = self.posed else {
+            return Err(RenderError::Config(
+                "no frame was captured: the scene is not posed".into(),
+            ));
+        };
+        let t0 = Instant::now();
+        let d = self.kinects[c].full_depth(carrier, stamp)?;
+        self.seconds += t0.elapsed().as_secs_f64();
+        Ok(d)
+    }
+
     /// Whether camera `c` can render a frame's colour after capturing it without
     /// ([`crate::kinect::Kinect::colour_on_demand`]).
     pub fn colour_on_demand(&self, c: usize) -> bool {

@@ -514,6 +514,71 @@ fn colour_on_demand_is_the_colour_a_capture_would_hold() {
     assert!(sr.colour(&mut r, &pose(1.0, 0.0), t).is_err());
 }
 
+/// A frame captured on a depth grid and given its whole depth afterwards holds what a
+/// capture of every pixel holds: two cameras on the same stream, one capturing every pixel
+/// and one every second pixel of every second row, give the same grid, then the same whole
+/// image, twice over (nothing is drawn for the whole image); a frame captured whole has
+/// nothing to complete. Refused for another frame than the last, and for a noise model that
+/// draws every pixel from the stream.
+#[test]
+fn full_depth_on_demand_is_the_depth_a_whole_capture_measures() {
+    use futago_sim::kinect::{Kinect, KinectConfig, KinectPreset, NoiseModel};
+    let world = box_room(6.0, 4.0, "");
+    let mut r = Renderer::new(&futago_sim::sim::scene(
+        &world,
+        &CreateConfig::default(),
+        &futago_sim::Movers::default(),
+        Pose2::new(1.0, 2.0, 0.0),
+        1,
+    ))
+    .unwrap();
+    let spec = |model| {
+        let mut config = KinectConfig::preset(KinectPreset::Seed000);
+        config.noise.model = model;
+        config.resolve(Path::new("t.toml"), "camera[0]").unwrap()
+    };
+    let stream = || futago_sim::noise::stream(1, "camera.kinect");
+    let (mut whole, mut grid) = (
+        Kinect::new(spec(NoiseModel::Nguyen), stream()),
+        Kinect::new(spec(NoiseModel::Nguyen), stream()),
+    );
+    assert!(grid.depth_on_demand(false) && grid.depth_on_demand(true));
+    let pose = |x: f32, yaw: f32| {
+        Pose::from_parts(Vec3::new(x, 2.0, 0.0), glam::Quat::from_rotation_z(yaw))
+    };
+    for (k, base) in [pose(1.0, 0.3), pose(1.5, -0.4)].into_iter().enumerate() {
+        let t = futago_msgs::Time::from_secs(k as f64);
+        let want = whole.capture(&mut r, &base, t, false, 1).unwrap();
+        let got = grid.capture(&mut r, &base, t, false, 2).unwrap();
+        let w = want.depth.width as usize;
+        let mut on_grid = 0;
+        for (i, (a, b)) in want.depth.data.iter().zip(&got.depth.data).enumerate() {
+            if (i % w).is_multiple_of(2) && (i / w).is_multiple_of(2) {
+                assert_eq!(a, b, "frame {k}, pixel {i} on the grid");
+                on_grid += usize::from(*a > 0.0);
+            } else {
+                assert_eq!(*b, 0.0, "frame {k}, pixel {i} off the grid");
+            }
+        }
+        assert!(on_grid > 1000, "{on_grid} measured pixels on the grid");
+        let full = grid.full_depth(&base, t).unwrap().unwrap();
+        assert_eq!(full.data, want.depth.data, "frame {k}'s whole depth");
+        assert_eq!(
+            grid.full_depth(&base, t).unwrap().unwrap(),
+            full,
+            "asked again"
+        );
+        assert_eq!(whole.full_depth(&base, t).unwrap(), None, "captured whole");
+        let later = futago_msgs::Time::from_secs(k as f64 + 0.5);
+        assert!(grid.full_depth(&base, later).is_err(), "another frame");
+    }
+    let mut icl = Kinect::new(spec(NoiseModel::IclNuim), stream());
+    assert!(!icl.depth_on_demand(false));
+    let t = futago_msgs::Time::ZERO;
+    icl.capture(&mut r, &pose(1.0, 0.3), t, false, 2).unwrap();
+    assert!(icl.full_depth(&pose(1.0, 0.3), t).is_err());
+}
+
 /// Steps a robot standing at (1, 3) in an 8 m × 6 m room among `movers` three times by
 /// `steps`, renders the depth seen from `p` and checks it against ray casts of the colliders
 /// (99.5 % within 1 mm + 0.1 %), and that at least `min` pixels lie nearer than `near` m.

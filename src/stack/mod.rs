@@ -142,6 +142,16 @@ pub trait Node {
         1
     }
 
+    /// Whether the node reads pixels of `camera`'s measured depth off its
+    /// [`Node::depth_stride`] grid only through [`FrameTruth::full_depth`], frame by frame:
+    /// for a node that looks at most frames on a grid and at few whole (the RGB-D map reads
+    /// the features of its keyframes anywhere in the image). Where the camera cannot give the
+    /// whole depth afterwards ([`futago_sim::kinect::Kinect::depth_on_demand`]), its frames
+    /// are noised whole for the node.
+    fn full_depth_on_demand(&self, _camera: &str) -> bool {
+        false
+    }
+
     /// Whether the node takes only the frames rendered for other nodes: a recorder that must
     /// change neither which frames are rendered, nor their form, nor (through the cameras'
     /// noise streams) what the other nodes see. Its wants alone render nothing.
@@ -233,6 +243,11 @@ pub trait FrameTruth {
     /// and pose, with the camera's colour noise, once for all the frame's nodes. Not truth,
     /// but the measurement the frame was taken without.
     fn colour(&mut self) -> Result<RgbImage>;
+    /// The frame's whole measured depth, for a node that reads it on demand
+    /// ([`Node::full_depth_on_demand`]): the frame's own where it holds every pixel, else
+    /// noised now for the rest of the image (the grid's pixels as the frame holds them), once
+    /// for all the frame's nodes.
+    fn full_depth(&mut self) -> Result<DepthImage>;
     fn optical(&self) -> Pose3;
     fn state(&self) -> &TrueState;
 }

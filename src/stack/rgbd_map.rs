@@ -27,7 +27,7 @@ use futago_msgs::{Pose2, Pose3};
 use futago_robot::control::PoseSource;
 use futago_robot::mapping::registration::{EnvironmentMap, Method};
 use futago_robot::mapping::rgbd_map::RgbdMapConfig;
-use futago_robot::mapping::rgbd_map::{CameraMount, RgbdMap, RgbdMapper};
+use futago_robot::mapping::rgbd_map::{CameraMount, Completion, RgbdMap, RgbdMapper};
 use futago_robot::tracking::exclusion::{Exclusion, ExclusionConfig};
 use futago_sim::config::SpecError;
 use serde::Deserialize;
@@ -284,6 +284,20 @@ impl Node for RgbdMapNode {
         true
     }
 
+    /// Finding the floor reads every `stride`-th pixel; a keyframe's features read anywhere,
+    /// through [`FrameTruth::full_depth`].
+    fn depth_stride(&self, camera: &str) -> u32 {
+        if camera == self.camera {
+            self.stride
+        } else {
+            1
+        }
+    }
+
+    fn full_depth_on_demand(&self, camera: &str) -> bool {
+        camera == self.camera
+    }
+
     fn wants_frame(&self, camera: &str, bus: &Bus) -> bool {
         if camera != self.camera || !self.mapper.wants(&self.map_pose(bus)) {
             return false;
@@ -307,19 +321,26 @@ impl Node for RgbdMapNode {
         }
         let pose = self.map_pose(bus);
         let t0 = Instant::now();
-        // The colour is rendered only for the frames that become keyframes (its time is
-        // the rendering's, not the keyframe's).
+        // The colour is rendered, and the depth noised whole, only for the frames that
+        // become keyframes (their time is the rendering's, not the keyframe's).
         let (mut failed, mut rendering) = (None, 0.0);
+        let complete = || {
+            let t1 = Instant::now();
+            let got = (|| -> Result<Completion> {
+                Ok(Completion {
+                    rgb: Some(truth.colour()?),
+                    depth: Some(truth.full_depth()?),
+                })
+            })();
+            rendering = t1.elapsed().as_secs_f64();
+            got.map_err(|e| failed = Some(e)).unwrap_or_default()
+        };
+        let people = self.people(bus);
         let taken = self
             .mapper
-            .offer_with_colour(&frame.frame, &pose, &self.people(bus), || {
-                let t1 = Instant::now();
-                let rgb = truth.colour();
-                rendering = t1.elapsed().as_secs_f64();
-                rgb.map_err(|e| failed = Some(e)).ok()
-            });
+            .offer_completing(&frame.frame, &pose, &people, complete);
         if let Some(e) = failed {
-            return Err(e.context("rendering a keyframe's colour image"));
+            return Err(e.context("completing a keyframe's colour and depth"));
         }
         self.offer_seconds += t0.elapsed().as_secs_f64() - rendering;
         if taken {

@@ -19,7 +19,7 @@ use crate::perception::features::{Detector, grey};
 use crate::perception::floor::{FloorConfig, Level, level, optical_to_body};
 use crate::tracking::exclusion::Exclusion;
 use futago_msgs::Pose2;
-use futago_msgs::camera::{RgbImage, RgbdFrame};
+use futago_msgs::camera::{DepthImage, RgbImage, RgbdFrame};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rustc_hash::FxHashMap;
@@ -150,6 +150,14 @@ pub struct RgbdMap {
     pub registration: RegistrationCounts,
 }
 
+/// What a frame offered to [`RgbdMapper::offer_completing`] lacks for a keyframe: its colour
+/// image where it was taken without, its whole depth where it holds the mapper's grid alone.
+#[derive(Debug, Default)]
+pub struct Completion {
+    pub rgb: Option<RgbImage>,
+    pub depth: Option<DepthImage>,
+}
+
 /// The keyframes and their logic.
 pub struct RgbdMapper {
     config: RgbdMapConfig,
@@ -200,20 +208,23 @@ impl RgbdMapper {
     /// [`Self::offer`], leaving out the points (and features) that lie on the people of
     /// `people` (cylinders in the base frame at the frame's time).
     pub fn offer_excluding(&mut self, frame: &RgbdFrame, pose: &Pose2, people: &Exclusion) -> bool {
-        self.offer_with_colour(frame, pose, people, || None)
+        self.offer_completing(frame, pose, people, Completion::default)
     }
 
     /// [`Self::offer_excluding`] for a frame that may have been taken without its colour
-    /// image: where `frame.rgb` is `None`, `colour` gives it, and is called only once the
-    /// frame is to become a keyframe (its floor found). Most frames a mapper is offered are
-    /// not taken: `office-rgbd`'s Kinect looked for the floor in 1,216 frames and found it in
-    /// 177, each a 640 × 480 colour render when the colour came with every frame.
-    pub fn offer_with_colour(
+    /// image, or with its depth measured on the mapper's grid alone (every `stride`-th pixel
+    /// of every `stride`-th row, what finding the floor reads): `complete` gives what the
+    /// frame lacks, and is called only once the frame is to become a keyframe (its floor
+    /// found), whose features are looked up anywhere in the depth. Most frames a mapper is
+    /// offered are not taken: `office-rgbd`'s Kinect looked for the floor in 1,216 frames and
+    /// found it in 177, each a 640 × 480 colour render and a 320 × 240 image's noise when the
+    /// frames came whole.
+    pub fn offer_completing(
         &mut self,
         frame: &RgbdFrame,
         pose: &Pose2,
         people: &Exclusion,
-        colour: impl FnOnce() -> Option<RgbImage>,
+        complete: impl FnOnce() -> Completion,
     ) -> bool {
         self.counts.frames += 1;
         if !self.wants(pose) {
@@ -248,14 +259,10 @@ impl RgbdMapper {
             self.counts.no_floor += 1;
             return false;
         };
-        let rendered;
-        let rgb = match &frame.rgb {
-            Some(rgb) => Some(rgb),
-            None => {
-                rendered = colour();
-                rendered.as_ref()
-            }
-        };
+        let completion = complete();
+        let rgb = frame.rgb.as_ref().or(completion.rgb.as_ref());
+        // The whole depth, for the features (the grid's pixels are the same in both).
+        let whole = completion.depth.as_ref().unwrap_or(d);
         let pts: Vec<([f64; 3], [u8; 3])> = sampled
             .into_iter()
             .map(|(p, [u, v])| {
@@ -319,7 +326,7 @@ impl RgbdMapper {
             {
                 let du = ((cu as f64 + 0.5) * d.width as f64 / rgb.width as f64) as u32;
                 let dv = ((cv as f64 + 0.5) * d.height as f64 / rgb.height as f64) as u32;
-                let z = d.at(du.min(d.width - 1), dv.min(d.height - 1)) as f64;
+                let z = whole.at(du.min(d.width - 1), dv.min(d.height - 1)) as f64;
                 if z.is_finite() && z > 0.0 && z <= cfg.max_depth {
                     let base = to_base(optical_to_body(k.back_project(du as f64, dv as f64, z)));
                     if !people.contains([base[0], base[1]]) {
@@ -525,11 +532,12 @@ mod tests {
         assert_eq!(m.counts().keyframes, 2);
     }
 
-    /// A frame offered without its colour and given it on demand becomes the keyframe the
-    /// frame with its colour becomes (the same points, colours and features), and a frame
-    /// without a floor never asks for its colour.
+    /// A frame offered without its colour, or also with its depth on the mapper's grid alone,
+    /// and completed on demand becomes the keyframe the whole frame becomes (the same points,
+    /// colours and features; without the whole depth, features off the grid are lost), and a
+    /// frame without a floor never asks for its completion.
     #[test]
-    fn colour_on_demand_makes_the_keyframe_the_colour_frame_makes() {
+    fn completion_on_demand_makes_the_keyframe_the_whole_frame_makes() {
         let (cfg, mount) = every_pixel();
         let depth_only = frame(2.0, 0.0);
         // A chequered colour image of twice the depth's size: corners for the features.
@@ -553,12 +561,74 @@ mod tests {
         let mut with = RgbdMapper::new(cfg.clone(), mount, 1);
         let mut on_demand = RgbdMapper::new(cfg, mount, 1);
         assert!(with.offer(&coloured, &Pose2::IDENTITY));
+        // Offered on the mapper's grid alone (the other pixels 0, as a camera noising the
+        // grid leaves them), given the whole depth and the colour on demand.
+        let mut grid_only = depth_only.clone();
+        for (i, z) in grid_only.depth.data.iter_mut().enumerate() {
+            let (u, v) = (i % 160, i / 160);
+            if u % 2 != 0 || v % 2 != 0 {
+                *z = 0.0;
+            }
+        }
+        let mut grid_mapper = RgbdMapper::new(
+            RgbdMapConfig {
+                stride: 2,
+                ..RgbdMapConfig::default()
+            },
+            mount,
+            1,
+        );
+        let mut whole_mapper = RgbdMapper::new(
+            RgbdMapConfig {
+                stride: 2,
+                ..RgbdMapConfig::default()
+            },
+            mount,
+            1,
+        );
+        assert!(whole_mapper.offer(&coloured, &Pose2::IDENTITY));
         let mut asked = 0;
         let none = Exclusion::default();
         assert!(
-            on_demand.offer_with_colour(&depth_only, &Pose2::IDENTITY, &none, || {
+            grid_mapper.offer_completing(&grid_only, &Pose2::IDENTITY, &none, || {
                 asked += 1;
-                Some(rgb.clone())
+                Completion {
+                    rgb: Some(rgb.clone()),
+                    depth: Some(depth_only.depth.clone()),
+                }
+            })
+        );
+        assert_eq!(asked, 1);
+        let (a, b) = (&whole_mapper.keyframes[0], &grid_mapper.keyframes[0]);
+        assert_eq!(a.points, b.points);
+        assert_eq!(a.colours, b.colours);
+        assert_eq!(a.features.len(), b.features.len());
+        assert!(a.features.iter().zip(&b.features).all(|(x, y)| x.0 == y.0));
+        // Without the whole depth, features on pixels off the grid find no depth.
+        let mut short = RgbdMapper::new(
+            RgbdMapConfig {
+                stride: 2,
+                ..RgbdMapConfig::default()
+            },
+            mount,
+            1,
+        );
+        assert!(
+            short.offer_completing(&grid_only, &Pose2::IDENTITY, &none, || Completion {
+                rgb: Some(rgb.clone()),
+                depth: None,
+            })
+        );
+        assert!(short.keyframes[0].features.len() < a.features.len());
+        // Colour alone on demand, every pixel's depth in the frame.
+        let mut asked = 0;
+        assert!(
+            on_demand.offer_completing(&depth_only, &Pose2::IDENTITY, &none, || {
+                asked += 1;
+                Completion {
+                    rgb: Some(rgb.clone()),
+                    depth: None,
+                }
             })
         );
         assert_eq!(asked, 1);
@@ -572,7 +642,7 @@ mod tests {
         let mut wall = frame(0.5, -0.3);
         wall.depth.data.iter_mut().for_each(|d| *d = 0.5);
         let far = Pose2::new(3.0, 0.0, 0.0);
-        assert!(!on_demand.offer_with_colour(&wall, &far, &none, || panic!("colour asked")));
+        assert!(!on_demand.offer_completing(&wall, &far, &none, || panic!("completion asked")));
     }
 
     #[test]
