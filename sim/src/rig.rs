@@ -176,23 +176,33 @@ impl Cameras {
         })
     }
 
-    /// The depth camera `c` would measure without noise from `carrier` (a [`Shot`]'s, of the
-    /// frame just captured), timed with the rendering.
-    pub fn true_depth(&mut self, c: usize, carrier: &Pose) -> Result<DepthImage, RenderError> {
+    /// `f` of camera `c`, the renderer and the stamp of the frame just captured, timed with
+    /// the rendering: the work a node asks of the frame after its capture.
+    fn after_capture<T>(
+        &mut self,
+        c: usize,
+        f: impl FnOnce(&mut Kinect, &mut Renderer, Time) -> Result<T, RenderError>,
+    ) -> Result<T, RenderError> {
         let Some(r) = self.renderer.as_mut() else {
             return Err(RenderError::Config(
                 "no renderer: the cameras were built without one".into(),
             ));
         };
-        let t0 = Instant::now();
         let Some(stamp) = self.posed else {
             return Err(RenderError::Config(
                 "no frame was captured: the scene is not posed".into(),
             ));
         };
-        let d = self.kinects[c].true_depth(r, carrier, stamp)?;
+        let t0 = Instant::now();
+        let out = f(&mut self.kinects[c], r, stamp)?;
         self.seconds += t0.elapsed().as_secs_f64();
-        Ok(d)
+        Ok(out)
+    }
+
+    /// The depth camera `c` would measure without noise from `carrier` (a [`Shot`]'s, of the
+    /// frame just captured), timed with the rendering.
+    pub fn true_depth(&mut self, c: usize, carrier: &Pose) -> Result<DepthImage, RenderError> {
+        self.after_capture(c, |k, r, stamp| k.true_depth(r, carrier, stamp))
     }
 
     /// Whether camera `c` can give a frame's whole depth after capturing it on a grid (with
@@ -209,15 +219,7 @@ impl Cameras {
         c: usize,
         carrier: &Pose,
     ) -> Result<Option<DepthImage>, RenderError> {
-        let Some(stamp) = self.posed else {
-            return Err(RenderError::Config(
-                "no frame was captured: the scene is not posed".into(),
-            ));
-        };
-        let t0 = Instant::now();
-        let d = self.kinects[c].full_depth(carrier, stamp)?;
-        self.seconds += t0.elapsed().as_secs_f64();
-        Ok(d)
+        self.after_capture(c, |k, _, stamp| k.full_depth(carrier, stamp))
     }
 
     /// Whether camera `c` can render a frame's colour after capturing it without
@@ -229,19 +231,6 @@ impl Cameras {
     /// The colour image of the frame of camera `c` just captured without it, from `carrier`
     /// (its [`Shot`]'s), timed with the rendering ([`crate::kinect::Kinect::colour`]).
     pub fn colour(&mut self, c: usize, carrier: &Pose) -> Result<RgbImage, RenderError> {
-        let Some(r) = self.renderer.as_mut() else {
-            return Err(RenderError::Config(
-                "no renderer: the cameras were built without one".into(),
-            ));
-        };
-        let t0 = Instant::now();
-        let Some(stamp) = self.posed else {
-            return Err(RenderError::Config(
-                "no frame was captured: the scene is not posed".into(),
-            ));
-        };
-        let image = self.kinects[c].colour(r, carrier, stamp)?;
-        self.seconds += t0.elapsed().as_secs_f64();
-        Ok(image)
+        self.after_capture(c, |k, r, stamp| k.colour(r, carrier, stamp))
     }
 }

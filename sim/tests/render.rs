@@ -410,6 +410,18 @@ fn seed000_kinect_gives_qvga_depth_registered_to_vga_colour_within_its_range() {
     );
 }
 
+/// A renderer of `world` with the default Create standing at (1, 2), the scene's seed 1.
+fn room_renderer(world: &World) -> Renderer {
+    Renderer::new(&futago_sim::sim::scene(
+        world,
+        &CreateConfig::default(),
+        &futago_sim::Movers::default(),
+        Pose2::new(1.0, 2.0, 0.0),
+        1,
+    ))
+    .unwrap()
+}
+
 /// A frame captured with colour and one of depth alone measure the same scene: the true depth
 /// after either is the image a fresh depth render gives (the capture's own render before its
 /// noise, not a stale one), a depth-only frame holds no colour, and a true depth asked at
@@ -421,14 +433,7 @@ fn true_depth_after_a_capture_is_the_noiseless_render_of_that_view() {
     let mut config = KinectConfig::preset(KinectPreset::Seed000);
     config.noise.model = NoiseModel::Nguyen;
     let spec = config.resolve(Path::new("t.toml"), "camera[0]").unwrap();
-    let mut r = Renderer::new(&futago_sim::sim::scene(
-        &world,
-        &CreateConfig::default(),
-        &futago_sim::Movers::default(),
-        Pose2::new(1.0, 2.0, 0.0),
-        1,
-    ))
-    .unwrap();
+    let mut r = room_renderer(&world);
     let mut cam = Kinect::new(spec.clone(), futago_sim::noise::stream(1, "camera.kinect"));
     // Facing the room's long diagonal, so the floor and walls lie within 1.2–3.5 m.
     let pose = |x: f32, yaw: f32| {
@@ -467,14 +472,7 @@ fn colour_on_demand_is_the_colour_a_capture_would_hold() {
     config.noise.model = NoiseModel::Nguyen;
     config.noise.rgb_sigma = 2.0;
     let spec = config.resolve(Path::new("t.toml"), "camera[0]").unwrap();
-    let mut r = Renderer::new(&futago_sim::sim::scene(
-        &world,
-        &CreateConfig::default(),
-        &futago_sim::Movers::default(),
-        Pose2::new(1.0, 2.0, 0.0),
-        1,
-    ))
-    .unwrap();
+    let mut r = room_renderer(&world);
     let stream = || futago_sim::noise::stream(1, "camera.kinect");
     let (mut eager, mut lazy) = (
         Kinect::new(spec.clone(), stream()),
@@ -524,14 +522,7 @@ fn colour_on_demand_is_the_colour_a_capture_would_hold() {
 fn full_depth_on_demand_is_the_depth_a_whole_capture_measures() {
     use futago_sim::kinect::{Kinect, KinectConfig, KinectPreset, NoiseModel};
     let world = box_room(6.0, 4.0, "");
-    let mut r = Renderer::new(&futago_sim::sim::scene(
-        &world,
-        &CreateConfig::default(),
-        &futago_sim::Movers::default(),
-        Pose2::new(1.0, 2.0, 0.0),
-        1,
-    ))
-    .unwrap();
+    let mut r = room_renderer(&world);
     let spec = |model| {
         let mut config = KinectConfig::preset(KinectPreset::Seed000);
         config.noise.model = model;
