@@ -108,11 +108,8 @@ impl FrameTruth for TrueDepth<'_> {
         }
     }
 
-    fn full_depth(&mut self) -> Result<DepthImage> {
-        Ok(self
-            .cameras
-            .full_depth(self.camera, &self.carrier)?
-            .unwrap_or_else(|| self.frame.frame.depth.clone()))
+    fn full_depth(&mut self) -> Result<Option<DepthImage>> {
+        Ok(self.cameras.full_depth(self.camera, &self.carrier)?)
     }
 
     fn optical(&self) -> futago_msgs::Pose3 {
@@ -401,10 +398,10 @@ impl CameraRig {
                     && wanting
                         .iter()
                         .all(|&i| !wants_rgb(i) || nodes[i].node.colour_on_demand(&name)));
-            // The grid every taker reads: the strides' greatest common divisor.
             // A node that reads the whole depth on demand reads its grid of the rest, where
             // the camera can give the whole afterwards.
             let later = cameras.depth_on_demand(c, rgb);
+            // The grid every taker reads: the strides' greatest common divisor.
             let depth_stride = wanting
                 .iter()
                 .map(|&i| {

@@ -244,10 +244,10 @@ pub trait FrameTruth {
     /// but the measurement the frame was taken without.
     fn colour(&mut self) -> Result<RgbImage>;
     /// The frame's whole measured depth, for a node that reads it on demand
-    /// ([`Node::full_depth_on_demand`]): the frame's own where it holds every pixel, else
-    /// noised now for the rest of the image (the grid's pixels as the frame holds them), once
-    /// for all the frame's nodes.
-    fn full_depth(&mut self) -> Result<DepthImage>;
+    /// ([`Node::full_depth_on_demand`]): noised now for the rest of the image (the grid's
+    /// pixels as the frame holds them), once for all the frame's nodes; `None` where the
+    /// frame holds every pixel.
+    fn full_depth(&mut self) -> Result<Option<DepthImage>>;
     fn optical(&self) -> Pose3;
     fn state(&self) -> &TrueState;
 }
