@@ -471,8 +471,9 @@ fn predict(
 const RAY_LANES: usize = 4;
 
 /// Candidates fewer than this are predicted on this thread: a prediction casts a ray every
-/// `ray_step_deg` (720 by default) and takes longer than starting a thread, but a handful
-/// is not worth one.
+/// `ray_step_deg` (720 by default), and a handful of them is not worth starting a thread
+/// (all of a plan's, on the cores, took `futago bench scan3d`'s view planning from
+/// 0.21–0.26 s to 0.14–0.15 s).
 const PREDICT_SERIAL_BELOW: usize = 8;
 
 #[cfg(test)]
