@@ -261,6 +261,9 @@ struct Draw {
     /// Transform slot (0: identity, for static geometry baked into world coordinates).
     slot: u32,
     indices: std::ops::Range<u32>,
+    /// Drawn from the front only: the triangles bound closed solids
+    /// ([`TriMesh::is_closed_solid`]), whose faces turned away are always hidden.
+    cull: bool,
 }
 
 /// Side of the square cells of the plane (m) by which static geometry is grouped for culling.
@@ -275,6 +278,8 @@ struct Chunk {
     indices: std::ops::Range<u32>,
     min: Vec3,
     max: Vec3,
+    /// As [`Draw::cull`].
+    cull: bool,
 }
 
 /// The six planes `(n, d)` of a view-projection's frustum (wgpu clip space: |x|, |y| ≤ w,
@@ -304,22 +309,28 @@ fn outside(planes: &[glam::Vec4; 6], min: Vec3, max: Vec3) -> bool {
     })
 }
 
-/// Groups the triangles `tris` (indices into `vertices`) by the cell of their centroids and
-/// appends them to `indices`, cell by cell.
-fn chunk_triangles(vertices: &[Vertex], indices: &mut Vec<u32>, tris: &[u32]) -> Vec<Chunk> {
-    let mut cells: std::collections::BTreeMap<(i64, i64), Vec<[u32; 3]>> = Default::default();
+/// Groups the triangles `tris` (indices into `vertices`, each with its [`Draw::cull`]) by
+/// the cell of their centroids and whether they are culled, and appends them to `indices`,
+/// cell by cell.
+fn chunk_triangles(
+    vertices: &[Vertex],
+    indices: &mut Vec<u32>,
+    tris: &[([u32; 3], bool)],
+) -> Vec<Chunk> {
+    let mut cells: std::collections::BTreeMap<(i64, i64, bool), Vec<[u32; 3]>> = Default::default();
     let at = |i: u32| Vec3::from_array(vertices[i as usize].position);
-    for t in tris.chunks_exact(3) {
+    for &(t, cull) in tris {
         let c = (at(t[0]) + at(t[1]) + at(t[2])) / 3.0;
         let key = (
             (c.y / CHUNK_SIZE).floor() as i64,
             (c.x / CHUNK_SIZE).floor() as i64,
+            cull,
         );
-        cells.entry(key).or_default().push([t[0], t[1], t[2]]);
+        cells.entry(key).or_default().push(t);
     }
     cells
-        .into_values()
-        .map(|tris| {
+        .into_iter()
+        .map(|((_, _, cull), tris)| {
             let start = indices.len() as u32;
             let (mut min, mut max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
             for t in &tris {
@@ -333,6 +344,7 @@ fn chunk_triangles(vertices: &[Vertex], indices: &mut Vec<u32>, tris: &[u32]) ->
                 indices: start..indices.len() as u32,
                 min,
                 max,
+                cull,
             }
         })
         .collect()
@@ -382,10 +394,8 @@ fn padded_row(width: u32) -> u32 {
 pub struct Renderer {
     gpu: Gpu,
     lighting: Lighting,
-    color_pipeline: wgpu::RenderPipeline,
-    /// Depth-only pass before the colour pass, so that fragments are shaded once.
-    z_pipeline: wgpu::RenderPipeline,
-    depth_pipeline: wgpu::RenderPipeline,
+    /// Pipelines drawing both sides of each triangle (`[0]`) and the front alone (`[1]`).
+    pipelines: [Pipelines; 2],
     frame_layout: wgpu::BindGroupLayout,
     frame_group: wgpu::BindGroup,
     camera_buffer: wgpu::Buffer,
@@ -483,7 +493,8 @@ fn pipelines(
     device: &wgpu::Device,
     frame_layout: &wgpu::BindGroupLayout,
     material_layout: &wgpu::BindGroupLayout,
-) -> [wgpu::RenderPipeline; 3] {
+    cull: bool,
+) -> Pipelines {
     let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("futago camera"),
         source: wgpu::ShaderSource::Wgsl(include_str!("shader.wgsl").into()),
@@ -502,7 +513,9 @@ fn pipelines(
     };
     let primitive = wgpu::PrimitiveState {
         topology: wgpu::PrimitiveTopology::TriangleList,
-        cull_mode: None,
+        // wgpu's default front face (counter-clockwise) is a closed solid's outside: the
+        // projection keeps the world's handedness on screen.
+        cull_mode: cull.then_some(wgpu::Face::Back),
         ..Default::default()
     };
     let pipeline = |label: &str,
@@ -570,7 +583,52 @@ fn pipelines(
         &[Some(DEPTH_BITS_FORMAT.into())],
         depth_stencil.clone(),
     );
-    [color_pipeline, z_pipeline, depth_pipeline]
+    Pipelines {
+        color: color_pipeline,
+        z: z_pipeline,
+        depth: depth_pipeline,
+    }
+}
+
+/// Which of a [`Pipelines`] a phase of a pass draws with.
+type PickPipeline = fn(&Pipelines) -> &wgpu::RenderPipeline;
+
+/// The render pipelines of one way of drawing faces (both sides, or the front only).
+struct Pipelines {
+    color: wgpu::RenderPipeline,
+    /// Depth-only pass before the colour pass, so that fragments are shaded once.
+    z: wgpu::RenderPipeline,
+    depth: wgpu::RenderPipeline,
+}
+
+/// Appends a draw of `indices`, or extends the last draw where it is alike and ends where
+/// they start.
+fn push_draw(
+    draws: &mut Vec<Draw>,
+    material: usize,
+    slot: u32,
+    indices: std::ops::Range<u32>,
+    cull: bool,
+) {
+    if indices.is_empty() {
+        return;
+    }
+    match draws.last_mut() {
+        Some(d)
+            if d.material == material
+                && d.slot == slot
+                && d.cull == cull
+                && d.indices.end == indices.start =>
+        {
+            d.indices.end = indices.end
+        }
+        _ => draws.push(Draw {
+            material,
+            slot,
+            indices,
+            cull,
+        }),
+    }
 }
 
 /// The [`Geometry`] of `scene`.
@@ -578,30 +636,23 @@ fn geometry(scene: &Scene) -> Geometry {
     let mut vertices: Vec<Vertex> = Vec::new();
     let mut indices: Vec<u32> = Vec::new();
     let mut draws = Vec::new();
-    let mut static_parts: Vec<(usize, &MeshPart, &Pose)> = Vec::new();
+    let mut static_parts: Vec<(usize, bool, &MeshPart, &Pose)> = Vec::new();
     for b in scene.bodies.iter().filter(|b| !b.movable) {
         for p in &b.parts {
-            static_parts.push((p.material, p, &b.pose));
+            static_parts.push((p.material, p.mesh.is_closed_solid(), p, &b.pose));
         }
     }
-    static_parts.sort_by_key(|s| s.0);
-    for (material, part, pose) in static_parts {
+    static_parts.sort_by_key(|s| (s.0, s.1));
+    let mut static_tris = Vec::new();
+    for (material, cull, part, pose) in static_parts {
         let range = push_mesh(&mut vertices, &mut indices, &part.mesh, Some(pose));
-        match draws.last_mut() {
-            Some(Draw {
-                material: m,
-                indices,
-                ..
-            }) if *m == material && indices.end == range.start => indices.end = range.end,
-            _ => draws.push(Draw {
-                material,
-                slot: 0,
-                indices: range,
-            }),
-        }
+        static_tris.extend(
+            indices[range.start as usize..range.end as usize]
+                .chunks_exact(3)
+                .map(|t| ([t[0], t[1], t[2]], cull)),
+        );
+        push_draw(&mut draws, material, 0, range, cull);
     }
-    let static_end = draws.last().map(|d| d.indices.end).unwrap_or(0) as usize;
-    let static_tris = indices[..static_end].to_vec();
     let chunks = chunk_triangles(&vertices, &mut indices, &static_tris);
     let mut depth_draws = vec![];
     let mut body_slots = vec![0u32; scene.bodies.len()];
@@ -612,21 +663,16 @@ fn geometry(scene: &Scene) -> Geometry {
         }
         slot += 1;
         body_slots[bi] = slot;
-        let start = indices.len() as u32;
         for p in &b.parts {
             let range = push_mesh(&mut vertices, &mut indices, &p.mesh, None);
+            let cull = p.mesh.is_closed_solid();
             draws.push(Draw {
                 material: p.material,
                 slot,
-                indices: range,
+                indices: range.clone(),
+                cull,
             });
-        }
-        if indices.len() as u32 > start {
-            depth_draws.push(Draw {
-                material: 0,
-                slot,
-                indices: start..indices.len() as u32,
-            });
+            push_draw(&mut depth_draws, 0, slot, range, cull);
         }
     }
     Geometry {
@@ -770,8 +816,8 @@ impl Renderer {
         let uniform_stride = gpu.limits.min_uniform_buffer_offset_alignment.max(256);
         let cam_size = std::mem::size_of::<CameraUniform>() as u64;
         let (frame_layout, material_layout) = layouts(device, cam_size);
-        let [color_pipeline, z_pipeline, depth_pipeline] =
-            pipelines(device, &frame_layout, &material_layout);
+        let pipelines =
+            [false, true].map(|cull| pipelines(device, &frame_layout, &material_layout, cull));
 
         let Geometry {
             mut vertices,
@@ -833,9 +879,7 @@ impl Renderer {
         let mut r = Renderer {
             gpu,
             lighting,
-            color_pipeline,
-            z_pipeline,
-            depth_pipeline,
+            pipelines,
             frame_layout,
             frame_group,
             camera_buffer,
@@ -1077,29 +1121,23 @@ impl Renderer {
                 .iter()
                 .filter(|c| !outside(planes, c.min, c.max))
             {
-                match depth_draws.last_mut() {
-                    Some(d) if d.indices.end == c.indices.start => d.indices.end = c.indices.end,
-                    _ => depth_draws.push(Draw {
-                        material: 0,
-                        slot: 0,
-                        indices: c.indices.clone(),
-                    }),
-                }
+                push_draw(&mut depth_draws, 0, 0, c.indices.clone(), c.cull);
             }
             depth_draws.extend(self.depth_draws.iter().cloned());
-            let phases: &[(&wgpu::RenderPipeline, &[Draw])] = if color {
-                &[
-                    (&self.z_pipeline, &depth_draws),
-                    (&self.color_pipeline, &self.draws),
-                ]
+            let phases: &[(PickPipeline, &[Draw])] = if color {
+                &[(|p| &p.z, &depth_draws), (|p| &p.color, &self.draws)]
             } else {
-                &[(&self.depth_pipeline, &depth_draws)]
+                &[(|p| &p.depth, &depth_draws)]
             };
             for (k, &(pipeline, draws)) in phases.iter().enumerate() {
                 let shaded = color && k == 1;
-                pass.set_pipeline(pipeline);
                 let mut bound = (u32::MAX, usize::MAX);
+                let mut culling = None;
                 for d in draws {
+                    if culling != Some(d.cull) {
+                        pass.set_pipeline(pipeline(&self.pipelines[d.cull as usize]));
+                        culling = Some(d.cull);
+                    }
                     if bound.0 != d.slot {
                         pass.set_bind_group(0, &self.frame_group, &[cam * stride, d.slot * stride]);
                         bound.0 = d.slot;
@@ -1337,6 +1375,121 @@ mod tests {
             "straddling the left edge"
         );
         assert!(!at(Vec3::ZERO, 10.0), "around the camera");
+    }
+
+    /// A scene of two 1 m boxes, a static one ahead at (2, 0, 0) and a movable one at
+    /// (2, 1.5, 0), before a wall quad 5 m ahead: each box one closed part, or six open
+    /// parts (a face each).
+    fn boxes(closed: bool) -> Scene {
+        let material = Material {
+            name: "m".into(),
+            color: [0.5; 3],
+            texture: None,
+        };
+        let cube = TriMesh::cuboid(Vec3::splat(0.5), UvMap::Fit);
+        let parts = |m: &TriMesh| -> Vec<TriMesh> {
+            if closed {
+                return vec![m.clone()];
+            }
+            m.indices
+                .chunks(2)
+                .map(|face| TriMesh {
+                    indices: face.to_vec(),
+                    ..m.clone()
+                })
+                .collect()
+        };
+        let mut wall = TriMesh::default();
+        wall.push_quad(
+            Vec3::new(5.0, 4.0, -3.0),
+            Vec3::new(0.0, -8.0, 0.0),
+            Vec3::new(0.0, 0.0, 6.0),
+            UvMap::Fit,
+        );
+        let mut scene = Scene {
+            materials: vec![material.clone()],
+            ..Default::default()
+        };
+        for (name, mesh, x) in [("box", &cube, 2.0), ("wall", &wall, 0.0)] {
+            scene.bodies.push(SceneBody {
+                name: name.into(),
+                pose: Pose::from_translation(Vec3::new(x, 0.0, 0.0)),
+                movable: false,
+                parts: parts(mesh)
+                    .into_iter()
+                    .map(|mesh| MeshPart { material: 0, mesh })
+                    .collect(),
+            });
+        }
+        let movable = parts(&cube)
+            .into_iter()
+            .map(|m| (material.clone(), m))
+            .collect();
+        scene.add_body(
+            "moved",
+            Pose::from_translation(Vec3::new(2.0, 1.5, 0.0)),
+            movable,
+        );
+        scene
+    }
+
+    /// Closed solids are drawn from the front alone: seen from outside, the same depth as
+    /// the same faces drawn from both sides (to float rounding where a face turned away
+    /// ties with the one in front at an edge); from inside one, its faces are not there.
+    #[test]
+    fn closed_solids_are_drawn_from_outside_alone() {
+        let mut closed = Renderer::new(&boxes(true)).unwrap();
+        let mut open = Renderer::new(&boxes(false)).unwrap();
+        // The static box's chunks are culled, the wall's (at x = 5 m) not; nothing of the
+        // open faces is.
+        assert!(closed.chunks.iter().all(|c| c.cull == (c.max.x < 3.0)));
+        assert!(closed.chunks.iter().any(|c| c.cull) && open.chunks.iter().all(|c| !c.cull));
+        assert!(closed.depth_draws.iter().all(|d| d.cull));
+        assert!(open.depth_draws.iter().all(|d| !d.cull));
+        let intr = Intrinsics::from_fov(96, 72, 1.4, 1.1).unwrap();
+        let views: Vec<Pose> = (0..12)
+            .map(|k| {
+                let yaw = -0.6 + 0.1 * k as f32;
+                let at = Vec3::new(
+                    -0.5 + 0.1 * k as f32,
+                    0.8 - 0.15 * k as f32,
+                    0.3 - 0.05 * k as f32,
+                );
+                Pose::from_parts(
+                    at,
+                    glam::Quat::from_rotation_z(yaw) * glam::Quat::from_rotation_y(0.2),
+                )
+            })
+            .collect();
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        closed
+            .render_depth_batch(&intr, &views, FAR_PLANE, &mut a)
+            .unwrap();
+        open.render_depth_batch(&intr, &views, FAR_PLANE, &mut b)
+            .unwrap();
+        let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+        let worst = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "{worst} m apart");
+        assert!(
+            differ * 100 < a.len(),
+            "{differ} of {} pixels differ",
+            a.len()
+        );
+        // The boxes are in view: the images are not all wall.
+        assert!(a.iter().any(|&z| z > 0.0 && z < 4.0));
+        // From the static box's centre, looking down +x: its far face 0.5 m ahead when
+        // drawn from both sides, the wall 3 m ahead when the box is a closed solid.
+        let inside = Pose::from_translation(Vec3::new(2.0, 0.0, 0.0));
+        let centre = |r: &mut Renderer| {
+            let d = r.render_depth(&intr, &inside).unwrap();
+            d.at(48, 36)
+        };
+        assert!((centre(&mut open) - 0.5).abs() < 1e-4);
+        assert!((centre(&mut closed) - 3.0).abs() < 1e-4);
     }
 
     #[test]

@@ -249,6 +249,71 @@ impl TriMesh {
             .collect();
     }
 
+    /// Whether the mesh bounds solids seen only from outside: every edge (vertices at the same
+    /// place, to 10 µm, counted as one) borne by exactly two triangles that run it in
+    /// opposite directions, and each connected piece winding counter-clockwise seen from
+    /// outside (a positive enclosed volume). From a point outside such solids the first
+    /// surface along any ray faces it, so the renderer may skip the triangles that face away
+    /// (back-face culling): the same image for less work. Open surfaces (a lone wall quad, a
+    /// reconstructed map) and inside-out pieces are false, and are drawn from both sides.
+    pub fn is_closed_solid(&self) -> bool {
+        use std::collections::HashMap;
+        if self.indices.is_empty() {
+            return false;
+        }
+        let n = self.positions.len();
+        if self.indices.iter().flatten().any(|&i| i as usize >= n) {
+            return false;
+        }
+        // Each vertex's place: the first vertex at the same rounded position.
+        let mut places: HashMap<[i64; 3], u32> = HashMap::new();
+        let mut place = Vec::with_capacity(n);
+        for (i, p) in self.positions.iter().enumerate() {
+            let key = p.to_array().map(|c| (c as f64 * 1e5).round() as i64);
+            place.push(*places.entry(key).or_insert(i as u32));
+        }
+        let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+        for t in &self.indices {
+            let t = t.map(|i| place[i as usize]);
+            for k in 0..3 {
+                *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+            }
+        }
+        let paired = edges
+            .iter()
+            .all(|(&(a, b), &count)| a != b && count == 1 && edges.get(&(b, a)) == Some(&1));
+        if !paired {
+            return false;
+        }
+        // Connected pieces (union-find over places), each one's signed volume: the sum of
+        // its triangles' tetrahedra with the piece's first vertex.
+        let mut parent: Vec<u32> = (0..n as u32).collect();
+        fn root(parent: &mut [u32], mut i: u32) -> u32 {
+            while parent[i as usize] != i {
+                let up = parent[parent[i as usize] as usize];
+                parent[i as usize] = up;
+                i = up;
+            }
+            i
+        }
+        for t in &self.indices {
+            let a = root(&mut parent, place[t[0] as usize]);
+            for &i in &t[1..] {
+                let b = root(&mut parent, place[i as usize]);
+                parent[b as usize] = a;
+            }
+        }
+        let mut volumes: HashMap<u32, (Vec3, f64)> = HashMap::new();
+        for t in &self.indices {
+            let r = root(&mut parent, place[t[0] as usize]);
+            let (a, b, c) = self.corners(t);
+            let entry = volumes.entry(r).or_insert((a, 0.0));
+            let o = entry.0;
+            entry.1 += ((a - o).dot((b - o).cross(c - o)) as f64) / 6.0;
+        }
+        volumes.values().all(|&(_, v)| v > 0.0)
+    }
+
     /// Total surface area, m².
     pub fn area(&self) -> f32 {
         self.indices
@@ -324,6 +389,57 @@ mod tests {
             "{} {exact}",
             m.area()
         );
+    }
+
+    #[test]
+    fn closed_solids_are_told_from_open_and_inside_out_surfaces() {
+        let q = glam::Quat::from_rotation_z(0.7) * glam::Quat::from_rotation_x(0.2);
+        let closed =
+            [
+                TriMesh::cuboid(Vec3::new(1.0, 0.5, 0.25), UvMap::Fit),
+                TriMesh::cuboid(Vec3::new(0.1, 2.0, 1.0), UvMap::Tiled(Vec2::splat(0.3)))
+                    .transformed(q, Vec3::new(3.2, -1.7, 0.4), 1.5),
+                TriMesh::prism(0.2, 0.5, 12, UvMap::Fit),
+                TriMesh::capsule(0.05, 0.4, 16, 4),
+            ];
+        for m in &closed {
+            assert!(m.is_closed_solid());
+        }
+        // Two solids apart are two closed pieces.
+        let mut two = closed[0].clone();
+        let other = closed[1].clone();
+        let base = two.positions.len() as u32;
+        two.positions.extend(&other.positions);
+        two.normals.extend(&other.normals);
+        two.uvs.extend(&other.uvs);
+        two.indices
+            .extend(other.indices.iter().map(|t| t.map(|i| i + base)));
+        assert!(two.is_closed_solid());
+        // A lone quad is open; so is a box without its top.
+        let mut quad = TriMesh::default();
+        quad.push_quad(Vec3::ZERO, Vec3::X, Vec3::Y, UvMap::Fit);
+        assert!(!quad.is_closed_solid());
+        let mut lidless = closed[0].clone();
+        lidless.indices.drain(8..10);
+        assert!(!lidless.is_closed_solid());
+        // Inside out (a room's box seen from within), alone or beside a solid.
+        let mut inverted = closed[0].clone();
+        for t in &mut inverted.indices {
+            t.swap(1, 2);
+        }
+        assert!(!inverted.is_closed_solid());
+        let mut mixed = two.clone();
+        for t in &mut mixed.indices[..12] {
+            t.swap(1, 2);
+        }
+        assert!(!mixed.is_closed_solid());
+        // An edge run the same way twice (one face's winding flipped) is not paired.
+        let mut flipped_face = closed[0].clone();
+        for t in &mut flipped_face.indices[..2] {
+            t.swap(1, 2);
+        }
+        assert!(!flipped_face.is_closed_solid());
+        assert!(!TriMesh::default().is_closed_solid());
     }
 
     #[test]
