@@ -1245,11 +1245,7 @@ impl Renderer {
                 for px in r.chunks_exact(4) {
                     rgb.extend_from_slice(&px[..3]);
                 }
-                let d = &depth[v * row as usize..][..w as usize * 4];
-                z.extend(
-                    d.chunks_exact(4)
-                        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-                );
+                extend_f32_le(&mut z, &depth[v * row as usize..][..w as usize * 4]);
             }
             (
                 RgbImage {
@@ -1318,15 +1314,15 @@ impl Renderer {
         let rows = n.div_ceil(cols).min(max / h).max(1);
         let per_atlas = cols * rows;
         let key = (false, cols * w, rows * h);
-        out.resize((n * w * h) as usize, 0.0);
+        // Filled view by view and row by row, in order: no zeroing first.
+        out.reserve((n * w * h) as usize);
         let mut first = 0u32;
         while first < n {
             let count = per_atlas.min(n - first);
             let views: Vec<((u32, u32), u32)> = (0..count)
                 .map(|i| (((i % cols) * w, (i / cols) * h), first + i))
                 .collect();
-            let dst = &mut out[(first * w * h) as usize..((first + count) * w * h) as usize];
-            self.run(key, (w, h), &views, |_, depth, row| {
+            let drawn = self.run(key, (w, h), &views, |_, depth, row| {
                 for i in 0..count as usize {
                     let (tx, ty) = (
                         i % cols as usize * w as usize,
@@ -1334,17 +1330,35 @@ impl Renderer {
                     );
                     for v in 0..h as usize {
                         let src = &depth[(ty + v) * row as usize + tx * 4..][..w as usize * 4];
-                        let d = &mut dst[(i * h as usize + v) * w as usize..][..w as usize];
-                        for (o, b) in d.iter_mut().zip(src.chunks_exact(4)) {
-                            *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-                        }
+                        extend_f32_le(out, src);
                     }
                 }
-            })?;
+            });
+            if let Err(e) = drawn {
+                out.clear();
+                return Err(e);
+            }
             first += count;
         }
         Ok(())
     }
+}
+
+/// Appends the little-endian `f32`s in `bytes` to `out`: copied as they are where the bytes
+/// are aligned for `f32` on a little-endian machine (a mapped read-back buffer's are), else
+/// one by one.
+fn extend_f32_le(out: &mut Vec<f32>, bytes: &[u8]) {
+    if cfg!(target_endian = "little")
+        && let Ok(values) = bytemuck::try_cast_slice::<u8, f32>(bytes)
+    {
+        out.extend_from_slice(values);
+        return;
+    }
+    out.extend(
+        bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+    );
 }
 
 #[cfg(test)]
