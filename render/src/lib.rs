@@ -1278,17 +1278,39 @@ impl Renderer {
     }
 
     /// Renders one depth image per camera pose into `out` (replaced): `cameras.len()` images of
-    /// `width × height` in order, contiguous. Surfaces farther than `far` (m, along the optical
-    /// axis; at most [`FAR_PLANE`]) are not drawn (0), and geometry beyond it costs nothing:
-    /// give a depth camera's range, and a batch of views from inside a building draws only
-    /// what lies within it. The views are tiled into atlases as large as the GPU allows and
-    /// drawn in one submission.
+    /// `width × height` in order, contiguous; as [`Renderer::render_depth_each`]. On an error
+    /// `out` is left empty.
     pub fn render_depth_batch(
         &mut self,
         intr: &Intrinsics,
         cameras: &[Pose],
         far: f32,
         out: &mut Vec<f32>,
+    ) -> Result<(), RenderError> {
+        out.clear();
+        out.reserve(cameras.len() * (intr.width as usize * intr.height as usize));
+        let drawn =
+            self.render_depth_each(intr, cameras, far, |_, image| out.extend_from_slice(image));
+        if drawn.is_err() {
+            out.clear();
+        }
+        drawn
+    }
+
+    /// Renders one depth image per camera pose and hands each to `each` with its pose's
+    /// index, in order, as it is read back (`width × height` values, row by row, in a buffer
+    /// reused for the next): a consumer that reduces each image (a particle's score) reads it
+    /// while it is still in the cache, and no batch-sized copy is made. Surfaces farther than
+    /// `far` (m, along the optical axis; at most [`FAR_PLANE`]) are not drawn (0), and geometry
+    /// beyond it costs nothing: give a depth camera's range, and a batch of views from inside
+    /// a building draws only what lies within it. The views are tiled into atlases as large
+    /// as the GPU allows and drawn in one submission each.
+    pub fn render_depth_each(
+        &mut self,
+        intr: &Intrinsics,
+        cameras: &[Pose],
+        far: f32,
+        mut each: impl FnMut(usize, &[f32]),
     ) -> Result<(), RenderError> {
         intr.validate().map_err(RenderError::Config)?;
         if !(far > NEAR_PLANE * 2.0 && far <= FAR_PLANE) {
@@ -1297,7 +1319,6 @@ impl Renderer {
                 NEAR_PLANE * 2.0
             )));
         }
-        out.clear();
         if cameras.is_empty() {
             return Ok(());
         }
@@ -1314,30 +1335,27 @@ impl Renderer {
         let rows = n.div_ceil(cols).min(max / h).max(1);
         let per_atlas = cols * rows;
         let key = (false, cols * w, rows * h);
-        // Filled view by view and row by row, in order: no zeroing first.
-        out.reserve((n * w * h) as usize);
+        let mut image = Vec::with_capacity((w * h) as usize);
         let mut first = 0u32;
         while first < n {
             let count = per_atlas.min(n - first);
             let views: Vec<((u32, u32), u32)> = (0..count)
                 .map(|i| (((i % cols) * w, (i / cols) * h), first + i))
                 .collect();
-            let drawn = self.run(key, (w, h), &views, |_, depth, row| {
+            self.run(key, (w, h), &views, |_, depth, row| {
                 for i in 0..count as usize {
                     let (tx, ty) = (
                         i % cols as usize * w as usize,
                         i / cols as usize * h as usize,
                     );
+                    image.clear();
                     for v in 0..h as usize {
                         let src = &depth[(ty + v) * row as usize + tx * 4..][..w as usize * 4];
-                        extend_f32_le(out, src);
+                        extend_f32_le(&mut image, src);
                     }
+                    each(first as usize + i, &image);
                 }
-            });
-            if let Err(e) = drawn {
-                out.clear();
-                return Err(e);
-            }
+            })?;
             first += count;
         }
         Ok(())

@@ -44,6 +44,33 @@ pub trait DepthModel {
         out: &mut Vec<f32>,
     ) -> Result<(), String>;
 
+    /// The same images handed to `each` one at a time with their pose's index, in order (a
+    /// buffer reused from one to the next). By default rendered as a batch and then split; a
+    /// renderer that reads its images back one by one hands each over as it is read, so
+    /// that a particle's score is taken while its image is in the cache.
+    fn render_each(
+        &mut self,
+        intr: &Intrinsics,
+        poses: &[Pose3],
+        far: f64,
+        each: &mut dyn FnMut(usize, &[f32]),
+    ) -> Result<(), String> {
+        let mut out = Vec::new();
+        self.render_batch(intr, poses, far, &mut out)?;
+        let pixels = intr.width as usize * intr.height as usize;
+        if out.len() != pixels * poses.len() {
+            return Err(format!(
+                "the model rendered {} values for {} poses of {pixels} pixels",
+                out.len(),
+                poses.len()
+            ));
+        }
+        for (k, image) in out.chunks_exact(pixels.max(1)).enumerate() {
+            each(k, image);
+        }
+        Ok(())
+    }
+
     /// The model's surfaces as a distance field, for [`Likelihood::Field`]; `None` (the
     /// default) where the model offers none.
     fn field(&self) -> Option<&DistanceField> {
@@ -69,6 +96,16 @@ impl<R: DepthModel> DepthModel for MeshModel<R> {
         self.renderer.render_batch(intr, poses, far, out)
     }
 
+    fn render_each(
+        &mut self,
+        intr: &Intrinsics,
+        poses: &[Pose3],
+        far: f64,
+        each: &mut dyn FnMut(usize, &[f32]),
+    ) -> Result<(), String> {
+        self.renderer.render_each(intr, poses, far, each)
+    }
+
     fn field(&self) -> Option<&DistanceField> {
         self.field.as_ref()
     }
@@ -85,6 +122,19 @@ impl DepthModel for futago_render::Renderer {
         let cameras: Vec<futago_render::Pose> = poses.iter().map(render_pose).collect();
         let far = far.min(futago_render::FAR_PLANE as f64) as f32;
         self.render_depth_batch(intr, &cameras, far, out)
+            .map_err(|e| e.to_string())
+    }
+
+    fn render_each(
+        &mut self,
+        intr: &Intrinsics,
+        poses: &[Pose3],
+        far: f64,
+        each: &mut dyn FnMut(usize, &[f32]),
+    ) -> Result<(), String> {
+        let cameras: Vec<futago_render::Pose> = poses.iter().map(render_pose).collect();
+        let far = far.min(futago_render::FAR_PLANE as f64) as f32;
+        self.render_depth_each(intr, &cameras, far, each)
             .map_err(|e| e.to_string())
     }
 }
@@ -367,8 +417,7 @@ pub struct DepthMcl {
     velocities: Vec<[f64; 3]>,
     /// The sensor model's table, for the camera range it was made for.
     sensor: Option<(f64, SensorModel)>,
-    /// Scratch: the particles' renders and poses.
-    rendered: Vec<f32>,
+    /// Scratch: the particles' poses.
     poses: Vec<Pose3>,
     /// Where a camera may be: the centres of free cells of side `cell` in the plane, for
     /// drawing particles anywhere (augmented MCL, a global start).
@@ -399,7 +448,6 @@ impl DepthMcl {
             weights: vec![1.0 / n as f64; n],
             velocities: vec![[0.0; 3]; n],
             sensor: None,
-            rendered: Vec::new(),
             poses: Vec::new(),
             free: Vec::new(),
             cell: 0.0,
@@ -582,30 +630,38 @@ impl DepthMcl {
         self.poses.clear();
         self.poses.extend(states.iter().map(|p| p.pose()));
         let far = model_far(range, self.config.alpha);
-        model.render_batch(intr, &self.poses, far, &mut self.rendered)?;
-        if self.rendered.len() != pixels * states.len() {
+        let sensor = &self.sensor.as_ref().expect("made above").1;
+        let valid = measured.iter().filter(|m| **m > 0.0).count().max(1);
+        let scale = c.independent_pixels / valid as f64;
+        // Each particle's score as its image is read back; an image missing or of the wrong
+        // size leaves its score NaN and is reported below.
+        let mut scores = vec![f64::NAN; states.len()];
+        let (mut images, mut wrong) = (0usize, None);
+        model.render_each(intr, &self.poses, far, &mut |k, predicted| {
+            images += 1;
+            if predicted.len() != pixels || k >= scores.len() {
+                wrong.get_or_insert((k, predicted.len()));
+                return;
+            }
+            scores[k] = match c.likelihood {
+                Likelihood::Seed => score(measured, predicted, c.alpha),
+                Likelihood::Sensor | Likelihood::Field => {
+                    scale * sensor.log_likelihood(measured, predicted)
+                }
+            };
+        })?;
+        if let Some((k, len)) = wrong {
             return Err(format!(
-                "the model rendered {} values for {} particles of {pixels} pixels",
-                self.rendered.len(),
+                "the model rendered {len} values for particle {k}: expected {pixels} pixels"
+            ));
+        }
+        if images != states.len() {
+            return Err(format!(
+                "the model rendered {images} images for {} particles",
                 states.len()
             ));
         }
-        Ok(match c.likelihood {
-            Likelihood::Seed => self
-                .rendered
-                .chunks_exact(pixels)
-                .map(|predicted| score(measured, predicted, c.alpha))
-                .collect(),
-            Likelihood::Sensor | Likelihood::Field => {
-                let model = &self.sensor.as_ref().expect("made above").1;
-                let valid = measured.iter().filter(|m| **m > 0.0).count().max(1);
-                let scale = c.independent_pixels / valid as f64;
-                self.rendered
-                    .chunks_exact(pixels)
-                    .map(|predicted| scale * model.log_likelihood(measured, predicted))
-                    .collect()
-            }
-        })
+        Ok(scores)
     }
 
     /// Weights from raw scores by the configured likelihood.
