@@ -120,6 +120,7 @@ impl Scene {
                 MeshPart {
                     material: self.materials.len() - 1,
                     mesh,
+                    faces_out: false,
                 }
             })
             .collect();
@@ -262,7 +263,8 @@ struct Draw {
     slot: u32,
     indices: std::ops::Range<u32>,
     /// Drawn from the front only: the triangles bound closed solids
-    /// ([`TriMesh::is_closed_solid`]), whose faces turned away are always hidden.
+    /// ([`TriMesh::is_closed_solid`]) or face out of solid matter ([`MeshPart::faces_out`]),
+    /// so their faces turned away are always hidden.
     cull: bool,
 }
 
@@ -631,6 +633,12 @@ fn push_draw(
     }
 }
 
+/// Whether `part` is drawn from the front alone: its triangles face out of solid matter
+/// ([`MeshPart::faces_out`], or a closed solid).
+fn front_only(part: &MeshPart) -> bool {
+    part.faces_out || part.mesh.is_closed_solid()
+}
+
 /// The [`Geometry`] of `scene`.
 fn geometry(scene: &Scene) -> Geometry {
     let mut vertices: Vec<Vertex> = Vec::new();
@@ -639,7 +647,7 @@ fn geometry(scene: &Scene) -> Geometry {
     let mut static_parts: Vec<(usize, bool, &MeshPart, &Pose)> = Vec::new();
     for b in scene.bodies.iter().filter(|b| !b.movable) {
         for p in &b.parts {
-            static_parts.push((p.material, p.mesh.is_closed_solid(), p, &b.pose));
+            static_parts.push((p.material, front_only(p), p, &b.pose));
         }
     }
     static_parts.sort_by_key(|s| (s.0, s.1));
@@ -665,7 +673,7 @@ fn geometry(scene: &Scene) -> Geometry {
         body_slots[bi] = slot;
         for p in &b.parts {
             let range = push_mesh(&mut vertices, &mut indices, &p.mesh, None);
-            let cull = p.mesh.is_closed_solid();
+            let cull = front_only(p);
             draws.push(Draw {
                 material: p.material,
                 slot,
@@ -1449,7 +1457,11 @@ mod tests {
                 movable: false,
                 parts: parts(mesh)
                     .into_iter()
-                    .map(|mesh| MeshPart { material: 0, mesh })
+                    .map(|mesh| MeshPart {
+                        material: 0,
+                        mesh,
+                        faces_out: false,
+                    })
                     .collect(),
             });
         }
@@ -1522,6 +1534,23 @@ mod tests {
         };
         assert!((centre(&mut open) - 0.5).abs() < 1e-4);
         assert!((centre(&mut closed) - 3.0).abs() < 1e-4);
+        // Open parts declared to face out of solid matter are drawn from the front alone too.
+        let mut declared = boxes(false);
+        for p in &mut declared.bodies[0].parts {
+            p.faces_out = true;
+        }
+        let mut declared = Renderer::new(&declared).unwrap();
+        assert!((centre(&mut declared) - 3.0).abs() < 1e-4);
+        let mut c = Vec::new();
+        declared
+            .render_depth_batch(&intr, &views, FAR_PLANE, &mut c)
+            .unwrap();
+        let worst = c
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "{worst} m apart");
     }
 
     #[test]

@@ -23,6 +23,11 @@ pub struct MeshPart {
     /// Index into the scene's (or world's) material list.
     pub material: usize,
     pub mesh: TriMesh,
+    /// Every triangle faces out of solid matter that no camera enters, though the mesh is
+    /// not closed: a floor plan's walls, whose sides against other walls and bottoms on the
+    /// floor are left out. Drawn from the front alone, as closed solids are
+    /// ([`TriMesh::is_closed_solid`](crate::TriMesh::is_closed_solid)).
+    pub faces_out: bool,
 }
 
 /// An sRGB RGBA8 image, row-major from the top-left.

@@ -438,7 +438,11 @@ pub fn scene(meshes: Vec<TriMesh>) -> Scene {
         parts: meshes
             .into_iter()
             .filter(|m| !m.indices.is_empty())
-            .map(|mesh| MeshPart { material: 0, mesh })
+            .map(|mesh| MeshPart {
+                material: 0,
+                mesh,
+                faces_out: false,
+            })
             .collect(),
     });
     s

@@ -357,6 +357,10 @@ mod tests {
             for t in &m.indices {
                 let (a, b, c) = m.corners(t);
                 let n = (b - a).cross(c - a);
+                // Wound counter-clockwise seen from outside (the renderer draws these faces
+                // from the front alone): the face turns away from the rectangle's centre,
+                // the mesh's origin.
+                assert!(n.dot((a + b + c) / 3.0) > 0.0, "a face wound inwards");
                 if n.z.abs() < 1e-6 {
                     upright += 0.5 * n.length();
                 } else {

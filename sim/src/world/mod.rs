@@ -368,6 +368,7 @@ impl Compiler<'_> {
                 parts: vec![MeshPart {
                     material: mat,
                     mesh: TriMesh::cuboid(half, uv),
+                    faces_out: false,
                 }],
                 motion: Motion::Static,
                 friction: 0.8,
@@ -643,6 +644,7 @@ impl Compiler<'_> {
                     parts: vec![MeshPart {
                         material: mat,
                         mesh: TriMesh::cuboid(half, uv),
+                        faces_out: false,
                     }],
                     motion: Motion::Static,
                     friction: 0.6,
@@ -682,6 +684,9 @@ impl Compiler<'_> {
                 parts: vec![MeshPart {
                     material: mat,
                     mesh: cells.mesh(r, h, uv),
+                    // The walls' union is solid: its faces all turn out, and a camera in
+                    // the free cells sees none from behind.
+                    faces_out: true,
                 }],
                 motion: Motion::Static,
                 friction: 0.6,
@@ -727,6 +732,7 @@ impl Compiler<'_> {
             parts: vec![MeshPart {
                 material: mat,
                 mesh: TriMesh::cuboid(half, self.uv(mat)),
+                faces_out: false,
             }],
             motion,
             friction,
@@ -778,6 +784,7 @@ impl Compiler<'_> {
             parts: vec![MeshPart {
                 material: mat,
                 mesh: TriMesh::prism(r, hh, cy.segments, self.uv(mat)),
+                faces_out: false,
             }],
             motion,
             friction,
@@ -823,6 +830,7 @@ impl Compiler<'_> {
                     parts.push(MeshPart {
                         material: first_mat + p.material,
                         mesh: p.mesh,
+                        faces_out: false,
                     });
                 }
                 self.gltf_cache.insert(canonical, parts.clone());
@@ -835,6 +843,7 @@ impl Compiler<'_> {
             .map(|p| MeshPart {
                 material: p.material,
                 mesh: p.mesh.transformed(Quat::IDENTITY, Vec3::ZERO, s),
+                faces_out: false,
             })
             .collect();
         let shape = match m.collider {
