@@ -1296,9 +1296,13 @@ impl Renderer {
         out: &mut Vec<f32>,
     ) -> Result<(), RenderError> {
         out.clear();
-        out.reserve(cameras.len() * (intr.width as usize * intr.height as usize));
-        let drawn =
-            self.render_depth_each(intr, cameras, far, |_, image| out.extend_from_slice(image));
+        let drawn = self.render_depth_each(intr, cameras, far, |k, image| {
+            // Sized once the image is known to be valid, not from the unchecked intrinsics.
+            if k == 0 {
+                out.reserve(cameras.len() * image.len());
+            }
+            out.extend_from_slice(image)
+        });
         if drawn.is_err() {
             out.clear();
         }

@@ -119,8 +119,7 @@ impl DepthModel for futago_render::Renderer {
         far: f64,
         out: &mut Vec<f32>,
     ) -> Result<(), String> {
-        let cameras: Vec<futago_render::Pose> = poses.iter().map(render_pose).collect();
-        let far = far.min(futago_render::FAR_PLANE as f64) as f32;
+        let (cameras, far) = render_views(poses, far);
         self.render_depth_batch(intr, &cameras, far, out)
             .map_err(|e| e.to_string())
     }
@@ -132,11 +131,16 @@ impl DepthModel for futago_render::Renderer {
         far: f64,
         each: &mut dyn FnMut(usize, &[f32]),
     ) -> Result<(), String> {
-        let cameras: Vec<futago_render::Pose> = poses.iter().map(render_pose).collect();
-        let far = far.min(futago_render::FAR_PLANE as f64) as f32;
+        let (cameras, far) = render_views(poses, far);
         self.render_depth_each(intr, &cameras, far, each)
             .map_err(|e| e.to_string())
     }
+}
+
+/// The renderer's camera poses for `poses`, and `far` within its far plane.
+fn render_views(poses: &[Pose3], far: f64) -> (Vec<futago_render::Pose>, f32) {
+    let cameras = poses.iter().map(render_pose).collect();
+    (cameras, far.min(futago_render::FAR_PLANE as f64) as f32)
 }
 
 /// How far past the camera's range the model is drawn, in multiples of α: a pixel measured
@@ -633,16 +637,17 @@ impl DepthMcl {
         let sensor = &self.sensor.as_ref().expect("made above").1;
         let valid = measured.iter().filter(|m| **m > 0.0).count().max(1);
         let scale = c.independent_pixels / valid as f64;
-        // Each particle's score as its image is read back; an image missing or of the wrong
-        // size leaves its score NaN and is reported below.
+        // Each particle's score as its image is read back; an image of the wrong size, out
+        // of range or given twice is reported below, as is one never given.
         let mut scores = vec![f64::NAN; states.len()];
-        let (mut images, mut wrong) = (0usize, None);
+        let mut given = vec![false; states.len()];
+        let mut wrong = None;
         model.render_each(intr, &self.poses, far, &mut |k, predicted| {
-            images += 1;
-            if predicted.len() != pixels || k >= scores.len() {
+            if predicted.len() != pixels || given.get(k) != Some(&false) {
                 wrong.get_or_insert((k, predicted.len()));
                 return;
             }
+            given[k] = true;
             scores[k] = match c.likelihood {
                 Likelihood::Seed => score(measured, predicted, c.alpha),
                 Likelihood::Sensor | Likelihood::Field => {
@@ -652,12 +657,14 @@ impl DepthMcl {
         })?;
         if let Some((k, len)) = wrong {
             return Err(format!(
-                "the model rendered {len} values for particle {k}: expected {pixels} pixels"
+                "the model gave image {k} ({len} values) for {} particles of {pixels} pixels: \
+                 expected one image of each particle",
+                states.len()
             ));
         }
-        if images != states.len() {
+        if let Some(k) = given.iter().position(|g| !g) {
             return Err(format!(
-                "the model rendered {images} images for {} particles",
+                "the model rendered no image for particle {k} of {}",
                 states.len()
             ));
         }
@@ -1455,6 +1462,65 @@ mod tests {
         }
         errors.sort_by(f64::total_cmp);
         (errors[errors.len() / 2], errors[errors.len() - 1], yaw)
+    }
+
+    /// A model that hands over its images wrongly: one short, or one twice.
+    struct Faulty {
+        room: BoxRoom,
+        twice: bool,
+    }
+
+    impl DepthModel for Faulty {
+        fn render_batch(
+            &mut self,
+            intr: &Intrinsics,
+            poses: &[Pose3],
+            far: f64,
+            out: &mut Vec<f32>,
+        ) -> Result<(), String> {
+            self.room.render_batch(intr, &poses[1..], far, out)
+        }
+
+        fn render_each(
+            &mut self,
+            intr: &Intrinsics,
+            poses: &[Pose3],
+            far: f64,
+            each: &mut dyn FnMut(usize, &[f32]),
+        ) -> Result<(), String> {
+            if !self.twice {
+                return self.room.render_each(intr, &poses[1..], far, each);
+            }
+            self.room.render_each(intr, poses, far, &mut |k, image| {
+                each(k.min(poses.len() - 2), image)
+            })
+        }
+    }
+
+    /// Images missing or given twice are errors naming what was expected, not scores.
+    #[test]
+    fn a_model_that_misses_or_repeats_an_image_is_an_error() {
+        let start = CameraState {
+            position: [1.0, 2.0, 1.0],
+            rpy: [0.0, 0.0, 0.2],
+        };
+        let z = render(&BoxRoom { pillars: false }, &start);
+        for twice in [false, true] {
+            let mut model = Faulty {
+                room: BoxRoom { pillars: false },
+                twice,
+            };
+            let mut mcl = DepthMcl::new(DepthMclConfig::default(), start, 3);
+            let e = mcl
+                .update(&mut model, &intr(), &z, RANGE, None)
+                .unwrap_err();
+            let expected = if twice {
+                "expected one image of each"
+            } else {
+                "rendered no image for particle"
+            };
+            assert!(e.contains(expected), "{e}");
+        }
     }
 
     /// Among pillars, both models follow a camera moving 5 cm a frame (a σ of the walk) within
