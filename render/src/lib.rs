@@ -1516,12 +1516,13 @@ mod tests {
         open.render_depth_batch(&intr, &views, FAR_PLANE, &mut b)
             .unwrap();
         let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
-        let worst = a
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0f32, f32::max);
-        assert!(worst < 1e-4, "{worst} m apart");
+        let worst = |x: &[f32], y: &[f32]| {
+            x.iter()
+                .zip(y)
+                .map(|(p, q)| (p - q).abs())
+                .fold(0.0f32, f32::max)
+        };
+        assert!(worst(&a, &b) < 1e-4, "{} m apart", worst(&a, &b));
         assert!(
             differ * 100 < a.len(),
             "{differ} of {} pixels differ",
@@ -1549,12 +1550,7 @@ mod tests {
         declared
             .render_depth_batch(&intr, &views, FAR_PLANE, &mut c)
             .unwrap();
-        let worst = c
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0f32, f32::max);
-        assert!(worst < 1e-4, "{worst} m apart");
+        assert!(worst(&c, &b) < 1e-4, "{} m apart", worst(&c, &b));
     }
 
     #[test]
