@@ -204,7 +204,9 @@ pub struct MapMetaData {
 pub struct OccupancyGrid {
     pub header: Header,
     pub info: MapMetaData,
-    pub data: Vec<i8>,
+    /// The cells, each an `int8` as its byte (two's complement, as CDR has it): `dust_dds`
+    /// 0.16 reads a `sequence<int8>` as bytes and then cannot make them a `Vec<i8>`.
+    pub data: Vec<u8>,
 }
 
 impl RosType for OccupancyGrid {
@@ -245,7 +247,10 @@ impl OccupancyGrid {
             cells: self
                 .data
                 .iter()
-                .map(|&c| if (0..=100).contains(&c) { c } else { -1 })
+                .map(|&b| {
+                    let c = b as i8;
+                    if (0..=100).contains(&c) { c } else { -1 }
+                })
                 .collect(),
         })
     }
@@ -565,7 +570,7 @@ mod tests {
                 },
                 ..MapMetaData::default()
             },
-            data: vec![0, 100, -1, 50, 0, 101],
+            data: [0i8, 100, -1, 50, 0, 101].map(|c| c as u8).to_vec(),
             ..OccupancyGrid::default()
         };
         let g = m.to_grid().unwrap();

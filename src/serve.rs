@@ -58,6 +58,7 @@ use anyhow::{Context, Result, bail};
 use dust_dds::domain::domain_participant::DomainParticipant;
 use dust_dds::domain::domain_participant_factory::DomainParticipantFactory;
 use dust_dds::infrastructure::error::DdsError;
+use dust_dds::infrastructure::listener::NO_LISTENER;
 use dust_dds::infrastructure::qos::{DataReaderQos, DataWriterQos, QosKind};
 use dust_dds::infrastructure::qos_policy::{
     DurabilityQosPolicy, DurabilityQosPolicyKind, HistoryQosPolicy, HistoryQosPolicyKind,
@@ -66,13 +67,14 @@ use dust_dds::infrastructure::qos_policy::{
 use dust_dds::infrastructure::sample_info::{ANY_INSTANCE_STATE, ANY_SAMPLE_STATE, ANY_VIEW_STATE};
 use dust_dds::infrastructure::status::{NO_STATUS, StatusKind};
 use dust_dds::infrastructure::time::{Duration as DdsDuration, DurationKind};
-use dust_dds::infrastructure::type_support::TypeSupport;
-use dust_dds::listener::NO_LISTENER;
 use dust_dds::publication::data_writer::DataWriter;
 use dust_dds::publication::publisher::Publisher;
+use dust_dds::rtps_udp_transport::udp_transport::RtpsUdpTransportParticipantFactory;
 use dust_dds::subscription::data_reader::DataReader;
+use dust_dds::topic_definition::topic::Topic;
 use dust_dds::topic_definition::topic_description::TopicDescription;
 use dust_dds::wait_set::{Condition, WaitSet};
+use dust_dds::xtypes::type_support::TypeSupport;
 use futago_msgs::camera::Intrinsics;
 use futago_msgs::grid::OccupancyGrid;
 use futago_msgs::ros2msg::Pose;
@@ -240,15 +242,11 @@ enum CommandReader {
     Stamped(DataReader<dds::TwistStamped>),
 }
 
-/// ROS 2 topic `topic` (`/scan`) of type `T`: DDS topic `rt/scan`.
+/// ROS 2 topic `topic` (`/scan`) of type `T`, created as DDS topic `rt/scan`.
 fn topic<T: TypeSupport + RosType + Send + 'static>(
     participant: &DomainParticipant,
     topic: &str,
-) -> Result<TopicDescription> {
-    // A topic both written and read (`/tf`) is created once.
-    if let Ok(Some(t)) = participant.lookup_topicdescription(&format!("rt{topic}")) {
-        return Ok(t);
-    }
+) -> Result<Topic> {
     dds(
         &format!("creating topic {topic}"),
         participant.create_topic::<T>(
@@ -280,7 +278,17 @@ fn reader<T: TypeSupport + RosType + Send + 'static>(
     name: &str,
     depth: u32,
 ) -> Result<DataReader<T>> {
-    let t = topic::<T>(participant, name)?;
+    // A topic the link also writes (`/tf`) was created with its writer.
+    let dds_name = format!("rt{name}");
+    let found = participant.lookup_topicdescription(&dds_name);
+    let created;
+    let t: &dyn TopicDescription = match found {
+        Ok(Some(ref t)) => t,
+        _ => {
+            created = topic::<T>(participant, name)?;
+            &created
+        }
+    };
     let topic = name;
     let subscriber = dds(
         "creating a subscriber",
@@ -298,44 +306,47 @@ fn reader<T: TypeSupport + RosType + Send + 'static>(
     };
     dds(
         &format!("creating the reader of {topic}"),
-        subscriber.create_datareader::<T>(&t, QosKind::Specific(qos), NO_LISTENER, NO_STATUS),
+        subscriber.create_datareader::<T>(t, QosKind::Specific(qos), NO_LISTENER, NO_STATUS),
     )
 }
 
 /// What the link asks of its UDP sockets' receive buffers: room for a burst of fragments of
 /// a large sample (a map, 0.2 MB at 5 cm for a 30 m × 18 m floor) from a peer. `dust_dds`
-/// 0.15 reassembles a sample wrongly when lost fragments come again packed otherwise
-/// (Cyclone DDS resends several in one submessage), so the link must not lose them. Linux
-/// caps it at `net.core.rmem_max`.
+/// (0.16 as 0.15) cannot reassemble a sample whose lost fragments come again packed
+/// otherwise (Cyclone DDS resends several in one submessage), so the link must not lose
+/// them. Linux caps it at `net.core.rmem_max`.
 const RECEIVE_BUFFER: usize = 8 << 20;
 
 /// The DDS participant factory: `dust_dds`'s own, but for the UDP sockets' receive buffers
 /// ([`RECEIVE_BUFFER`]).
-fn participant_factory()
--> Result<&'static DomainParticipantFactory<dust_dds::std_runtime::StdRuntime>> {
+fn participant_factory() -> &'static DomainParticipantFactory<RtpsUdpTransportParticipantFactory> {
+    use dust_dds::dds_async::configuration::DustDdsConfigurationBuilder;
     use dust_dds::dds_async::domain_participant_factory::DomainParticipantFactoryAsync;
-    use dust_dds::rtps_udp_transport::udp_transport::RtpsUdpTransportParticipantFactoryBuilder;
-    use dust_dds::std_runtime::{StdRuntime, executor::Executor, timer::TimerDriver};
+    use dust_dds::std_runtime::StdRuntime;
     use std::sync::OnceLock;
-    static ASYNC: OnceLock<DomainParticipantFactoryAsync<StdRuntime>> = OnceLock::new();
-    static FACTORY: OnceLock<DomainParticipantFactory<StdRuntime>> = OnceLock::new();
-    if let Some(f) = FACTORY.get() {
-        return Ok(f);
-    }
-    let transport = RtpsUdpTransportParticipantFactoryBuilder::new()
-        .udp_receive_buffer_size(Some(RECEIVE_BUFFER))
-        .build()
-        .map_err(|e| anyhow::anyhow!("DDS: the UDP transport: {e}"))?;
+    static ASYNC: OnceLock<DomainParticipantFactoryAsync<RtpsUdpTransportParticipantFactory>> =
+        OnceLock::new();
+    static FACTORY: OnceLock<DomainParticipantFactory<RtpsUdpTransportParticipantFactory>> =
+        OnceLock::new();
     let factory = ASYNC.get_or_init(|| {
+        let mut transport = RtpsUdpTransportParticipantFactory::default();
+        transport.set_udp_receive_buffer_size(Some(RECEIVE_BUFFER));
+        // No XTypes type information in discovery: peers match by type name. With it (dust_dds
+        // 0.16's default) Cyclone DDS matched none of the link's endpoints.
+        let configuration = DustDdsConfigurationBuilder::new()
+            .enable_type_information(false)
+            .build()
+            .unwrap_or_default();
         // As dust_dds names a participant: this host's address and the process.
         DomainParticipantFactoryAsync::new(
-            StdRuntime::new(Executor::new(), TimerDriver::new()),
+            StdRuntime::default(),
             std::process::id().to_ne_bytes(),
             host_id(),
             transport,
+            configuration,
         )
     });
-    Ok(FACTORY.get_or_init(|| DomainParticipantFactory::new(factory)))
+    FACTORY.get_or_init(|| DomainParticipantFactory::new(factory))
 }
 
 /// This host's IPv4 address that multicast leaves from (no packet is sent), for the
@@ -359,7 +370,7 @@ impl Dds {
     /// `TwistStamped` when `stamped`.
     fn new(s: &Scenario, domain: i32, serve: &ServeOptions, patience: Duration) -> Result<Dds> {
         let stamped = serve.stamped;
-        let factory = participant_factory()?;
+        let factory = participant_factory();
         let participant = dds(
             "creating the participant",
             factory.create_participant(domain, QosKind::Default, NO_LISTENER, NO_STATUS),
@@ -483,6 +494,52 @@ impl Dds {
             }
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// Waits, at most `patience` in all, until reliable subscribers have acknowledged all
+    /// that every writer published: a write returns once its sample is queued, so the last
+    /// ones (or the fragments of an image lost on the way and asked for again) may still be
+    /// under way when the run ends. Returns the topics still unacknowledged.
+    fn flush(&self, patience: Duration) -> Vec<String> {
+        fn wait<T>(w: &DataWriter<T>, deadline: Instant) -> bool {
+            let left = deadline.saturating_duration_since(Instant::now());
+            w.wait_for_acknowledgments(DdsDuration::new(
+                left.as_secs().min(i32::MAX as u64) as i32,
+                left.subsec_nanos(),
+            ))
+            .is_ok()
+        }
+        let deadline = Instant::now() + patience;
+        let mut late = Vec::new();
+        for (name, ok) in [
+            ("/clock", wait(&self.clock, deadline)),
+            ("/tf", wait(&self.tf, deadline)),
+            ("/tf_static", wait(&self.tf_static, deadline)),
+            ("/odom", wait(&self.odom, deadline)),
+        ] {
+            if !ok {
+                late.push(name.to_string());
+            }
+        }
+        for (name, w) in &self.scans {
+            if !wait(w, deadline) {
+                late.push(format!("{name}'s scans"));
+            }
+        }
+        for c in &self.cameras {
+            let n = &c.name;
+            for (topic, ok) in [
+                ("rgb/image_raw", wait(&c.rgb, deadline)),
+                ("rgb/camera_info", wait(&c.rgb_info, deadline)),
+                ("depth/image_raw", wait(&c.depth, deadline)),
+                ("depth/camera_info", wait(&c.depth_info, deadline)),
+            ] {
+                if !ok {
+                    late.push(format!("/{n}/{topic}"));
+                }
+            }
+        }
+        late
     }
 
     /// The pose estimates that arrived on the user's pose topic, as `(stamp, pose)`.
@@ -844,6 +901,17 @@ impl Node for Link {
     }
 
     fn finish(&mut self, _bus: &mut Bus, out: Option<&Path>) -> Result<Report> {
+        // What was published reaches the subscribers before the participant goes. A
+        // subscriber gone by now cannot acknowledge; that changes no result, so it is said
+        // and the run goes on.
+        let late = self.dds.flush(self.timeout);
+        if !late.is_empty() {
+            eprintln!(
+                "futago serve: warning: not acknowledged within --timeout at the end of the \
+                 run: {}",
+                late.join(", ")
+            );
+        }
         let e = &self.estimates;
         if e.pose_topic.is_some() || e.from_tf || e.map_topic.is_some() {
             // What the stack published in answer to the last /clock.

@@ -6,7 +6,9 @@
 
 mod common;
 use common::{multicast_with, python_with, root, udp_receive_buffer_with};
+use dust_dds::dds_async::configuration::DustDdsConfigurationBuilder;
 use dust_dds::domain::domain_participant_factory::DomainParticipantFactory;
+use dust_dds::infrastructure::listener::NO_LISTENER;
 use dust_dds::infrastructure::qos::{DataReaderQos, DataWriterQos, QosKind};
 use dust_dds::infrastructure::qos_policy::{
     HistoryQosPolicy, HistoryQosPolicyKind, ReliabilityQosPolicy, ReliabilityQosPolicyKind,
@@ -14,7 +16,6 @@ use dust_dds::infrastructure::qos_policy::{
 use dust_dds::infrastructure::sample_info::{ANY_INSTANCE_STATE, ANY_SAMPLE_STATE, ANY_VIEW_STATE};
 use dust_dds::infrastructure::status::NO_STATUS;
 use dust_dds::infrastructure::time::{Duration as DdsDuration, DurationKind};
-use dust_dds::listener::NO_LISTENER;
 use futago::dds::{self, RosType};
 use futago_msgs::Time;
 use std::collections::{BTreeMap, VecDeque};
@@ -61,11 +62,11 @@ fn serve(scenario: &str, out: &Path, domain: i32, extra: &[&str]) -> Child {
 }
 
 /// DDS topic `name` of type `T`, named `ty` on the wire.
-fn topic<T: dust_dds::infrastructure::type_support::TypeSupport + Send + 'static>(
+fn topic<T: dust_dds::xtypes::type_support::TypeSupport + Send + 'static>(
     p: &dust_dds::domain::domain_participant::DomainParticipant,
     name: &str,
     ty: &str,
-) -> dust_dds::topic_definition::topic_description::TopicDescription {
+) -> dust_dds::topic_definition::topic::Topic {
     p.create_topic::<T>(name, ty, QosKind::Default, NO_LISTENER, NO_STATUS)
         .unwrap()
 }
@@ -137,6 +138,13 @@ impl Square {
 /// published as a `TwistStamped` stamped t_k. Returns the child's status and stderr.
 fn drive_square(domain: i32, mut child: Child) -> (std::process::ExitStatus, String) {
     let factory = DomainParticipantFactory::get_instance();
+    // As futago serve's participants: no XTypes type information. This controller reads
+    // `/odom` as `OdometryStart`, which is not the type written; dust_dds 0.16 with type
+    // information on delivers it no sample.
+    *factory.get_mut_configuration() = DustDdsConfigurationBuilder::new()
+        .enable_type_information(false)
+        .build()
+        .unwrap();
     let p = factory
         .create_participant(domain, QosKind::Default, NO_LISTENER, NO_STATUS)
         .unwrap();
@@ -555,12 +563,22 @@ fn a_cyclone_dds_subscriber_receives_the_depth_images_the_stack_renders_at_the_r
         "{sent} sent of {rendered} rendered"
     );
     let depth = &summary["camera"][0]["depth"];
+    let received: u64 = printed
+        .split_once("images ")
+        .and_then(|(_, rest)| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0);
+    // Every image, or all but the run's first: a first image whose burst overflows the
+    // subscriber's buffer (on a loaded machine) is lost to it, as Cyclone DDS takes up a
+    // writer from the first heartbeat it hears when it has no sample of it yet; every later
+    // one is resent until acknowledged.
     assert!(
-        printed.contains(&format!(
-            "images {sent} sizes {}x{}",
-            depth[0].as_u64().unwrap(),
-            depth[1].as_u64().unwrap()
-        )),
+        (sent - 1..=sent).contains(&received)
+            && printed.contains(&format!(
+                " sizes {}x{}",
+                depth[0].as_u64().unwrap(),
+                depth[1].as_u64().unwrap()
+            )),
         "{printed} against {sent} sent: {}",
         summary["camera"]
     );
@@ -628,7 +646,7 @@ fn export_office_map(dir: &Path) {
 
 /// Python with `cyclonedds`, where a map can be sent to the link: multicast loops back, and
 /// the link's socket may hold a map's burst of fragments (lost ones come again packed
-/// otherwise, which dust_dds 0.15 reassembles wrongly). `None`: `test` is skipped.
+/// otherwise, which dust_dds cannot reassemble). `None`: `test` is skipped.
 fn cyclone_taking_maps(test: &str) -> Option<std::path::PathBuf> {
     let python = python_with(test, &["cyclonedds"])?;
     (multicast_with(test) && udp_receive_buffer_with(test, 1 << 20)).then_some(python)
