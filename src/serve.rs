@@ -510,36 +510,32 @@ impl Dds {
             .is_ok()
         }
         let deadline = Instant::now() + patience;
-        let mut late = Vec::new();
-        for (name, ok) in [
-            ("/clock", wait(&self.clock, deadline)),
-            ("/tf", wait(&self.tf, deadline)),
-            ("/tf_static", wait(&self.tf_static, deadline)),
-            ("/odom", wait(&self.odom, deadline)),
-        ] {
-            if !ok {
-                late.push(name.to_string());
-            }
-        }
+        let mut acked = vec![
+            ("/clock".to_string(), wait(&self.clock, deadline)),
+            ("/tf".to_string(), wait(&self.tf, deadline)),
+            ("/tf_static".to_string(), wait(&self.tf_static, deadline)),
+            ("/odom".to_string(), wait(&self.odom, deadline)),
+        ];
         for (name, w) in &self.scans {
-            if !wait(w, deadline) {
-                late.push(format!("{name}'s scans"));
-            }
+            acked.push((format!("{name}'s scans"), wait(w, deadline)));
         }
         for c in &self.cameras {
             let n = &c.name;
-            for (topic, ok) in [
-                ("rgb/image_raw", wait(&c.rgb, deadline)),
-                ("rgb/camera_info", wait(&c.rgb_info, deadline)),
-                ("depth/image_raw", wait(&c.depth, deadline)),
-                ("depth/camera_info", wait(&c.depth_info, deadline)),
-            ] {
-                if !ok {
-                    late.push(format!("/{n}/{topic}"));
-                }
-            }
+            acked.extend([
+                (format!("/{n}/rgb/image_raw"), wait(&c.rgb, deadline)),
+                (format!("/{n}/rgb/camera_info"), wait(&c.rgb_info, deadline)),
+                (format!("/{n}/depth/image_raw"), wait(&c.depth, deadline)),
+                (
+                    format!("/{n}/depth/camera_info"),
+                    wait(&c.depth_info, deadline),
+                ),
+            ]);
         }
-        late
+        acked
+            .into_iter()
+            .filter(|(_, ok)| !ok)
+            .map(|(topic, _)| topic)
+            .collect()
     }
 
     /// The pose estimates that arrived on the user's pose topic, as `(stamp, pose)`.
